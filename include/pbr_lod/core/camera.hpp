@@ -1,0 +1,254 @@
+// pbr_lod — pinhole camera, viewport, frustum, and the projection of a sphere's size to pixels.
+//
+// A `camera` lives in world space (double). Hierarchies store coordinates relative to their own
+// double-precision origin, so traversal and rasterisation use a `view`: the camera expressed in
+// that relative frame, in float. Building the view subtracts the origin in double, which is what
+// keeps scans 10⁷ units from the world origin exact to float precision *near the data*.
+//
+// Screen convention: pixel (0,0) is the top-left pixel, its centre at (0.5, 0.5); x grows right,
+// y grows down. Eye space: x right, y up, z = depth along the viewing direction (positive in front
+// of the eye).
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <string>
+
+#include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/math.hpp"
+
+namespace pbr_lod {
+
+struct viewport {
+  int width = 512;
+  int height = 512;
+};
+
+/// World-space pinhole camera.
+struct camera {
+  vec3d eye = vec3d(0, 0, 3);
+  vec3d target = vec3d::Zero();
+  vec3d up = vec3d::UnitY();
+  double fovy_degrees = 40;  ///< vertical field of view
+  viewport vp{};
+  double z_near = 1e-3;  ///< distances along the view direction, world units
+  double z_far = 1e3;
+
+  /// The pbrlod tool's `--view AZ,EL,DIST`: azimuth and elevation in degrees around `centre`,
+  /// distance in multiples of `radius`. `up_axis` is 1 for y-up (scans), 2 for z-up (LiDAR).
+  /// Near and far planes bracket the sphere with margin.
+  [[nodiscard]] static camera orbit(const vec3d& centre, double radius, double azimuth_deg,
+                                    double elevation_deg, double distance, int up_axis = 1,
+                                    viewport vp = {}) {
+    if (!(radius > 0) || !std::isfinite(radius)) radius = 1;
+    const double az = azimuth_deg * std::numbers::pi / 180, el = elevation_deg * std::numbers::pi / 180;
+    // Direction from the centre to the eye in a y-up frame, then permuted for z-up.
+    const vec3d dir_yup(std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az));
+    camera c;
+    if (up_axis == 2) {
+      c.up = vec3d::UnitZ();
+      c.eye = centre + distance * radius * vec3d(dir_yup.z(), dir_yup.x(), dir_yup.y());
+    } else {
+      c.up = vec3d::UnitY();
+      c.eye = centre + distance * radius * dir_yup;
+    }
+    c.target = centre;
+    c.vp = vp;
+    const double d = distance * radius;
+    c.z_near = std::max(d - 1.5 * radius, d * 1e-4);
+    c.z_far = d + 1.5 * radius;
+    return c;
+  }
+};
+
+/// Plane n·p + d = 0 with unit n; the positive side (n·p + d ≥ 0) is inside.
+struct plane {
+  vec3f n = vec3f::UnitZ();
+  float d = 0;
+  [[nodiscard]] float distance(const vec3f& p) const { return n.dot(p) + d; }
+};
+
+/// A camera expressed relative to an origin, in float: what traversal and rasterisers use.
+class view {
+ public:
+  vec3f eye;      ///< eye position relative to the origin
+  vec3f right;    ///< unit eye-space axes
+  vec3f up;
+  vec3f forward;
+  float focal_px;  ///< focal length in pixels: (height/2) / tan(fovy/2)
+  float tan_half_fovy;
+  int width, height;
+  float z_near, z_far;
+  /// left, right, bottom, top, near, far — inside is the positive side of every plane
+  std::array<plane, 6> frustum;
+
+  view(const camera& cam, const vec3d& origin) {
+    if (cam.vp.width <= 0 || cam.vp.height <= 0)
+      throw InvalidArgument("view: viewport must be at least 1x1 pixels, got " +
+                            std::to_string(cam.vp.width) + "x" + std::to_string(cam.vp.height));
+    if (!(cam.fovy_degrees > 0 && cam.fovy_degrees < 180))
+      throw InvalidArgument("view: fovy must lie in (0, 180) degrees");
+    if (!(cam.z_near > 0 && cam.z_far > cam.z_near))
+      throw InvalidArgument("view: need 0 < z_near < z_far");
+    const vec3d f = (cam.target - cam.eye);
+    if (!(f.norm() > 0) || !all_finite(f)) throw InvalidArgument("view: eye equals target");
+    const vec3d fw = f.normalized();
+    vec3d r = fw.cross(cam.up);
+    if (!(r.norm() > 1e-12)) r = fw.cross(any_orthogonal(fw.cast<float>()).cast<double>());
+    r.normalize();
+    const vec3d u = r.cross(fw);
+    eye = (cam.eye - origin).cast<float>();
+    right = r.cast<float>();
+    up = u.cast<float>();
+    forward = fw.cast<float>();
+    width = cam.vp.width;
+    height = cam.vp.height;
+    tan_half_fovy = static_cast<float>(std::tan(cam.fovy_degrees * std::numbers::pi / 360));
+    focal_px = static_cast<float>(0.5 * height) / tan_half_fovy;
+    z_near = static_cast<float>(cam.z_near);
+    z_far = static_cast<float>(cam.z_far);
+    // Side planes pass through the eye; their normals point inwards.
+    const float hx = 0.5f * static_cast<float>(width) / focal_px;  // tan of half the x fov
+    const float hy = tan_half_fovy;
+    const auto side = [&](const vec3f& n) {
+      const vec3f nn = n.normalized();
+      return plane{nn, -nn.dot(eye)};
+    };
+    frustum[0] = side(forward * hx + right);   // left:   x/z ≥ −hx
+    frustum[1] = side(forward * hx - right);   // right:  x/z ≤ hx
+    frustum[2] = side(forward * hy + up);      // bottom
+    frustum[3] = side(forward * hy - up);      // top
+    frustum[4] = plane{forward, -(forward.dot(eye) + z_near)};
+    frustum[5] = plane{-forward, forward.dot(eye) + z_far};
+  }
+
+  /// Eye-space coordinates of p (x right, y up, z depth).
+  [[nodiscard]] vec3f to_eye(const vec3f& p) const {
+    const vec3f d = p - eye;
+    return {d.dot(right), d.dot(up), d.dot(forward)};
+  }
+  /// Screen position (pixels, y down) of an eye-space point with z > 0.
+  [[nodiscard]] vec2f eye_to_screen(const vec3f& e) const {
+    const float s = focal_px / e.z();
+    return {0.5f * static_cast<float>(width) + e.x() * s,
+            0.5f * static_cast<float>(height) - e.y() * s};
+  }
+  /// World-space size of one pixel at depth z (eye space).
+  [[nodiscard]] float pixel_size_at_depth(float z) const { return z / focal_px; }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Projected size of a bounding sphere, in pixels.
+//
+// The silhouette of a sphere (centre c, radius r) seen from the eye is a cone of half-angle
+// α = asin(r/d), d = |c − eye|, about the direction to c. Its intersection with the image plane
+// (at distance f = focal_px) is an ellipse. With θ the angle between that direction and the
+// optical axis, the ellipse's semi-axes are
+//     a = f·sinα·cosα / (cos²θ − sin²α)    (radial: the largest extent)
+//     b = f·sinα / sqrt(cos²θ − sin²α)
+// valid while the whole sphere lies in front of the eye plane (cos²θ > sin²α, i.e. z_c > r).
+// `projected_radius_exact` returns a (+∞ when the sphere reaches the eye plane): the exact
+// largest screen-space radius, what decides whether a node's splat can cover it.
+//
+// The papers use cheaper estimates; each can be compared with the exact one:
+//  * eye_z:    f·r / z_c           — eye-space depth only (QSplat, POP, Pajarola's d²/|(c−e)·w|²);
+//              under-estimates off-axis, where a > f·r/z_c.
+//  * distance: f·r / d             — Euclidean distance; under-estimates off-axis even more.
+//  * pmr:      r / pixel size at the box corner nearest the eye (Dey & Hudson §4): the world
+//              size of a pixel measured by projecting a unit offset at that corner.
+// ---------------------------------------------------------------------------------------------
+
+enum class projection_metric { exact, eye_z, distance, pmr_corner };
+
+[[nodiscard]] inline float projected_radius_exact(const view& v, const sphere& s) {
+  const vec3f e = v.to_eye(s.centre);
+  const float d2 = e.squaredNorm();
+  const float r2 = s.radius * s.radius;
+  if (e.z() <= s.radius || d2 <= r2) return std::numeric_limits<float>::infinity();
+  // cos²θ − sin²α = (z² − r²)/d²  (cos θ = z/d, sin α = r/d)
+  const float d = std::sqrt(d2);
+  const float sin_a = s.radius / d;
+  const float cos_a = std::sqrt(std::max(0.0f, 1 - sin_a * sin_a));
+  const float denom = (e.z() * e.z() - r2) / d2;
+  return v.focal_px * sin_a * cos_a / denom;
+}
+
+/// Semi-minor axis of the same ellipse (used by tests and by area estimates).
+[[nodiscard]] inline float projected_minor_radius_exact(const view& v, const sphere& s) {
+  const vec3f e = v.to_eye(s.centre);
+  const float d2 = e.squaredNorm();
+  const float r2 = s.radius * s.radius;
+  if (e.z() <= s.radius || d2 <= r2) return std::numeric_limits<float>::infinity();
+  const float sin_a = s.radius / std::sqrt(d2);
+  return v.focal_px * sin_a / std::sqrt((e.z() * e.z() - r2) / d2);
+}
+
+[[nodiscard]] inline float projected_radius_eye_z(const view& v, const sphere& s) {
+  const float z = v.to_eye(s.centre).z();
+  if (z <= 0) return std::numeric_limits<float>::infinity();
+  return v.focal_px * s.radius / z;
+}
+
+[[nodiscard]] inline float projected_radius_distance(const view& v, const sphere& s) {
+  const float d = (s.centre - v.eye).norm();
+  if (d <= s.radius) return std::numeric_limits<float>::infinity();
+  return v.focal_px * s.radius / d;
+}
+
+/// World size of a pixel at point p, measured as Dey & Hudson do: project p and a point at the
+/// same distance from the eye one world unit away (along the camera's right axis, re-normalised
+/// to that distance) and take the reciprocal of their screen distance.
+[[nodiscard]] inline float pixel_size_pmr(const view& v, const vec3f& p) {
+  const vec3f ep = v.to_eye(p);
+  if (ep.z() <= 0) return 0;
+  const float dist = ep.norm();
+  // A unit step orthogonal to the ray, then back onto the sphere of radius dist about the eye.
+  vec3f step = vec3f::UnitX() - ep.normalized() * ep.normalized().x();
+  if (step.squaredNorm() < 1e-12f) step = vec3f::UnitY();
+  vec3f q = ep + step.normalized();
+  q *= dist / q.norm();
+  if (q.z() <= 0) return 0;
+  const float px = (v.eye_to_screen(ep) - v.eye_to_screen(q)).norm();
+  return px > 0 ? 1.0f / px : 0.0f;
+}
+
+/// Dey & Hudson's estimate applied to a sphere: the pixel size at the corner of the sphere's
+/// bounding cube nearest the eye.
+[[nodiscard]] inline float projected_radius_pmr(const view& v, const sphere& s) {
+  vec3f corner;
+  for (int i = 0; i < 3; ++i)
+    corner[i] = s.centre[i] + (v.eye[i] < s.centre[i] ? -s.radius : s.radius);
+  const float size = pixel_size_pmr(v, corner);
+  if (!(size > 0)) return std::numeric_limits<float>::infinity();
+  return s.radius / size;
+}
+
+[[nodiscard]] inline float projected_radius(projection_metric m, const view& v, const sphere& s) {
+  switch (m) {
+    case projection_metric::eye_z: return projected_radius_eye_z(v, s);
+    case projection_metric::distance: return projected_radius_distance(v, s);
+    case projection_metric::pmr_corner: return projected_radius_pmr(v, s);
+    case projection_metric::exact: break;
+  }
+  return projected_radius_exact(v, s);
+}
+
+/// Frustum test of a sphere against the planes selected by `mask` (bit i = plane i still to be
+/// tested). Returns -1 when the sphere is outside one plane, otherwise the mask of planes it
+/// still straddles (0 = fully inside: children need no more tests).
+[[nodiscard]] inline int frustum_test(const view& v, const sphere& s, int mask = 0x3f) {
+  int out = 0;
+  for (int i = 0; i < 6; ++i) {
+    if (!(mask & (1 << i))) continue;
+    const float dist = v.frustum[static_cast<std::size_t>(i)].distance(s.centre);
+    if (dist < -s.radius) return -1;
+    if (dist < s.radius) out |= 1 << i;
+  }
+  return out;
+}
+
+}  // namespace pbr_lod

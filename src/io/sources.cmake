@@ -1,0 +1,1 @@
+# I/O: OpenMesh-backed mesh/point readers, PCD, LAS, hierarchy files.

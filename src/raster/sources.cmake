@@ -1,0 +1,1 @@
+# Rasteriser support: PNG output, metrics (Hausdorff via FLANN).
