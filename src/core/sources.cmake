@@ -1,1 +1,1 @@
-target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/version.cpp)
+target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/version.cpp ${CMAKE_CURRENT_LIST_DIR}/synthetic.cpp)

@@ -1,0 +1,31 @@
+// pbr_lod — generated inputs: the demo scene and large synthetic surfaces for scale tests.
+//
+// The demo scene is built to exercise what LOD methods get wrong: varying sampling density
+// (a sphere whose rings crowd towards one pole), sharp creases (a box with per-face vertices, so
+// normals jump at the edges), a thin part (a fin 1/100 of its height thick, which coarse levels
+// merge front and back of) and per-vertex colours (gradients and stripes, so colour averaging
+// shows). Everything is deterministic.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "pbr_lod/core/point_set.hpp"
+#include "pbr_lod/core/triangle_mesh.hpp"
+
+namespace pbr_lod {
+
+/// The demo scene as a triangle mesh with per-vertex normals and colours. `detail` scales the
+/// tessellation: about 10·detail² triangles (detail 64 → ~45k triangles).
+[[nodiscard]] triangle_mesh make_demo_scene(int detail = 64);
+
+/// n points sampled uniformly by area on the mesh (seeded), with normals (interpolated per-vertex
+/// normals, or the face normal) and colours (interpolated) where the mesh has them.
+[[nodiscard]] point_cloud sample_surface(const triangle_mesh& mesh, std::size_t n,
+                                         std::uint64_t seed = 1);
+
+/// A closed, wavy surface of revolution with n samples, normals and colours: a large input for
+/// scale tests and build-throughput benchmarks (millions of points without a file).
+[[nodiscard]] point_cloud make_wavy_surface(std::size_t n, std::uint64_t seed = 1);
+
+}  // namespace pbr_lod

@@ -1,0 +1,135 @@
+// pbr_lod — the generic view-dependent LOD traversal.
+//
+// Depth-first over any Hierarchy: cull a node whose bounding sphere lies outside the view
+// frustum (planes a parent lies fully inside are not tested again for its subtree), cull a node
+// whose normal cone faces away from the eye (when the hierarchy has cones and back-face culling
+// is on), then either refine into the children or emit the node. The default rule — QSplat's,
+// and POP's and Pajarola's up to their choice of size estimate — is: refine while the node's
+// projected diameter exceeds the screen-space tolerance, emit otherwise (and always emit a leaf).
+//
+// Method-specific behaviour plugs in through a Policy (see default_policy): the size estimate
+// (Pajarola's tilted-area metric, PMR's per-leaf level choice), the refine rule, and the emit
+// step. The traversal itself stays one loop; the policies are specialisations of it.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "pbr_lod/traverse/hierarchy.hpp"
+
+namespace pbr_lod {
+
+struct traverse_options {
+  /// Refine while a node's screen size (projected diameter, pixels) exceeds this. 1 = full
+  /// detail at pixel accuracy; larger values trade accuracy for speed.
+  float tolerance_px = 1;
+  /// How the screen size is estimated (exact, or one of the papers' approximations).
+  projection_metric metric = projection_metric::exact;
+  bool frustum_cull = true;
+  /// Needs HasNormalCones; ignored otherwise.
+  bool backface_cull = false;
+};
+
+struct traverse_stats {
+  std::size_t visited = 0;          ///< nodes whose bounds were tested
+  std::size_t culled_frustum = 0;   ///< subtrees rejected by the frustum
+  std::size_t culled_backface = 0;  ///< subtrees rejected by their normal cone
+  std::size_t emitted_nodes = 0;    ///< inner nodes emitted (the cut above the leaves)
+  std::size_t emitted_leaves = 0;   ///< leaves emitted at full detail
+  std::size_t points = 0, splats = 0, triangles = 0;  ///< primitives by kind
+  [[nodiscard]] std::size_t primitives() const { return points + splats + triangles; }
+};
+
+/// The default policy: screen size = projected diameter under the chosen metric; refine while it
+/// exceeds the tolerance; emit with the hierarchy's own emit().
+struct default_policy {
+  template <Hierarchy H>
+  [[nodiscard]] float screen_size(const H&, const typename H::node_id&, const sphere& s,
+                                  const view& v, const traverse_options& o) const {
+    return 2 * projected_radius(o.metric, v, s);
+  }
+  template <Hierarchy H>
+  [[nodiscard]] bool refine(const H& h, const typename H::node_id& n, float size_px,
+                            const traverse_options& o) const {
+    return !h.is_leaf(n) && size_px > o.tolerance_px;
+  }
+  template <Hierarchy H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float /*size_px*/,
+            S& sink) const {
+    h.emit(n, v, sink);
+  }
+};
+
+namespace detail {
+/// Forwards to a sink and counts what passes, so the stats know primitives by kind.
+template <attributes A, class S>
+struct counting_forwarder {
+  S& inner;
+  std::size_t points = 0, splats = 0, triangles = 0;
+  void point(const point_prim<A>& p) {
+    ++points;
+    inner.point(p);
+  }
+  void splat(const splat_prim<A>& q) {
+    ++splats;
+    inner.splat(q);
+  }
+  void triangle(const triangle_prim<A>& t) {
+    ++triangles;
+    inner.triangle(t);
+  }
+};
+}  // namespace detail
+
+/// Traverses h for view v and sends the selected nodes' primitives to sink. The view must be
+/// expressed relative to h.origin() (construct it as view(camera, h.origin())).
+template <Hierarchy H, Sink<H::attrs> S, class Policy = default_policy>
+traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S& sink,
+                        const Policy& policy = {}) {
+  traverse_stats st;
+  if (h.empty()) return st;
+  detail::counting_forwarder<H::attrs, S> out{sink};
+  struct entry {
+    typename H::node_id node;
+    int planes;  // frustum planes still straddled by the parent
+  };
+  std::vector<entry> stack;
+  stack.reserve(256);
+  stack.push_back({h.root(), o.frustum_cull ? 0x3f : 0});
+  while (!stack.empty()) {
+    const entry e = stack.back();
+    stack.pop_back();
+    ++st.visited;
+    const sphere s = h.bounding_sphere(e.node);
+    int planes = e.planes;
+    if (planes != 0) {
+      planes = frustum_test(v, s, planes);
+      if (planes < 0) {
+        ++st.culled_frustum;
+        continue;
+      }
+    }
+    if constexpr (HasNormalCones<H>) {
+      if (o.backface_cull && back_facing(s, h.normal_cone(e.node), v.eye)) {
+        ++st.culled_backface;
+        continue;
+      }
+    }
+    const float size = policy.screen_size(h, e.node, s, v, o);
+    if (policy.refine(h, e.node, size, o)) {
+      for (const auto& c : h.children(e.node)) stack.push_back({c, planes});
+      continue;
+    }
+    if (h.is_leaf(e.node))
+      ++st.emitted_leaves;
+    else
+      ++st.emitted_nodes;
+    policy.emit(h, e.node, v, size, out);
+  }
+  st.points = out.points;
+  st.splats = out.splats;
+  st.triangles = out.triangles;
+  return st;
+}
+
+}  // namespace pbr_lod

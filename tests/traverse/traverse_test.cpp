@@ -1,0 +1,196 @@
+#include <gtest/gtest.h>
+
+#include <random>
+#include <set>
+
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
+#include "support/sphere_tree.hpp"
+
+namespace pbr_lod {
+namespace {
+
+using tree_n = test::sphere_tree<with_normals>;
+
+point_set<with_normals> demo_points(std::size_t n) {
+  return point_set<with_normals>::from(sample_surface(make_demo_scene(16), n, 7));
+}
+
+camera looking_at_scene(double az = 30, double el = 20, double dist = 3) {
+  return camera::orbit(vec3d(0, 1, 0), 2.5, az, el, dist, 1, {256, 256});
+}
+
+/// Records which samples the emitted nodes stand for.
+struct node_recorder {
+  const tree_n* tree;
+  std::vector<std::uint32_t> emitted;
+};
+
+// A policy that forwards to the default and remembers every emitted node, so tests can check
+// the cut against brute force.
+struct recording_policy : default_policy {
+  std::vector<std::uint32_t>* out;
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size, S& sink) const {
+    out->push_back(n);
+    default_policy::emit(h, n, v, size, sink);
+  }
+};
+
+// Culling is conservative and complete: with tolerance 0 every sample inside the frustum is
+// emitted (its leaf is never culled), and every culled leaf lies wholly outside.
+TEST(Traverse, FrustumKeepsInsideCullsOutside) {
+  const auto pts = demo_points(20000);
+  const tree_n tree(pts, 8);
+  const view v(looking_at_scene(80, 10, 1.2), pts.origin);  // close up: much is outside
+  std::vector<std::uint32_t> emitted;
+  counting_sink<tree_n::attrs> sink;
+  const traverse_options o{.tolerance_px = 0};
+  const auto st = traverse(tree, v, o, sink, recording_policy{{}, &emitted});
+  EXPECT_GT(st.culled_frustum, 0u);
+  std::vector<char> drawn(pts.size(), 0);
+  for (auto n : emitted) {
+    ASSERT_TRUE(tree.is_leaf(n));  // tolerance 0: only leaves
+    for (auto i : tree.samples(n)) drawn[i] = 1;
+  }
+  std::size_t inside = 0, drawn_outside = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const bool in = frustum_test(v, sphere{pts.positions[i], 0}) >= 0;
+    inside += in;
+    if (in) {
+      EXPECT_TRUE(drawn[i]) << "sample " << i << " inside the frustum was not drawn";
+    }
+    drawn_outside += (!in && drawn[i]);
+  }
+  EXPECT_GT(inside, 0u);
+  EXPECT_LT(inside, pts.size());
+  EXPECT_EQ(sink.points, static_cast<std::size_t>(std::count(drawn.begin(), drawn.end(), 1)));
+  // Leaves straddling the frustum are drawn whole, so some outside samples are drawn — but not
+  // many more than the inside ones.
+  EXPECT_LT(drawn_outside, inside);
+}
+
+// With no culling and tolerance 0, every sample is emitted exactly once.
+TEST(Traverse, FullDetailEmitsEverySampleOnce) {
+  const auto pts = demo_points(5000);
+  const tree_n tree(pts, 4);
+  const view v(looking_at_scene(), pts.origin);
+  std::vector<std::uint32_t> emitted;
+  counting_sink<tree_n::attrs> sink;
+  const auto st = traverse(tree, v, {.tolerance_px = 0, .frustum_cull = false}, sink,
+                           recording_policy{{}, &emitted});
+  EXPECT_EQ(sink.points, pts.size());
+  EXPECT_EQ(st.points, pts.size());
+  EXPECT_EQ(st.visited, tree.size());  // nothing culled, all refined
+  std::multiset<std::uint32_t> seen;
+  for (auto n : emitted)
+    for (auto i : tree.samples(n)) seen.insert(i);
+  EXPECT_EQ(seen.size(), pts.size());
+  for (std::uint32_t i = 0; i < pts.size(); ++i) EXPECT_EQ(seen.count(i), 1u);
+}
+
+// The cut: every emitted inner node is at most `tolerance` pixels large and its parent was
+// larger; a larger tolerance never emits more primitives.
+TEST(Traverse, ToleranceControlsTheCut) {
+  const auto pts = demo_points(20000);
+  const tree_n tree(pts, 8);
+  const view v(looking_at_scene(), pts.origin);
+  std::size_t previous = std::numeric_limits<std::size_t>::max();
+  for (float tol : {0.5f, 1.0f, 2.0f, 4.0f, 8.0f, 16.0f}) {
+    std::vector<std::uint32_t> emitted;
+    counting_sink<tree_n::attrs> sink;
+    traverse(tree, v, {.tolerance_px = tol}, sink, recording_policy{{}, &emitted});
+    for (auto n : emitted)
+      if (!tree.is_leaf(n)) {
+        EXPECT_LE(2 * projected_radius_exact(v, tree.bounding_sphere(n)), tol);
+      }
+    EXPECT_LE(sink.total(), previous) << "tolerance " << tol;
+    previous = sink.total();
+  }
+  // 16 px on a 256² image: leaves of 8 samples whose parent exceeds 16 px, a small fraction.
+  EXPECT_LT(previous, pts.size() / 5);
+}
+
+// Back-face culling only removes subtrees whose every sample faces away from the eye.
+TEST(Traverse, BackfaceCullingIsConservative) {
+  const auto pts = demo_points(20000);
+  const tree_n tree(pts, 8);
+  const view v(looking_at_scene(200, 30, 3), pts.origin);
+  std::vector<std::uint32_t> with, without;
+  counting_sink<tree_n::attrs> s1, s2;
+  const auto st = traverse(tree, v, {.tolerance_px = 0, .backface_cull = true}, s1,
+                           recording_policy{{}, &with});
+  traverse(tree, v, {.tolerance_px = 0, .backface_cull = false}, s2, recording_policy{{}, &without});
+  EXPECT_GT(st.culled_backface, 0u);
+  EXPECT_LT(s1.points, s2.points);
+  std::vector<char> kept(pts.size(), 0);
+  for (auto n : with)
+    for (auto i : tree.samples(n)) kept[i] = 1;
+  for (auto n : without)
+    for (auto i : tree.samples(n))
+      if (!kept[i]) {
+        // dropped by back-face culling: must face away
+        EXPECT_GT((pts.positions[i] - v.eye).dot(pts.normals[i]), -1e-4f) << "sample " << i;
+      }
+}
+
+// The approximate metrics under-estimate size off-axis, so they never refine more than exact.
+TEST(Traverse, ApproximateMetricsDrawNoMoreThanExact) {
+  const auto pts = demo_points(20000);
+  const tree_n tree(pts, 8);
+  const view v(looking_at_scene(), pts.origin);
+  const auto count = [&](projection_metric m) {
+    counting_sink<tree_n::attrs> s;
+    traverse(tree, v, {.tolerance_px = 4, .metric = m}, s);
+    return s.total();
+  };
+  const auto exact = count(projection_metric::exact);
+  EXPECT_LE(count(projection_metric::eye_z), exact);
+  EXPECT_LE(count(projection_metric::distance), exact);
+  EXPECT_GT(count(projection_metric::pmr_corner), 0u);
+}
+
+// The same scene 10⁷ units from the origin, with the camera moved along, selects the same cut:
+// the hierarchy stores coordinates relative to its origin and the view subtracts it in double.
+TEST(Traverse, FarFromOriginSelectsTheSameCut) {
+  auto cloud = sample_surface(make_demo_scene(16), 10000, 3);
+  const auto near_pts = point_set<with_normals>::from(cloud);
+  cloud.origin += vec3d(1e7, 4e6, -2e7);
+  const auto far_pts = point_set<with_normals>::from(cloud);
+  const tree_n near_tree(near_pts), far_tree(far_pts);
+  camera cam = looking_at_scene();
+  const view v_near(cam, near_pts.origin);
+  cam.eye += cloud.origin;
+  cam.target += cloud.origin;
+  const view v_far(cam, far_pts.origin);
+  counting_sink<tree_n::attrs> a, b;
+  const auto sa = traverse(near_tree, v_near, {.tolerance_px = 2}, a);
+  const auto sb = traverse(far_tree, v_far, {.tolerance_px = 2}, b);
+  EXPECT_EQ(sa.visited, sb.visited);
+  EXPECT_EQ(a.total(), b.total());
+}
+
+TEST(Traverse, EmptyHierarchyEmitsNothing) {
+  const point_set<with_normals> none;
+  const tree_n tree(none);
+  counting_sink<tree_n::attrs> s;
+  const auto st = traverse(tree, view(looking_at_scene(), vec3d::Zero()), {}, s);
+  EXPECT_EQ(st.visited, 0u);
+  EXPECT_EQ(s.total(), 0u);
+}
+
+// Buffer sink keeps what a host renderer copies, in emission order, and replays it unchanged.
+TEST(Sinks, BufferSinkReplays) {
+  const auto pts = demo_points(2000);
+  const tree_n tree(pts);
+  const view v(looking_at_scene(), pts.origin);
+  buffer_sink<tree_n::attrs> buf;
+  const auto st = traverse(tree, v, {.tolerance_px = 2}, buf);
+  EXPECT_EQ(buf.points.size(), st.points);
+  counting_sink<tree_n::attrs> c;
+  buf.replay(c);
+  EXPECT_EQ(c.points, st.points);
+}
+
+}  // namespace
+}  // namespace pbr_lod
