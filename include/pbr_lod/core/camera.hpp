@@ -165,26 +165,21 @@ class view {
 enum class projection_metric { exact, eye_z, distance, pmr_corner };
 
 [[nodiscard]] inline float projected_radius_exact(const view& v, const sphere& s) {
+  // With sinα = r/d, cosα = sqrt(d²−r²)/d, cos²θ − sin²α = (z² − r²)/d² the major semi-axis
+  // simplifies to a = f·r·sqrt(d² − r²) / (z² − r²): one square root, one division.
   const vec3f e = v.to_eye(s.centre);
-  const float d2 = e.squaredNorm();
   const float r2 = s.radius * s.radius;
-  if (e.z() <= s.radius || d2 <= r2) return std::numeric_limits<float>::infinity();
-  // cos²θ − sin²α = (z² − r²)/d²  (cos θ = z/d, sin α = r/d)
-  const float d = std::sqrt(d2);
-  const float sin_a = s.radius / d;
-  const float cos_a = std::sqrt(std::max(0.0f, 1 - sin_a * sin_a));
-  const float denom = (e.z() * e.z() - r2) / d2;
-  return v.focal_px * sin_a * cos_a / denom;
+  const float z2r2 = e.z() * e.z() - r2;
+  if (e.z() <= s.radius || !(z2r2 > 0)) return std::numeric_limits<float>::infinity();
+  return v.focal_px * s.radius * std::sqrt(e.squaredNorm() - r2) / z2r2;
 }
 
-/// Semi-minor axis of the same ellipse (used by tests and by area estimates).
+/// Semi-minor axis of the same ellipse, b = f·r / sqrt(z² − r²) (tests, area estimates).
 [[nodiscard]] inline float projected_minor_radius_exact(const view& v, const sphere& s) {
   const vec3f e = v.to_eye(s.centre);
-  const float d2 = e.squaredNorm();
-  const float r2 = s.radius * s.radius;
-  if (e.z() <= s.radius || d2 <= r2) return std::numeric_limits<float>::infinity();
-  const float sin_a = s.radius / std::sqrt(d2);
-  return v.focal_px * sin_a / std::sqrt((e.z() * e.z() - r2) / d2);
+  const float z2r2 = e.z() * e.z() - s.radius * s.radius;
+  if (e.z() <= s.radius || !(z2r2 > 0)) return std::numeric_limits<float>::infinity();
+  return v.focal_px * s.radius / std::sqrt(z2r2);
 }
 
 [[nodiscard]] inline float projected_radius_eye_z(const view& v, const sphere& s) {

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Installs what pbr_lod needs on Debian 12 (bookworm) from Debian's packages. Idempotent: it only
+# calls apt-get when a package is missing. Uses sudo when not run as root.
+set -euo pipefail
+packages=(
+  build-essential cmake pkg-config git
+  libeigen3-dev libcgal-dev libflann-dev liblz4-dev libopenmesh-dev liblzf-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+echo "install-deps: installing ${missing[*]}"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
