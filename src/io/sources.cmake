@@ -1,1 +1,23 @@
-# I/O: OpenMesh-backed mesh/point readers, PCD, LAS, hierarchy files.
+# I/O: OpenMesh-backed OBJ/OFF readers, our PLY/PCD/LAS readers, the PLY writer.
+# OpenMesh is linked PRIVATE in the top-level CMakeLists (OpenMeshCore); liblzf decodes
+# PCD's binary_compressed data. Neither appears in a public header.
+target_sources(pbr_lod PRIVATE
+  ${CMAKE_CURRENT_LIST_DIR}/common.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/read.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/ply_reader.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/ply_writer.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/openmesh_reader.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/pcd_reader.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/las_reader.cpp)
+
+# Debian's liblzf-dev ships a config defining liblzf::liblzf (include dir /usr/include/liblzf);
+# fall back to a plain search where it does not.
+find_package(liblzf CONFIG QUIET)
+if(TARGET liblzf::liblzf)
+  target_link_libraries(pbr_lod PRIVATE liblzf::liblzf)
+else()
+  find_path(PBR_LOD_LZF_INCLUDE_DIR lzf.h PATH_SUFFIXES liblzf REQUIRED)
+  find_library(PBR_LOD_LZF_LIBRARY lzf REQUIRED)
+  target_include_directories(pbr_lod PRIVATE ${PBR_LOD_LZF_INCLUDE_DIR})
+  target_link_libraries(pbr_lod PRIVATE ${PBR_LOD_LZF_LIBRARY})
+endif()

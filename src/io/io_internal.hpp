@@ -1,0 +1,131 @@
+// pbr_lod — internals shared by the file readers and writers in src/io (not installed).
+//
+// Every reader parses into a raw_geometry (world coordinates in double, nothing dropped yet) and
+// hands it to finish_mesh, which is the one place that drops non-finite points, picks the origin
+// and converts to the float-relative containers. So the rules of read.hpp hold for every format.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <charconv>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <type_traits>
+#include <vector>
+
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/math.hpp"
+#include "pbr_lod/core/triangle_mesh.hpp"
+#include "pbr_lod/io/read.hpp"
+
+namespace pbr_lod::detail {
+
+/// A file as parsed, before finish_mesh: world positions in double, attribute vectors empty or
+/// one entry per position (normals, colours) or per face (face_texcoords).
+struct raw_geometry {
+  std::vector<vec3d> positions;
+  std::vector<vec3f> normals;
+  std::vector<rgb8> colours;
+  std::vector<std::array<std::uint32_t, 3>> faces;
+  std::vector<std::array<vec2f, 3>> face_texcoords;
+  std::string texture_path;
+  /// An origin the file asks for (write_ply stores one); used when it is finite and inside the
+  /// bounding box of the finite points, else the box centre is used.
+  std::optional<vec3d> origin_hint;
+};
+
+/// Drops non-finite points (and faces using them), chooses the origin, converts positions to
+/// float relative to it, and records counts and warnings in `report`.
+[[nodiscard]] triangle_mesh finish_mesh(raw_geometry&& g, const std::string& path,
+                                        read_report& report);
+
+// --- the format parsers (one .cpp each) ---------------------------------------------------------
+[[nodiscard]] raw_geometry read_ply_file(const std::string& path, read_report& report);
+[[nodiscard]] raw_geometry read_obj_file(const std::string& path, read_report& report);
+[[nodiscard]] raw_geometry read_off_file(const std::string& path, read_report& report);
+[[nodiscard]] raw_geometry read_pcd_file(const std::string& path, read_report& report);
+[[nodiscard]] raw_geometry read_las_file(const std::string& path, read_report& report);
+
+// --- small utilities ----------------------------------------------------------------------------
+
+/// The whole file in memory. Throws IoError when it is missing, a directory or unreadable.
+[[nodiscard]] std::string read_file_bytes(const std::string& path);
+
+/// ".ply" for "a/b.PLY"; empty when there is no extension.
+[[nodiscard]] std::string lower_extension(const std::string& path);
+
+/// Concatenates anything streamable into a string (messages).
+template <class... Args>
+[[nodiscard]] std::string cat(const Args&... args) {
+  std::ostringstream s;
+  (s << ... << args);
+  return s.str();
+}
+
+/// Throws FormatError "<path>: <where>: <what>" (where may be empty).
+[[noreturn]] void format_error(const std::string& path, const std::string& where,
+                               const std::string& what);
+
+/// Strips spaces, tabs and a trailing '\r'.
+[[nodiscard]] std::string_view trim(std::string_view s);
+
+/// Splits on spaces/tabs into `out` (cleared first); returns out.size().
+std::size_t split_ws(std::string_view line, std::vector<std::string_view>& out);
+
+/// Parses the whole token as a number (from_chars; a leading '+' is accepted). nullopt on any
+/// garbage, overflow or partial parse. For floating types "nan"/"inf" parse.
+template <class T>
+[[nodiscard]] std::optional<T> parse_number(std::string_view tok) {
+  if (!tok.empty() && tok.front() == '+') tok.remove_prefix(1);
+  T v{};
+  const auto [ptr, ec] = std::from_chars(tok.data(), tok.data() + tok.size(), v);
+  if (ec != std::errc{} || ptr != tok.data() + tok.size() || tok.empty()) return std::nullopt;
+  return v;
+}
+
+/// a * b, or nullopt when it overflows.
+[[nodiscard]] inline std::optional<std::uint64_t> mul_checked(std::uint64_t a, std::uint64_t b) {
+  std::uint64_t r = 0;
+  if (__builtin_mul_overflow(a, b, &r)) return std::nullopt;
+  return r;
+}
+[[nodiscard]] inline std::optional<std::uint64_t> add_checked(std::uint64_t a, std::uint64_t b) {
+  std::uint64_t r = 0;
+  if (__builtin_add_overflow(a, b, &r)) return std::nullopt;
+  return r;
+}
+
+/// Reverses the bytes of an arithmetic value (endianness).
+template <class T>
+[[nodiscard]] inline T byte_swapped(T v) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  std::array<unsigned char, sizeof(T)> b{};
+  std::memcpy(b.data(), &v, sizeof(T));
+  for (std::size_t i = 0; i < sizeof(T) / 2; ++i) std::swap(b[i], b[sizeof(T) - 1 - i]);
+  std::memcpy(&v, b.data(), sizeof(T));
+  return v;
+}
+
+/// Loads a little-endian value from unaligned memory (the caller has bounds-checked p).
+template <class T>
+[[nodiscard]] inline T load_le(const unsigned char* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  if constexpr (std::endian::native == std::endian::big) v = byte_swapped(v);
+  return v;
+}
+
+/// 8-bit colour channel from a [0, 1] float (clamped; NaN → 0).
+[[nodiscard]] inline std::uint8_t unit_to_u8(double v) {
+  if (!(v > 0.0)) return 0;
+  if (v >= 1.0) return 255;
+  return static_cast<std::uint8_t>(v * 255.0 + 0.5);
+}
+
+}  // namespace pbr_lod::detail

@@ -1,0 +1,154 @@
+// pbr_lod — our LAS reader (ASPRS LAS 1.0–1.4, point data record formats 0–10).
+//
+// Read: X Y Z (32-bit integers, world = X·scale + offset, in double) and, for formats 2, 3, 5,
+// 7, 8 and 10, the 16-bit RGB. The specification says RGB is scaled to 16 bits, but many writers
+// store 0–255 in the 16-bit fields (the PDAL sample does): when no value exceeds 255 they are
+// kept, otherwise every value is shifted right by 8.
+//
+// Checked before any point is read: signature "LASF", version 1.0–1.4, header size at least the
+// version's minimum (227 / 235 / 375 bytes for 1.0–1.2 / 1.3 / 1.4), the compression bits of the
+// point format (LAZ → FormatError), format ≤ 10, record length ≥ the format's minimum, scale
+// factors finite and non-zero, offsets finite, point data offset ≥ header size, and
+// offset + count × record length ≤ file size (overflow-checked). Record lengths longer than the
+// minimum ("extra bytes") are fine: we step by the declared length.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "io_internal.hpp"
+
+namespace pbr_lod::detail {
+namespace {
+
+// Minimum record length and RGB offset (0 = none) per point data record format.
+constexpr std::uint16_t min_record_length[11] = {20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67};
+constexpr std::uint16_t rgb_offset[11] = {0, 0, 20, 28, 0, 28, 0, 30, 30, 0, 30};
+
+}  // namespace
+
+raw_geometry read_las_file(const std::string& path, read_report& report) {
+  const std::string bytes = read_file_bytes(path);
+  const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
+  const std::uint64_t file_size = bytes.size();
+  const std::string name = std::filesystem::path(path).filename().string();
+
+  if (file_size < 4 || std::memcmp(b, "LASF", 4) != 0)
+    format_error(path, "header", "expected the signature 'LASF' (not a LAS file)");
+  if (file_size < 227)
+    format_error(path, "header", cat("truncated: ", file_size, " bytes, a LAS header needs 227"));
+
+  const unsigned major = b[24], minor = b[25];
+  if (major != 1 || minor > 4)
+    format_error(path, "header",
+                 cat("unsupported LAS version ", major, ".", minor, " (expected 1.0 to 1.4)"));
+  const std::uint16_t header_size = load_le<std::uint16_t>(b + 94);
+  const std::uint32_t data_offset = load_le<std::uint32_t>(b + 96);
+  const std::uint8_t format_byte = b[104];
+  const std::uint16_t record_length = load_le<std::uint16_t>(b + 105);
+  const std::uint32_t legacy_count = load_le<std::uint32_t>(b + 107);
+
+  const std::uint16_t min_header = minor <= 2 ? 227 : minor == 3 ? 235 : 375;
+  if (header_size < min_header)
+    format_error(path, "header",
+                 cat("header size ", header_size, " is below the ", min_header, " bytes LAS 1.",
+                     minor, " requires"));
+  if (header_size > file_size)
+    format_error(
+        path, "header",
+        cat("truncated: header size ", header_size, " but the file has ", file_size, " bytes"));
+  // Bits 7 and 6 of the format byte mark LAZ (LASzip) compressed points.
+  if (format_byte & 0xC0)
+    format_error(path, "header",
+                 cat("point data is compressed (LAZ; format byte ", unsigned{format_byte},
+                     "), which is not supported: decompress it to LAS first (laszip, pdal)"));
+  const unsigned format = format_byte;
+  if (format > 10)
+    format_error(path, "header",
+                 cat("unknown point data record format ", format, " (expected 0 to 10)"));
+  if (record_length < min_record_length[format])
+    format_error(path, "header",
+                 cat("point record length ", record_length, " is smaller than the ",
+                     min_record_length[format], " bytes format ", format, " needs"));
+
+  std::uint64_t count = legacy_count;
+  if (minor >= 4) {
+    const std::uint64_t count64 = load_le<std::uint64_t>(b + 247);
+    if (count64 != 0) {
+      if (legacy_count != 0 && legacy_count != count64)
+        report.warnings.push_back(cat(name, ": legacy point count ", legacy_count,
+                                      " differs from the 64-bit count ", count64,
+                                      "; using the latter"));
+      count = count64;
+    }
+  }
+
+  double scale[3], offset[3], bmax[3], bmin[3];
+  for (int a = 0; a < 3; ++a) {
+    scale[a] = load_le<double>(b + 131 + 8 * a);
+    offset[a] = load_le<double>(b + 155 + 8 * a);
+    bmax[a] = load_le<double>(b + 179 + 16 * a);
+    bmin[a] = load_le<double>(b + 187 + 16 * a);
+    if (!std::isfinite(scale[a]) || scale[a] == 0.0)
+      format_error(
+          path, "header",
+          cat("scale factor ", "xyz"[a], " = ", scale[a], " is not a finite non-zero number"));
+    if (!std::isfinite(offset[a]))
+      format_error(path, "header", cat("offset ", "xyz"[a], " is not finite"));
+  }
+
+  if (data_offset < header_size)
+    format_error(path, "header",
+                 cat("offset to point data ", data_offset, " lies inside the ", header_size,
+                     "-byte header"));
+  if (data_offset > file_size)
+    format_error(path, "header",
+                 cat("offset to point data ", data_offset, " is beyond the end of the file (",
+                     file_size, " bytes)"));
+  const auto point_bytes = mul_checked(count, record_length);
+  const auto end = point_bytes ? add_checked(data_offset, *point_bytes) : std::nullopt;
+  if (!end || *end > file_size)
+    format_error(path, "points",
+                 cat("truncated: ", count, " points of ", record_length, " bytes from offset ",
+                     data_offset, " need ", end ? cat(*end) : std::string("more than 2^64"),
+                     " bytes, the file has ", file_size));
+
+  raw_geometry g;
+  g.positions.resize(count);
+  const unsigned char* rec = b + data_offset;
+  for (std::uint64_t i = 0; i < count; ++i, rec += record_length)
+    for (int a = 0; a < 3; ++a)
+      g.positions[i][a] = load_le<std::int32_t>(rec + 4 * a) * scale[a] + offset[a];
+
+  if (rgb_offset[format] != 0) {
+    std::vector<std::array<std::uint16_t, 3>> rgb(count);
+    std::uint16_t top = 0;
+    rec = b + data_offset + rgb_offset[format];
+    for (std::uint64_t i = 0; i < count; ++i, rec += record_length)
+      for (int c = 0; c < 3; ++c) {
+        rgb[i][c] = load_le<std::uint16_t>(rec + 2 * c);
+        top = std::max(top, rgb[i][c]);
+      }
+    const int shift = top > 255 ? 8 : 0;
+    g.colours.resize(count);
+    for (std::uint64_t i = 0; i < count; ++i)
+      g.colours[i] = {static_cast<std::uint8_t>(rgb[i][0] >> shift),
+                      static_cast<std::uint8_t>(rgb[i][1] >> shift),
+                      static_cast<std::uint8_t>(rgb[i][2] >> shift)};
+  }
+
+  // Points outside the header's bounds (by more than one quantum) mean a stale header: worth a
+  // warning, not an error, since the points themselves are well defined.
+  std::uint64_t outside = 0;
+  for (const vec3d& p : g.positions)
+    for (int a = 0; a < 3; ++a)
+      if (p[a] < bmin[a] - std::abs(scale[a]) || p[a] > bmax[a] + std::abs(scale[a])) {
+        ++outside;
+        break;
+      }
+  if (outside > 0)
+    report.warnings.push_back(
+        cat(name, ": ", outside, " points lie outside the bounding box the header states"));
+  return g;
+}
+
+}  // namespace pbr_lod::detail

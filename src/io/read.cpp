@@ -1,0 +1,58 @@
+// pbr_lod — read_mesh / read_points: dispatch on the file extension to the format parsers.
+#include "pbr_lod/io/read.hpp"
+
+#include "io_internal.hpp"
+
+namespace pbr_lod {
+
+namespace {
+
+[[noreturn]] void unsupported(const std::string& path, const std::string& ext, const char* what) {
+  detail::format_error(path, "",
+                       ext.empty() ? detail::cat("no file extension; ", what)
+                                   : detail::cat("unsupported extension '", ext, "'; ", what));
+}
+
+}  // namespace
+
+triangle_mesh read_mesh(const std::string& path, read_report* report) {
+  read_report local;
+  read_report& r = report ? *report : local;
+  r = read_report{};
+  const std::string ext = detail::lower_extension(path);
+  detail::raw_geometry g;
+  if (ext == ".ply")
+    g = detail::read_ply_file(path, r);
+  else if (ext == ".obj")
+    g = detail::read_obj_file(path, r);
+  else if (ext == ".off")
+    g = detail::read_off_file(path, r);
+  else if (ext == ".pcd" || ext == ".las" || ext == ".laz")
+    detail::format_error(path, "", "a point cloud format, not a mesh: use read_points");
+  else
+    unsupported(path, ext, "read_mesh reads .ply, .obj and .off");
+  return detail::finish_mesh(std::move(g), path, r);
+}
+
+point_cloud read_points(const std::string& path, read_report* report) {
+  const std::string ext = detail::lower_extension(path);
+  if (ext == ".ply" || ext == ".obj" || ext == ".off")
+    return std::move(read_mesh(path, report).vertices);
+  read_report local;
+  read_report& r = report ? *report : local;
+  r = read_report{};
+  detail::raw_geometry g;
+  if (ext == ".pcd")
+    g = detail::read_pcd_file(path, r);
+  else if (ext == ".las")
+    g = detail::read_las_file(path, r);
+  else if (ext == ".laz")
+    detail::format_error(path, "",
+                         "LAZ is compressed LAS, which is not supported; convert it to LAS first "
+                         "(laszip -i in.laz -o out.las, or pdal translate in.laz out.las)");
+  else
+    unsupported(path, ext, "read_points reads .ply, .obj, .off, .pcd and .las");
+  return std::move(detail::finish_mesh(std::move(g), path, r).vertices);
+}
+
+}  // namespace pbr_lod
