@@ -1,1 +1,8 @@
-# Rasteriser support: PNG output, metrics (Hausdorff via FLANN).
+# Rasteriser support: whole-frame passes (shadow resolve, hole filling), reference renders,
+# metrics (Hausdorff via FLANN k-NN), PNG (libpng). FLANN and libpng stay out of public headers.
+target_sources(pbr_lod PRIVATE
+  ${CMAKE_CURRENT_LIST_DIR}/postprocess.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/reference.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/metrics.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/png.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/../core/knn.cpp)

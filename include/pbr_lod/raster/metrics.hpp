@@ -1,0 +1,46 @@
+// pbr_lod — image and geometry error metrics: RMSE / PSNR / hole fraction between two renders
+// of the same view, and the Hausdorff distance between two point sets.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+
+#include "pbr_lod/core/point_set.hpp"
+#include "pbr_lod/raster/image.hpp"
+
+namespace pbr_lod {
+
+/// Difference of a test image from a reference image of the same size.
+struct image_error {
+  double rmse = 0;           ///< over the RGB channels of the pixels covered in either image
+  double psnr = 0;           ///< 20·log10(255 / rmse) dB; +inf when rmse = 0 (identical pixels)
+  double hole_fraction = 0;  ///< holes / reference_covered (0 when the reference is empty)
+  std::size_t covered_either = 0;     ///< pixels covered in at least one of the images
+  std::size_t reference_covered = 0;  ///< pixels covered in the reference
+  std::size_t holes = 0;  ///< pixels covered in the reference but background in the test
+};
+
+/// Compares `test` against `reference` (same width and height, else InvalidArgument).
+/// RMSE and PSNR are taken over the pixels covered in either image, so that a mostly empty
+/// frame does not dilute the error; a pixel covered in only one image compares its colour with
+/// the colour the other image stores there (its background colour). Nothing covered in either
+/// image: rmse 0, psnr +inf.
+[[nodiscard]] image_error compare_images(const image& reference, const image& test);
+
+/// One-sided and symmetric Hausdorff distances between two point clouds (world units).
+struct hausdorff_result {
+  double a_to_b_max = 0;  ///< max over points of a of the distance to the nearest point of b
+  double b_to_a_max = 0;
+  double a_to_b_mean = 0;  ///< mean of the same distances
+  double b_to_a_mean = 0;
+  /// The Hausdorff distance max(a→b, b→a).
+  [[nodiscard]] double symmetric() const { return std::max(a_to_b_max, b_to_a_max); }
+};
+
+/// Hausdorff distance between the positions of a and b, via exact k-d tree queries. Computed in
+/// the frame of a's origin: b's positions are re-expressed relative to it in double first, so two
+/// georeferenced clouds with different origins compare correctly. Throws InvalidArgument when
+/// either cloud is empty or has non-finite positions.
+[[nodiscard]] hausdorff_result hausdorff(const point_cloud& a, const point_cloud& b);
+
+}  // namespace pbr_lod

@@ -1,0 +1,334 @@
+// pbr_lod — the CPU reference rasteriser: a deterministic, z-buffered software renderer that is
+// a Sink (traverse/sink.hpp) for one-pixel points, square splats, object-space elliptical splats
+// and triangles.
+//
+// Techniques (details in docs/rasterizer.md and in detail/raster_core.hpp):
+//  * elliptical splats projected exactly in perspective: pixel ray → splat-plane parameters by a
+//    3×3 projective map, inside iff s² + t² ≤ 1, depth from the ray–plane intersection
+//    (Zwicker et al. 2004, "Perspective accurate splatting");
+//  * triangles by edge functions at pixel centres with the top-left rule, watertight, with
+//    perspective-correct attributes (barycentrics over 1/z);
+//  * Lambert shading with one directional light, two-sided for all primitives: a normal that
+//    faces away from the eye is flipped (for triangles: when the triangle is seen from its back);
+//  * shadows by a two-pass shadow map (Williams 1978) fitted to the primitives' bounds;
+//  * hole filling by a screen-space reconstruction filter (Pfister et al. 2000; POP §3.4).
+//
+// Effects cost nothing when off. `render<A, Compiled>` looks at the requested effects once per
+// frame and calls an instantiation of rasterizer<A, E> for exactly that effect set, so inside
+// the per-primitive code every effect test is `if constexpr`: an effect that is off has no
+// branch, no pass and no buffer. Effects outside `Compiled` are never instantiated (and are
+// ignored if requested); effects the attribute set cannot support (shading without normals,
+// colour without colours) are dropped at compile time, so the same image comes out whether an
+// unused effect is compiled in or not.
+//
+// Determinism: single-threaded, fixed traversal order, ties in the depth test keep the first
+// primitive drawn; the same primitives in the same order give the same bytes.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <span>
+#include <utility>
+#include <vector>
+
+#include "pbr_lod/core/attributes.hpp"
+#include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/raster/detail/postprocess.hpp"
+#include "pbr_lod/raster/detail/raster_core.hpp"
+#include "pbr_lod/raster/detail/shadow_map.hpp"
+#include "pbr_lod/raster/effects.hpp"
+#include "pbr_lod/raster/image.hpp"
+#include "pbr_lod/traverse/primitives.hpp"
+#include "pbr_lod/traverse/sink.hpp"
+
+namespace pbr_lod {
+
+/// The effects of E that attribute set A can apply: shading needs normals, colour needs colours.
+[[nodiscard]] constexpr effects applicable_effects(const effects& e, const attributes& a) {
+  return {e.shading && a.normal, e.colour && a.colour, e.backface_cull, e.shadows, e.hole_filling};
+}
+
+/// A z-buffered rasteriser for one frame; models Sink<A>.
+///
+/// E is the effect set, fixed at compile time (use render() to choose it at run time). Back-face
+/// culling applies to triangles (screen winding: counter-clockwise = front) and to points and
+/// splats that have normals (n·(p − eye) > 0 is back-facing); splats without normals have no
+/// front side and are never culled. With E.shadows the rasteriser needs the map of a first pass
+/// (render() builds it); constructed without one, nothing is in shadow.
+///
+/// Usage: construct, send primitives (point/splat/triangle, any order), then finish() once.
+/// Not thread-safe; one rasteriser per frame.
+template <attributes A, effects E = effects{}>
+class rasterizer {
+ public:
+  /// What this instantiation actually applies.
+  static constexpr effects fx = applicable_effects(E, A);
+
+  rasterizer(const view& v, const render_options& opt, const detail::shadow_map* shadows = nullptr)
+      : view_(v),
+        proj_(v),
+        opt_(opt),
+        shadows_(shadows),
+        key_(pixel_count(v), proj_.key_far),
+        colour_(pixel_count(v), detail::pack(opt.background)),
+        flat_(opt.flat_colour) {
+    if constexpr (kLitBuffer) lit_.assign(pixel_count(v), 1.0f);
+    kb_ = key_.data();
+    cb_ = colour_.data();
+    lb_ = lit_.data();
+    fw_ = static_cast<float>(v.width);
+    fh_ = static_cast<float>(v.height);
+    const vec3f d = opt.sun.direction;
+    light_ = (all_finite(d) && d.squaredNorm() > 0) ? vec3f(d.normalized()) : vec3f::Zero();
+    ambient_ = std::isfinite(opt.sun.ambient) ? std::clamp(opt.sun.ambient, 0.0f, 1.0f) : 0.0f;
+  }
+  // The raw buffer pointers would point into the source's buffers after a copy; a move keeps
+  // the storage, so it is fine.
+  rasterizer(const rasterizer&) = delete;
+  rasterizer& operator=(const rasterizer&) = delete;
+  rasterizer(rasterizer&&) noexcept = default;
+  rasterizer& operator=(rasterizer&&) noexcept = default;
+
+  /// A square of p.size_px pixels (≤ 1: the pixel containing the projected centre), at the depth
+  /// of its centre. Points behind the near plane or beyond the far plane are dropped.
+  void point(const point_prim<A>& p) {
+    const vec3f d = p.position - proj_.eye;
+    const float z = d.dot(proj_.forward);
+    if (!(z >= proj_.w_near)) return;  // behind the near plane, or NaN
+    if constexpr (kCullNormals)
+      if (p.normal.dot(d) > 0) return;
+    const float key = 1.0f / z;
+    const float sx = proj_.cx + d.dot(proj_.right_px) * key;
+    const float sy = proj_.cy - d.dot(proj_.up_px) * key;
+    if (!(p.size_px > 1)) [[likely]] {
+      if (!(sx >= 0 && sx < fw_ && sy >= 0 && sy < fh_)) return;
+      const std::size_t i = static_cast<std::size_t>(static_cast<int>(sy)) * width() +
+                            static_cast<std::size_t>(static_cast<int>(sx));
+      if (!(key > kb_[i])) return;
+      kb_[i] = key;
+      store(i, shade(p, d));  // shading after the depth test: hidden points cost no shading
+      return;
+    }
+    const fragment_colour c = shade(p, d);
+    detail::raster_square(view_.width, view_.height, sx, sy, p.size_px, key,
+                          [this, c](std::size_t i, float k) {
+                            if (k > kb_[i]) {
+                              kb_[i] = k;
+                              store(i, c);
+                            }
+                          });
+  }
+
+  /// The ellipse centre ± u ± v (u, v orthogonal semi-axes), projected exactly.
+  void splat(const splat_prim<A>& s) {
+    const vec3f d = s.centre - proj_.eye;
+    if constexpr (kCullNormals)
+      if (s.normal.dot(d) > 0) return;
+    const fragment_colour c = shade(s, d);
+    const detail::span_target<true, kLitBuffer> out{kb_, cb_, lb_, packed(c), c.lit};
+    detail::raster_ellipse(proj_, s.centre, s.u, s.v, out);
+  }
+
+  /// A triangle with per-vertex normal and colour interpolated perspective-correctly.
+  void triangle(const triangle_prim<A>& t) {
+    std::array<detail::tri_vertex<kNP>, 3> v;
+    for (std::size_t k = 0; k < 3; ++k) {
+      v[k].h = proj_.point(t.p[k]);
+      if constexpr (fx.shading)
+        for (int c = 0; c < 3; ++c) v[k].a[static_cast<std::size_t>(c)] = t.normal[k][c];
+      if constexpr (fx.colour) {
+        v[k].a[kColourAt + 0] = t.colour[k].r;
+        v[k].a[kColourAt + 1] = t.colour[k].g;
+        v[k].a[kColourAt + 2] = t.colour[k].b;
+      }
+    }
+    float* const kb = kb_;
+    detail::raster_triangle<fx.backface_cull>(
+        proj_, v, [kb](std::size_t i, float k) { return k > kb[i]; },
+        [this](std::size_t i, float k, const std::array<float, kNP>& a, bool front) {
+          kb_[i] = k;
+          fragment_colour c{flat_, 1.0f};
+          if constexpr (fx.colour)
+            c.albedo = {detail::to_channel(a[kColourAt]), detail::to_channel(a[kColourAt + 1]),
+                        detail::to_channel(a[kColourAt + 2])};
+          if constexpr (fx.shading) {
+            vec3f n(a[0], a[1], a[2]);
+            const float len = n.norm();
+            n = len > 0 ? vec3f(n / (front ? len : -len)) : vec3f::Zero();
+            c.lit = detail::lambert(n, light_, ambient_);
+          }
+          store(i, c);
+        });
+  }
+
+  /// Runs the per-frame passes the effect set has (shadow resolve, hole filling) and returns the
+  /// image. Call once; the rasteriser is empty afterwards.
+  [[nodiscard]] image finish() {
+    image img;
+    img.width = view_.width;
+    img.height = view_.height;
+    img.colour.resize(colour_.size());
+    for (std::size_t i = 0; i < colour_.size(); ++i) img.colour[i] = detail::unpack(colour_[i]);
+    if constexpr (fx.shadows)
+      detail::resolve_shadows(view_, shadows_, ambient_, key_, proj_.key_far, img.colour, lit_);
+    if constexpr (fx.hole_filling)
+      detail::fill_holes(view_.width, view_.height, key_, img.colour, proj_.key_far, opt_);
+    img.depth = detail::keys_to_depth(key_, proj_.key_far);
+    key_.clear();
+    colour_.clear();
+    lit_.clear();
+    return img;
+  }
+
+ private:
+  // Shading needs a lit factor per pixel only when shadows are resolved after the pass.
+  static constexpr bool kLitBuffer = fx.shadows && fx.shading;
+  static constexpr bool kCullNormals = fx.backface_cull && A.normal;
+  static constexpr int kNP = (fx.shading ? 3 : 0) + (fx.colour ? 3 : 0);
+  static constexpr std::size_t kColourAt = fx.shading ? 3 : 0;
+
+  struct fragment_colour {
+    rgb8 albedo;
+    float lit;  ///< Lambert factor (1 without shading)
+  };
+
+  static std::size_t pixel_count(const view& v) {
+    return static_cast<std::size_t>(v.width) * static_cast<std::size_t>(v.height);
+  }
+  [[nodiscard]] std::size_t width() const { return static_cast<std::size_t>(view_.width); }
+
+  /// Albedo and light factor of a point or splat; `to_prim` = position − eye.
+  template <class Prim>
+  [[nodiscard]] fragment_colour shade(const Prim& p, [[maybe_unused]] const vec3f& to_prim) const {
+    fragment_colour c{flat_, 1.0f};
+    if constexpr (fx.colour) c.albedo = p.colour;
+    if constexpr (fx.shading) {
+      // Two-sided: light the side the eye sees.
+      const vec3f n = p.normal.dot(to_prim) > 0 ? vec3f(-p.normal) : vec3f(p.normal);
+      c.lit = detail::lambert(n, light_, ambient_);
+    }
+    return c;
+  }
+
+  /// The packed colour a pixel of this fragment stores: the final colour, or the albedo when
+  /// shadows are composed in finish().
+  [[nodiscard]] static std::uint32_t packed(const fragment_colour& c) {
+    if constexpr (!fx.shadows && fx.shading)
+      return detail::pack(detail::scale_colour(c.albedo, c.lit));
+    return detail::pack(c.albedo);
+  }
+
+  void store(std::size_t i, const fragment_colour& c) {
+    cb_[i] = packed(c);
+    if constexpr (kLitBuffer) lb_[i] = c.lit;
+  }
+
+  view view_;
+  detail::persp_projection proj_;
+  render_options opt_;
+  const detail::shadow_map* shadows_;
+  std::vector<float> key_;             ///< depth key 1/z per pixel; key_far = empty
+  std::vector<std::uint32_t> colour_;  ///< packed final colour, or albedo with shadows
+  std::vector<float> lit_;             ///< Lambert factor per pixel (shadows + shading only)
+  float* kb_ = nullptr;                // raw views of the buffers for the inner loops
+  std::uint32_t* cb_ = nullptr;
+  float* lb_ = nullptr;
+  float fw_ = 0, fh_ = 0;
+  rgb8 flat_;
+  vec3f light_ = vec3f::Zero();
+  float ambient_ = 0;
+};
+
+static_assert(Sink<rasterizer<positions_only>, positions_only>);
+static_assert(Sink<rasterizer<all_attributes, all_effects>, all_attributes>);
+
+namespace detail {
+
+[[nodiscard]] constexpr bool effect_flag(const effects& e, int i) {
+  switch (i) {
+    case 0:
+      return e.shading;
+    case 1:
+      return e.colour;
+    case 2:
+      return e.backface_cull;
+    case 3:
+      return e.shadows;
+    default:
+      return e.hole_filling;
+  }
+}
+[[nodiscard]] constexpr effects with_effect(effects e, int i) {
+  switch (i) {
+    case 0:
+      e.shading = true;
+      break;
+    case 1:
+      e.colour = true;
+      break;
+    case 2:
+      e.backface_cull = true;
+      break;
+    case 3:
+      e.shadows = true;
+      break;
+    default:
+      e.hole_filling = true;
+      break;
+  }
+  return e;
+}
+
+/// Calls f.template operator()<R>() for R = `run` restricted to Allowed, with R a compile-time
+/// constant: one branch per effect per frame, and only subsets of Allowed are instantiated.
+template <effects Allowed, effects Fixed, int I, class F>
+[[nodiscard]] image dispatch_effects(const effects& run, F& f) {
+  if constexpr (I == 5) {
+    return f.template operator()<Fixed>();
+  } else {
+    if constexpr (effect_flag(Allowed, I)) {
+      if (effect_flag(run, I))
+        return dispatch_effects<Allowed, with_effect(Fixed, I), I + 1>(run, f);
+    }
+    return dispatch_effects<Allowed, Fixed, I + 1>(run, f);
+  }
+}
+
+template <attributes A, effects E, class DrawFn>
+[[nodiscard]] image render_with(const view& v, const render_options& opt, DrawFn& draw) {
+  if constexpr (E.shadows) {
+    // Buffer once, so the light pass and the camera pass see the same primitives and the
+    // caller's draw runs once.
+    buffer_sink<A> prims;
+    draw(prims);
+    const shadow_map sm = build_shadow_map(prims, v, opt);
+    rasterizer<A, E> r(v, opt, &sm);
+    prims.replay(r);
+    return r.finish();
+  } else {
+    rasterizer<A, E> r(v, opt);
+    draw(r);
+    return r.finish();
+  }
+}
+
+}  // namespace detail
+
+/// Renders one frame: `draw(sink)` emits the frame's primitives into the sink it is given
+/// (a rasterizer<A, E>&, or with shadows a buffer_sink<A>&; write it as a generic lambda
+/// `[&](auto& sink) { ... }`). It is called exactly once.
+///
+/// `Compiled` is the set of effects compiled in. The run-time request `opt.fx` is intersected
+/// with it and with what A supports (applicable_effects), then dispatched once to the
+/// rasterizer instantiated for exactly that set. Hence rendering with an effect switched off at
+/// run time gives the same bytes as rendering with it compiled out.
+template <attributes A, effects Compiled = all_effects, class DrawFn>
+[[nodiscard]] image render(const view& v, const render_options& opt, DrawFn&& draw) {
+  constexpr effects allowed = applicable_effects(Compiled, A);
+  const effects run = opt.fx & allowed;
+  auto dispatch = [&]<effects E>() { return detail::render_with<A, E>(v, opt, draw); };
+  return detail::dispatch_effects<allowed, no_effects, 0>(run, dispatch);
+}
+
+}  // namespace pbr_lod

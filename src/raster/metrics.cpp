@@ -1,0 +1,78 @@
+// pbr_lod — image metrics (RMSE, PSNR, hole fraction) and the Hausdorff distance between point
+// sets (exact nearest neighbours through core/knn.hpp).
+#include "pbr_lod/raster/metrics.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/knn.hpp"
+
+namespace pbr_lod {
+
+image_error compare_images(const image& reference, const image& test) {
+  if (reference.width != test.width || reference.height != test.height)
+    throw InvalidArgument("compare_images: reference is " + std::to_string(reference.width) + "x" +
+                          std::to_string(reference.height) + " but test is " +
+                          std::to_string(test.width) + "x" + std::to_string(test.height));
+  const std::size_t n = reference.size();
+  if (reference.depth.size() != n || test.colour.size() != n || test.depth.size() != n)
+    throw InvalidArgument("compare_images: an image's buffers do not match its size");
+  image_error e;
+  double sum2 = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool r = reference.covered(i), t = test.covered(i);
+    if (r) ++e.reference_covered;
+    if (r && !t) ++e.holes;
+    if (!r && !t) continue;
+    ++e.covered_either;
+    const rgb8 a = reference.colour[i], b = test.colour[i];
+    const double dr = double(a.r) - b.r, dg = double(a.g) - b.g, db = double(a.b) - b.b;
+    sum2 += dr * dr + dg * dg + db * db;
+  }
+  e.rmse = e.covered_either ? std::sqrt(sum2 / (3.0 * double(e.covered_either))) : 0.0;
+  e.psnr = e.rmse > 0 ? 20.0 * std::log10(255.0 / e.rmse) : std::numeric_limits<double>::infinity();
+  e.hole_fraction = e.reference_covered ? double(e.holes) / double(e.reference_covered) : 0.0;
+  return e;
+}
+
+namespace {
+
+/// max and mean over `from` of the distance to the nearest point of `to`.
+std::pair<double, double> one_sided(const std::vector<vec3f>& from, const knn_index& to) {
+  double mx = 0, sum = 0;
+  for (const vec3f& p : from) {
+    const double d = to.nearest_distance(p);
+    mx = std::max(mx, d);
+    sum += d;
+  }
+  return {mx, sum / double(from.size())};
+}
+
+}  // namespace
+
+hausdorff_result hausdorff(const point_cloud& a, const point_cloud& b) {
+  if (a.empty() || b.empty())
+    throw InvalidArgument(std::string("hausdorff: point cloud ") + (a.empty() ? "a" : "b") +
+                          " is empty");
+  if (!all_finite(a.origin) || !all_finite(b.origin))
+    throw InvalidArgument("hausdorff: a cloud's origin is not finite");
+  // b in a's frame: world = b.origin + p, relative to a = (b.origin − a.origin) + p, in double.
+  const vec3d shift = b.origin - a.origin;
+  std::vector<vec3f> b_in_a(b.size());
+  for (std::size_t i = 0; i < b.size(); ++i)
+    b_in_a[i] = (b.positions[i].cast<double>() + shift).cast<float>();
+  const knn_index index_a(a.positions);  // throws on non-finite positions
+  const knn_index index_b(b_in_a);
+  hausdorff_result h;
+  std::tie(h.a_to_b_max, h.a_to_b_mean) = one_sided(a.positions, index_b);
+  std::tie(h.b_to_a_max, h.b_to_a_mean) = one_sided(b_in_a, index_a);
+  return h;
+}
+
+}  // namespace pbr_lod

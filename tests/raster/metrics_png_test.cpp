@@ -1,0 +1,195 @@
+// Image metrics, Hausdorff distance and PNG files.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <string>
+
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/png.hpp"
+
+namespace pbr_lod {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+image uniform(int w, int h, rgb8 c) {
+  image img(w, h);
+  for (std::size_t i = 0; i < img.size(); ++i) {
+    img.colour[i] = c;
+    img.depth[i] = 1;
+  }
+  return img;
+}
+
+// Comparing an image with itself: no error, infinite PSNR, no holes.
+TEST(Metrics, IdenticalImages) {
+  image a = uniform(8, 6, {10, 200, 30});
+  a.depth[5] = kInf;  // some background too
+  const image_error e = compare_images(a, a);
+  EXPECT_EQ(e.rmse, 0);
+  EXPECT_TRUE(std::isinf(e.psnr) && e.psnr > 0);
+  EXPECT_EQ(e.holes, 0u);
+  EXPECT_EQ(e.hole_fraction, 0);
+  EXPECT_EQ(e.covered_either, 47u);
+  EXPECT_EQ(e.reference_covered, 47u);
+}
+
+// Four covered reference pixels of grey 100; the test differs by 10 in one channel of one pixel
+// and has a hole (background 0,0,0) at another: squared error 10² + 3·100² = 30100 over
+// 4 pixels × 3 channels → RMSE = sqrt(30100/12) = 50.083, PSNR = 20·log10(255/50.083) = 14.137 dB;
+// 1 hole of 4 reference pixels. An extra covered pixel only in the test (the 5th, equal to its
+// reference background colour) counts in covered_either but adds no error and no hole.
+TEST(Metrics, KnownDifferences) {
+  image ref(5, 1, {0, 0, 0}), test(5, 1, {0, 0, 0});
+  for (int x = 0; x < 4; ++x) {
+    ref.colour[std::size_t(x)] = {100, 100, 100};
+    ref.depth[std::size_t(x)] = 1;
+    test.colour[std::size_t(x)] = {100, 100, 100};
+    test.depth[std::size_t(x)] = 1;
+  }
+  test.colour[1] = {110, 100, 100};
+  test.colour[2] = {0, 0, 0};
+  test.depth[2] = kInf;
+  test.depth[4] = 2;  // covered in the test only, colour = the reference's background
+  const image_error e = compare_images(ref, test);
+  EXPECT_EQ(e.covered_either, 5u);
+  EXPECT_EQ(e.reference_covered, 4u);
+  EXPECT_EQ(e.holes, 1u);
+  EXPECT_DOUBLE_EQ(e.hole_fraction, 0.25);
+  EXPECT_NEAR(e.rmse, std::sqrt(30100.0 / 15.0), 1e-12);  // 5 pixels covered in either
+  EXPECT_NEAR(e.psnr, 20 * std::log10(255 / std::sqrt(30100.0 / 15.0)), 1e-9);
+  // Without the extra pixel: exactly the numbers of the comment.
+  test.depth[4] = kInf;
+  const image_error f = compare_images(ref, test);
+  EXPECT_NEAR(f.rmse, 50.0832640, 1e-6);
+  EXPECT_NEAR(f.psnr, 14.136951, 1e-5);
+}
+
+TEST(Metrics, SizeMismatchThrows) {
+  EXPECT_THROW((void)compare_images(image(3, 2), image(2, 3)), InvalidArgument);
+}
+
+point_cloud grid_cloud(const vec3d& origin) {
+  point_cloud c;
+  c.origin = origin;
+  for (int k = 0; k < 6; ++k)
+    for (int j = 0; j < 6; ++j)
+      for (int i = 0; i < 6; ++i) c.positions.emplace_back(0.1f * i, 0.1f * j, 0.1f * k);
+  return c;
+}
+
+// A cloud against itself: 0. Against a copy translated by t with |t| < half the spacing h: the
+// nearest point of every point is its own translate (any other is ≥ h − |t| > |t| away), so
+// every distance, hence max and mean, is |t|.
+TEST(Metrics, HausdorffSelfAndTranslated) {
+  const point_cloud a = grid_cloud(vec3d::Zero());
+  const hausdorff_result self = hausdorff(a, a);
+  EXPECT_EQ(self.symmetric(), 0);
+  EXPECT_EQ(self.a_to_b_mean, 0);
+  point_cloud b = a;
+  const vec3f t(0.02f, 0.01f, -0.015f);
+  for (auto& p : b.positions) p += t;
+  const hausdorff_result h = hausdorff(a, b);
+  EXPECT_NEAR(h.a_to_b_max, t.norm(), 1e-6);
+  EXPECT_NEAR(h.b_to_a_max, t.norm(), 1e-6);
+  EXPECT_NEAR(h.a_to_b_mean, t.norm(), 1e-6);
+  EXPECT_NEAR(h.symmetric(), t.norm(), 1e-6);
+}
+
+// Different origins 10⁷ apart describing the same world points: rebasing in double keeps them
+// identical, so the distance is 0 (float coordinates of the world position would be 1 m off).
+TEST(Metrics, HausdorffAcrossOrigins) {
+  const point_cloud a = grid_cloud(vec3d(1e7, -2e6, 3e5));
+  point_cloud b = a;
+  rebase(b, vec3d(1e7 + 123.25, -2e6 - 0.5, 3e5 + 7));
+  EXPECT_NEAR(hausdorff(a, b).symmetric(), 0, 1e-5);
+  EXPECT_THROW((void)hausdorff(a, point_cloud{}), InvalidArgument);
+}
+
+// --- PNG ---------------------------------------------------------------------------------------
+
+std::string temp_path(const std::string& name) {
+  return (std::filesystem::temp_directory_path() / ("pbr_lod_raster_" + name)).string();
+}
+
+// Colours, including those of background pixels, and coverage survive a write/read exactly.
+TEST(Png, RoundTripExact) {
+  std::mt19937 rng(1);  // seeded random content: every byte value and coverage pattern
+  std::uniform_int_distribution<int> byte(0, 255), coin(0, 3);
+  image img(37, 23, {7, 8, 9});
+  for (std::size_t i = 0; i < img.size(); ++i) {
+    if (coin(rng) == 0) continue;  // stays background, colour (7, 8, 9)
+    img.colour[i] = {std::uint8_t(byte(rng)), std::uint8_t(byte(rng)), std::uint8_t(byte(rng))};
+    img.depth[i] = 3.5f;
+  }
+  const std::string path = temp_path("roundtrip.png");
+  write_png(path, img);
+  const image back = read_png(path);
+  std::filesystem::remove(path);
+  ASSERT_EQ(back.width, img.width);
+  ASSERT_EQ(back.height, img.height);
+  EXPECT_EQ(back.colour, img.colour);
+  for (std::size_t i = 0; i < img.size(); ++i) {
+    ASSERT_EQ(back.covered(i), img.covered(i)) << i;
+    if (back.covered(i)) {
+      EXPECT_EQ(back.depth[i], 0.0f);  // PNG keeps no depth
+    }
+  }
+}
+
+// A 2×2 RGB PNG without alpha (bytes made with Python's zlib): every pixel is covered.
+TEST(Png, RgbWithoutAlphaIsAllCovered) {
+  const unsigned char bytes[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00,
+                                 0x0d, 0x49, 0x48, 0x44, 0x52, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00,
+                                 0x00, 0x02, 0x08, 0x02, 0x00, 0x00, 0x00, 0xfd, 0xd4, 0x9a, 0x73,
+                                 0x00, 0x00, 0x00, 0x13, 0x49, 0x44, 0x41, 0x54, 0x78, 0x9c, 0x63,
+                                 0xf8, 0xcf, 0xc0, 0xc0, 0x00, 0xc2, 0x0c, 0xff, 0xb9, 0x44, 0xe4,
+                                 0x00, 0x1a, 0x58, 0x03, 0x3a, 0x56, 0x63, 0xa2, 0x3c, 0x00, 0x00,
+                                 0x00, 0x00, 0x49, 0x45, 0x4e, 0x44, 0xae, 0x42, 0x60, 0x82};
+  const std::string path = temp_path("rgb.png");
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes), sizeof bytes);
+  const image img = read_png(path);
+  std::filesystem::remove(path);
+  ASSERT_EQ(img.width, 2);
+  ASSERT_EQ(img.height, 2);
+  EXPECT_EQ(img.covered_count(), 4u);
+  EXPECT_EQ(img.at(0, 0), (rgb8{255, 0, 0}));
+  EXPECT_EQ(img.at(1, 0), (rgb8{0, 255, 0}));
+  EXPECT_EQ(img.at(0, 1), (rgb8{0, 0, 255}));
+  EXPECT_EQ(img.at(1, 1), (rgb8{10, 20, 30}));
+}
+
+// Errors name the file: missing → IoError, not a PNG or truncated → FormatError.
+TEST(Png, Errors) {
+  const std::string missing = temp_path("does_not_exist.png");
+  try {
+    (void)read_png(missing);
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find(missing), std::string::npos);
+  }
+  const std::string junk = temp_path("junk.png");
+  std::ofstream(junk) << "this is not a png";
+  EXPECT_THROW((void)read_png(junk), FormatError);
+  // A valid PNG cut in the middle of its data.
+  image img(16, 16, {1, 2, 3});
+  write_png(junk, img);
+  const auto size = std::filesystem::file_size(junk);
+  std::filesystem::resize_file(junk, size / 2);
+  try {
+    (void)read_png(junk);
+    FAIL();
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find(junk), std::string::npos);
+  }
+  std::filesystem::remove(junk);
+  EXPECT_THROW(write_png(temp_path("no_such_dir/x.png"), img), IoError);
+  EXPECT_THROW(write_png(junk, image()), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace pbr_lod
