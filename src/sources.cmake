@@ -2,3 +2,4 @@
 include(${CMAKE_CURRENT_LIST_DIR}/core/sources.cmake)
 include(${CMAKE_CURRENT_LIST_DIR}/io/sources.cmake)
 include(${CMAKE_CURRENT_LIST_DIR}/raster/sources.cmake)
+include(${CMAKE_CURRENT_LIST_DIR}/core/estimation.cmake)

@@ -1,0 +1,83 @@
+// pbr_lod — per-point normals and splat ellipses estimated from the k nearest neighbours.
+//
+// This work is based on:
+//   R. Pajarola, "Efficient Level-of-Details for Point Based Rendering", CGIM 2003, end of §4:
+//   initial splat ellipses from the covariance of the k nearest neighbours, projected into the
+//   tangent plane and scaled to bound them (the node rule of Fig. 5 / Fig. 6a, EQ 5–6).
+//   H. Hoppe, T. DeRose, T. Duchamp, J. McDonald, W. Stuetzle, "Surface Reconstruction from
+//   Unorganized Points", SIGGRAPH 1992, §3 (tangent planes): normal = smallest eigenvector of the
+//   k-NN covariance, orientation propagated along a minimum spanning tree of the Riemannian graph
+//   (CGAL::mst_orient_normals, Point_set_processing_3).
+//
+// Neighbourhoods come from knn_index (FLANN, exact). CGAL and FLANN appear only in the .cpp
+// files. Both functions run in parallel over the points (oneTBB) and are deterministic: each
+// point's result depends only on the input, never on the scheduling.
+//
+// Coordinates: pass positions relative to a nearby origin (point_cloud / point_set store them
+// that way). The covariance is accumulated in double and centred on the neighbourhood mean, so
+// the result is translation invariant up to float rounding of the relative positions; absolute
+// coordinates of a georeferenced scan cast to float would already have lost the surface.
+#pragma once
+
+#include <span>
+#include <vector>
+
+#include "pbr_lod/core/math.hpp"
+
+namespace pbr_lod {
+
+/// Unit normals, one per position (P #P by 3 positions).
+///
+/// The neighbourhood of a point is its min(k, #P) nearest samples *including itself* (and any
+/// duplicates of it). Normal = eigenvector of the smallest eigenvalue of the neighbourhood's
+/// covariance (double, centred on the neighbourhood mean). Degenerate neighbourhoods still give
+/// a finite unit normal:
+///  * all samples at one position (a single point, duplicates): +z;
+///  * collinear (middle eigenvalue ≤ 1e-12 × largest): any_orthogonal(line direction);
+///  * coplanar, any count ≥ 3 distinct: the plane normal.
+/// Sign: with orient == false, the largest-magnitude component is made positive (a canonical,
+/// deterministic choice that knows nothing about the surface). With orient == true the signs
+/// are then made consistent by CGAL::mst_orient_normals over a k-NN Riemannian graph (Hoppe
+/// 1992): the sample with the largest z gets a normal with z ≥ 0 and the orientation is
+/// propagated along the minimum spanning tree (edge weight 1 − |nᵢ·nⱼ|). On a closed surface
+/// this is outward. Points the graph does not connect to that sample (separate components)
+/// keep their canonical PCA sign. The orientation pass is sequential (CGAL).
+///
+/// Throws InvalidArgument when k < 3 or a position is not finite. Empty input → empty output.
+[[nodiscard]] std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k = 16,
+                                                  bool orient = true);
+
+/// Semi-axis vectors of per-point splat ellipses: u[i] the major, v[i] the minor semi-axis
+/// (direction × length), both orthogonal to the normal and to each other. The layout of
+/// point_cloud::axis_u / axis_v.
+struct splat_axes {
+  std::vector<vec3f> u, v;
+};
+
+/// Smallest ratio minor / major of an estimated splat ellipse. Without a floor a neighbourhood
+/// that is collinear in the tangent plane (a scan line) would give a needle of zero width.
+inline constexpr double splat_min_axis_ratio = 0.1;
+
+/// Splat ellipses centred at each sample, in its tangent plane (normals[i]; need not be unit,
+/// the sign is irrelevant), bounding its min(k, #P) nearest samples (itself included).
+///
+/// Per point: project the neighbour offsets pⱼ − pᵢ into the tangent plane, take the eigen-
+/// vectors of their 2×2 second-moment matrix (about pᵢ, the splat's centre) as the axis
+/// directions with the eigenvalues λ₁ ≥ λ₂ (λ₂ raised to splat_min_axis_ratio²·λ₁ if smaller),
+/// and scale the axes √λ₁, √λ₂ by f = max over neighbours of √(x²/λ₁ + y²/λ₂) — the bounding
+/// rule of Pajarola Fig. 6a — times (1 + 1e-5) so that rounding the axes to float never leaves
+/// the farthest neighbour just outside. Every neighbour then lies in the ellipse; for a sample
+/// whose Delaunay neighbours are among its k nearest, the ellipse contains the whole Delaunay
+/// triangles around it (an ellipse is convex), so the union of the ellipses has no gaps.
+///
+/// Degenerate neighbourhoods (all neighbours project onto pᵢ: duplicates, or samples stacked
+/// along the normal): a circular disk whose radius is the distance to the nearest sample not at
+/// pᵢ (searched among up to 4096 nearest), else 1e-6 × the bounding-box half-diagonal of all
+/// positions, else (all samples identical) 1e-6 × max(1, |pᵢ|∞). Always finite and non-zero.
+///
+/// Throws InvalidArgument when k < 2, the spans differ in length, a position is not finite or
+/// a normal is zero or not finite. Empty input → empty output.
+[[nodiscard]] splat_axes estimate_splat_ellipses(std::span<const vec3f> positions,
+                                                 std::span<const vec3f> normals, int k = 16);
+
+}  // namespace pbr_lod

@@ -1,0 +1,137 @@
+// pbr_lod — quantised normals (Pajarola 2003, §5 and Fig. 9). Layout and error bound are
+// described in include/pbr_lod/core/normal_quantization.hpp and docs/normal-quantization.md.
+#include "pbr_lod/core/normal_quantization.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <string>
+
+#include "pbr_lod/core/error.hpp"
+
+namespace pbr_lod {
+
+namespace {
+
+constexpr double half_pi = std::numbers::pi / 2;
+// Float rounding moves a table direction by at most ~1e-7 rad off its exact (θ, φ); the row
+// pruning bound and max_error_degrees() allow ten times that.
+constexpr double table_slack = 1e-6;
+
+/// Upper edge b(i) of latitude band i: 1 − cos b = (i+1)(i+2)/(k(k+1)), written as
+/// 2·asin(sqrt(x/2)) because acos(1 − x) loses half the digits for small x.
+double band_edge(int i, int k) {
+  if (i < 0) return 0.0;
+  const double x = double(i + 1) * double(i + 2) / (double(k) * double(k + 1));
+  return 2.0 * std::asin(std::min(1.0, std::sqrt(x / 2.0)));
+}
+
+vec3d direction(double theta, double phi) {
+  return {std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
+}
+
+/// Angle between two unit vectors, accurate also for tiny angles.
+double angle(const vec3d& a, const vec3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b));
+}
+
+}  // namespace
+
+normal_quantizer::normal_quantizer(int q_bits) {
+  if (q_bits < min_bits || q_bits > max_bits)
+    throw InvalidArgument("normal_quantizer: q_bits = " + std::to_string(q_bits) + " is outside [" +
+                          std::to_string(min_bits) + ", " + std::to_string(max_bits) + "]");
+  bits_ = q_bits;
+  const std::uint64_t budget = std::uint64_t{1} << (q_bits - 3);
+  while (std::uint64_t(k_ + 1) * std::uint64_t(k_ + 2) / 2 <= budget) ++k_;
+  per_octant_ = static_cast<std::uint32_t>(std::uint64_t(k_) * std::uint64_t(k_ + 1) / 2);
+  index_mask_ = static_cast<std::uint32_t>(budget - 1);
+
+  dirs_.reserve(per_octant_);
+  row_theta_.resize(std::size_t(k_));
+  double bound = 0;
+  for (int i = 0; i < k_; ++i) {
+    const double lo = band_edge(i - 1, k_), hi = band_edge(i, k_);
+    const double theta = 0.5 * (lo + hi);
+    row_theta_[std::size_t(i)] = theta;
+    const double cell = half_pi / double(i + 1);
+    for (int j = 0; j <= i; ++j)
+      dirs_.push_back(direction(theta, cell * (double(j) + 0.5)).cast<float>());
+    // Every direction of band i is within half a cell in longitude of a sample of row i; over
+    // the band the distance to that sample is largest at one of the band's edges (cos of the
+    // distance is a single-peaked sinusoid in the polar angle).
+    const vec3d sample = direction(theta, 0.5 * cell);
+    bound = std::max({bound, angle(direction(lo, 0), sample), angle(direction(hi, 0), sample)});
+  }
+  max_error_deg_ = (bound + table_slack) * 180.0 / std::numbers::pi;
+}
+
+void normal_quantizer::throw_invalid_code(std::uint32_t code) const {
+  throw InvalidArgument("normal_quantizer: code " + std::to_string(code) + " is not a valid " +
+                        std::to_string(bits_) + "-bit code (" + std::to_string(per_octant_) +
+                        " directions per octant)");
+}
+
+void normal_quantizer::search_row(int row, double ax, double ay, double az, double phi,
+                                  double& best_dot, std::uint32_t& best) const {
+  // Within a row the distance grows with the longitude difference, so the nearest sample is in
+  // the cell containing φ; its neighbours are checked too because the float table entries are
+  // not exactly at the cell centres.
+  const int j0 = std::clamp(static_cast<int>(std::floor(phi * double(row + 1) / half_pi)), 0, row);
+  const std::uint32_t first = std::uint32_t(row) * std::uint32_t(row + 1) / 2;
+  for (int j = std::max(0, j0 - 1); j <= std::min(row, j0 + 1); ++j) {
+    const std::uint32_t t = first + std::uint32_t(j);
+    const vec3f& d = dirs_[t];
+    const double dot = ax * double(d.x()) + ay * double(d.y()) + az * double(d.z());
+    if (dot > best_dot) {
+      best_dot = dot;
+      best = t;
+    }
+  }
+}
+
+std::uint32_t normal_quantizer::encode(const vec3f& n) const {
+  const double x = n.x(), y = n.y(), z = n.z();
+  const double len2 = x * x + y * y + z * z;
+  if (!(len2 > 0) || !std::isfinite(len2)) return 0;  // NaN, Inf or zero: as +z
+  const double inv = 1.0 / std::sqrt(len2);
+  const std::uint32_t octant = (x < 0 ? 1u : 0u) | (y < 0 ? 2u : 0u) | (z < 0 ? 4u : 0u);
+  // Fold into the first octant: the table is symmetric under sign flips, so the nearest
+  // direction of the folded normal in the first octant's table is the nearest overall (mirroring
+  // a direction of another octant into this one never moves it away from n).
+  const double ax = std::abs(x) * inv, ay = std::abs(y) * inv, az = std::abs(z) * inv;
+  const double rho2 = ax * ax + ay * ay;
+  const double theta = std::atan2(std::sqrt(rho2), az);
+  const double phi = std::atan2(ay, ax);
+  // The band containing θ: i(i+1) ≤ (1 − cos θ)·k(k+1) < (i+1)(i+2); 1 − cos θ = ρ²/(1 + cos θ).
+  const double u = rho2 / (1.0 + az) * double(k_) * double(k_ + 1);
+  const int row0 = std::clamp(static_cast<int>(std::floor(std::sqrt(u + 0.25) - 0.5)), 0, k_ - 1);
+
+  double best_dot = -std::numeric_limits<double>::infinity();
+  std::uint32_t best = 0;
+  search_row(row0, ax, ay, az, phi, best_dot, best);
+  // Any direction of row r is at least |θ − θ_r| away from n: walk outwards from row0 and stop
+  // once that bound exceeds the best distance found (first row on each side that is past θ).
+  const auto worth = [&](int r) {
+    const double gap = std::abs(theta - row_theta_[std::size_t(r)]) - table_slack;
+    return gap <= 0 || std::cos(gap) >= best_dot;
+  };
+  for (int r = row0 - 1; r >= 0; --r) {
+    if (!worth(r)) {
+      if (row_theta_[std::size_t(r)] <= theta) break;
+      continue;
+    }
+    search_row(r, ax, ay, az, phi, best_dot, best);
+  }
+  for (int r = row0 + 1; r < k_; ++r) {
+    if (!worth(r)) {
+      if (row_theta_[std::size_t(r)] >= theta) break;
+      continue;
+    }
+    search_row(r, ax, ay, az, phi, best_dot, best);
+  }
+  return (octant << (bits_ - 3)) | best;
+}
+
+}  // namespace pbr_lod
