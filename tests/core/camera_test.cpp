@@ -101,15 +101,16 @@ TEST(Camera, PmrPixelSizeOnAxis) {
   const view v(test_camera(), vec3d::Zero());
   EXPECT_NEAR(pixel_size_pmr(v, vec3f::Zero()), 10.0f / v.focal_px, 1e-3f * 10.0f / v.focal_px);
   const sphere s{vec3f::Zero(), 0.01f};
-  EXPECT_NEAR(projected_radius_pmr(v, s), projected_radius_eye_z(v, s), 0.01f * projected_radius_eye_z(v, s));
+  EXPECT_NEAR(projected_radius_pmr(v, s), projected_radius_eye_z(v, s),
+              0.01f * projected_radius_eye_z(v, s));
 }
 
 TEST(Camera, FrustumClassifiesSpheres) {
   const view v(test_camera(), vec3d::Zero());
-  EXPECT_EQ(frustum_test(v, sphere{vec3f::Zero(), 0.1f}), 0);        // inside
-  EXPECT_EQ(frustum_test(v, sphere{vec3f(0, 0, 20), 1}), -1);        // behind the eye
-  EXPECT_EQ(frustum_test(v, sphere{vec3f(100, 0, 0), 1}), -1);       // far right
-  EXPECT_GT(frustum_test(v, sphere{vec3f(0, 0, -89.5f), 1}), 0);     // straddles the far plane
+  EXPECT_EQ(frustum_test(v, sphere{vec3f::Zero(), 0.1f}), 0);     // inside
+  EXPECT_EQ(frustum_test(v, sphere{vec3f(0, 0, 20), 1}), -1);     // behind the eye
+  EXPECT_EQ(frustum_test(v, sphere{vec3f(100, 0, 0), 1}), -1);    // far right
+  EXPECT_GT(frustum_test(v, sphere{vec3f(0, 0, -89.5f), 1}), 0);  // straddles the far plane
 }
 
 }  // namespace

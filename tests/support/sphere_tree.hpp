@@ -29,7 +29,7 @@ class sphere_tree {
     vec3f mean = vec3f::Zero();
     vec3f mean_normal = vec3f::UnitZ();
     rgb8 mean_colour{};
-    std::uint32_t first_child = 0;  // children are first_child, first_child + 1; 0 = leaf
+    std::uint32_t first_child = 0;       // children are first_child, first_child + 1; 0 = leaf
     std::uint32_t first = 0, count = 0;  // samples [first, first + count) of `order`
   };
 
@@ -51,9 +51,7 @@ class sphere_tree {
     return std::views::iota(nd.first_child, nd.first_child == 0 ? 0u : nd.first_child + 2);
   }
   [[nodiscard]] sphere bounding_sphere(node_id n) const { return nodes_[n].bounds; }
-  [[nodiscard]] pbr_lod::normal_cone normal_cone(node_id n) const
-    requires(A.normal)
-  {
+  [[nodiscard]] pbr_lod::normal_cone normal_cone(node_id n) const requires(A.normal) {
     return nodes_[n].cone;
   }
   [[nodiscard]] const node& at(node_id n) const { return nodes_[n]; }
@@ -99,18 +97,22 @@ class sphere_tree {
       nd.mean = (sum / count).cast<float>();
       const vec3f c = box.centre();
       double r2 = 0;
-      for (auto i : idx) r2 = std::max(r2, (pts_->positions[i] - c).template cast<double>().squaredNorm());
+      for (auto i : idx)
+        r2 = std::max(r2, (pts_->positions[i] - c).template cast<double>().squaredNorm());
       nd.bounds = {c, static_cast<float>(std::sqrt(r2)) * (1 + 1e-6f)};
       if constexpr (A.normal) {
-        nd.mean_normal = nsum.norm() > 0 ? vec3f(nsum.normalized().cast<float>()) : vec3f(vec3f::UnitZ());
+        nd.mean_normal =
+            nsum.norm() > 0 ? vec3f(nsum.normalized().cast<float>()) : vec3f(vec3f::UnitZ());
         float worst = 0;
         for (auto i : idx)
-          worst = std::max(worst, std::acos(std::clamp(nd.mean_normal.dot(pts_->normals[i]), -1.0f, 1.0f)));
+          worst = std::max(
+              worst, std::acos(std::clamp(nd.mean_normal.dot(pts_->normals[i]), -1.0f, 1.0f)));
         nd.cone = {nd.mean_normal, std::min(worst + 1e-4f, std::numbers::pi_v<float>)};
       }
       if constexpr (A.colour) {
         const vec3d m = csum / count;
-        nd.mean_colour = {static_cast<std::uint8_t>(m.x() + 0.5), static_cast<std::uint8_t>(m.y() + 0.5),
+        nd.mean_colour = {static_cast<std::uint8_t>(m.x() + 0.5),
+                          static_cast<std::uint8_t>(m.y() + 0.5),
                           static_cast<std::uint8_t>(m.z() + 0.5)};
       }
     }

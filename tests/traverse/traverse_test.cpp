@@ -31,9 +31,10 @@ struct node_recorder {
 struct recording_policy : default_policy {
   std::vector<std::uint32_t>* out;
   template <class H, class S>
-  void emit(const H& h, const typename H::node_id& n, const view& v, float size, S& sink) const {
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
+            const traverse_options& o, S& sink) const {
     out->push_back(n);
-    default_policy::emit(h, n, v, size, sink);
+    default_policy::emit(h, n, v, size, o, sink);
   }
 };
 
@@ -120,7 +121,8 @@ TEST(Traverse, BackfaceCullingIsConservative) {
   counting_sink<tree_n::attrs> s1, s2;
   const auto st = traverse(tree, v, {.tolerance_px = 0, .backface_cull = true}, s1,
                            recording_policy{{}, &with});
-  traverse(tree, v, {.tolerance_px = 0, .backface_cull = false}, s2, recording_policy{{}, &without});
+  traverse(tree, v, {.tolerance_px = 0, .backface_cull = false}, s2,
+           recording_policy{{}, &without});
   EXPECT_GT(st.culled_backface, 0u);
   EXPECT_LT(s1.points, s2.points);
   std::vector<char> kept(pts.size(), 0);

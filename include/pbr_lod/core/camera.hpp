@@ -45,7 +45,8 @@ struct camera {
                                     double elevation_deg, double distance, int up_axis = 1,
                                     viewport vp = {}) {
     if (!(radius > 0) || !std::isfinite(radius)) radius = 1;
-    const double az = azimuth_deg * std::numbers::pi / 180, el = elevation_deg * std::numbers::pi / 180;
+    const double az = azimuth_deg * std::numbers::pi / 180,
+                 el = elevation_deg * std::numbers::pi / 180;
     // Direction from the centre to the eye in a y-up frame, then permuted for z-up.
     const vec3d dir_yup(std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az));
     camera c;
@@ -75,8 +76,8 @@ struct plane {
 /// A camera expressed relative to an origin, in float: what traversal and rasterisers use.
 class view {
  public:
-  vec3f eye;      ///< eye position relative to the origin
-  vec3f right;    ///< unit eye-space axes
+  vec3f eye;    ///< eye position relative to the origin
+  vec3f right;  ///< unit eye-space axes
   vec3f up;
   vec3f forward;
   float focal_px;  ///< focal length in pixels: (height/2) / tan(fovy/2)
@@ -118,10 +119,10 @@ class view {
       const vec3f nn = n.normalized();
       return plane{nn, -nn.dot(eye)};
     };
-    frustum[0] = side(forward * hx + right);   // left:   x/z ≥ −hx
-    frustum[1] = side(forward * hx - right);   // right:  x/z ≤ hx
-    frustum[2] = side(forward * hy + up);      // bottom
-    frustum[3] = side(forward * hy - up);      // top
+    frustum[0] = side(forward * hx + right);  // left:   x/z ≥ −hx
+    frustum[1] = side(forward * hx - right);  // right:  x/z ≤ hx
+    frustum[2] = side(forward * hy + up);     // bottom
+    frustum[3] = side(forward * hy - up);     // top
     frustum[4] = plane{forward, -(forward.dot(eye) + z_near)};
     frustum[5] = plane{-forward, forward.dot(eye) + z_far};
   }
@@ -224,12 +225,32 @@ enum class projection_metric { exact, eye_z, distance, pmr_corner };
 
 [[nodiscard]] inline float projected_radius(projection_metric m, const view& v, const sphere& s) {
   switch (m) {
-    case projection_metric::eye_z: return projected_radius_eye_z(v, s);
-    case projection_metric::distance: return projected_radius_distance(v, s);
-    case projection_metric::pmr_corner: return projected_radius_pmr(v, s);
-    case projection_metric::exact: break;
+    case projection_metric::eye_z:
+      return projected_radius_eye_z(v, s);
+    case projection_metric::distance:
+      return projected_radius_distance(v, s);
+    case projection_metric::pmr_corner:
+      return projected_radius_pmr(v, s);
+    case projection_metric::exact:
+      break;
   }
   return projected_radius_exact(v, s);
+}
+
+/// Pajarola's view-cone test (§6, Fig. 10a; Pajarola 1998): the frustum is approximated by the
+/// cone about the viewing direction w through its corners (semi-angle ω), and a sphere is
+/// outside when γ − α > ω, γ the angle between w and c − e, α = asin(r/d) its angular radius.
+/// Cheaper than six planes, looser in the corners; never culls a sphere the planes keep, except
+/// beyond z_far (the cone has no far plane; spheres behind the near plane are kept).
+[[nodiscard]] inline bool outside_view_cone(const view& v, const sphere& s) {
+  const vec3f d = s.centre - v.eye;
+  const float dist = d.norm();
+  if (dist <= s.radius) return false;
+  const float hx = 0.5f * static_cast<float>(v.width) / v.focal_px;
+  const float omega = std::atan(std::sqrt(hx * hx + v.tan_half_fovy * v.tan_half_fovy));
+  const float gamma = std::acos(std::clamp(d.dot(v.forward) / dist, -1.0f, 1.0f));
+  const float alpha = std::asin(std::min(1.0f, s.radius / dist));
+  return gamma - alpha > omega;
 }
 
 /// Frustum test of a sphere against the planes selected by `mask` (bit i = plane i still to be

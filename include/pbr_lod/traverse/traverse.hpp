@@ -28,6 +28,8 @@ struct traverse_options {
   bool frustum_cull = true;
   /// Needs HasNormalCones; ignored otherwise.
   bool backface_cull = false;
+  /// Cull against the six frustum planes (exact) or Pajarola's enclosing view cone (cheaper).
+  enum class volume { planes, view_cone } cull_volume = volume::planes;
 };
 
 struct traverse_stats {
@@ -55,7 +57,7 @@ struct default_policy {
   }
   template <Hierarchy H, class S>
   void emit(const H& h, const typename H::node_id& n, const view& v, float /*size_px*/,
-            S& sink) const {
+            const traverse_options& /*o*/, S& sink) const {
     h.emit(n, v, sink);
   }
 };
@@ -102,7 +104,12 @@ traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S&
     ++st.visited;
     const sphere s = h.bounding_sphere(e.node);
     int planes = e.planes;
-    if (planes != 0) {
+    if (o.cull_volume == traverse_options::volume::view_cone) {
+      if (o.frustum_cull && outside_view_cone(v, s)) {
+        ++st.culled_frustum;
+        continue;
+      }
+    } else if (planes != 0) {
       planes = frustum_test(v, s, planes);
       if (planes < 0) {
         ++st.culled_frustum;
@@ -124,7 +131,7 @@ traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S&
       ++st.emitted_leaves;
     else
       ++st.emitted_nodes;
-    policy.emit(h, e.node, v, size, out);
+    policy.emit(h, e.node, v, size, o, out);
   }
   st.points = out.points;
   st.splats = out.splats;
