@@ -31,9 +31,9 @@ void bm_traverse(benchmark::State& state) {
     st = traverse(t, v, {.tolerance_px = tol, .metric = metric, .backface_cull = backface}, sink);
     benchmark::DoNotOptimize(sink.points);
   }
-  state.counters["nodes/s"] = benchmark::Counter(static_cast<double>(st.visited) *
-                                                     static_cast<double>(state.iterations()),
-                                                 benchmark::Counter::kIsRate);
+  state.counters["nodes/s"] =
+      benchmark::Counter(static_cast<double>(st.visited) * static_cast<double>(state.iterations()),
+                         benchmark::Counter::kIsRate);
   state.counters["visited"] = static_cast<double>(st.visited);
   state.counters["emitted"] = static_cast<double>(st.primitives());
 }

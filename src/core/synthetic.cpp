@@ -48,7 +48,9 @@ struct builder {
         if (stripes && (static_cast<int>(v * 12) % 2 == 0)) c = vec3f(0.95f, 0.95f, 0.9f);
         vertex(o + u * U + v * V, normal, c);
       }
-    const auto at = [&](int i, int j) { return base + static_cast<std::uint32_t>(j * (n + 1) + i); };
+    const auto at = [&](int i, int j) {
+      return base + static_cast<std::uint32_t>(j * (n + 1) + i);
+    };
     for (int j = 0; j < k; ++j)
       for (int i = 0; i < n; ++i) {
         tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
@@ -61,13 +63,15 @@ struct builder {
            bool stripes) {
     const vec3f d = hi - lo;
     const vec3f X(d.x(), 0, 0), Y(0, d.y(), 0), Z(0, 0, d.z());
-    const auto cells = [&](float a) { return std::max(1, static_cast<int>(std::lround(n * a / d.maxCoeff()))); };
-    patch(lo, Y, X, cells(d.y()), cells(d.x()), colours[0], stripes);          // -z
-    patch(lo + Z, X, Y, cells(d.x()), cells(d.y()), colours[1], stripes);      // +z
-    patch(lo, Z, Y, cells(d.z()), cells(d.y()), colours[2], stripes);          // -x
-    patch(lo + X, Y, Z, cells(d.y()), cells(d.z()), colours[3], stripes);      // +x
-    patch(lo, X, Z, cells(d.x()), cells(d.z()), colours[4], stripes);          // -y
-    patch(lo + Y, Z, X, cells(d.z()), cells(d.x()), colours[5], stripes);      // +y
+    const auto cells = [&](float a) {
+      return std::max(1, static_cast<int>(std::lround(n * a / d.maxCoeff())));
+    };
+    patch(lo, Y, X, cells(d.y()), cells(d.x()), colours[0], stripes);      // -z
+    patch(lo + Z, X, Y, cells(d.x()), cells(d.y()), colours[1], stripes);  // +z
+    patch(lo, Z, Y, cells(d.z()), cells(d.y()), colours[2], stripes);      // -x
+    patch(lo + X, Y, Z, cells(d.y()), cells(d.z()), colours[3], stripes);  // +x
+    patch(lo, X, Z, cells(d.x()), cells(d.z()), colours[4], stripes);      // -y
+    patch(lo + Y, Z, X, cells(d.z()), cells(d.x()), colours[5], stripes);  // +y
   }
 };
 
@@ -87,12 +91,16 @@ triangle_mesh make_demo_scene(int detail) {
       const float t = static_cast<float>(j) / static_cast<float>(rings);
       const float theta = std::numbers::pi_v<float> * t * t;
       for (int i = 0; i <= segs; ++i) {
-        const float phi = 2 * std::numbers::pi_v<float> * static_cast<float>(i) / static_cast<float>(segs);
-        const vec3f n(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi));
+        const float phi =
+            2 * std::numbers::pi_v<float> * static_cast<float>(i) / static_cast<float>(segs);
+        const vec3f n(std::sin(theta) * std::cos(phi), std::cos(theta),
+                      std::sin(theta) * std::sin(phi));
         b.vertex(c + r * n, n, hue(0.6f * t + 0.05f));
       }
     }
-    const auto at = [&](int i, int j) { return base + static_cast<std::uint32_t>(j * (segs + 1) + i); };
+    const auto at = [&](int i, int j) {
+      return base + static_cast<std::uint32_t>(j * (segs + 1) + i);
+    };
     for (int j = 0; j < rings; ++j)
       for (int i = 0; i < segs; ++i) {
         if (j > 0) b.tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
@@ -125,7 +133,8 @@ point_cloud sample_surface(const triangle_mesh& mesh, std::size_t n, std::uint64
   double total = 0;
   for (std::size_t f = 0; f < mesh.faces.size(); ++f) {
     const auto& t = mesh.faces[f];
-    total += 0.5 * (P[t[1]] - P[t[0]]).cast<double>().cross((P[t[2]] - P[t[0]]).cast<double>()).norm();
+    total +=
+        0.5 * (P[t[1]] - P[t[0]]).cast<double>().cross((P[t[2]] - P[t[0]]).cast<double>()).norm();
     cdf[f] = total;
   }
   if (!(total > 0)) return out;  // all faces degenerate: nothing to sample
@@ -138,7 +147,8 @@ point_cloud sample_surface(const triangle_mesh& mesh, std::size_t n, std::uint64
   std::uniform_real_distribution<double> u01(0, 1);
   for (std::size_t s = 0; s < n; ++s) {
     const double x = u01(rng) * total;
-    const auto f = static_cast<std::size_t>(std::lower_bound(cdf.begin(), cdf.end(), x) - cdf.begin());
+    const auto f =
+        static_cast<std::size_t>(std::lower_bound(cdf.begin(), cdf.end(), x) - cdf.begin());
     const auto& t = mesh.faces[std::min(f, mesh.faces.size() - 1)];
     double a = u01(rng), b = u01(rng);
     if (a + b > 1) {
@@ -152,14 +162,16 @@ point_cloud sample_surface(const triangle_mesh& mesh, std::size_t n, std::uint64
     out.positions.push_back(w(P[t[0]], P[t[1]], P[t[2]]));
     vec3f nn = (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]]);
     if (normals) {
-      const vec3f ni = w(mesh.vertices.normals[t[0]], mesh.vertices.normals[t[1]], mesh.vertices.normals[t[2]]);
+      const vec3f ni =
+          w(mesh.vertices.normals[t[0]], mesh.vertices.normals[t[1]], mesh.vertices.normals[t[2]]);
       if (ni.norm() > 1e-12f) nn = ni;
     }
     out.normals.push_back(nn.norm() > 0 ? vec3f(nn.normalized()) : vec3f::UnitZ());
     if (colours) {
       const auto& C = mesh.vertices.colours;
       const auto ch = [&](auto get) {
-        return static_cast<std::uint8_t>(std::lround(c * get(C[t[0]]) + a * get(C[t[1]]) + b * get(C[t[2]])));
+        return static_cast<std::uint8_t>(
+            std::lround(c * get(C[t[0]]) + a * get(C[t[1]]) + b * get(C[t[2]])));
       };
       out.colours.push_back({ch([](rgb8 q) { return q.r; }), ch([](rgb8 q) { return q.g; }),
                              ch([](rgb8 q) { return q.b; })});
@@ -182,7 +194,8 @@ point_cloud make_wavy_surface(std::size_t n, std::uint64_t seed) {
     const float u = ang(rng), v = ang(rng);
     const auto pos = [&](float uu, float vv) {
       const float r = 0.35f + 0.05f * std::sin(5 * uu) * std::cos(3 * vv);
-      return vec3f((R + r * std::cos(vv)) * std::cos(uu), r * std::sin(vv), (R + r * std::cos(vv)) * std::sin(uu));
+      return vec3f((R + r * std::cos(vv)) * std::cos(uu), r * std::sin(vv),
+                   (R + r * std::cos(vv)) * std::sin(uu));
     };
     const float h = 1e-3f;
     const vec3f p = pos(u, v);

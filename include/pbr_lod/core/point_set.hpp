@@ -27,11 +27,11 @@ namespace pbr_lod {
 struct point_cloud {
   vec3d origin = vec3d::Zero();
   std::vector<vec3f> positions;
-  std::vector<vec3f> normals;        ///< unit normals, or empty
-  std::vector<rgb8> colours;         ///< or empty
+  std::vector<vec3f> normals;           ///< unit normals, or empty
+  std::vector<rgb8> colours;            ///< or empty
   std::vector<std::uint8_t> materials;  ///< or empty
-  std::vector<vec3f> axis_u;         ///< splat ellipse semi-axis vectors (tangent), or empty
-  std::vector<vec3f> axis_v;         ///< second semi-axis, orthogonal to axis_u, or empty
+  std::vector<vec3f> axis_u;            ///< splat ellipse semi-axis vectors (tangent), or empty
+  std::vector<vec3f> axis_v;            ///< second semi-axis, orthogonal to axis_u, or empty
 
   [[nodiscard]] std::size_t size() const { return positions.size(); }
   [[nodiscard]] bool empty() const { return positions.empty(); }
@@ -115,8 +115,8 @@ class point_set {
     c.validate(what);
     const attributes have = c.present();
     if (!have.contains(A))
-      throw InvalidArgument(what + " has attributes " + have.to_string() + " but " +
-                            A.to_string() + " were requested");
+      throw InvalidArgument(what + " has attributes " + have.to_string() + " but " + A.to_string() +
+                            " were requested");
     point_set s;
     s.origin = c.origin;
     s.positions = c.positions;

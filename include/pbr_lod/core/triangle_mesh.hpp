@@ -33,9 +33,8 @@ struct triangle_mesh {
           throw InvalidArgument(what + ": face " + std::to_string(f) + " references vertex " +
                                 std::to_string(i) + ", but there are " + std::to_string(n));
     if (!face_texcoords.empty() && face_texcoords.size() != faces.size())
-      throw InvalidArgument(what + ": face_texcoords has " +
-                            std::to_string(face_texcoords.size()) + " entries, expected " +
-                            std::to_string(faces.size()));
+      throw InvalidArgument(what + ": face_texcoords has " + std::to_string(face_texcoords.size()) +
+                            " entries, expected " + std::to_string(faces.size()));
   }
 };
 

@@ -42,8 +42,8 @@ concept Hierarchy = requires(const H& h, typename H::node_id n, const view& v,
   { h.root() } -> std::same_as<typename H::node_id>;
   { h.is_leaf(n) } -> std::convertible_to<bool>;
   { h.children(n) } -> std::ranges::forward_range;
-  requires std::convertible_to<std::ranges::range_value_t<decltype(h.children(n))>,
-                               typename H::node_id>;
+  requires std::convertible_to < std::ranges::range_value_t<decltype(h.children(n))>,
+  typename H::node_id > ;
   { h.bounding_sphere(n) } -> std::convertible_to<sphere>;
   h.emit(n, v, sink);
 };
