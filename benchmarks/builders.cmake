@@ -1,0 +1,1 @@
+pbr_lod_add_benchmark(bench_point_octree ${CMAKE_CURRENT_LIST_DIR}/point_octree_benchmark.cpp)

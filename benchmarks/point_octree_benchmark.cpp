@@ -1,0 +1,209 @@
+// Point-octree (Pajarola 2003) benchmarks: build throughput (Table 1), storage (Table 2), the
+// fraction drawn at τ = 16 px (Fig. 1), a tolerance sweep (image error vs time vs splats) and
+// the drift of the paper's covariance formulation far from the origin. docs/point-octree.md
+// quotes these numbers.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <map>
+#include <numbers>
+
+#include "pbr_lod/builders/point_octree.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
+#include "support/data.hpp"
+
+namespace {
+using namespace pbr_lod;
+
+constexpr attributes disks{.normal = true, .colour = true, .ellipse = true};
+
+/// Circular splats of radius 1.5·√(area per sample / π) in each sample's tangent plane: input
+/// with ellipses, so the tree build is measured without the k-NN estimation.
+point_set<disks> with_disks(point_cloud c, double total_area) {
+  const auto r = static_cast<float>(
+      1.5 * std::sqrt(total_area / (std::numbers::pi * static_cast<double>(c.size()))));
+  c.axis_u.resize(c.size());
+  c.axis_v.resize(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const vec3f t = any_orthogonal(c.normals[i]);
+    c.axis_u[i] = t * r;
+    c.axis_v[i] = c.normals[i].cross(t) * r;
+  }
+  if (c.colours.empty()) c.colours.assign(c.size(), rgb8{200, 200, 200});
+  return point_set<disks>::from(c);
+}
+
+/// The wavy torus of make_wavy_surface: area ≈ 4π²·R·r with R = 1, r ≈ 0.35.
+const point_set<disks>& surface(std::size_t n) {
+  static std::map<std::size_t, point_set<disks>> cache;
+  auto it = cache.find(n);
+  if (it == cache.end())
+    it = cache
+             .emplace(n, with_disks(make_wavy_surface(n, 1),
+                                    4 * std::numbers::pi * std::numbers::pi * 0.35))
+             .first;
+  return it->second;
+}
+
+const point_cloud& scan(const std::string& name) {
+  static std::map<std::string, point_cloud> cache;
+  auto it = cache.find(name);
+  if (it == cache.end()) it = cache.emplace(name, read_points(test::data_file(name))).first;
+  return it->second;
+}
+
+void report(benchmark::State& state, const auto& t, std::size_t n) {
+  state.counters["points/s"] =
+      benchmark::Counter(static_cast<double>(n) * static_cast<double>(state.iterations()),
+                         benchmark::Counter::kIsRate);
+  state.counters["nodes/point"] = static_cast<double>(t.nodes().size()) / static_cast<double>(n);
+  state.counters["B/point_file"] = static_cast<double>(t.file_bytes()) / static_cast<double>(n);
+  state.counters["B/point_mem"] = static_cast<double>(t.memory_bytes()) / static_cast<double>(n);
+}
+
+// Tree build (octree, covariances, ellipses, quantisation) on a generated surface with splats.
+void bm_build_surface(benchmark::State& state) {
+  const auto& pts = surface(static_cast<std::size_t>(state.range(0)));
+  const point_octree_options opt{.normal_bits = static_cast<int>(state.range(1)),
+                                 .threads = static_cast<unsigned>(state.range(2))};
+  point_octree<point_octree_attributes(disks)> t;
+  for (auto _ : state) {
+    t = build_point_octree(pts, opt);
+    benchmark::DoNotOptimize(t.nodes().data());
+  }
+  report(state, t, pts.size());
+}
+BENCHMARK(bm_build_surface)
+    ->ArgNames({"points", "normal_bits", "threads"})
+    ->Args({1'000'000, 16, 1})
+    ->Args({1'000'000, 16, 2})
+    ->Args({1'000'000, 0, 2})
+    ->Args({5'000'000, 16, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// Whole build from a real scan with positions only: k-NN normals + orientation + ellipses + tree.
+void bm_build_scan(benchmark::State& state, const std::string& name) {
+  const auto pts = point_set<positions_only>::from(scan(name));
+  point_octree<point_octree_attributes(positions_only)> t;
+  for (auto _ : state) {
+    t = build_point_octree(pts);
+    benchmark::DoNotOptimize(t.nodes().data());
+  }
+  report(state, t, pts.size());
+  state.counters["estimation_s"] = t.stats().estimation_seconds;
+  state.counters["tree_s"] = t.stats().tree_seconds;
+}
+BENCHMARK_CAPTURE(bm_build_scan, bunny, std::string("bun_zipper.ply"))
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(bm_build_scan, happy_buddha, std::string("happy_vrip_res3.ply"))
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// Tolerance sweep (Fig. 1 / §6) on a 1M-point surface seen at 1024²: traversal + rasterisation
+// time, splats drawn, and the image error against the full-detail render (τ = 0).
+void bm_tolerance(benchmark::State& state) {
+  static const auto t = build_point_octree(surface(1'000'000));
+  using tree = std::decay_t<decltype(t)>;
+  const auto tol = static_cast<float>(state.range(0));
+  const camera cam = camera::orbit(t.origin(), 1.4, 30, 35, 2.2, 1, {1024, 1024});
+  const view v(cam, t.origin());
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = true};
+  const traverse_options o{.tolerance_px = tol,
+                           .backface_cull = true,
+                           .cull_volume = traverse_options::volume::view_cone};
+  static const image full = render<tree::attrs>(v, ro, [&](auto& s) {
+    traverse(t, v, {.tolerance_px = 0, .backface_cull = true}, s, point_octree_policy{});
+  });
+  image img;
+  for (auto _ : state) {
+    img = render<tree::attrs>(v, ro, [&](auto& s) { traverse(t, v, o, s, point_octree_policy{}); });
+    benchmark::DoNotOptimize(img.colour.data());
+  }
+  counting_sink<tree::attrs> c;
+  const auto st = traverse(t, v, o, c, point_octree_policy{});
+  const auto err = compare_images(full, img);
+  state.counters["splats"] = static_cast<double>(c.splats);
+  state.counters["fraction_drawn"] =
+      static_cast<double>(c.splats) / static_cast<double>(t.samples().size());
+  state.counters["visited"] = static_cast<double>(st.visited);
+  state.counters["psnr_db"] = err.psnr;
+  state.counters["hole_fraction"] = err.hole_fraction;
+}
+BENCHMARK(bm_tolerance)
+    ->ArgName("tau_px")
+    ->Arg(1)
+    ->Arg(2)
+    ->Arg(4)
+    ->Arg(8)
+    ->Arg(16)
+    ->Unit(benchmark::kMillisecond);
+
+// Traversal alone (LOD selection of §6) at τ = 16 on the same surface.
+void bm_select(benchmark::State& state) {
+  static const auto t = build_point_octree(surface(1'000'000));
+  using tree = std::decay_t<decltype(t)>;
+  const view v(camera::orbit(t.origin(), 1.4, 30, 35, 2.2, 1, {1024, 1024}), t.origin());
+  const traverse_options o{.tolerance_px = static_cast<float>(state.range(0)),
+                           .backface_cull = true,
+                           .cull_volume = traverse_options::volume::view_cone};
+  traverse_stats st;
+  for (auto _ : state) {
+    counting_sink<tree::attrs> c;
+    st = traverse(t, v, o, c, point_octree_policy{});
+    benchmark::DoNotOptimize(c.splats);
+  }
+  state.counters["nodes/s"] =
+      benchmark::Counter(static_cast<double>(st.visited) * static_cast<double>(state.iterations()),
+                         benchmark::Counter::kIsRate);
+}
+BENCHMARK(bm_select)->ArgName("tau_px")->Arg(1)->Arg(16)->Unit(benchmark::kMillisecond);
+
+// How far the node ellipses drift when the same cloud lies far from the origin: the paper's
+// world-coordinate homogeneous sums in float and double vs the stable merge (relative error of
+// the ellipse axes against the at-origin build; max over nodes, and median).
+void bm_covariance_drift(benchmark::State& state) {
+  const auto method = static_cast<covariance_method>(state.range(0));
+  const double offset = std::pow(10.0, static_cast<double>(state.range(1)));
+  const auto cloud = sample_surface(make_demo_scene(16), 50000, 3);
+  const point_octree_options ref_opt{.normal_bits = 0, .threads = 1};
+  const auto ref = build_point_octree(point_set<with_normals>::from(cloud), ref_opt);
+  point_cloud moved = cloud;
+  moved.origin += vec3d(0.5, 0.4, 0.01) * offset;
+  point_octree_options opt = ref_opt;
+  opt.covariance = method;
+  point_octree<point_octree_attributes(with_normals)> t;
+  for (auto _ : state) t = build_point_octree(point_set<with_normals>::from(moved), opt);
+  std::vector<double> rel;
+  for (std::size_t i = 0; i < t.nodes().size(); ++i) {
+    const auto &x = ref.nodes()[i], &y = t.nodes()[i];
+    const double s = std::max<double>(x.axis_u.norm(), 1e-30);
+    const double du = std::min((x.axis_u - y.axis_u).norm(), (x.axis_u + y.axis_u).norm());
+    const double dv = std::min((x.axis_v - y.axis_v).norm(), (x.axis_v + y.axis_v).norm());
+    rel.push_back(std::max(du, dv) / s);
+  }
+  std::sort(rel.begin(), rel.end());
+  state.counters["max_rel_drift"] = rel.back();
+  state.counters["median_rel_drift"] = rel[rel.size() / 2];
+  // Ellipse area relative to the at-origin build (inflation when the axes lose their shape).
+  double a0 = 0, a1 = 0;
+  for (std::size_t i = 0; i < t.nodes().size(); ++i) {
+    a0 += ref.nodes()[i].axis_u.norm() * ref.nodes()[i].axis_v.norm();
+    a1 += t.nodes()[i].axis_u.norm() * t.nodes()[i].axis_v.norm();
+  }
+  state.counters["area_ratio"] = a1 / a0;
+}
+BENCHMARK(bm_covariance_drift)
+    ->ArgNames({"method", "log10_offset"})
+    ->ArgsProduct({{0, 1, 2}, {0, 3, 5, 6, 7}})
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,403 @@
+// Tests of the point-octree builder (Pajarola 2003). Each case says why its expectation holds.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "pbr_lod/builders/point_octree.hpp"
+#include "pbr_lod/core/covariance.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/raster/reference.hpp"
+#include "support/data.hpp"
+
+namespace pbr_lod {
+namespace {
+
+constexpr attributes in_attrs{.normal = true, .colour = true};
+using octree_nc = point_octree<point_octree_attributes(in_attrs)>;
+using octree_p = point_octree<point_octree_attributes(positions_only)>;
+
+point_set<in_attrs> demo_points(std::size_t n, std::uint64_t seed = 7) {
+  return point_set<in_attrs>::from(sample_surface(make_demo_scene(24), n, seed));
+}
+
+constexpr attributes disk_attrs{.normal = true, .colour = true, .ellipse = true};
+/// Dense samples of the demo scene with circular splats of radius 1.5·√(area/(πn)) — about 1.5×
+/// the mean spacing, so they overlap — without k-NN estimation (fast for large n).
+point_set<disk_attrs> dense_points(std::size_t n, std::uint64_t seed = 7) {
+  const auto mesh = make_demo_scene(24);
+  double area = 0;
+  for (const auto& f : mesh.faces) {
+    const auto& P = mesh.vertices.positions;
+    area +=
+        0.5 * (P[f[1]] - P[f[0]]).cast<double>().cross((P[f[2]] - P[f[0]]).cast<double>()).norm();
+  }
+  auto c = sample_surface(mesh, n, seed);
+  const auto r =
+      static_cast<float>(1.5 * std::sqrt(area / (std::numbers::pi * static_cast<double>(n))));
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const vec3f t = any_orthogonal(c.normals[i]);
+    c.axis_u.push_back(t * r);
+    c.axis_v.push_back(c.normals[i].cross(t) * r);
+  }
+  return point_set<disk_attrs>::from(c);
+}
+
+/// Checks every invariant the paper's structure promises; returns the number of nodes checked.
+template <class T>
+std::size_t check_invariants(const T& t) {
+  const auto& s = t.samples();
+  std::vector<int> owner(s.size(), 0);
+  for (typename T::node_id i = 0; i < t.nodes().size(); ++i) {
+    const auto& nd = t.at(i);
+    const sphere b = t.bounding_sphere(i);
+    const normal_cone cone = t.normal_cone(i);
+    const elliptical_disk e = t.disk(i);
+    EXPECT_TRUE(all_finite(nd.centre) && all_finite(nd.normal) && all_finite(nd.axis_u) &&
+                all_finite(nd.axis_v) && std::isfinite(nd.radius) && std::isfinite(nd.cone_angle))
+        << "node " << i;
+    EXPECT_NEAR(nd.normal.norm(), 1.0f, 1e-4f) << "node " << i;
+    // The ellipse lies in the tangent plane: axes orthogonal to each other and to the normal.
+    const float scale = std::max(nd.axis_u.norm(), 1e-30f);
+    EXPECT_LE(std::abs(nd.axis_u.dot(nd.normal)), 1e-4f * scale) << "node " << i;
+    EXPECT_LE(std::abs(nd.axis_u.dot(nd.axis_v)), 1e-4f * scale * scale) << "node " << i;
+    const auto corners = [](const vec3f& c, const vec3f& u, const vec3f& v) {
+      return std::array<vec3f, 4>{c + u + v, c + u - v, c - u + v, c - u - v};
+    };
+    if (nd.leaf) {
+      for (std::uint32_t k = nd.first; k < nd.first + nd.count; ++k) {
+        ++owner[k];
+        EXPECT_TRUE(b.contains(s.positions[k])) << "leaf " << i << " sample " << k;
+        EXPECT_TRUE(cone.contains(s.normals[k], 1e-3f)) << "leaf " << i << " sample " << k;
+        for (const auto& c : corners(s.positions[k], s.axis_u[k], s.axis_v[k]))
+          EXPECT_TRUE(e.covers(c, 1e-3f)) << "leaf " << i << " does not cover sample " << k;
+      }
+    } else {
+      for (auto c : t.children(i)) {
+        const auto& ch = t.at(c);
+        EXPECT_TRUE(b.contains(t.bounding_sphere(c), 1e-4f)) << "node " << i << " child " << c;
+        for (const auto& p : corners(ch.centre, ch.axis_u, ch.axis_v))
+          EXPECT_TRUE(e.covers(p, 1e-3f)) << "node " << i << " does not cover child " << c;
+      }
+    }
+  }
+  // Cones of inner nodes contain every sample normal below them: check at the root.
+  for (std::size_t k = 0; k < s.size(); ++k)
+    EXPECT_TRUE(t.normal_cone(0).contains(s.normals[k], 1e-3f));
+  for (std::size_t k = 0; k < s.size(); ++k) EXPECT_EQ(owner[k], 1) << "sample " << k;
+  return t.nodes().size();
+}
+
+TEST(PointOctree, InvariantsOnTheDemoScene) {
+  const auto pts = demo_points(30000);
+  const auto t = build_point_octree(pts, {.leaf_size = 8});
+  EXPECT_GT(check_invariants(t), 1000u);
+  EXPECT_EQ(t.samples().size(), pts.size());
+  // Nodes per point: an octree with ≤ 8 samples per leaf has roughly N/4..N/2 nodes (paper ≈ 0.4).
+  const double ratio = static_cast<double>(t.nodes().size()) / static_cast<double>(pts.size());
+  EXPECT_GT(ratio, 0.1);
+  EXPECT_LT(ratio, 0.8);
+}
+
+TEST(PointOctree, InvariantsWithoutQuantisationAndWithThePapersRules) {
+  const auto pts = demo_points(8000, 3);
+  for (const auto cov : {covariance_method::stable, covariance_method::generic_double})
+    for (const auto rule : {ellipse_axis_rule::sqrt_eigenvalue, ellipse_axis_rule::eigenvalue})
+      for (const int bits : {0, 12, 16}) {
+        SCOPED_TRACE(::testing::Message()
+                     << "cov " << int(cov) << " rule " << int(rule) << " bits " << bits);
+        const auto t = build_point_octree(pts, {.leaf_size = 4,
+                                                .covariance = cov,
+                                                .axis_rule = rule,
+                                                .normal_bits = bits,
+                                                .threads = 1});
+        check_invariants(t);
+      }
+}
+
+// Positions only (the real bunny scan): normals and splat ellipses come from k-NN (§4 end).
+TEST(PointOctree, BunnyWithEstimatedNormalsAndEllipses) {
+  const auto cloud = read_points(test::data_file("bun_zipper.ply"));
+  const auto pts = point_set<positions_only>::from(cloud);
+  const auto t = build_point_octree(pts);
+  EXPECT_TRUE(t.stats().estimated_normals);
+  EXPECT_TRUE(t.stats().estimated_ellipses);
+  check_invariants(t);
+}
+
+// The parallel build (subtrees in tasks, spliced) gives exactly the sequential tree.
+TEST(PointOctree, ParallelBuildEqualsSequential) {
+  const auto pts = demo_points(60000, 11);
+  const auto a = build_point_octree(pts, {.threads = 1});
+  const auto b = build_point_octree(pts, {.threads = 4});
+  EXPECT_TRUE(a == b);
+}
+
+// Covariance from the paper's homogeneous sums (EQ 2–4) and from the stable merge equals a
+// direct two-pass computation (EQ 1), also after merging two sets.
+TEST(Covariance, SumsEqualDirectComputation) {
+  std::mt19937 rng(42);  // any data: the identities hold for every input
+  std::normal_distribution<double> g(0, 1);
+  std::vector<vec3d> a(300), b(200);
+  for (auto& p : a) p = vec3d(g(rng) * 3 + 1, g(rng) + 2, g(rng) * 0.1 - 1);
+  for (auto& p : b) p = vec3d(g(rng) + 4, g(rng) * 2, g(rng));
+  const auto direct = [](const std::vector<vec3d>& pts) {
+    vec3d m = vec3d::Zero();
+    for (const auto& p : pts) m += p;
+    m /= static_cast<double>(pts.size());
+    mat3d c = mat3d::Zero();
+    for (const auto& p : pts) c += (p - m) * (p - m).transpose();
+    return mat3d(c / static_cast<double>(pts.size()));
+  };
+  generic_homogeneous_covariance<double> ga, gb;
+  scatter_accumulator sa, sb;
+  for (const auto& p : a) {
+    ga.add(p);
+    sa.add(p);
+  }
+  for (const auto& p : b) {
+    gb.add(p);
+    sb.add(p);
+  }
+  EXPECT_LT((ga.covariance() - direct(a)).norm(), 1e-10);
+  EXPECT_LT((sa.covariance() - direct(a)).norm(), 1e-12);
+  std::vector<vec3d> ab = a;
+  ab.insert(ab.end(), b.begin(), b.end());
+  ga += gb;  // EQ 4
+  sa += sb;  // Chan et al.
+  EXPECT_LT((ga.covariance() - direct(ab)).norm(), 1e-10);
+  EXPECT_LT((sa.covariance() - direct(ab)).norm(), 1e-12);
+  // EQ 3 with a rotation: the covariance in a rotated frame is R·M·Rᵀ.
+  const mat3d R = Eigen::AngleAxisd(0.7, vec3d(1, 2, 3).normalized()).toRotationMatrix();
+  const mat3d in_frame = ga.in_frame(sa.mean, R).block<3, 3>(0, 0);
+  EXPECT_LT((in_frame - R * direct(ab) * R.transpose()).norm(), 1e-9);
+}
+
+/// Relative difference of two trees' node ellipses (max over nodes, of |Δaxis| / |axis|).
+template <class T>
+double ellipse_drift(const T& a, const T& b) {
+  double worst = 0;
+  for (std::size_t i = 0; i < a.nodes().size(); ++i) {
+    const auto &x = a.at(static_cast<std::uint32_t>(i)), &y = b.at(static_cast<std::uint32_t>(i));
+    const double s = std::max<double>(x.axis_u.norm(), 1e-30);
+    // Axes are defined up to sign.
+    const double du = std::min((x.axis_u - y.axis_u).norm(), (x.axis_u + y.axis_u).norm());
+    const double dv = std::min((x.axis_v - y.axis_v).norm(), (x.axis_v + y.axis_v).norm());
+    worst = std::max(worst, std::max(du, dv) / s);
+  }
+  return worst;
+}
+
+// The hard case (PCL #2403, #2184): the same cloud 5·10⁵…10⁷ units from the origin. Moving it
+// and re-expressing it relative to a new origin changes its float coordinates by rounding only
+// (~1e-7 relative); the stable covariance then reproduces the at-origin ellipses to 1e-5, while
+// the paper's world-coordinate sums in float are destroyed by cancellation.
+TEST(PointOctree, FarFromOriginStablePathMatches) {
+  const auto cloud = sample_surface(make_demo_scene(12), 4000, 5);
+  const point_octree_options opt{.leaf_size = 8, .normal_bits = 0, .threads = 1};
+  const auto ref = build_point_octree(point_set<in_attrs>::from(cloud), opt);
+  for (const vec3d& shift : {vec3d(5e5, 4e6, 100), vec3d(1e7, 1e7, 1e7)}) {
+    point_cloud moved = cloud;
+    moved.origin += shift;
+    rebase(moved, moved.origin + vec3d(0.0123, -0.0456, 0.0789));  // new float coordinates
+    const auto pts_moved = point_set<in_attrs>::from(moved);
+    const auto b = build_point_octree(pts_moved, opt);
+    ASSERT_EQ(ref.nodes().size(), b.nodes().size()) << "shift " << shift.transpose();
+    EXPECT_LT(ellipse_drift(ref, b), 1e-5) << "shift " << shift.transpose();
+    // The paper's formulation in float, in world coordinates: catastrophic at these offsets.
+    point_octree_options paper = opt;
+    paper.covariance = covariance_method::generic_float;
+    const auto pf = build_point_octree(pts_moved, paper);
+    ASSERT_EQ(pf.nodes().size(), b.nodes().size());
+    EXPECT_GT(ellipse_drift(b, pf), 1e-2) << "expected the float homogeneous sums to fail";
+    check_invariants(pf);  // the coverage rule (f from the corners) still bounds everything
+  }
+}
+
+// The degenerate ladder (CGAL's hierarchy_simplification_test): every rung gives a valid tree.
+TEST(PointOctree, DegenerateLadder) {
+  point_set<positions_only> empty;
+  EXPECT_THROW((void)build_point_octree(empty), InvalidArgument);
+
+  const auto make = [](std::vector<vec3f> p) {
+    point_set<positions_only> s;
+    s.positions = std::move(p);
+    return s;
+  };
+  // 1 point: one leaf.
+  {
+    const auto t = build_point_octree(make({vec3f(1, 2, 3)}));
+    ASSERT_EQ(t.nodes().size(), 1u);
+    EXPECT_TRUE(t.is_leaf(0));
+    check_invariants(t);
+  }
+  // 1000 copies of one point: no split separates them, one leaf of 1000.
+  {
+    const auto t = build_point_octree(make(std::vector<vec3f>(1000, vec3f(0.5f, 0.5f, 0.5f))));
+    ASSERT_EQ(t.nodes().size(), 1u);
+    EXPECT_EQ(t.at(0).count, 1000u);
+    check_invariants(t);
+  }
+  // 2 points with leaf size 1: a root and two leaves.
+  {
+    const auto t = build_point_octree(make({vec3f(0, 0, 0), vec3f(1, 0, 0)}), {.leaf_size = 1});
+    EXPECT_EQ(t.nodes().size(), 3u);
+    check_invariants(t);
+  }
+  // Collinear, coplanar grid, random cube.
+  std::vector<vec3f> line, grid, cube;
+  for (int i = 0; i < 200; ++i) line.emplace_back(0.01f * i, 0.02f * i, -0.005f * i);
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) grid.emplace_back(0.1f * i, 0.05f * j, 2.0f);
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<float> u(-1, 1);
+  for (int i = 0; i < 3000; ++i) cube.emplace_back(u(rng), u(rng), u(rng));
+  for (auto* pts : {&line, &grid, &cube}) {
+    const auto t = build_point_octree(make(*pts), {.leaf_size = 4});
+    EXPECT_GT(t.nodes().size(), pts->size() / 8);
+    check_invariants(t);
+  }
+}
+
+TEST(PointOctree, RejectsBadInput) {
+  point_set<positions_only> s;
+  s.positions = {vec3f(0, 0, 0), vec3f(std::nanf(""), 0, 0)};
+  EXPECT_THROW((void)build_point_octree(s), InvalidArgument);
+  s.positions[1] = vec3f(1, 1, 1);
+  EXPECT_THROW((void)build_point_octree(s, {.normal_bits = 3}), InvalidArgument);
+  // Cancel from the progress callback: throws, returns nothing.
+  EXPECT_THROW(
+      (void)build_point_octree(demo_points(5000), {.progress = [](double f) { return f < 0.05; }}),
+      Cancelled);
+}
+
+// save()/load() round-trips exactly, quantised or not; bytes per point are reported.
+TEST(PointOctree, SaveLoadRoundTrip) {
+  const auto pts = demo_points(20000, 9);
+  const auto dir = std::filesystem::temp_directory_path();
+  for (const int bits : {0, 13, 16, 20}) {
+    const auto t = build_point_octree(pts, {.normal_bits = bits});
+    const auto path = (dir / ("pbr_lod_octree_" + std::to_string(bits) + ".lod")).string();
+    t.save(path);
+    EXPECT_EQ(std::filesystem::file_size(path), t.file_bytes());
+    const auto u = octree_nc::load(path);
+    EXPECT_TRUE(t == u) << "bits " << bits;
+    // The wrong attribute set is refused, with a clear message.
+    EXPECT_THROW((void)point_octree<point_octree_attributes(with_normals)>::load(path),
+                 FormatError);
+  }
+}
+
+TEST(PointOctree, LoadRejectsCorruptFiles) {
+  const auto t = build_point_octree(demo_points(3000, 2));
+  const auto path =
+      (std::filesystem::temp_directory_path() / "pbr_lod_octree_corrupt.lod").string();
+  t.save(path);
+  std::vector<char> bytes;
+  {
+    std::ifstream f(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
+  const auto write = [&](const std::vector<char>& b) {
+    std::ofstream f(path, std::ios::binary | std::ios::trunc);
+    f.write(b.data(), static_cast<std::streamsize>(b.size()));
+  };
+  // Truncated at many places, one byte flipped anywhere, bad magic, lying counts: all Errors.
+  for (std::size_t cut :
+       {std::size_t{0}, std::size_t{5}, std::size_t{40}, bytes.size() / 2, bytes.size() - 1}) {
+    write(std::vector<char>(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(cut)));
+    EXPECT_THROW((void)octree_nc::load(path), Error) << "cut at " << cut;
+  }
+  std::mt19937 rng(1);
+  for (int trial = 0; trial < 200; ++trial) {
+    auto b = bytes;
+    b[rng() % b.size()] ^= static_cast<char>(1 + rng() % 255);
+    write(b);
+    EXPECT_THROW((void)octree_nc::load(path), Error);
+  }
+  EXPECT_THROW((void)octree_nc::load(path + ".missing"), IoError);
+}
+
+/// Forwards to point_octree_policy and records the emitted nodes.
+struct recording_policy : point_octree_policy {
+  std::vector<std::uint32_t>* out;
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
+            const traverse_options& o, S& sink) const {
+    out->push_back(n);
+    point_octree_policy::emit(h, n, v, size, o, sink);
+  }
+};
+
+// LOD selection (§6): every inner node the policy emits is within τ by the paper's tilted-area
+// metric, and a larger τ draws fewer splats.
+TEST(PointOctree, TiltedAreaPolicyRespectsTolerance) {
+  const auto pts = dense_points(200000, 4);
+  const auto t = build_point_octree(pts);
+  const auto cam = camera::orbit(vec3d(0, 1, 0) + pts.origin, 2.8, 30, 20, 3, 1, {256, 256});
+  const view v(cam, t.origin());
+  std::size_t previous = std::numeric_limits<std::size_t>::max();
+  for (const float tol : {1.0f, 2.0f, 4.0f, 8.0f, 16.0f}) {
+    counting_sink<octree_nc::attrs> sink;
+    const traverse_options o{.tolerance_px = tol,
+                             .backface_cull = true,
+                             .cull_volume = traverse_options::volume::view_cone};
+    std::vector<std::uint32_t> emitted;
+    const auto st = traverse(t, v, o, sink, recording_policy{{}, &emitted});
+    for (auto n : emitted)
+      if (!t.is_leaf(n)) {
+        EXPECT_LE(point_octree_policy{}.screen_size(t, n, t.bounding_sphere(n), v, o), tol);
+      }
+    EXPECT_LE(sink.splats, previous);
+    EXPECT_EQ(sink.splats, st.splats);
+    previous = sink.splats;
+  }
+  EXPECT_LT(previous, pts.size() / 10);
+}
+
+// Rendering at τ = 1 px matches the full-detail render (every sample's own splat) closely.
+// Thresholds: at 1 px the cut replaces groups of samples by one bounding splat no larger than a
+// pixel, so colours blend over ~1 px (PSNR well above 25 dB) and bounding splats cover at least
+// what the samples cover (holes < 0.5 %; the only holes come from back-face/edge rounding).
+TEST(PointOctree, ToleranceOnePixelIsCloseToFullDetail) {
+  const auto pts = dense_points(300000, 8);
+  const auto t = build_point_octree(pts);
+  const auto cam = camera::orbit(vec3d(-0.2, 0.9, 0) + pts.origin, 2.6, 30, 20, 3, 1, {256, 256});
+  const view v(cam, t.origin());
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = true};
+  const auto draw_all = [&](auto& sink) {
+    traverse(t, v, {.tolerance_px = 0}, sink, point_octree_policy{});
+  };
+  const auto draw_lod = [&](auto& sink) {
+    traverse(t, v, {.tolerance_px = 1}, sink, point_octree_policy{});
+  };
+  const image full = render<octree_nc::attrs>(v, ro, draw_all);
+  const image lod = render<octree_nc::attrs>(v, ro, draw_lod);
+  const auto err = compare_images(full, lod);
+  counting_sink<octree_nc::attrs> c1, c0, c4;
+  traverse(t, v, {.tolerance_px = 1}, c1, point_octree_policy{});
+  traverse(t, v, {.tolerance_px = 0}, c0, point_octree_policy{});
+  EXPECT_LT(c1.splats, c0.splats);  // the cut is coarser than full detail
+  // τ = 4: far fewer splats, still no real holes (bounding splats cover their subtrees).
+  const image lod4 = render<octree_nc::attrs>(
+      v, ro, [&](auto& sink) { traverse(t, v, {.tolerance_px = 4}, sink, point_octree_policy{}); });
+  traverse(t, v, {.tolerance_px = 4}, c4, point_octree_policy{});
+  const auto err4 = compare_images(full, lod4);
+  EXPECT_LT(c4.splats, c0.splats / 4);
+  EXPECT_GT(err4.psnr, 18.0);
+  EXPECT_LT(err4.hole_fraction, 0.01);
+  std::printf(
+      "tau=1: %zu of %zu splats, PSNR %.2f dB, holes %.5f; tau=4: %zu splats, PSNR %.2f, holes "
+      "%.5f\n",
+      c1.splats, c0.splats, err.psnr, err.hole_fraction, c4.splats, err4.psnr, err4.hole_fraction);
+  EXPECT_GT(err.psnr, 25.0);
+  EXPECT_LT(err.hole_fraction, 0.005);
+}
+
+}  // namespace
+}  // namespace pbr_lod
