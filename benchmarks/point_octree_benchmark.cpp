@@ -14,25 +14,15 @@
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "support/data.hpp"
+#include "support/policies.hpp"
 
 namespace {
 using namespace pbr_lod;
 
 constexpr attributes disks{.normal = true, .colour = true, .ellipse = true};
 
-/// Circular splats of radius 1.5·√(area per sample / π) in each sample's tangent plane: input
-/// with ellipses, so the tree build is measured without the k-NN estimation.
 point_set<disks> with_disks(point_cloud c, double total_area) {
-  const auto r = static_cast<float>(
-      1.5 * std::sqrt(total_area / (std::numbers::pi * static_cast<double>(c.size()))));
-  c.axis_u.resize(c.size());
-  c.axis_v.resize(c.size());
-  for (std::size_t i = 0; i < c.size(); ++i) {
-    const vec3f t = any_orthogonal(c.normals[i]);
-    c.axis_u[i] = t * r;
-    c.axis_v[i] = c.normals[i].cross(t) * r;
-  }
-  if (c.colours.empty()) c.colours.assign(c.size(), rgb8{200, 200, 200});
+  test::add_circular_splats(c, total_area);
   return point_set<disks>::from(c);
 }
 
@@ -179,14 +169,7 @@ void bm_covariance_drift(benchmark::State& state) {
   opt.covariance = method;
   point_octree<point_octree_attributes(with_normals)> t;
   for (auto _ : state) t = build_point_octree(point_set<with_normals>::from(moved), opt);
-  std::vector<double> rel;
-  for (std::size_t i = 0; i < t.nodes().size(); ++i) {
-    const auto &x = ref.nodes()[i], &y = t.nodes()[i];
-    const double s = std::max<double>(x.axis_u.norm(), 1e-30);
-    const double du = std::min((x.axis_u - y.axis_u).norm(), (x.axis_u + y.axis_u).norm());
-    const double dv = std::min((x.axis_v - y.axis_v).norm(), (x.axis_v + y.axis_v).norm());
-    rel.push_back(std::max(du, dv) / s);
-  }
+  auto rel = test::ellipse_drifts(ref, t);
   std::sort(rel.begin(), rel.end());
   state.counters["max_rel_drift"] = rel.back();
   state.counters["median_rel_drift"] = rel[rel.size() / 2];

@@ -186,11 +186,8 @@ loaded_input load(const std::string& path) {
 
 /// World-space bounding sphere (centre of the box, radius to the farthest point), in double.
 std::pair<vec3d, double> world_bounds(const point_cloud& c) {
-  const box3 b = box3::of(c.positions);
-  const vec3f centre = b.centre();
-  double r2 = 0;
-  for (const auto& p : c.positions) r2 = std::max(r2, (p - centre).cast<double>().squaredNorm());
-  return {c.origin + centre.cast<double>(), std::sqrt(r2)};
+  const sphere s = bounding_sphere_about_box_centre(c.positions);
+  return {c.origin + s.centre.cast<double>(), static_cast<double>(s.radius)};
 }
 
 struct view_args {

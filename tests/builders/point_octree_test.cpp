@@ -13,6 +13,7 @@
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
+#include "support/policies.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -26,8 +27,7 @@ point_set<in_attrs> demo_points(std::size_t n, std::uint64_t seed = 7) {
 }
 
 constexpr attributes disk_attrs{.normal = true, .colour = true, .ellipse = true};
-/// Dense samples of the demo scene with circular splats of radius 1.5·√(area/(πn)) — about 1.5×
-/// the mean spacing, so they overlap — without k-NN estimation (fast for large n).
+/// Dense samples of the demo scene with overlapping circular splats (no k-NN estimation).
 point_set<disk_attrs> dense_points(std::size_t n, std::uint64_t seed = 7) {
   const auto mesh = make_demo_scene(24);
   double area = 0;
@@ -37,13 +37,7 @@ point_set<disk_attrs> dense_points(std::size_t n, std::uint64_t seed = 7) {
         0.5 * (P[f[1]] - P[f[0]]).cast<double>().cross((P[f[2]] - P[f[0]]).cast<double>()).norm();
   }
   auto c = sample_surface(mesh, n, seed);
-  const auto r =
-      static_cast<float>(1.5 * std::sqrt(area / (std::numbers::pi * static_cast<double>(n))));
-  for (std::size_t i = 0; i < c.size(); ++i) {
-    const vec3f t = any_orthogonal(c.normals[i]);
-    c.axis_u.push_back(t * r);
-    c.axis_v.push_back(c.normals[i].cross(t) * r);
-  }
+  test::add_circular_splats(c, area);
   return point_set<disk_attrs>::from(c);
 }
 
@@ -177,19 +171,10 @@ TEST(Covariance, SumsEqualDirectComputation) {
   EXPECT_LT((in_frame - R * direct(ab) * R.transpose()).norm(), 1e-9);
 }
 
-/// Relative difference of two trees' node ellipses (max over nodes, of |Δaxis| / |axis|).
 template <class T>
 double ellipse_drift(const T& a, const T& b) {
-  double worst = 0;
-  for (std::size_t i = 0; i < a.nodes().size(); ++i) {
-    const auto &x = a.at(static_cast<std::uint32_t>(i)), &y = b.at(static_cast<std::uint32_t>(i));
-    const double s = std::max<double>(x.axis_u.norm(), 1e-30);
-    // Axes are defined up to sign.
-    const double du = std::min((x.axis_u - y.axis_u).norm(), (x.axis_u + y.axis_u).norm());
-    const double dv = std::min((x.axis_v - y.axis_v).norm(), (x.axis_v + y.axis_v).norm());
-    worst = std::max(worst, std::max(du, dv) / s);
-  }
-  return worst;
+  const auto d = test::ellipse_drifts(a, b);
+  return d.empty() ? 0.0 : *std::max_element(d.begin(), d.end());
 }
 
 // The hard case (PCL #2403, #2184): the same cloud 5·10⁵…10⁷ units from the origin. Moving it
@@ -322,16 +307,7 @@ TEST(PointOctree, LoadRejectsCorruptFiles) {
   EXPECT_THROW((void)octree_nc::load(path + ".missing"), IoError);
 }
 
-/// Forwards to point_octree_policy and records the emitted nodes.
-struct recording_policy : point_octree_policy {
-  std::vector<std::uint32_t>* out;
-  template <class H, class S>
-  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
-            const traverse_options& o, S& sink) const {
-    out->push_back(n);
-    point_octree_policy::emit(h, n, v, size, o, sink);
-  }
-};
+using recording_policy = test::recording_policy<point_octree_policy>;
 
 // LOD selection (§6): every inner node the policy emits is within τ by the paper's tilted-area
 // metric, and a larger τ draws fewer splats.

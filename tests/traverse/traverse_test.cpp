@@ -5,6 +5,7 @@
 
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
+#include "support/policies.hpp"
 #include "support/sphere_tree.hpp"
 
 namespace pbr_lod {
@@ -20,23 +21,7 @@ camera looking_at_scene(double az = 30, double el = 20, double dist = 3) {
   return camera::orbit(vec3d(0, 1, 0), 2.5, az, el, dist, 1, {256, 256});
 }
 
-/// Records which samples the emitted nodes stand for.
-struct node_recorder {
-  const tree_n* tree;
-  std::vector<std::uint32_t> emitted;
-};
-
-// A policy that forwards to the default and remembers every emitted node, so tests can check
-// the cut against brute force.
-struct recording_policy : default_policy {
-  std::vector<std::uint32_t>* out;
-  template <class H, class S>
-  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
-            const traverse_options& o, S& sink) const {
-    out->push_back(n);
-    default_policy::emit(h, n, v, size, o, sink);
-  }
-};
+using recording_policy = test::recording_policy<default_policy>;
 
 // Culling is conservative and complete: with tolerance 0 every sample inside the frustum is
 // emitted (its leaf is never culled), and every culled leaf lies wholly outside.
