@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <limits>
+#include <type_traits>
 
 #include "io_internal.hpp"
 
@@ -241,62 +242,43 @@ class binary_source {
   [[nodiscard]] std::size_t line() const { return 0; }
 
   /// false when the file ends first.
-  bool real(scalar t, double& out) {
+  /// Reads one scalar of type t into out; an integer target refuses float types (the header
+  /// check keeps them out of lists and indices anyway).
+  template <class Out>
+  bool read_scalar(scalar t, Out& out) {
     if (!has(scalar_size(t))) return false;
     switch (t) {
       case scalar::i8:
-        out = get<std::int8_t>();
+        out = static_cast<Out>(get<std::int8_t>());
         break;
       case scalar::u8:
-        out = get<std::uint8_t>();
+        out = static_cast<Out>(get<std::uint8_t>());
         break;
       case scalar::i16:
-        out = get<std::int16_t>();
+        out = static_cast<Out>(get<std::int16_t>());
         break;
       case scalar::u16:
-        out = get<std::uint16_t>();
+        out = static_cast<Out>(get<std::uint16_t>());
         break;
       case scalar::i32:
-        out = get<std::int32_t>();
+        out = static_cast<Out>(get<std::int32_t>());
         break;
       case scalar::u32:
-        out = get<std::uint32_t>();
+        out = static_cast<Out>(get<std::uint32_t>());
         break;
       case scalar::f32:
-        out = get<float>();
-        break;
       case scalar::f64:
-        out = get<double>();
-        break;
+        if constexpr (std::is_floating_point_v<Out>) {
+          out = t == scalar::f32 ? static_cast<Out>(get<float>()) : static_cast<Out>(get<double>());
+          break;
+        } else {
+          return false;
+        }
     }
     return true;
   }
-  bool integer(scalar t, std::int64_t& out) {
-    if (!has(scalar_size(t))) return false;
-    switch (t) {
-      case scalar::i8:
-        out = get<std::int8_t>();
-        break;
-      case scalar::u8:
-        out = get<std::uint8_t>();
-        break;
-      case scalar::i16:
-        out = get<std::int16_t>();
-        break;
-      case scalar::u16:
-        out = get<std::uint16_t>();
-        break;
-      case scalar::i32:
-        out = get<std::int32_t>();
-        break;
-      case scalar::u32:
-        out = get<std::uint32_t>();
-        break;
-      default:
-        return false;  // the header check keeps float types out of here
-    }
-    return true;
-  }
+  bool real(scalar t, double& out) { return read_scalar(t, out); }
+  bool integer(scalar t, std::int64_t& out) { return read_scalar(t, out); }
   /// Can a list of n items of type t still be read?
   [[nodiscard]] bool list_fits(std::uint64_t n, scalar t) const {
     const auto bytes = mul_checked(n, scalar_size(t));

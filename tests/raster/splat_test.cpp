@@ -9,21 +9,12 @@
 #include <vector>
 
 #include "pbr_lod/raster/rasterizer.hpp"
+#include "support/cameras.hpp"
 
 namespace pbr_lod {
 namespace {
 
-camera origin_camera(int w, int h, double z_near = 0.1) {
-  camera c;
-  c.eye = vec3d::Zero();
-  c.target = vec3d(0, 0, -1);
-  c.up = vec3d::UnitY();
-  c.fovy_degrees = 60;
-  c.vp = {w, h};
-  c.z_near = z_near;
-  c.z_far = 100;
-  return c;
-}
+using test::origin_camera;
 
 struct ellipse3 {
   vec3f c, u, v;

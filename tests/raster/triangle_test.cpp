@@ -9,24 +9,14 @@
 #include <vector>
 
 #include "pbr_lod/raster/rasterizer.hpp"
+#include "support/cameras.hpp"
 
 namespace pbr_lod {
 namespace {
 
 using tri = std::array<vec3f, 3>;
 
-/// A camera at the world origin looking down −z with y up: eye coordinates are (x, y, −z).
-camera origin_camera(int w, int h, double z_near = 0.1) {
-  camera c;
-  c.eye = vec3d::Zero();
-  c.target = vec3d(0, 0, -1);
-  c.up = vec3d::UnitY();
-  c.fovy_degrees = 60;
-  c.vp = {w, h};
-  c.z_near = z_near;
-  c.z_far = 100;
-  return c;
-}
+using test::origin_camera;
 
 image draw(const view& v, const std::vector<tri>& tris, effects fx = no_effects) {
   render_options opt;
