@@ -175,19 +175,17 @@ int inside_grid(const view& v, double px, double py, double s, double depth, dou
   return 1;
 }
 
-// A closed grid of 2·12² triangles in perspective: every pixel centre inside its outline is
-// covered by exactly one triangle, none by two (edges shared in all directions, with jitter).
-TEST(Triangle, MeshIsWatertight) {
-  const view v(origin_camera(120, 90), vec3d::Zero());
-  std::mt19937 rng(7);  // seeded jitter: arbitrary edge slopes
-  const std::vector<tri> grid = jittered_grid(12, 0.6f, 2.0f, rng);
+/// Every pixel is covered at most once; pixels whose centre lies inside the grid's square
+/// (inside_grid == 1) exactly once, those clearly outside (0) never; more than 1000 inside.
+void expect_covered_exactly_once(const view& v, const std::vector<tri>& grid, double size,
+                                 double depth, double eps) {
   const std::vector<int> count = coverage_counts(v, grid);
   int inside = 0;
   for (int y = 0; y < v.height; ++y)
     for (int x = 0; x < v.width; ++x) {
       const int c = count[static_cast<std::size_t>(y * v.width + x)];
       ASSERT_LE(c, 1) << x << "," << y;
-      const int want = inside_grid(v, x + 0.5, y + 0.5, 0.6, 2.0, 1e-5);
+      const int want = inside_grid(v, x + 0.5, y + 0.5, size, depth, eps);
       if (want == 1) {
         ++inside;
         ASSERT_EQ(c, 1) << x << "," << y;
@@ -198,6 +196,15 @@ TEST(Triangle, MeshIsWatertight) {
   EXPECT_GT(inside, 1000);
 }
 
+// A closed grid of 2·12² triangles in perspective: every pixel centre inside its outline is
+// covered by exactly one triangle, none by two (edges shared in all directions, with jitter).
+TEST(Triangle, MeshIsWatertight) {
+  const view v(origin_camera(120, 90), vec3d::Zero());
+  std::mt19937 rng(7);  // seeded jitter: arbitrary edge slopes
+  const std::vector<tri> grid = jittered_grid(12, 0.6f, 2.0f, rng);
+  expect_covered_exactly_once(v, grid, 0.6, 2.0, 1e-5);
+}
+
 // The same grid crossing the near plane: the clipped triangles still tile the visible part of
 // the plane exactly once (intersections on a shared edge are computed the same way by both
 // triangles), and nothing in front of the near plane is drawn.
@@ -205,21 +212,7 @@ TEST(Triangle, ClippedMeshIsWatertight) {
   const view v(origin_camera(120, 90, 0.9), vec3d::Zero());
   std::mt19937 rng(11);
   const std::vector<tri> grid = jittered_grid(10, 1.5f, 1.2f, rng);
-  const std::vector<int> count = coverage_counts(v, grid);
-  int inside = 0;
-  for (int y = 0; y < v.height; ++y)
-    for (int x = 0; x < v.width; ++x) {
-      const int c = count[static_cast<std::size_t>(y * v.width + x)];
-      ASSERT_LE(c, 1) << x << "," << y;
-      const int want = inside_grid(v, x + 0.5, y + 0.5, 1.5, 1.2, 1e-4);
-      if (want == 1) {
-        ++inside;
-        ASSERT_EQ(c, 1) << x << "," << y;
-      } else if (want == 0) {
-        ASSERT_EQ(c, 0) << x << "," << y;
-      }
-    }
-  EXPECT_GT(inside, 1000);
+  expect_covered_exactly_once(v, grid, 1.5, 1.2, 1e-4);
 }
 
 // Colour interpolated over 1/z: on a quad in the plane y = −0.5 receding from depth 1 to depth
