@@ -31,6 +31,19 @@ vec3d direction(double theta, double phi) {
   return {std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
 }
 
+/// atan2(y, x) for x, y ≥ 0 (not both zero), within 1.7e-6 rad: a minimax polynomial of the
+/// arctangent on [0, 1] and the reflection atan(t) = π/2 − atan(1/t).
+double fast_atan2_first_quadrant(double y, double x) {
+  const bool swap = y > x;
+  const double t = swap ? x / y : y / x;  // in [0, 1]
+  const double t2 = t * t;
+  const double a =
+      t * (0.99997726 +
+           t2 * (-0.33262347 +
+                 t2 * (0.19354346 + t2 * (-0.11643287 + t2 * (0.05265332 - t2 * 0.01172120)))));
+  return swap ? half_pi - a : a;
+}
+
 /// Angle between two unit vectors, accurate also for tiny angles.
 double angle(const vec3d& a, const vec3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b));
@@ -49,12 +62,14 @@ normal_quantizer::normal_quantizer(int q_bits) {
   index_mask_ = static_cast<std::uint32_t>(budget - 1);
 
   dirs_.reserve(per_octant_);
-  row_theta_.resize(std::size_t(k_));
+  row_cos_.resize(std::size_t(k_));
+  row_sin_.resize(std::size_t(k_));
   double bound = 0;
   for (int i = 0; i < k_; ++i) {
     const double lo = band_edge(i - 1, k_), hi = band_edge(i, k_);
     const double theta = 0.5 * (lo + hi);
-    row_theta_[std::size_t(i)] = theta;
+    row_cos_[std::size_t(i)] = std::cos(theta);
+    row_sin_[std::size_t(i)] = std::sin(theta);
     const double cell = half_pi / double(i + 1);
     for (int j = 0; j <= i; ++j)
       dirs_.push_back(direction(theta, cell * (double(j) + 0.5)).cast<float>());
@@ -102,8 +117,10 @@ std::uint32_t normal_quantizer::encode(const vec3f& n) const {
   // a direction of another octant into this one never moves it away from n).
   const double ax = std::abs(x) * inv, ay = std::abs(y) * inv, az = std::abs(z) * inv;
   const double rho2 = ax * ax + ay * ay;
-  const double theta = std::atan2(std::sqrt(rho2), az);
-  const double phi = std::atan2(ay, ax);
+  const double sin_theta = std::sqrt(rho2);
+  // φ only picks the longitude cell of a row, whose neighbours are searched too, so an error far
+  // below the narrowest cell (π/2 / k ≥ 7.7e-4 rad at q = 24) cannot change the result.
+  const double phi = fast_atan2_first_quadrant(ay, ax);
   // The band containing θ: i(i+1) ≤ (1 − cos θ)·k(k+1) < (i+1)(i+2); 1 − cos θ = ρ²/(1 + cos θ).
   const double u = rho2 / (1.0 + az) * double(k_) * double(k_ + 1);
   const int row0 = std::clamp(static_cast<int>(std::floor(std::sqrt(u + 0.25) - 0.5)), 0, k_ - 1);
@@ -113,20 +130,25 @@ std::uint32_t normal_quantizer::encode(const vec3f& n) const {
   search_row(row0, ax, ay, az, phi, best_dot, best);
   // Any direction of row r is at least |θ − θ_r| away from n: walk outwards from row0 and stop
   // once that bound exceeds the best distance found (first row on each side that is past θ).
+  // With g = |θ − θ_r| and the table slack s: cos g = cos θ·cos θ_r + sin θ·sin θ_r and
+  // sin g = |sin θ·cos θ_r − cos θ·sin θ_r| need no trigonometry, and
+  // cos(g − s) ≤ cos g + s·sin g, so no row within reach of the best distance is skipped.
   const auto worth = [&](int r) {
-    const double gap = std::abs(theta - row_theta_[std::size_t(r)]) - table_slack;
-    return gap <= 0 || std::cos(gap) >= best_dot;
+    const auto i = std::size_t(r);
+    const double cos_g = az * row_cos_[i] + sin_theta * row_sin_[i];
+    const double sin_g = std::abs(sin_theta * row_cos_[i] - az * row_sin_[i]);
+    return cos_g + table_slack * sin_g + 1e-15 >= best_dot;
   };
   for (int r = row0 - 1; r >= 0; --r) {
     if (!worth(r)) {
-      if (row_theta_[std::size_t(r)] <= theta) break;
+      if (row_cos_[std::size_t(r)] >= az) break;  // θ_r ≤ θ
       continue;
     }
     search_row(r, ax, ay, az, phi, best_dot, best);
   }
   for (int r = row0 + 1; r < k_; ++r) {
     if (!worth(r)) {
-      if (row_theta_[std::size_t(r)] >= theta) break;
+      if (row_cos_[std::size_t(r)] <= az) break;  // θ_r ≥ θ
       continue;
     }
     search_row(r, ax, ay, az, phi, best_dot, best);
