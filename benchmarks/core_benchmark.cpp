@@ -93,18 +93,25 @@ BENCHMARK(BM_EstimateSplatEllipses)
     ->UseRealTime()
     ->Iterations(1);
 
-// Both steps, as a builder's preprocessing would run them.
+// Both steps: arg 1 = 0 as two calls (two k-NN searches), 1 in one pass over one k-NN search
+// (estimate_normals_and_ellipses, what the point-octree builder runs).
 void BM_NormalsAndEllipses(benchmark::State& state) {
   const auto& cloud = surface(static_cast<std::size_t>(state.range(0)));
   for (auto _ : state) {
-    const auto n = pbr_lod::estimate_normals(cloud.positions, 16, true);
-    auto e = pbr_lod::estimate_splat_ellipses(cloud.positions, n, 16);
-    benchmark::DoNotOptimize(e.u.data());
+    if (state.range(1) == 0) {
+      const auto n = pbr_lod::estimate_normals(cloud.positions, 16, true);
+      auto e = pbr_lod::estimate_splat_ellipses(cloud.positions, n, 16);
+      benchmark::DoNotOptimize(e.u.data());
+    } else {
+      auto both = pbr_lod::estimate_normals_and_ellipses(cloud.positions, 16, 16, true);
+      benchmark::DoNotOptimize(both.axes.u.data());
+    }
   }
   rate(state, cloud.size());
 }
 BENCHMARK(BM_NormalsAndEllipses)
-    ->Arg(1'000'000)
+    ->Args({1'000'000, 0})
+    ->Args({1'000'000, 1})
     ->Unit(benchmark::kSecond)
     ->UseRealTime()
     ->Iterations(1);

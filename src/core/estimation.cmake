@@ -1,10 +1,11 @@
 # Quantised normals (Pajarola 2003 §5) and k-NN normal / splat-ellipse estimation (§4 end).
 #
-# CGAL (mst_orient_normals) is used by estimation.cpp only. That file is compiled as its own
-# object library so CGAL::CGAL's usage requirements (-frounding-math, Boost/GMP includes) apply to
-# that one translation unit instead of every source of pbr_lod; its objects are then linked into
-# pbr_lod. Included after the config-mode finds of Eigen3/OpenMesh in the top-level list:
-# find_package(CGAL) puts CGAL's own Find modules on CMAKE_MODULE_PATH (DEPENDENCIES.md).
+# estimation.cpp needs TBB (parallel k-NN, parallel edge sort) and Boost's header-only union-find;
+# it is its own object library so those usage requirements stay on that translation unit.
+# CGAL is found here for the builders' CGAL translation units (src/builders/*.cmake), each an
+# object library of its own so CGAL's -frounding-math never reaches other sources. Included after
+# the config-mode finds of Eigen3/OpenMesh in the top-level list: find_package(CGAL) puts CGAL's
+# own Find modules on CMAKE_MODULE_PATH (DEPENDENCIES.md).
 find_package(TBB REQUIRED NO_MODULE)  # TBB::tbb (before CGAL: CGAL ships a FindTBB module)
 find_package(CGAL REQUIRED)           # CGAL::CGAL
 
@@ -13,8 +14,7 @@ set_target_properties(pbr_lod_estimation PROPERTIES POSITION_INDEPENDENT_CODE ON
                       CXX_EXTENSIONS OFF)
 target_compile_features(pbr_lod_estimation PRIVATE cxx_std_20)
 target_include_directories(pbr_lod_estimation PRIVATE ${PROJECT_SOURCE_DIR}/include)
-target_link_libraries(pbr_lod_estimation PRIVATE CGAL::CGAL Eigen3::Eigen TBB::tbb
-                      pbr_lod_warnings)
+target_link_libraries(pbr_lod_estimation PRIVATE Eigen3::Eigen TBB::tbb pbr_lod_warnings)
 
 target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/normal_quantization.cpp
                $<TARGET_OBJECTS:pbr_lod_estimation>)

@@ -4,11 +4,11 @@
 // as its own object library (src/core/estimation.cmake) so CGAL's -frounding-math stays here.
 #include "pbr_lod/core/estimation.hpp"
 
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/mst_orient_normals.h>
-#include <CGAL/property_map.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <boost/pending/disjoint_sets.hpp>
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
@@ -61,7 +61,7 @@ vec3d canonical_sign(const vec3d& n) {
 }
 
 /// PCA normal of the neighbourhood idx (see estimate_normals for the degenerate cases).
-vec3d pca_normal(std::span<const vec3f> pts, const std::vector<std::uint32_t>& idx) {
+vec3d pca_normal(std::span<const vec3f> pts, std::span<const std::uint32_t> idx) {
   vec3d mean = vec3d::Zero();
   for (const auto j : idx) mean += pts[j].cast<double>();
   mean /= double(idx.size());
@@ -81,71 +81,172 @@ vec3d pca_normal(std::span<const vec3f> pts, const std::vector<std::uint32_t>& i
   return all_finite(n) ? canonical_sign(n) : vec3d::UnitZ();
 }
 
-/// Makes the signs of `normals` consistent with CGAL's MST propagation (Hoppe 1992). Points
-/// CGAL leaves unoriented keep their sign.
-void mst_orient(std::span<const vec3f> pts, std::vector<vec3f>& normals, int k) {
-  using kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
-  using item = std::tuple<kernel::Point_3, kernel::Vector_3, std::uint32_t>;
-  std::vector<item> items;
-  items.reserve(pts.size());
-  for (std::size_t i = 0; i < pts.size(); ++i) {
-    const vec3f& p = pts[i];
-    const vec3f& n = normals[i];
-    items.emplace_back(kernel::Point_3(p.x(), p.y(), p.z()), kernel::Vector_3(n.x(), n.y(), n.z()),
-                       static_cast<std::uint32_t>(i));
-  }
-  const auto first_unoriented = CGAL::mst_orient_normals(
-      items, static_cast<unsigned>(k),
-      CGAL::parameters::point_map(CGAL::Nth_of_tuple_property_map<0, item>())
-          .normal_map(CGAL::Nth_of_tuple_property_map<1, item>()));
-  for (auto it = items.begin(); it != first_unoriented; ++it) {
-    const auto& v = std::get<1>(*it);
-    const vec3f n(float(v.x()), float(v.y()), float(v.z()));
-    // CGAL only negates; keep our unit float normal and copy the sign.
-    vec3f& out = normals[std::get<2>(*it)];
-    if (n.dot(out) < 0) out = -out;
-  }
-}
-
-}  // namespace
-
-std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k, bool orient) {
-  if (k < 3) throw InvalidArgument("estimate_normals: k = " + std::to_string(k) + " < 3");
-  check_positions(positions, "estimate_normals");
-  const std::size_t n = positions.size();
-  std::vector<vec3f> normals(n);
-  if (n == 0) return normals;
-  const knn_index index(positions);
-  const int kk = static_cast<int>(std::min<std::size_t>(std::size_t(k), n));
+/// The k nearest neighbours of every position (itself included), k per row, from one FLANN index
+/// queried in parallel. Rows of points with fewer than k neighbours (n < k) are padded with the
+/// point itself.
+std::vector<std::uint32_t> knn_table(std::span<const vec3f> positions, const knn_index& index,
+                                     int k) {
+  const std::size_t n = positions.size(), kk = static_cast<std::size_t>(k);
+  std::vector<std::uint32_t> table(n * kk);
   parallel_over(n, [&](std::size_t begin, std::size_t end) {
     std::vector<std::uint32_t> idx;
     std::vector<float> d2;
     for (std::size_t i = begin; i < end; ++i) {
-      index.query(positions[i], kk, idx, d2);
-      normals[i] = pca_normal(positions, idx).cast<float>();
+      index.query(positions[i], k, idx, d2);
+      for (std::size_t j = 0; j < kk; ++j)
+        table[i * kk + j] = j < idx.size() ? idx[j] : static_cast<std::uint32_t>(i);
     }
   });
-  // CGAL needs ≥ 2 points and k ≥ 2.
-  if (orient && n >= 2) mst_orient(positions, normals, std::max(kk, 2));
+  return table;
+}
+
+/// Makes the signs of `normals` consistent (Hoppe et al. 1992, §3.3): a minimum spanning forest
+/// of the k-NN ("Riemannian") graph with edge cost 1 − |nᵢ·nⱼ| (Kruskal: a parallel sort of the
+/// edges, then Boost's union-find); in every connected component the sample with the largest z gets
+/// a normal with z ≥ 0 and the sign is propagated along the tree, flipping a child whose normal
+/// points against its parent's. This is CGAL::mst_orient_normals' rule, but on the k-NN table the
+/// PCA pass already computed (CGAL re-searched every neighbourhood with its own sequential k-d
+/// tree: 85 % of the time of estimate_normals; Boost's own kruskal_minimum_spanning_tree, tried
+/// first, spent 40 % of the bunny's estimation in its edge heap), and every component is oriented
+/// where CGAL orients only the top sample's.
+void mst_orient(std::span<const vec3f> pts, std::vector<vec3f>& normals,
+                const std::vector<std::uint32_t>& table, int stride_k, int k) {
+  const std::size_t n = pts.size(), stride = static_cast<std::size_t>(stride_k),
+                    kk = static_cast<std::size_t>(k);
+  // The undirected k-NN graph: edge {i, t} once (from the smaller index, or from i when t's row
+  // does not list i), in parallel per row, then concatenated in row order.
+  struct edge {
+    float cost;
+    std::uint32_t a, b;
+  };
+  const auto lists = [&](std::uint32_t t, std::uint32_t i) {
+    const auto row = std::span(table).subspan(t * stride, kk);
+    return std::find(row.begin(), row.end(), i) != row.end();
+  };
+  std::vector<std::uint32_t> count(n + 1, 0);
+  parallel_over(n, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      for (std::size_t j = 0; j < kk; ++j) {
+        const std::uint32_t t = table[i * stride + j];
+        count[i + 1] += t != i && (i < t || !lists(t, static_cast<std::uint32_t>(i)));
+      }
+  });
+  for (std::size_t i = 0; i < n; ++i) count[i + 1] += count[i];
+  std::vector<edge> edges(count[n]);
+  parallel_over(n, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      std::size_t at = count[i];
+      for (std::size_t j = 0; j < kk; ++j) {
+        const std::uint32_t t = table[i * stride + j];
+        if (t != i && (i < t || !lists(t, static_cast<std::uint32_t>(i))))
+          edges[at++] = {1.0f - std::abs(normals[i].dot(normals[t])), static_cast<std::uint32_t>(i),
+                         t};
+      }
+    }
+  });
+  // Kruskal: edges by cost (ties by index, so the forest is deterministic), joined with Boost's
+  // union-find (path compression, union by rank).
+  tbb::parallel_sort(edges.begin(), edges.end(), [](const edge& x, const edge& y) {
+    return std::tie(x.cost, x.a, x.b) < std::tie(y.cost, y.a, y.b);
+  });
+  std::vector<std::uint32_t> rank(n), parent(n);
+  boost::disjoint_sets<std::uint32_t*, std::uint32_t*> sets(rank.data(), parent.data());
+  for (std::uint32_t i = 0; i < n; ++i) sets.make_set(i);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> tree;
+  tree.reserve(n);
+  for (const auto& e : edges) {
+    const std::uint32_t ra = sets.find_set(e.a), rb = sets.find_set(e.b);
+    if (ra == rb) continue;
+    sets.link(ra, rb);
+    tree.emplace_back(e.a, e.b);
+    if (tree.size() + 1 == n) break;
+  }
+  edges = {};
+
+  // The forest as adjacency lists (CSR), then one traversal per component from its top sample.
+  std::vector<std::uint32_t> degree(n + 1, 0), adj(2 * tree.size());
+  for (const auto& [a, b] : tree) {
+    ++degree[a + 1];
+    ++degree[b + 1];
+  }
+  for (std::size_t i = 0; i < n; ++i) degree[i + 1] += degree[i];
+  {
+    std::vector<std::uint32_t> fill(degree.begin(), degree.end() - 1);
+    for (const auto& [a, b] : tree) {
+      adj[fill[a]++] = b;
+      adj[fill[b]++] = a;
+    }
+  }
+  // Components, each with its sample of largest z (ties: the lowest index).
+  constexpr std::uint32_t none = std::numeric_limits<std::uint32_t>::max();
+  std::vector<std::uint32_t> component(n, none), stack;
+  std::vector<std::uint32_t> tops;
+  for (std::uint32_t s = 0; s < n; ++s) {
+    if (component[s] != none) continue;
+    const auto c = static_cast<std::uint32_t>(tops.size());
+    std::uint32_t top = s;
+    component[s] = c;
+    stack.push_back(s);
+    while (!stack.empty()) {
+      const std::uint32_t v = stack.back();
+      stack.pop_back();
+      if (pts[v].z() > pts[top].z()) top = v;
+      for (std::uint32_t e = degree[v]; e < degree[v + 1]; ++e)
+        if (component[adj[e]] == none) {
+          component[adj[e]] = c;
+          stack.push_back(adj[e]);
+        }
+    }
+    tops.push_back(top);
+  }
+  std::vector<char> seen(n, 0);
+  for (const std::uint32_t top : tops) {
+    if (normals[top].z() < 0) normals[top] = -normals[top];
+    seen[top] = 1;
+    stack.push_back(top);
+    while (!stack.empty()) {
+      const std::uint32_t v = stack.back();
+      stack.pop_back();
+      for (std::uint32_t e = degree[v]; e < degree[v + 1]; ++e) {
+        const std::uint32_t w = adj[e];
+        if (seen[w]) continue;
+        seen[w] = 1;
+        if (normals[w].dot(normals[v]) < 0) normals[w] = -normals[w];
+        stack.push_back(w);
+      }
+    }
+  }
+}
+
+int clamp_k(int k, std::size_t n) {
+  return static_cast<int>(std::min<std::size_t>(std::size_t(k), n));
+}
+
+/// PCA normals from the first kk neighbours of each row of `table` (rows of `stride`), then
+/// the MST orientation over the same neighbourhoods.
+std::vector<vec3f> normals_from(std::span<const vec3f> positions,
+                                const std::vector<std::uint32_t>& table, int stride_k, int kk,
+                                bool orient) {
+  const std::size_t n = positions.size(), stride = static_cast<std::size_t>(stride_k),
+                    kz = static_cast<std::size_t>(kk);
+  std::vector<vec3f> normals(n);
+  parallel_over(n, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      normals[i] = pca_normal(positions, std::span(table).subspan(i * stride, kz)).cast<float>();
+  });
+  if (orient && n >= 2) mst_orient(positions, normals, table, stride_k, kk);
   return normals;
 }
 
-splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<const vec3f> normals,
-                                   int k) {
-  if (k < 2) throw InvalidArgument("estimate_splat_ellipses: k = " + std::to_string(k) + " < 2");
-  if (normals.size() != positions.size())
-    throw InvalidArgument("estimate_splat_ellipses: " + std::to_string(normals.size()) +
-                          " normals for " + std::to_string(positions.size()) + " positions");
-  check_positions(positions, "estimate_splat_ellipses");
-  for (std::size_t i = 0; i < normals.size(); ++i)
-    if (!all_finite(normals[i]) || normals[i].squaredNorm() == 0)
-      throw InvalidArgument("estimate_splat_ellipses: normal " + std::to_string(i) +
-                            " is zero or not finite");
-  const std::size_t n = positions.size();
+/// Splat ellipses from the first kk neighbours of each row of `table` (rows of `stride`).
+splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f> normals,
+                         const knn_index& index, const std::vector<std::uint32_t>& table,
+                         int stride_k, int kk) {
+  const std::size_t n = positions.size(), stride = static_cast<std::size_t>(stride_k),
+                    kz = static_cast<std::size_t>(kk);
   splat_axes out;
   out.u.resize(n);
   out.v.resize(n);
-  if (n == 0) return out;
 
   // Scale of the last-resort disk: the bounding-box half-diagonal of all positions.
   vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
@@ -155,21 +256,19 @@ splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<c
   }
   const double half_diagonal = 0.5 * (hi - lo).norm();
 
-  const knn_index index(positions);
-  const int kk = static_cast<int>(std::min<std::size_t>(std::size_t(k), n));
   constexpr double ratio2 = splat_min_axis_ratio * splat_min_axis_ratio;
   constexpr double cover_margin = 1 + 1e-5;
   constexpr int max_fallback_k = 4096;
 
   parallel_over(n, [&](std::size_t begin, std::size_t end) {
-    std::vector<std::uint32_t> idx;
+    std::vector<std::uint32_t> more;
     std::vector<float> d2;
     std::vector<vec2d> xy;
     for (std::size_t i = begin; i < end; ++i) {
       const vec3d p = positions[i].cast<double>();
       const vec3d nrm = normals[i].cast<double>().normalized();
       const vec3d t1 = orthogonal(nrm), t2 = nrm.cross(t1);
-      index.query(positions[i], kk, idx, d2);
+      const auto idx = std::span(table).subspan(i * stride, kz);
       // Second moments of the tangent-plane offsets about pᵢ (the splat's centre, not the
       // neighbourhood mean: at a boundary the neighbours lie on one side and must still be
       // covered). No division by the count: only the eigenvalue ratio and f·√λ matter.
@@ -191,7 +290,7 @@ splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<c
         // that is not at pᵢ, searched among more and more neighbours.
         double radius = 0;
         for (int want = kk;; want = std::min(2 * want, max_fallback_k)) {
-          if (want != kk) index.query(positions[i], want, idx, d2);
+          index.query(positions[i], want, more, d2);
           for (const float e : d2)
             if (e > 0) {
               radius = std::sqrt(double(e));
@@ -221,6 +320,56 @@ splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<c
       out.v[i] = (f * std::sqrt(l2) * axis2).cast<float>();
     }
   });
+  return out;
+}
+
+void check_normals(std::span<const vec3f> positions, std::span<const vec3f> normals) {
+  if (normals.size() != positions.size())
+    throw InvalidArgument("estimate_splat_ellipses: " + std::to_string(normals.size()) +
+                          " normals for " + std::to_string(positions.size()) + " positions");
+  for (std::size_t i = 0; i < normals.size(); ++i)
+    if (!all_finite(normals[i]) || normals[i].squaredNorm() == 0)
+      throw InvalidArgument("estimate_splat_ellipses: normal " + std::to_string(i) +
+                            " is zero or not finite");
+}
+
+}  // namespace
+
+std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k, bool orient) {
+  if (k < 3) throw InvalidArgument("estimate_normals: k = " + std::to_string(k) + " < 3");
+  check_positions(positions, "estimate_normals");
+  if (positions.empty()) return {};
+  const knn_index index(positions);
+  const int kk = clamp_k(k, positions.size());
+  return normals_from(positions, knn_table(positions, index, kk), kk, kk, orient);
+}
+
+splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<const vec3f> normals,
+                                   int k) {
+  if (k < 2) throw InvalidArgument("estimate_splat_ellipses: k = " + std::to_string(k) + " < 2");
+  check_normals(positions, normals);
+  check_positions(positions, "estimate_splat_ellipses");
+  if (positions.empty()) return {};
+  const knn_index index(positions);
+  const int kk = clamp_k(k, positions.size());
+  return ellipses_from(positions, normals, index, knn_table(positions, index, kk), kk, kk);
+}
+
+estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions, int k_normals,
+                                               int k_ellipses, bool orient) {
+  if (k_normals < 3)
+    throw InvalidArgument("estimate_normals: k = " + std::to_string(k_normals) + " < 3");
+  if (k_ellipses < 2)
+    throw InvalidArgument("estimate_splat_ellipses: k = " + std::to_string(k_ellipses) + " < 2");
+  check_positions(positions, "estimate_normals");
+  if (positions.empty()) return {};
+  const knn_index index(positions);
+  const int kn = clamp_k(k_normals, positions.size()), ke = clamp_k(k_ellipses, positions.size());
+  const int stride = std::max(kn, ke);
+  const auto table = knn_table(positions, index, stride);
+  estimated_splats out;
+  out.normals = normals_from(positions, table, stride, kn, orient);
+  out.axes = ellipses_from(positions, out.normals, index, table, stride, ke);
   return out;
 }
 

@@ -189,7 +189,7 @@ TEST(EstimateNormals, TranslationInvariantInRelativeCoordinates) {
   EXPECT_GT(worst_abs, 10.0);
 }
 
-// Same input, same output, bit for bit (parallel over points, sequential orientation).
+// Same input, same output, bit for bit (parallel k-NN and edge sort, sequential forest walk).
 TEST(EstimateNormals, Deterministic) {
   const auto cloud = make_wavy_surface(30000, 4);
   const auto a = estimate_normals(cloud.positions, 16);
@@ -199,6 +199,40 @@ TEST(EstimateNormals, Deterministic) {
   const auto eb = estimate_splat_ellipses(cloud.positions, a, 16);
   EXPECT_EQ(ea.u, eb.u);
   EXPECT_EQ(ea.v, eb.v);
+}
+
+// Two spheres far apart: the k-NN graph has two components and each is oriented from its own
+// top sample, so both come out outward (CGAL's mst_orient_normals oriented only the component
+// of the global top sample and left the other with canonical, mixed signs).
+TEST(EstimateNormals, EveryComponentIsOriented) {
+  std::vector<vec3d> world = sphere_sample(8000, 1.0, 7);
+  const std::size_t first = world.size();
+  for (const auto& p : sphere_sample(8000, 1.0, 8)) world.push_back(p + vec3d(100, 0, -50));
+  const auto pts = to_float(world, vec3d::Zero());
+  const auto normals = estimate_normals(pts, 16);
+  std::size_t outward = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const vec3d centre = i < first ? vec3d::Zero() : vec3d(100, 0, -50);
+    outward += normals[i].cast<double>().dot(world[i] - centre) > 0;
+  }
+  EXPECT_EQ(outward, pts.size());
+}
+
+// The one-search path the builders use equals the two separate calls (no equidistant neighbours
+// on a random surface), for k_normals above, equal to and below k_ellipses.
+TEST(EstimateNormals, CombinedWithEllipsesEqualsSeparateCalls) {
+  const auto cloud = make_wavy_surface(20000, 6);
+  for (const auto& [kn, ke] : {std::pair{16, 12}, std::pair{12, 12}, std::pair{8, 20}}) {
+    const auto both = estimate_normals_and_ellipses(cloud.positions, kn, ke);
+    const auto normals = estimate_normals(cloud.positions, kn);
+    const auto axes = estimate_splat_ellipses(cloud.positions, normals, ke);
+    EXPECT_EQ(both.normals, normals) << kn << " " << ke;
+    EXPECT_EQ(both.axes.u, axes.u) << kn << " " << ke;
+    EXPECT_EQ(both.axes.v, axes.v) << kn << " " << ke;
+  }
+  EXPECT_THROW((void)estimate_normals_and_ellipses(cloud.positions, 2, 12), InvalidArgument);
+  EXPECT_THROW((void)estimate_normals_and_ellipses(cloud.positions, 16, 1), InvalidArgument);
+  EXPECT_TRUE(estimate_normals_and_ellipses({}, 16, 12).normals.empty());
 }
 
 // The wavy closed surface: orientation agrees with the generator's outward normals everywhere

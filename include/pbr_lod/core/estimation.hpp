@@ -37,11 +37,11 @@ namespace pbr_lod {
 ///  * coplanar, any count ≥ 3 distinct: the plane normal.
 /// Sign: with orient == false, the largest-magnitude component is made positive (a canonical,
 /// deterministic choice that knows nothing about the surface). With orient == true the signs
-/// are then made consistent by CGAL::mst_orient_normals over a k-NN Riemannian graph (Hoppe
-/// 1992): the sample with the largest z gets a normal with z ≥ 0 and the orientation is
-/// propagated along the minimum spanning tree (edge weight 1 − |nᵢ·nⱼ|). On a closed surface
-/// this is outward. Points the graph does not connect to that sample (separate components)
-/// keep their canonical PCA sign. The orientation pass is sequential (CGAL).
+/// are then made consistent over the k-NN Riemannian graph (Hoppe 1992, the rule of
+/// CGAL::mst_orient_normals): in each connected component the sample with the largest z gets a
+/// normal with z ≥ 0 and the orientation is propagated along the minimum spanning forest (edge
+/// weight 1 − |nᵢ·nⱼ|). On a closed surface this is outward. The neighbourhoods of the PCA pass
+/// are reused; the k-NN queries and the edge sort run in parallel.
 ///
 /// Throws InvalidArgument when k < 3 or a position is not finite. Empty input → empty output.
 [[nodiscard]] std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k = 16,
@@ -79,5 +79,18 @@ inline constexpr double splat_min_axis_ratio = 0.1;
 /// a normal is zero or not finite. Empty input → empty output.
 [[nodiscard]] splat_axes estimate_splat_ellipses(std::span<const vec3f> positions,
                                                  std::span<const vec3f> normals, int k = 16);
+
+/// Oriented normals and splat ellipses of a bare point set in one pass over one k-NN index:
+/// the same results as estimate_normals(positions, k_normals, orient) followed by
+/// estimate_splat_ellipses(positions, normals, k_ellipses) up to the order of equidistant
+/// neighbours, with the neighbourhoods searched once (max(k_normals, k_ellipses) nearest).
+struct estimated_splats {
+  std::vector<vec3f> normals;
+  splat_axes axes;
+};
+[[nodiscard]] estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
+                                                             int k_normals = 16,
+                                                             int k_ellipses = 16,
+                                                             bool orient = true);
 
 }  // namespace pbr_lod
