@@ -20,6 +20,7 @@
 #include "pbr_lod/core/covariance.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
+#include "pbr_lod/core/memory.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 
 namespace pbr_lod {
@@ -124,9 +125,17 @@ struct point_octree_builder {
 
   point_octree_builder(point_set<A>& pts, std::vector<typename tree::orientation_code>* codes,
                        const point_octree_options& o, const normal_quantizer* quant)
-      : in(pts), in_codes(codes), opt(o), q(quant), oct(pts.size()), scratch3(pts.size()) {
-    if constexpr (A.colour) scratch_rgb.resize(pts.size());
-    if (codes) scratch_code.resize(pts.size());
+      : in(pts), in_codes(codes), opt(o), q(quant) {
+    // Scratch written by the scatters only: reserved on huge pages, never value-initialised
+    // pages first (see core/memory.hpp for what first touch costs here).
+    const auto fresh = [n = pts.size()](auto& v) {
+      reserve_huge(v, n);
+      v.resize(n);
+    };
+    fresh(oct);
+    fresh(scratch3);
+    if constexpr (A.colour) fresh(scratch_rgb);
+    if (codes) fresh(scratch_code);
   }
 
   /// Stable counting-sort scatter of [first, first + count) of one array by octant.
@@ -427,6 +436,8 @@ struct point_octree_builder {
       std::vector<local> locals(kids.size());
       std::vector<std::future<summary>> futs;
       for (std::size_t j = 0; j < kids.size(); ++j) {
+        // ≈ 0.4 nodes per sample (Table 2): room for the subtree without regrowing.
+        reserve(locals[j], kids[j].count / 2 + 16);
         locals[j].nodes.resize(1);
         if constexpr (A.colour) locals[j].colours.resize(1);
         if (q) locals[j].codes.resize(1);
@@ -467,6 +478,13 @@ struct point_octree_builder {
     return s;
   }
 
+  /// Room for n nodes in L (on huge pages when large).
+  void reserve(local& L, std::size_t n) const {
+    reserve_huge(L.nodes, n);
+    if constexpr (A.colour) reserve_huge(L.colours, n);
+    if (q) reserve_huge(L.codes, n);
+  }
+
   /// Moves subtree `sub` (root at its index 0) into L: the root to `at`, the rest appended.
   void splice(local& L, std::uint32_t at, local& sub) const {
     const auto offset = static_cast<std::uint32_t>(L.nodes.size()) - 1;  // local i ≥ 1 → i + offset
@@ -503,6 +521,7 @@ template <attributes A>
 void quantize_samples(point_set<A>& pts, const normal_quantizer& q,
                       std::vector<typename point_octree<A>::orientation_code>& codes,
                       unsigned threads) {
+  reserve_huge(codes, pts.size());
   codes.resize(pts.size());
   parallel_for(pts.size(), threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t i = lo; i < hi; ++i) {
@@ -548,22 +567,33 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   // The working copy: the input's attributes plus what §4 estimates from k nearest neighbours.
   point_set<A> work;
   work.origin = points.origin;
-  work.positions = points.positions;
-  if constexpr (In.colour) work.colours = points.colours;
+  const auto copy = [](auto& to, const auto& from) {
+    reserve_huge(to, from.size());
+    to.assign(from.begin(), from.end());
+  };
+  copy(work.positions, points.positions);
+  if constexpr (In.colour) copy(work.colours, points.colours);
   if constexpr (In.normal) {
-    work.normals = points.normals;
+    copy(work.normals, points.normals);
     for (auto& n : work.normals) {
       const float len = n.norm();
       n = (len > 0 && std::isfinite(len)) ? vec3f(n / len) : vec3f::UnitZ();
     }
+  } else if constexpr (!In.ellipse) {
+    // Neither: both from one k-NN search.
+    auto est = estimate_normals_and_ellipses(work.positions, opt.knn, opt.knn_ellipses, true);
+    work.normals = std::move(est.normals);
+    work.axis_u = std::move(est.axes.u);
+    work.axis_v = std::move(est.axes.v);
+    st.estimated_normals = st.estimated_ellipses = true;
   } else {
     work.normals = estimate_normals(work.positions, opt.knn, true);
     st.estimated_normals = true;
   }
   if constexpr (In.ellipse) {
-    work.axis_u = points.axis_u;
-    work.axis_v = points.axis_v;
-  } else {
+    copy(work.axis_u, points.axis_u);
+    copy(work.axis_v, points.axis_v);
+  } else if constexpr (In.normal) {
     auto axes = estimate_splat_ellipses(work.positions, work.normals, opt.knn_ellipses);
     work.axis_u = std::move(axes.u);
     work.axis_v = std::move(axes.v);
@@ -586,7 +616,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   local L;
   // A point-octree has ≈ 0.4 nodes per sample at leaf size 8 (paper, Table 2); reserving avoids
   // re-copying the node array while it grows.
-  L.nodes.reserve(work.size() / std::max<std::size_t>(1, opt.leaf_size / 2) + 16);
+  b.reserve(L, work.size() / std::max<std::size_t>(1, opt.leaf_size / 2) + 16);
   L.nodes.resize(1);
   if constexpr (A.colour) L.colours.resize(1);
   if (quant) L.codes.resize(1);
