@@ -82,7 +82,7 @@ class normal_quantizer {
 
  private:
   [[noreturn]] void throw_invalid_code(std::uint32_t code) const;
-  void search_row(int row, double ax, double ay, double az, double phi, double& best_dot,
+  void search_row(int row, double ax, double ay, double az, double phi_cells, double& best_dot,
                   std::uint32_t& best) const;
 
   int bits_ = 0;
