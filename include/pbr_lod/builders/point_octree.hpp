@@ -27,9 +27,11 @@
 // point_octree is immutable; const member functions are safe for concurrent readers.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <numbers>
 #include <ranges>
 #include <string>
 #include <vector>
@@ -197,6 +199,15 @@ class point_octree {
     return {nd.centre, nd.normal, nd.axis_u, nd.axis_v};
   }
   [[nodiscard]] int normal_bits() const { return normal_bits_; }
+
+  /// What LOD selection (§6) needs of a node beyond its geometry, derived once after build and
+  /// load so the per-frame test needs no trigonometry: the disk's area A_e = π·a·b and the
+  /// cosine and sine of the cone semi-angle θ_c.
+  struct selection_record {
+    float area;
+    float cos_cone, sin_cone;
+  };
+  [[nodiscard]] const selection_record& selection(node_id n) const { return selection_[n]; }
   [[nodiscard]] const point_octree_build_stats& stats() const { return stats_; }
   /// Bytes the hierarchy occupies in memory (nodes, samples, codes), excluding vector slack.
   [[nodiscard]] std::size_t memory_bytes() const;
@@ -218,12 +229,21 @@ class point_octree {
   friend struct detail::point_octree_builder<A>;
   friend struct detail::point_octree_io<A>;
   [[nodiscard]] bool equal(const point_octree& o) const;
+  void derive_selection() {
+    selection_.resize(nodes_.size());
+    for (std::size_t i = 0; i < nodes_.size(); ++i) {
+      const node& nd = nodes_[i];
+      selection_[i] = {std::numbers::pi_v<float> * nd.axis_u.norm() * nd.axis_v.norm(),
+                       std::cos(nd.cone_angle), std::sin(nd.cone_angle)};
+    }
+  }
 
   std::vector<node> nodes_;
   [[no_unique_address]] detail::maybe<A.colour, std::vector<rgb8>, 0> node_colours_{};
   point_set<A> samples_;
   int normal_bits_ = 0;
   std::vector<orientation_code> node_codes_, sample_codes_;
+  std::vector<selection_record> selection_;  // derived from nodes_ (not saved, not compared)
   point_octree_build_stats stats_;
 };
 
@@ -245,15 +265,19 @@ struct point_octree_policy : default_policy {
   [[nodiscard]] float screen_size(const H& h, const typename H::node_id& n, const sphere& s,
                                   const view& v, const traverse_options&) const {
     const auto& nd = h.at(n);
+    const auto& sel = h.selection(n);
     const vec3f ce = s.centre - v.eye;
     const float depth = ce.dot(v.forward);
     if (depth <= s.radius) return std::numeric_limits<float>::infinity();  // eye plane reached
-    const float area = std::numbers::pi_v<float> * nd.axis_u.norm() * nd.axis_v.norm();
     const float dist = ce.norm();
     const float cos_gamma = std::min(1.0f, std::abs(nd.normal.dot(ce)) / std::max(dist, 1e-30f));
-    const float gamma = std::acos(cos_gamma);
-    const float tilt = gamma <= nd.cone_angle ? 1.0f : std::cos(gamma - nd.cone_angle);
-    const float a_screen = tilt * area * v.focal_px * v.focal_px / (depth * depth);
+    // cos(γ − θ_c) = cos γ·cos θ_c + sin γ·sin θ_c once γ > θ_c (cos γ < cos θ_c), else 1.
+    float tilt = 1;
+    if (cos_gamma < sel.cos_cone) {
+      const float sin_gamma = std::sqrt(std::max(0.0f, 1 - cos_gamma * cos_gamma));
+      tilt = cos_gamma * sel.cos_cone + sin_gamma * sel.sin_cone;
+    }
+    const float a_screen = tilt * sel.area * v.focal_px * v.focal_px / (depth * depth);
     return 2 * std::sqrt(std::max(0.0f, a_screen) / std::numbers::pi_v<float>);
   }
   /// A node within the tolerance draws its own splat e_c — a leaf too; a leaf still larger than

@@ -631,6 +631,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   // The build left the samples in leaf order.
   out.samples_ = std::move(work);
   out.sample_codes_ = std::move(work_codes);
+  out.derive_selection();
   st.tree_seconds = std::chrono::duration<double>(clock::now() - t1).count();
   st.circle_fallbacks = b.circle_fallbacks.load();
   st.nodes = out.nodes_.size();
@@ -905,6 +906,7 @@ struct point_octree_io {
       if constexpr (A.colour) s.colours[i] = r.get<rgb8>("sample colour");
     }
     validate_tree(t, path);
+    t.derive_selection();
     t.stats_.nodes = n_nodes;
     for (const auto& nd : t.nodes_) {
       t.stats_.leaves += nd.leaf;
@@ -966,7 +968,8 @@ template <attributes A>
 std::size_t point_octree<A>::memory_bytes() const {
   return nodes_.size() * sizeof(node) + (A.colour ? nodes_.size() * sizeof(rgb8) : 0) +
          samples_.size() * point_set<A>::bytes_per_point() +
-         (node_codes_.size() + sample_codes_.size()) * sizeof(orientation_code);
+         (node_codes_.size() + sample_codes_.size()) * sizeof(orientation_code) +
+         selection_.size() * sizeof(selection_record);
 }
 
 template <attributes A>
