@@ -1,0 +1,377 @@
+// pbrlod — the command-line tool of pbr_lod (see DESIGN.md "The command-line tool").
+// This file: the subcommands and the method table; tool.hpp/.cpp the shared parts; one
+// <method>_method.cpp per builder.
+//
+//   pbrlod build  --method NAME [--param k=v]... INPUT -o OUT.lod
+//   pbrlod render OUT.lod|INPUT [--view AZ,EL,DIST] [--size WxH] [--tolerance PX]
+//                 [--effects LIST] [--up y|z] -o IMAGE.png [--json]
+//   pbrlod stats  OUT.lod|INPUT [--json]
+//   pbrlod compare A.png B.png [--json]
+//   pbrlod demo   [INPUT] [-o DIR] [--json]
+//
+// Exit codes: 0 success, 1 bad input or failure (message on stderr), 2 usage error or a method
+// that this version does not have.
+#include <CLI/CLI.hpp>
+
+#include <filesystem>
+#include <iostream>
+
+#include "pbr_lod/builders/point_octree.hpp"
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/raster/png.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/raster/reference.hpp"
+#include "pbr_lod/version.hpp"
+#include "tool.hpp"
+
+namespace pbrlod_tool {
+
+const std::vector<method_entry>& methods() {
+  static const std::vector<method_entry> m = {
+      point_octree_method(),
+      {"rho-grid", "Duguet & Drettakis 2004 (issue #4)", "PBRLODRG"},
+      {"pop", "Chen & Nguyen 2001 (issue #5)", "PBRLODPP"},
+      {"pca-octree", "Kalaiah & Varshney 2003", ""},
+      {"pmr", "Dey & Hudson 2002", ""},
+  };
+  return m;
+}
+
+}  // namespace pbrlod_tool
+
+namespace {
+using namespace pbrlod_tool;
+namespace fs = std::filesystem;
+
+void add_view_options(CLI::App* cmd, view_args& a) {
+  cmd->add_option("--view", a.view,
+                  "AZ,EL,DIST: azimuth and elevation in degrees around the "
+                  "model's bounding-sphere centre, distance in radii")
+      ->capture_default_str();
+  cmd->add_option("--size", a.size, "WxH image size in pixels")->capture_default_str();
+  cmd->add_option("--up", a.up, "up axis: y (scans) or z (LiDAR)")
+      ->check(CLI::IsMember({"y", "z"}))
+      ->capture_default_str();
+  cmd->add_option("--effects", a.effects_list,
+                  "comma list of shading, colour, backface_cull, shadows, hole_filling; 'none'; "
+                  "'all'; 'default' = shading where the data has normals (or faces), colour where "
+                  "it has colours");
+}
+
+/// The method that wrote a .lod file, by its magic.
+const method_entry& lod_method(const std::string& path) {
+  const auto h = peek_lod(path);
+  for (const auto& m : methods())
+    if (!m.magic.empty() && m.magic == h.magic && m.render) return m;
+  throw FormatError(path +
+                    ": not a hierarchy file written by this version of pbrlod (unknown magic)");
+}
+
+render_options make_render_options(const loaded_input& in, const view_args& a) {
+  render_options o;
+  if (a.effects_list == "default") {
+    o.fx = no_effects;
+    o.fx.shading = in.is_mesh() || !in.mesh.vertices.normals.empty();
+    o.fx.colour = !in.mesh.vertices.colours.empty();
+  } else {
+    o.fx = parse_effects(a.effects_list);
+  }
+  return o;
+}
+
+image render_input(const loaded_input& in, const camera& cam, const render_options& o) {
+  return in.is_mesh() ? render_reference(in.mesh, cam, o)
+                      : render_reference(in.mesh.vertices, cam, o);
+}
+
+int cmd_render(const std::string& input, const view_args& va, float tolerance,
+               const std::string& output, bool as_json) {
+  if (is_hierarchy_file(input))
+    return lod_method(input).render({input, output, va, tolerance, as_json});
+  progress prog(as_json);
+  prog.step("reading " + input);
+  const auto in = load(input);
+  const camera cam = make_camera(in.mesh.vertices, va);
+  const render_options o = make_render_options(in, va);
+  prog.step("rendering");
+  const auto t0 = clock_type::now();
+  const image img = render_input(in, cam, o);
+  const double render_s = seconds_since(t0);
+  write_png(output, img);
+  std::size_t covered = 0;
+  for (const float d : img.depth) covered += std::isfinite(d);
+  if (as_json) {
+    json j;
+    j.str("input", input).str("output", output).str("kind", in.is_mesh() ? "mesh" : "points");
+    j.num("tolerance_px", tolerance).str("effects", o.fx.to_string());
+    j.integer("width", img.width).integer("height", img.height);
+    j.integer("covered_pixels", static_cast<long long>(covered));
+    j.integer("primitives",
+              static_cast<long long>(in.is_mesh() ? in.mesh.num_faces() : in.mesh.num_vertices()));
+    j.num("read_seconds", in.read_seconds).num("render_seconds", render_s);
+    std::cout << j.text() << "\n";
+  } else {
+    std::cout << "wrote " << output << " (" << img.width << "x" << img.height << ", " << covered
+              << " pixels covered, " << render_s << " s)\n";
+  }
+  return 0;
+}
+
+int cmd_stats(const std::string& input, bool as_json) {
+  if (is_hierarchy_file(input)) return lod_method(input).stats(input, as_json);
+  const auto in = load(input);
+  const auto& c = in.mesh.vertices;
+  const auto [centre, radius] = world_bounds(c);
+  const attributes a = c.present();
+  // Bytes per point as pbr_lod stores the input (point_set with exactly these attributes).
+  const std::size_t bpp = a.bytes_per_point();
+  if (as_json) {
+    json j;
+    j.str("input", input).str("kind", in.is_mesh() ? "mesh" : "points");
+    j.integer("points", static_cast<long long>(c.size()));
+    j.integer("faces", static_cast<long long>(in.mesh.num_faces()));
+    j.integer("points_in_file", static_cast<long long>(in.report.points_read));
+    j.integer("dropped_non_finite", static_cast<long long>(in.report.dropped_non_finite));
+    j.integer("faces_dropped", static_cast<long long>(in.report.faces_dropped));
+    j.str("attributes", a.to_string());
+    j.boolean("textured", !in.mesh.texture_path.empty());
+    j.integer("bytes_per_point", static_cast<long long>(bpp));
+    j.num("bits_per_point", 8.0 * static_cast<double>(bpp));
+    json o;
+    o.num("x", c.origin.x()).num("y", c.origin.y()).num("z", c.origin.z());
+    j.object("origin", o);
+    json s;
+    s.num("x", centre.x()).num("y", centre.y()).num("z", centre.z()).num("radius", radius);
+    j.object("bounding_sphere", s);
+    j.num("read_seconds", in.read_seconds);
+    std::cout << j.text() << "\n";
+  } else {
+    std::cout << input << ": " << (in.is_mesh() ? "mesh" : "point cloud") << ", " << c.size()
+              << " points, " << in.mesh.num_faces() << " faces, attributes " << a.to_string()
+              << ", " << bpp << " bytes/point, bounding sphere centre (" << centre.transpose()
+              << ") radius " << radius << ", read in " << in.read_seconds << " s\n";
+  }
+  return 0;
+}
+
+int cmd_compare(const std::string& a, const std::string& b, bool as_json) {
+  const image ia = read_png(a), ib = read_png(b);
+  if (ia.width != ib.width || ia.height != ib.height)
+    throw InvalidArgument("compare: " + a + " is " + std::to_string(ia.width) + "x" +
+                          std::to_string(ia.height) + " but " + b + " is " +
+                          std::to_string(ib.width) + "x" + std::to_string(ib.height));
+  const image_error e = compare_images(ia, ib);
+  if (as_json) {
+    json j = error_json(e);
+    j.str("reference", a).str("test", b);
+    std::cout << j.text() << "\n";
+  } else {
+    std::cout << "RMSE " << e.rmse << ", PSNR " << e.psnr << " dB, hole fraction "
+              << e.hole_fraction << " (" << e.holes << " of " << e.reference_covered
+              << " reference pixels)\n";
+  }
+  return 0;
+}
+
+int cmd_build(const std::string& method, const std::string& input, const std::string& output,
+              const std::vector<std::string>& params, bool as_json) {
+  const auto& all = methods();
+  const auto it =
+      std::find_if(all.begin(), all.end(), [&](const auto& m) { return m.name == method; });
+  if (it == all.end()) {
+    std::string names;
+    for (const auto& m : all) names += (names.empty() ? "" : ", ") + m.name;
+    std::cerr << "pbrlod build: unknown method '" << method << "' (expected one of " << names
+              << ")\n";
+    return 2;
+  }
+  if (!it->build) {
+    std::cerr << "pbrlod build: method '" << method << "' (" << it->paper
+              << ") is not available in pbr_lod " << version() << " yet\n";
+    return 2;
+  }
+  return it->build({input, output, params, as_json});
+}
+
+int cmd_demo(const std::string& input, const std::string& dir, bool as_json) {
+  progress prog(as_json);
+  fs::create_directories(dir);
+  loaded_input in;
+  std::string name = input;
+  if (input.empty()) {
+    prog.step("generating the demo scene");
+    in.mesh = make_demo_scene(64);
+    name = "generated demo scene";
+  } else {
+    prog.step("reading " + input);
+    in = load(input);
+  }
+  json report;
+  report.str("input", name).integer("points", static_cast<long long>(in.mesh.num_vertices()));
+  report.integer("faces", static_cast<long long>(in.mesh.num_faces()));
+  view_args va;
+  va.size = "768x768";
+  const camera cam = make_camera(in.mesh.vertices, va);
+  render_options o = make_render_options(in, va);
+  o.fx.shading = true;  // a mesh has face normals; a cloud without normals falls back to flat
+  o.fx.colour = !in.mesh.vertices.colours.empty();
+
+  // 1. The full-detail reference: the mesh's triangles, or every point as its own splat.
+  prog.step("rendering the full-detail reference");
+  auto t0 = clock_type::now();
+  const image ref = render_input(in, cam, o);
+  report.num("reference_seconds", seconds_since(t0));
+  const std::string ref_png = (fs::path(dir) / "reference.png").string();
+  write_png(ref_png, ref);
+  report.str("reference_png", ref_png);
+
+  // 2. For a mesh: the same surface as a point cloud (one sample per vertex-area), rendered as
+  //    splats with and without hole filling, and compared with the mesh reference.
+  if (in.is_mesh()) {
+    prog.step("sampling the surface into points");
+    const std::size_t n = std::max<std::size_t>(in.mesh.num_vertices(), 20000);
+    loaded_input pts;
+    pts.mesh.vertices = sample_surface(in.mesh, n, 1);
+    report.integer("samples", static_cast<long long>(n));
+    for (const bool holes : {false, true}) {
+      render_options po = o;
+      po.fx.hole_filling = holes;
+      prog.step(holes ? "rendering splats with hole filling" : "rendering splats");
+      t0 = clock_type::now();
+      const image img = render_input(pts, cam, po);
+      const double secs = seconds_since(t0);
+      const std::string png =
+          (fs::path(dir) / (holes ? "points_hole_filled.png" : "points.png")).string();
+      write_png(png, img);
+      json j = error_json(compare_images(ref, img));
+      j.str("png", png).num("seconds", secs);
+      report.object(holes ? "points_hole_filled" : "points", j);
+    }
+    // Shadows and shading cost: one more image with the shadow pass.
+    render_options so = o;
+    so.fx.shadows = true;
+    prog.step("rendering with shadows");
+    t0 = clock_type::now();
+    const image shadowed = render_input(in, cam, so);
+    const std::string png = (fs::path(dir) / "reference_shadows.png").string();
+    write_png(png, shadowed);
+    json j;
+    j.str("png", png).num("seconds", seconds_since(t0));
+    report.object("shadows", j);
+  }
+  // 3. The point-octree (Pajarola 2003) over the points, drawn at τ = 1, 4, 16 px.
+  {
+    prog.step("building the point-octree");
+    const point_cloud cloud =
+        in.is_mesh()
+            ? sample_surface(in.mesh, std::max<std::size_t>(in.mesh.num_vertices(), 20000), 1)
+            : in.mesh.vertices;
+    json oj;
+    with_point_set(cloud, name, [&](const auto& pts) {
+      const auto t = build_point_octree(pts);
+      using tree = std::decay_t<decltype(t)>;
+      oj.integer("nodes", static_cast<long long>(t.nodes().size()));
+      oj.num("build_seconds", t.stats().seconds);
+      oj.num("bytes_per_point_file",
+             static_cast<double>(t.file_bytes()) / static_cast<double>(t.samples().size()));
+      const view v(cam, t.origin());
+      render_options lo = o;
+      lo.fx.colour = tree::attrs.colour && o.fx.colour;
+      for (const float tol : {1.0f, 4.0f, 16.0f}) {
+        prog.step("rendering the point-octree at " + std::to_string(static_cast<int>(tol)) + " px");
+        const traverse_options topt{.tolerance_px = tol,
+                                    .backface_cull = true,
+                                    .cull_volume = traverse_options::volume::view_cone};
+        traverse_stats st;
+        const auto start = clock_type::now();
+        const image img = render<tree::attrs>(
+            v, lo, [&](auto& sink) { st = traverse(t, v, topt, sink, point_octree_policy{}); });
+        const double secs = seconds_since(start);
+        const std::string png =
+            (fs::path(dir) / ("point_octree_tau" + std::to_string(static_cast<int>(tol)) + ".png"))
+                .string();
+        write_png(png, img);
+        json j = error_json(compare_images(ref, img));
+        j.str("png", png).num("seconds", secs).integer("splats", static_cast<long long>(st.splats));
+        oj.object("tau_" + std::to_string(static_cast<int>(tol)), j);
+      }
+      return 0;
+    });
+    report.object("point_octree", oj);
+  }
+  if (as_json) {
+    std::cout << report.text() << "\n";
+  } else {
+    std::cout << "pbrlod demo: " << name << " (" << in.mesh.num_vertices() << " points, "
+              << in.mesh.num_faces() << " faces) -> " << dir << "/\n"
+              << report.text() << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"pbrlod: level-of-detail hierarchies for point-based rendering (pbr_lod " +
+               std::string(version()) + ")"};
+  app.require_subcommand(1);
+  bool as_json = false;
+
+  std::string method, build_input, build_output;
+  std::vector<std::string> params;
+  auto* build = app.add_subcommand("build", "build a LOD hierarchy from a mesh or point cloud");
+  std::string method_names;
+  for (const auto& m : methods()) method_names += (method_names.empty() ? "" : ", ") + m.name;
+  build->add_option("--method", method, method_names)->required();
+  build->add_option("--param", params, "k=v builder parameter (repeatable)")
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  build->add_option("input", build_input, "mesh or point cloud file")->required();
+  build->add_option("-o,--output", build_output, "hierarchy file to write (.lod)")->required();
+  build->add_flag("--json", as_json, "print one JSON object");
+
+  std::string render_input_path, render_output = "render.png";
+  float tolerance = 1;
+  view_args va;
+  auto* render = app.add_subcommand("render", "render a hierarchy or an input file (full detail)");
+  render->add_option("input", render_input_path, "OUT.lod or a mesh/point cloud file")->required();
+  render->add_option("-o,--output", render_output, "PNG to write")->capture_default_str();
+  render->add_option("--tolerance", tolerance, "screen-space tolerance in pixels")
+      ->capture_default_str();
+  add_view_options(render, va);
+  render->add_flag("--json", as_json, "print one JSON object");
+
+  std::string stats_input;
+  auto* stats = app.add_subcommand("stats", "statistics of a hierarchy or an input file");
+  stats->add_option("input", stats_input, "OUT.lod or a mesh/point cloud file")->required();
+  stats->add_flag("--json", as_json, "print one JSON object");
+
+  std::string cmp_a, cmp_b;
+  auto* compare = app.add_subcommand("compare", "image error of B against reference A");
+  compare->add_option("reference", cmp_a, "reference PNG")->required();
+  compare->add_option("test", cmp_b, "PNG to compare")->required();
+  compare->add_flag("--json", as_json, "print one JSON object");
+
+  std::string demo_input, demo_dir = "pbrlod-demo";
+  auto* demo = app.add_subcommand("demo", "render a generated scene (or INPUT) and report");
+  demo->add_option("input", demo_input, "optional mesh or point cloud file");
+  demo->add_option("-o,--output", demo_dir, "folder for the images")->capture_default_str();
+  demo->add_flag("--json", as_json, "print one JSON object");
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*build) return cmd_build(method, build_input, build_output, params, as_json);
+    if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json);
+    if (*stats) return cmd_stats(stats_input, as_json);
+    if (*compare) return cmd_compare(cmp_a, cmp_b, as_json);
+    if (*demo) return cmd_demo(demo_input, demo_dir, as_json);
+  } catch (const pbr_lod::Error& e) {
+    std::cerr << "pbrlod: " << e.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "pbrlod: unexpected error: " << e.what() << "\n";
+    return 1;
+  }
+  return 2;
+}

@@ -1,0 +1,186 @@
+// pbrlod — the command-line tool's shared parts (tool.hpp).
+#include "tool.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <stdexcept>
+
+#include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/error.hpp"
+
+namespace pbrlod_tool {
+namespace fs = std::filesystem;
+
+bool is_hierarchy_file(const std::string& path) {
+  return fs::path(path).extension() == ".lod";
+}
+
+lod_header peek_lod(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError(path + ": cannot open");
+  char magic[8] = {};
+  lod_header h;
+  f.read(magic, 8);
+  f.read(reinterpret_cast<char*>(&h.version), 4);
+  f.read(reinterpret_cast<char*>(&h.flags), 4);
+  if (!f) throw FormatError(path + ": too short for a pbr_lod hierarchy file");
+  h.magic.assign(magic, 8);
+  return h;
+}
+
+loaded_input load(const std::string& path) {
+  loaded_input in;
+  const auto t0 = clock_type::now();
+  const auto ext = fs::path(path).extension().string();
+  if (ext == ".ply" || ext == ".obj" || ext == ".off" || ext == ".PLY" || ext == ".OBJ" ||
+      ext == ".OFF")
+    in.mesh = read_mesh(path, &in.report);
+  else
+    in.mesh.vertices = read_points(path, &in.report);
+  in.read_seconds = seconds_since(t0);
+  if (in.mesh.vertices.empty()) throw InvalidArgument(path + ": the file holds no points");
+  for (const auto& w : in.report.warnings) std::cerr << "warning: " << w << "\n";
+  return in;
+}
+
+std::pair<vec3d, double> world_bounds(const point_cloud& c) {
+  const sphere s = bounding_sphere_about_box_centre(c.positions);
+  return {c.origin + s.centre.cast<double>(), static_cast<double>(s.radius)};
+}
+
+std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n, const char* what) {
+  std::vector<double> v;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, sep)) {
+    try {
+      std::size_t used = 0;
+      v.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      throw InvalidArgument(std::string(what) + ": '" + s + "' is not a list of " +
+                            std::to_string(n) + " numbers separated by '" + sep + "'");
+    }
+  }
+  if (v.size() != n)
+    throw InvalidArgument(std::string(what) + ": '" + s + "' needs " + std::to_string(n) +
+                          " numbers");
+  return v;
+}
+
+camera make_camera(const point_cloud& c, const view_args& a) {
+  const auto v = parse_numbers(a.view, ',', 3, "--view");
+  const auto sz = parse_numbers(a.size, 'x', 2, "--size");
+  if (!(sz[0] >= 1 && sz[1] >= 1 && sz[0] <= 16384 && sz[1] <= 16384))
+    throw InvalidArgument("--size: width and height must lie in 1..16384");
+  if (!(v[2] > 0)) throw InvalidArgument("--view: the distance must be positive");
+  const auto [centre, radius] = world_bounds(c);
+  return camera::orbit(centre, radius > 0 ? radius : 1.0, v[0], v[1], v[2], a.up == "z" ? 2 : 1,
+                       {static_cast<int>(sz[0]), static_cast<int>(sz[1])});
+}
+
+render_options lod_render_options(const view_args& a, bool has_colour) {
+  render_options o;
+  if (a.effects_list == "default") {
+    o.fx = no_effects;
+    o.fx.shading = true;
+    o.fx.colour = has_colour;
+  } else {
+    o.fx = parse_effects(a.effects_list);
+  }
+  return o;
+}
+
+json error_json(const image_error& e) {
+  json j;
+  j.num("rmse", e.rmse).num("psnr", e.psnr).num("hole_fraction", e.hole_fraction);
+  j.integer("covered_either", static_cast<long long>(e.covered_either));
+  j.integer("reference_covered", static_cast<long long>(e.reference_covered));
+  j.integer("holes", static_cast<long long>(e.holes));
+  return j;
+}
+
+params::params(const std::vector<std::string>& items) {
+  for (const auto& p : items) {
+    const auto eq = p.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw InvalidArgument("--param '" + p + "': expected key=value");
+    m_[p.substr(0, eq)] = p.substr(eq + 1);
+  }
+}
+
+long params::integer(const std::string& key, long fallback, long lo, long hi) {
+  const auto it = m_.find(key);
+  if (it == m_.end()) return fallback;
+  long v = 0;
+  try {
+    std::size_t used = 0;
+    v = std::stol(it->second, &used);
+    if (used != it->second.size()) throw std::invalid_argument(key);
+  } catch (const std::exception&) {
+    throw InvalidArgument("--param " + key + "=" + it->second + ": expected an integer");
+  }
+  if (v < lo || v > hi)
+    throw InvalidArgument("--param " + key + "=" + it->second + ": expected " + std::to_string(lo) +
+                          ".." + std::to_string(hi));
+  m_.erase(it);
+  return v;
+}
+
+double params::number(const std::string& key, double fallback, double lo, double hi) {
+  const auto it = m_.find(key);
+  if (it == m_.end()) return fallback;
+  double v = 0;
+  try {
+    std::size_t used = 0;
+    v = std::stod(it->second, &used);
+    if (used != it->second.size()) throw std::invalid_argument(key);
+  } catch (const std::exception&) {
+    throw InvalidArgument("--param " + key + "=" + it->second + ": expected a number");
+  }
+  if (!(v >= lo && v <= hi))
+    throw InvalidArgument("--param " + key + "=" + it->second + ": expected " + std::to_string(lo) +
+                          ".." + std::to_string(hi));
+  m_.erase(it);
+  return v;
+}
+
+std::string params::choice(const std::string& key, const std::string& fallback,
+                           const std::vector<std::string>& choices) {
+  const auto it = m_.find(key);
+  if (it == m_.end()) return fallback;
+  const std::string v = it->second;
+  if (std::find(choices.begin(), choices.end(), v) == choices.end()) {
+    std::string all;
+    for (const auto& c : choices) all += (all.empty() ? "" : ", ") + c;
+    throw InvalidArgument("--param " + key + "=" + v + ": expected one of " + all);
+  }
+  m_.erase(it);
+  return v;
+}
+
+bool params::flag(const std::string& key, bool fallback) {
+  const std::string v = choice(key, fallback ? "true" : "false", {"true", "false", "1", "0"});
+  return v == "true" || v == "1";
+}
+
+void params::finish(const std::string& method, const std::string& expected) const {
+  if (!m_.empty())
+    throw InvalidArgument(method + ": unknown parameter '" + m_.begin()->first + "' (expected " +
+                          expected + ")");
+}
+
+std::function<bool(double)> progress_callback(const std::string& what, bool on_terminal) {
+  if (!on_terminal) return {};
+  return [what, t0 = clock_type::now()](double f) {
+    std::fprintf(stderr, "\r\033[K[%5.1fs] building %s %3.0f%%", seconds_since(t0), what.c_str(),
+                 100 * f);
+    if (f >= 1) std::fprintf(stderr, "\r\033[K");
+    std::fflush(stderr);
+    return true;
+  };
+}
+
+}  // namespace pbrlod_tool

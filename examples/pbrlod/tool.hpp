@@ -1,0 +1,246 @@
+// pbrlod — the command-line tool's shared parts: JSON output, progress, inputs, views, builder
+// parameters, and the table of build methods (one source file per method under examples/pbrlod/).
+#pragma once
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <functional>
+#include <map>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "pbr_lod/core/attributes.hpp"
+#include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/point_set.hpp"
+#include "pbr_lod/core/triangle_mesh.hpp"
+#include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/effects.hpp"
+#include "pbr_lod/raster/image.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+
+namespace pbrlod_tool {
+using namespace pbr_lod;
+
+using clock_type = std::chrono::steady_clock;
+inline double seconds_since(clock_type::time_point t0) {
+  return std::chrono::duration<double>(clock_type::now() - t0).count();
+}
+
+// ---- a minimal JSON object writer (one object on one line; numbers, strings, nested objects)
+class json {
+ public:
+  json& num(const std::string& k, double v) {
+    key(k);
+    if (std::isfinite(v)) {
+      std::ostringstream o;
+      o.precision(10);
+      o << v;
+      out_ += o.str();
+    } else {
+      out_ += "null";  // JSON has no inf/NaN (PSNR of identical images is +inf)
+    }
+    return *this;
+  }
+  json& integer(const std::string& k, long long v) {
+    key(k);
+    out_ += std::to_string(v);
+    return *this;
+  }
+  json& str(const std::string& k, const std::string& v) {
+    key(k);
+    out_ += quote(v);
+    return *this;
+  }
+  json& boolean(const std::string& k, bool v) {
+    key(k);
+    out_ += v ? "true" : "false";
+    return *this;
+  }
+  json& object(const std::string& k, const json& v) {
+    key(k);
+    out_ += v.text();
+    return *this;
+  }
+  [[nodiscard]] std::string text() const { return "{" + out_ + "}"; }
+
+ private:
+  void key(const std::string& k) {
+    if (!out_.empty()) out_ += ",";
+    out_ += quote(k) + ":";
+  }
+  static std::string quote(const std::string& s) {
+    std::string q = "\"";
+    for (const char c : s) {
+      switch (c) {
+        case '"':
+          q += "\\\"";
+          break;
+        case '\\':
+          q += "\\\\";
+          break;
+        case '\n':
+          q += "\\n";
+          break;
+        case '\t':
+          q += "\\t";
+          break;
+        default:
+          if (static_cast<unsigned char>(c) < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, "\\u%04x", c);
+            q += buf;
+          } else {
+            q += c;
+          }
+      }
+    }
+    return q + "\"";
+  }
+  std::string out_;
+};
+
+// ---- progress on a terminal only (stderr, so --json output on stdout stays one object)
+class progress {
+ public:
+  explicit progress(bool json_mode)
+      : enabled_(!json_mode && isatty(STDOUT_FILENO) && isatty(STDERR_FILENO)) {}
+  void step(const std::string& what) {
+    if (!enabled_) return;
+    std::fprintf(stderr, "\r\033[K[%5.1fs] %s", seconds_since(t0_), what.c_str());
+    std::fflush(stderr);
+  }
+  ~progress() {
+    if (enabled_) std::fprintf(stderr, "\r\033[K");
+  }
+  progress(const progress&) = delete;
+  progress& operator=(const progress&) = delete;
+
+ private:
+  bool enabled_;
+  clock_type::time_point t0_ = clock_type::now();
+};
+
+/// True on a terminal (progress lines are drawn only there, on stderr).
+inline bool interactive(bool as_json) {
+  return !as_json && isatty(STDOUT_FILENO) && isatty(STDERR_FILENO);
+}
+
+// ---- inputs
+/// A .lod file (a hierarchy written by `pbrlod build`).
+bool is_hierarchy_file(const std::string& path);
+
+/// The first 8 bytes (the method's magic) and the u32 flags after the u32 version of a .lod
+/// file. Throws IoError / FormatError.
+struct lod_header {
+  std::string magic;
+  std::uint32_t version = 0, flags = 0;
+};
+lod_header peek_lod(const std::string& path);
+
+struct loaded_input {
+  triangle_mesh mesh;  // faces empty for a point cloud
+  read_report report;
+  double read_seconds = 0;
+  [[nodiscard]] bool is_mesh() const { return !mesh.faces.empty(); }
+};
+/// Reads a mesh (.ply/.obj/.off) or a point cloud (.pcd/.las, or a PLY without faces); warnings
+/// go to stderr. Throws on a file without points.
+loaded_input load(const std::string& path);
+
+/// World-space bounding sphere (centre of the box, radius to the farthest point), in double.
+std::pair<vec3d, double> world_bounds(const point_cloud& c);
+
+// ---- views
+struct view_args {
+  std::string view = "30,20,3";
+  std::string size = "512x512";
+  std::string up = "y";
+  std::string effects_list = "default";
+};
+std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n, const char* what);
+/// The orbit camera of --view/--size/--up around the bounding sphere of c.
+camera make_camera(const point_cloud& c, const view_args& a);
+/// --effects for a hierarchy: 'default' = shading, and colour when the hierarchy has colours.
+render_options lod_render_options(const view_args& a, bool has_colour);
+json error_json(const image_error& e);
+
+// ---- builder parameters (--param key=value)
+class params {
+ public:
+  /// Throws InvalidArgument on an item without '='.
+  explicit params(const std::vector<std::string>& items);
+  long integer(const std::string& key, long fallback, long lo, long hi);
+  double number(const std::string& key, double fallback, double lo, double hi);
+  std::string choice(const std::string& key, const std::string& fallback,
+                     const std::vector<std::string>& choices);
+  bool flag(const std::string& key, bool fallback);
+  /// Throws InvalidArgument naming the first parameter no getter asked for.
+  void finish(const std::string& method, const std::string& expected) const;
+
+ private:
+  std::map<std::string, std::string> m_;
+};
+
+/// A "[ 12.3s] building <what> 45%" progress callback, or an empty one off a terminal.
+std::function<bool(double)> progress_callback(const std::string& what, bool on_terminal);
+
+// ---- build methods
+struct build_request {
+  std::string input, output;
+  std::vector<std::string> params;
+  bool as_json = false;
+};
+struct render_request {
+  std::string input, output;
+  view_args view;
+  float tolerance = 1;
+  bool as_json = false;
+};
+/// One builder as the tool sees it. A method without build is listed but not available.
+struct method_entry {
+  std::string name, paper;
+  std::string magic;  ///< the 8 bytes its .lod files start with
+  int (*build)(const build_request&) = nullptr;
+  int (*render)(const render_request&) = nullptr;
+  int (*stats)(const std::string& path, bool as_json) = nullptr;
+};
+const std::vector<method_entry>& methods();
+
+// One per source file under examples/pbrlod/.
+method_entry point_octree_method();
+
+/// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,
+/// ellipses: eight instantiations), so a builder is compiled for exactly what the scene has.
+template <class F>
+auto with_point_set(const point_cloud& c, const std::string& what, F&& f) {
+  const attributes have = c.present();
+  const auto go = [&]<attributes A>() { return f(point_set<A>::from(c, what)); };
+  constexpr attributes N{.normal = true}, C{.colour = true}, E{.ellipse = true};
+  const int key = (have.normal ? 1 : 0) | (have.colour ? 2 : 0) | (have.ellipse ? 4 : 0);
+  switch (key) {
+    case 1:
+      return go.template operator()<N>();
+    case 2:
+      return go.template operator()<C>();
+    case 3:
+      return go.template operator()<N | C>();
+    case 4:
+      return go.template operator()<E>();
+    case 5:
+      return go.template operator()<N | E>();
+    case 6:
+      return go.template operator()<C | E>();
+    case 7:
+      return go.template operator()<N | C | E>();
+    default:
+      return go.template operator()<positions_only>();
+  }
+}
+
+}  // namespace pbrlod_tool
