@@ -17,11 +17,13 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/covariance.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/memory.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
 namespace detail {
@@ -68,20 +70,10 @@ inline double squared(double x) {
   return x * x;
 }
 
-/// f(lo, hi) over `threads` contiguous chunks of [0, n); deterministic (each index once, same
-/// chunking for the same n and thread count).
+/// f(lo, hi) over contiguous chunks of at least ~4096 samples (core/parallel.hpp).
 template <class F>
 void parallel_for(std::size_t n, unsigned threads, F&& f) {
-  threads = std::max(1u, std::min<unsigned>(threads, static_cast<unsigned>(n / 4096 + 1)));
-  if (threads == 1) {
-    f(std::size_t{0}, n);
-    return;
-  }
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t)
-    pool.emplace_back([&, t] { f(n * t / threads, n * (t + 1) / threads); });
-  f(std::size_t{0}, n / threads);
-  for (auto& th : pool) th.join();
+  parallel_chunks(n, threads, 4096, f);
 }
 
 }  // namespace detail
@@ -667,64 +659,6 @@ namespace detail {
 
 inline constexpr char point_octree_magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'O'};
 inline constexpr std::uint32_t point_octree_version = 1;
-
-struct byte_writer {
-  std::vector<unsigned char> bytes;
-  template <class T>
-  void put(const T& v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    const auto* p = reinterpret_cast<const unsigned char*>(&v);
-    bytes.insert(bytes.end(), p, p + sizeof(T));
-  }
-  void put_vec(const vec3f& v) {
-    put(v.x());
-    put(v.y());
-    put(v.z());
-  }
-  void put_code(std::uint32_t c, int bits) {
-    if (bits <= 16)
-      put(static_cast<std::uint16_t>(c));
-    else
-      put(c);
-  }
-};
-
-struct byte_reader {
-  const std::vector<unsigned char>& bytes;
-  std::size_t pos = 0;
-  const std::string& path;
-  template <class T>
-  T get(const char* what) {
-    if (bytes.size() - pos < sizeof(T))
-      throw FormatError(path + ": truncated while reading " + what + " at byte " +
-                        std::to_string(pos));
-    T v;
-    std::memcpy(&v, bytes.data() + pos, sizeof(T));
-    pos += sizeof(T);
-    return v;
-  }
-  float get_finite(const char* what, std::size_t element) {
-    const float f = get<float>(what);
-    if (!std::isfinite(f))
-      throw FormatError(path + ": " + what + " of element " + std::to_string(element) +
-                        " is not finite");
-    return f;
-  }
-  vec3f get_vec(const char* what, std::size_t element) {
-    const float x = get_finite(what, element), y = get_finite(what, element),
-                z = get_finite(what, element);
-    return {x, y, z};
-  }
-  std::uint32_t get_code(int bits, const char* what) {
-    return bits <= 16 ? get<std::uint16_t>(what) : get<std::uint32_t>(what);
-  }
-};
-
-inline std::uint64_t fnv1a(const unsigned char* p, std::size_t n) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
-  return h;
-}
 
 template <attributes A>
 struct point_octree_io {
