@@ -1,0 +1,183 @@
+// ρ-grid (Duguet & Drettakis 2004) benchmarks: the storage study of Table 2 (bits per leaf
+// sample of the NIS and IS streams and of the in-core structure) on the Stanford bunny and
+// Buddha at oct/7, tri/4, oct/10, tri/6; build time and peak memory (tri/7 on the bunny);
+// flexible rendering in float and fixed point (§4.1, §5.1); one-pass shadows against the
+// rasteriser's two-pass shadow map (§4.2). docs/rho-grid.md quotes these numbers.
+//
+// Run with --benchmark_repetitions=3 --benchmark_report_aggregates_only=true for medians.
+#include <benchmark/benchmark.h>
+#include <sys/resource.h>
+
+#include <map>
+#include <string>
+
+#include "pbr_lod/builders/rho_grid.hpp"
+#include "pbr_lod/builders/rho_grid_render.hpp"
+#include "pbr_lod/io/read.hpp"
+#include "support/data.hpp"
+
+namespace {
+using namespace pbr_lod;
+
+const triangle_mesh& model(const std::string& name) {
+  static std::map<std::string, triangle_mesh> cache;
+  auto it = cache.find(name);
+  if (it == cache.end()) it = cache.emplace(name, read_mesh(test::data_file(name))).first;
+  return it->second;
+}
+
+const char* model_name(int i) {
+  return i == 0 ? "bun_zipper.ply" : "happy_vrip_res3.ply";
+}
+
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;  // kB on Linux
+}
+
+template <int Rho>
+void report(benchmark::State& state, const rho_grid<Rho>& g) {
+  const auto& s = g.stats();
+  state.counters["samples"] = double(s.samples);
+  state.counters["inner"] = double(s.inner_cells);
+  state.counters["inner/leaf"] = double(s.inner_cells) / double(s.samples);
+  state.counters["eq1_inner/leaf"] = 1.0 / (Rho * Rho - 1);
+  state.counters["bps_nis"] = s.bits_per_sample_nis;
+  state.counters["bps_is"] = s.bits_per_sample_is;
+  state.counters["bps_incore"] = s.bits_per_sample_incore;
+  state.counters["kB_nis"] = double(g.serialise(rho_grid_layout::nis).size()) / 1e3;
+  state.counters["kB_is"] = double(g.serialise(rho_grid_layout::is).size()) / 1e3;
+  state.counters["kB_mem"] = double(g.memory_bytes()) / 1e3;
+  state.counters["build_s"] = s.build_seconds;
+  state.counters["working_MB"] = double(s.peak_working_bytes) / 1e6;
+  state.counters["peak_rss_MB"] = peak_rss_mb();
+}
+
+// Table 2: build, then the sizes of the two streams and of the in-core structure.
+template <int Rho>
+void bm_table2(benchmark::State& state) {
+  const auto& m = model(model_name(int(state.range(0))));
+  const int depth = int(state.range(1));
+  rho_grid<Rho> g;
+  for (auto _ : state) {
+    g = build_rho_grid<Rho>(m, {.depth = depth, .threads = 2});
+    benchmark::DoNotOptimize(g.cell_count());
+  }
+  report(state, g);
+}
+BENCHMARK(bm_table2<2>)
+    ->ArgNames({"model", "depth"})
+    ->Args({0, 7})
+    ->Args({1, 7})
+    ->Args({0, 10})
+    ->Args({1, 10})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+BENCHMARK(bm_table2<3>)
+    ->ArgNames({"model", "depth"})
+    ->Args({0, 4})
+    ->Args({1, 4})
+    ->Args({0, 6})
+    ->Args({1, 6})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+// ρ = 4 and 5 at comparable sample counts (4^5 ≈ 2^10, 5^4 ≈ 3^6·0.86).
+BENCHMARK(bm_table2<4>)
+    ->ArgNames({"model", "depth"})
+    ->Args({0, 5})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+BENCHMARK(bm_table2<5>)
+    ->ArgNames({"model", "depth"})
+    ->Args({0, 4})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+
+// The memory question: depth 7 tri-grid on the bunny (run alone for a clean peak RSS:
+// --benchmark_filter=bm_tri7).
+void bm_tri7_bunny(benchmark::State& state) {
+  const auto& m = model("bun_zipper.ply");
+  const double before = peak_rss_mb();
+  rho_grid<3> g;
+  for (auto _ : state) g = build_rho_grid<3>(m, {.depth = 7, .threads = 2});
+  report(state, g);
+  state.counters["rss_before_MB"] = before;
+}
+BENCHMARK(bm_tri7_bunny)->Unit(benchmark::kMillisecond)->Iterations(1);
+
+// Point cloud input: the bunny's vertices.
+void bm_points(benchmark::State& state) {
+  const point_cloud pc = read_points(test::data_file("bun_zipper.ply"));
+  rho_grid<3> g;
+  for (auto _ : state) g = build_rho_grid<3>(pc, {.depth = int(state.range(0))});
+  report(state, g);
+  state.counters["points/s"] = benchmark::Counter(double(pc.size()) * double(state.iterations()),
+                                                  benchmark::Counter::kIsRate);
+}
+BENCHMARK(bm_points)->Arg(4)->Arg(6)->Unit(benchmark::kMillisecond);
+
+const rho_grid<3>& bunny_tri6() {
+  static const rho_grid<3> g = build_rho_grid<3>(model("bun_zipper.ply"), {.depth = 6});
+  return g;
+}
+
+camera bench_camera(const rho_grid<3>& g, double dist, int size = 512) {
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {size, size});
+}
+
+// §4.1 / §5.1: the flexible traversal alone (counting sink), float vs fixed, splat size s.
+void bm_traverse(benchmark::State& state) {
+  const auto& g = bunny_tri6();
+  const view v(bench_camera(g, double(state.range(2)) / 10), g.origin());
+  rho_grid_render_options o{.splat_px = float(state.range(1))};
+  o.arithmetic = state.range(0) ? rho_grid_arithmetic::fixed : rho_grid_arithmetic::floating;
+  rho_grid_traverse_stats st;
+  for (auto _ : state) {
+    std::size_t n = 0;
+    st = rho_grid_traverse(g, v, o, [&](const rho_grid_cell_ref&, bool) { ++n; });
+    benchmark::DoNotOptimize(n);
+  }
+  state.counters["visited"] = double(st.visited);
+  state.counters["splats"] = double(st.splats);
+  state.counters["points"] = double(st.points);
+  state.counters["cells/s"] = benchmark::Counter(double(st.visited) * double(state.iterations()),
+                                                 benchmark::Counter::kIsRate);
+}
+BENCHMARK(bm_traverse)
+    ->ArgNames({"fixed", "s", "dist10"})
+    ->Args({0, 1, 25})
+    ->Args({1, 1, 25})
+    ->Args({0, 1, 80})
+    ->Args({1, 1, 80})
+    ->Args({0, 4, 25})
+    ->Args({1, 4, 25})
+    ->Unit(benchmark::kMillisecond);
+
+// Whole frames (512², shading) into the shared rasteriser: no shadows, one-pass shadows (§4.2),
+// the rasteriser's two-pass shadow map.
+void bm_frame(benchmark::State& state) {
+  const auto& g = bunny_tri6();
+  const camera cam = bench_camera(g, 2.5);
+  rho_grid_render_options o;
+  o.raster.fx = effects{.shading = true, .shadows = state.range(0) == 2};
+  o.raster.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  rho_grid_traverse_stats st;
+  for (auto _ : state) {
+    const image img = state.range(0) == 1 ? render_rho_grid_one_pass_shadows(g, cam, o, &st)
+                                          : render_rho_grid(g, cam, o, &st);
+    benchmark::DoNotOptimize(img.colour.data());
+  }
+  state.counters["drawn"] = double(st.splats + st.points);
+  state.counters["fps"] =
+      benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(bm_frame)
+    ->ArgName("mode_0none_1onepass_2twopass")
+    ->DenseRange(0, 2)
+    ->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

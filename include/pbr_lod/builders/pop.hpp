@@ -1,0 +1,358 @@
+// pbr_lod — POP: hybrid point and polygon rendering with triangle-leaf bounding-sphere trees.
+//
+// This work is based on:
+//   B. Chen, M. X. Nguyen. POP: A Hybrid Point and Polygon Rendering System for Large Data.
+//   IEEE Visualization 2001.
+//   (building on S. Rusinkiewicz, M. Levoy. QSplat. SIGGRAPH 2000, for the top-down tree.)
+// What each part implements:
+//   §3.1, §3.5  leaves: the input triangles grouped into leaves of at most four edge-adjacent
+//               triangles (OpenMesh adjacency, in src/builders/pop_build.cpp), so that leaves ≈
+//               vertices; leaf normal = average of its vertices' normals, colour = average of
+//               its triangles' colours (with a texture: the average of the texels inside each
+//               triangle).
+//   §3.1        leaf spheres: circumcircle when no angle exceeds 90°, the longest edge as the
+//               diameter otherwise; a multi-triangle leaf bounds its triangles' spheres.
+//   §3.1        QSplat-style top-down tree over the leaves (split at the median of the longest
+//               axis, twice: up to four children); inner attributes = averages of the children;
+//               inner spheres by the paper's rules (one child's sphere if it holds the others,
+//               else the 2-, 3- and 4-child constructions) — pop_sphere_rule::paper — or the
+//               exact smallest enclosing sphere (CGAL Min_sphere_of_spheres_d) —
+//               pop_sphere_rule::exact. Normal cones per node for back-face culling.
+//   §3.2        RENDER: frustum and back-face culling, refine while the splat size exceeds the
+//               threshold, a point for an inner node, the leaf's 1–4 triangles at a leaf, the
+//               optional silhouette rule — pop_policy with the generic traverse().
+//   §3.2        RENDER-COHERENCY: the previous frame's cut is kept and moved up or down —
+//               pop_coherent_traversal.
+//   §3.3        splat size from eye-space z only (traverse_options::metric = eye_z) or exact
+//               (projection_metric::exact).
+//   §3.4        simplified splatting (constant-colour squares of the splat size) or visibility
+//               splatting (one-pixel points + the rasteriser's screen-space hole filling).
+//   §3.5        storage: vertices quantised to 16 bits per axis over the bounding box (Deering /
+//               QSplat), normals to a q-bit table, face index lists, leaf → face range; save()/
+//               load() of a versioned, validated file ("PBRLODPP").
+//
+// Layout: a flat node array in breadth-first order. An inner node's children are contiguous
+// [first, first + count), 2..4 of them, all after it; a leaf's triangles are faces()[first,
+// first + count), 1..4 of them. Render a node as a point when its splat is within the threshold,
+// else its children; a leaf is always its triangles.
+//
+// Threading: build() uses up to `options.threads` threads. A built pop_tree is immutable; const
+// member functions are safe for concurrent readers. pop_coherent_traversal holds per-frame state
+// and is for one thread.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <numbers>
+#include <ranges>
+#include <string>
+#include <vector>
+
+#include "pbr_lod/core/attributes.hpp"
+#include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/triangle_mesh.hpp"
+#include "pbr_lod/traverse/hierarchy.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
+
+namespace pbr_lod {
+
+/// How bounding spheres above single triangles are computed (§3.1).
+enum class pop_sphere_rule : std::uint32_t {
+  paper = 0,  ///< the paper's rules: a child's sphere if it holds the others, else the 2/3/4 cases
+  exact = 1,  ///< beyond the paper: the smallest enclosing sphere (CGAL Min_sphere_of_spheres_d)
+};
+
+struct pop_options {
+  /// Triangles per leaf, 1..4. The paper groups up to four adjacent triangles so that leaves ≈
+  /// vertices and the tree is about QSplat's size (§3.5); 1 gives one leaf per triangle.
+  std::uint32_t max_leaf_triangles = 4;
+  pop_sphere_rule spheres = pop_sphere_rule::paper;
+  /// Bits of the quantised vertex and node normals (§3.5; 6..24). 16: worst error < 0.5°.
+  int normal_bits = 16;
+  /// Threads for the build (0 = hardware concurrency).
+  unsigned threads = 0;
+};
+
+struct pop_build_stats {
+  double build_seconds = 0;      ///< whole build
+  double adjacency_seconds = 0;  ///< OpenMesh connectivity + grouping into leaves
+  double tree_seconds = 0;       ///< top-down split + bottom-up spheres, attributes, cones
+  std::size_t vertices = 0, triangles = 0;
+  std::size_t nodes = 0, leaves = 0, max_depth = 0;
+  std::array<std::size_t, 4> leaves_by_size{};  ///< leaves with 1, 2, 3, 4 triangles
+  /// Faces OpenMesh's halfedge structure refused (non-manifold, duplicate, repeated vertex):
+  /// they have no adjacency and become leaves of their own. They are drawn like any other.
+  std::size_t isolated_faces = 0;
+  std::size_t degenerate_faces = 0;  ///< zero-area faces (their spheres are still finite)
+  std::size_t contained_inner = 0;   ///< inner nodes whose sphere is one child's (rule 0, §3.1)
+  std::size_t file_bytes = 0;        ///< size of the file save() writes
+  double bytes_per_vertex = 0, bytes_per_triangle = 0;  ///< file_bytes / vertices, / triangles
+  friend bool operator==(const pop_build_stats&, const pop_build_stats&) = default;
+};
+
+namespace detail {
+/// One node of the flat tree (see the layout comment above).
+struct pop_node {
+  vec3f centre = vec3f::Zero();  ///< bounding sphere: every triangle of the subtree is inside
+  float radius = 0;
+  vec3f normal = vec3f::UnitZ();  ///< unit, decoded from its normal code: the point's normal
+  float cone_angle = std::numbers::pi_v<float>;  ///< every face normal below is within this of
+                                                 ///< `normal` (π: unbounded)
+  std::uint32_t first = 0;                       ///< inner: first child; leaf: first face
+  std::uint32_t parent = std::numeric_limits<std::uint32_t>::max();  ///< root: max (not stored)
+  std::uint8_t count = 0;   ///< inner: children (2..4); leaf: triangles (1..4)
+  std::uint8_t leaf = 0;    ///< 1 for a leaf
+  std::uint16_t depth = 0;  ///< root = 0 (not stored)
+  friend bool operator==(const pop_node&, const pop_node&) = default;
+};
+
+/// Everything a pop_tree holds, independent of the attribute set (colours empty without them).
+struct pop_data {
+  vec3d origin = vec3d::Zero();
+  std::vector<vec3f> positions;  ///< dequantised vertex positions relative to origin
+  std::vector<vec3f> normals;    ///< decoded vertex normals
+  std::vector<rgb8> colours;     ///< vertex colours, or empty
+  std::vector<std::array<std::uint32_t, 3>> faces;  ///< in leaf order
+  std::vector<pop_node> nodes;
+  std::vector<rgb8> node_colours;  ///< or empty
+  // storage (§3.5): what the file holds and the in-memory values are derived from
+  std::vector<std::array<std::uint16_t, 3>> vertex_q;
+  vec3f q_min = vec3f::Zero(), q_step = vec3f::Zero();
+  std::vector<std::uint32_t> vertex_normal_codes, node_normal_codes;
+  int normal_bits = 16;
+  pop_sphere_rule spheres = pop_sphere_rule::paper;
+  pop_build_stats stats;
+  friend bool operator==(const pop_data& a, const pop_data& b);
+};
+
+// Compiled in src/builders/pop_build.cpp (OpenMesh stays there).
+[[nodiscard]] pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& options,
+                                      bool colour);
+void save_pop_data(const pop_data& d, const std::string& path);
+[[nodiscard]] pop_data load_pop_data(const std::string& path, bool colour);
+[[nodiscard]] std::size_t pop_file_bytes(const pop_data& d);
+
+/// Smallest sphere enclosing the n spheres (centres c, radii r), via CGAL
+/// Min_sphere_of_spheres_d (src/builders/pop_min_sphere.cpp). Returns false when n == 0.
+bool min_sphere_of_spheres(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
+                           double& radius);
+/// The paper's inner-node sphere (§3.1) of n ≤ 4 spheres, in double. Exposed for the tests.
+void pop_paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
+                      double& radius);
+/// The paper's triangle circle (§3.1): circumcircle when no angle exceeds 90°, else the longest
+/// edge as diameter; degenerate triangles fall back to the longest edge. Radius = the largest
+/// distance from the centre to a corner (so it always contains them).
+void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& centre,
+                         double& radius);
+}  // namespace detail
+
+template <attributes A>
+class pop_tree {
+  static_assert(A.normal && !A.material && !A.ellipse,
+                "pop_tree<with_normals> or pop_tree<with_normals_colours>");
+
+ public:
+  using node_id = std::uint32_t;
+  using node = detail::pop_node;
+  static constexpr attributes attrs = A;
+  static constexpr node_id no_node = std::numeric_limits<node_id>::max();
+
+  pop_tree() = default;
+
+  // ---- the Hierarchy interface
+  [[nodiscard]] vec3d origin() const { return d_.origin; }
+  [[nodiscard]] bool empty() const { return d_.nodes.empty(); }
+  [[nodiscard]] node_id root() const { return 0; }
+  [[nodiscard]] bool is_leaf(node_id n) const { return d_.nodes[n].leaf != 0; }
+  [[nodiscard]] auto children(node_id n) const {
+    const node& nd = d_.nodes[n];
+    const std::uint32_t end = nd.leaf ? nd.first : nd.first + nd.count;
+    return std::views::iota(nd.first, end);
+  }
+  [[nodiscard]] sphere bounding_sphere(node_id n) const {
+    return {d_.nodes[n].centre, d_.nodes[n].radius};
+  }
+  [[nodiscard]] pbr_lod::normal_cone normal_cone(node_id n) const {
+    return {d_.nodes[n].normal, d_.nodes[n].cone_angle};
+  }
+  /// Inner node: a point whose size is its exact projected diameter. Leaf: its triangles.
+  template <class S>
+  void emit(node_id n, const view& v, S& sink) const {
+    if (is_leaf(n))
+      emit_triangles(n, sink);
+    else
+      emit_point(n, std::max(1.0f, 2 * projected_radius_exact(v, bounding_sphere(n))), sink);
+  }
+  /// The node's point (§3.2): a square of size_px pixels with the node's normal and colour.
+  template <class S>
+  void emit_point(node_id n, float size_px, S& sink) const {
+    point_prim<A> p{d_.nodes[n].centre, size_px};
+    p.normal = d_.nodes[n].normal;
+    if constexpr (A.colour) p.colour = d_.node_colours[n];
+    sink.point(p);
+  }
+  /// A leaf's 1–4 triangles with per-vertex normals (and colours).
+  template <class S>
+  void emit_triangles(node_id n, S& sink) const {
+    const node& nd = d_.nodes[n];
+    for (std::uint32_t f = nd.first; f < nd.first + nd.count; ++f) {
+      const auto& F = d_.faces[f];
+      triangle_prim<A> t{{d_.positions[F[0]], d_.positions[F[1]], d_.positions[F[2]]}};
+      t.normal = {d_.normals[F[0]], d_.normals[F[1]], d_.normals[F[2]]};
+      if constexpr (A.colour) t.colour = {d_.colours[F[0]], d_.colours[F[1]], d_.colours[F[2]]};
+      sink.triangle(t);
+    }
+  }
+  /// Every triangle of n's subtree (the silhouette rule draws a node this way).
+  template <class S>
+  void emit_subtree_triangles(node_id n, S& sink) const {
+    std::vector<node_id> stack{n};
+    while (!stack.empty()) {
+      const node_id m = stack.back();
+      stack.pop_back();
+      if (is_leaf(m)) {
+        emit_triangles(m, sink);
+        continue;
+      }
+      for (node_id c = d_.nodes[m].first + d_.nodes[m].count; c-- > d_.nodes[m].first;)
+        stack.push_back(c);
+    }
+  }
+
+  // ---- inspection
+  [[nodiscard]] const std::vector<node>& nodes() const { return d_.nodes; }
+  [[nodiscard]] const node& at(node_id n) const { return d_.nodes[n]; }
+  [[nodiscard]] node_id parent(node_id n) const { return d_.nodes[n].parent; }
+  [[nodiscard]] const std::vector<vec3f>& positions() const { return d_.positions; }
+  [[nodiscard]] const std::vector<vec3f>& vertex_normals() const { return d_.normals; }
+  [[nodiscard]] const std::vector<std::array<std::uint32_t, 3>>& faces() const { return d_.faces; }
+  [[nodiscard]] rgb8 node_colour(node_id n) const requires(A.colour) { return d_.node_colours[n]; }
+  [[nodiscard]] pop_sphere_rule sphere_rule() const { return d_.spheres; }
+  [[nodiscard]] const pop_build_stats& stats() const { return d_.stats; }
+  [[nodiscard]] std::size_t file_bytes() const { return detail::pop_file_bytes(d_); }
+
+  // ---- storage (§3.5)
+  /// Writes the versioned file; throws IoError. load(save(t)) == t exactly.
+  void save(const std::string& path) const { detail::save_pop_data(d_, path); }
+  /// Reads and validates a file written by save(): magic "PBRLODPP", version, attribute set,
+  /// every count and index against the file size and the tree, finite values, a checksum.
+  /// Throws IoError (cannot read) or FormatError naming the element at fault.
+  [[nodiscard]] static pop_tree load(const std::string& path) {
+    pop_tree t;
+    t.d_ = detail::load_pop_data(path, A.colour);
+    return t;
+  }
+
+  friend bool operator==(const pop_tree& a, const pop_tree& b) { return a.d_ == b.d_; }
+
+ private:
+  template <attributes B>
+  friend pop_tree<B> build_pop(const triangle_mesh&, const pop_options&);
+  detail::pop_data d_;
+};
+
+/// Builds the POP tree of a triangle mesh. Vertex normals are the mesh's, else area-weighted
+/// face normals. With colours (A.colour): the texture's texels when the mesh has texture
+/// coordinates and a texture, else its vertex colours; InvalidArgument when it has neither.
+/// Throws InvalidArgument on an empty or invalid mesh (NaN/Inf, out-of-range indices) or bad
+/// options, IoError/FormatError when the texture cannot be read.
+template <attributes A>
+[[nodiscard]] pop_tree<A> build_pop(const triangle_mesh& mesh, const pop_options& options = {}) {
+  pop_tree<A> t;
+  t.d_ = detail::build_pop_data(mesh, options, A.colour);
+  return t;
+}
+
+/// True when build_pop<with_normals_colours> can colour this mesh (texture or vertex colours).
+[[nodiscard]] inline bool pop_mesh_has_colour(const triangle_mesh& m) {
+  return (!m.face_texcoords.empty() && !m.texture_path.empty()) || !m.vertices.colours.empty();
+}
+
+/// How inner nodes are drawn when their splat is within the threshold (§3.4).
+enum class pop_point_mode {
+  simplified,  ///< a constant-colour square of the splat size (QSplat's simplified splatting)
+  visibility,  ///< a one-pixel point; render with effects::hole_filling, radius = threshold
+};
+
+/// POP's RENDER (§3.2) as a traversal policy: the screen size is the splat size under
+/// traverse_options::metric (eye_z = the paper's §3.3, exact = projected_radius_exact); refine
+/// while it exceeds the threshold; a leaf draws its triangles, an inner node a point.
+/// Silhouette rule (optional): an inner node whose normal is nearly perpendicular to the
+/// direction from the eye (|n·d| < silhouette_cos) draws its subtree's triangles instead of a
+/// point. It changes what a cut node draws, not the cut, so coherent traversals stay exact.
+struct pop_policy : default_policy {
+  float silhouette_cos = 0;  ///< 0: off; e.g. 0.1 (within ≈ 5.7° of perpendicular)
+  pop_point_mode points = pop_point_mode::simplified;
+
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size_px,
+            const traverse_options& /*o*/, S& sink) const {
+    if (h.is_leaf(n)) {
+      h.emit_triangles(n, sink);
+      return;
+    }
+    if (silhouette_cos > 0) {
+      const auto& nd = h.at(n);
+      const vec3f d = nd.centre - v.eye;
+      const float len = d.norm();
+      if (len > 0 && std::abs(nd.normal.dot(d)) < silhouette_cos * len) {
+        h.emit_subtree_triangles(n, sink);
+        return;
+      }
+    }
+    const float size =
+        points == pop_point_mode::visibility ? 1.0f : std::max(1.0f, std::min(size_px, 1e4f));
+    h.emit_point(n, size, sink);
+  }
+};
+
+/// POP's RENDER-COHERENCY (§3.2): keeps the previous frame's cut — the nodes drawn and the nodes
+/// culled — and moves from each of them down (when it must now refine) or up (while its parent
+/// need not refine any more), instead of starting at the root. Produces exactly the cut of the
+/// plain traversal with the same options and policy (the refine rule is monotone: a parent's
+/// sphere holds its children's, so its splat is at least as large, its frustum and back-face
+/// tests at most as strict), and emits it in the plain traversal's order, so images are
+/// byte-identical. traverse_stats::visited counts the nodes evaluated this frame.
+template <attributes A>
+class pop_coherent_traversal {
+ public:
+  using node_id = typename pop_tree<A>::node_id;
+  explicit pop_coherent_traversal(const pop_tree<A>& t);
+
+  /// Draws one frame. The first frame (or after reset()) starts at the root.
+  template <Sink<A> S>
+  traverse_stats frame(const view& v, const traverse_options& o, S& sink,
+                       const pop_policy& policy = {});
+  /// Forgets the cut: the next frame starts at the root.
+  void reset() { front_.clear(); }
+  /// The nodes drawn in the last frame, in drawing order.
+  [[nodiscard]] const std::vector<node_id>& drawn() const { return drawn_; }
+  /// The last frame's cut: drawn and culled nodes (unordered).
+  [[nodiscard]] const std::vector<node_id>& front() const { return front_; }
+
+ private:
+  enum state : std::uint8_t { culled_frustum, culled_backface, refine, draw };
+  state eval(node_id n, const view& v, const traverse_options& o, const pop_policy& p, float& size);
+  state cached(node_id n, const view& v, const traverse_options& o, const pop_policy& p);
+  void descend(node_id f, const view& v, const traverse_options& o, const pop_policy& p);
+  void add(node_id n, state s);
+
+  const pop_tree<A>* t_;
+  std::vector<node_id> rank_;  // position of each node in the plain traversal's order
+  std::vector<std::uint32_t> stamp_, added_;
+  std::vector<state> state_;
+  std::vector<float> size_;
+  std::uint32_t frame_ = 0;
+  std::vector<node_id> front_, next_, drawn_;
+  traverse_stats st_;
+};
+
+}  // namespace pbr_lod
+
+#include "pbr_lod/builders/detail/pop_impl.hpp"

@@ -1,0 +1,461 @@
+// ρ-grid construction (Duguet & Drettakis 2004, §3.1), level by level.
+//
+// The only translation unit of the ρ-grid that includes CGAL: it is compiled as its own object
+// library with CGAL's flags (-frounding-math), see rho_grid.cmake.
+//
+// Mesh: an AABB tree over the non-degenerate triangles (CGAL::AABB_tree, Epick). Per non-empty
+// cell of a level, in parallel: the closest surface point to the centre
+// (closest_point_and_primitive) gives the sample and its attribute; the triangles meeting the
+// cell (all_intersected_primitives with the cell's box) are tested exactly against the children
+// they may touch (CGAL::do_intersect(Triangle_3, Bbox_3)) to give the childhood code. The next
+// level is the children, in digit order, of the cells in order — path order, i.e. breadth first.
+//
+// Points: every point's leaf path is a base-ρ³ number; sorted by it, the cells of every level are
+// runs, so each level is one linear scan (codes from the next digit, sample = the run's point
+// closest to the centre).
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <tbb/blocked_range.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <numeric>
+#include <optional>
+
+#include "pbr_lod/builders/detail/rho_grid_impl.hpp"
+#include "pbr_lod/builders/rho_grid.hpp"
+#include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/raster/reference.hpp"
+
+namespace pbr_lod {
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using tri_vector = std::vector<K::Triangle_3>;
+using primitive = CGAL::AABB_triangle_primitive<K, tri_vector::const_iterator>;
+using aabb_tree = CGAL::AABB_tree<CGAL::AABB_traits<K, primitive>>;
+
+using cell_pos = std::array<std::uint32_t, 3>;
+
+struct frame {
+  vec3d min = vec3d::Zero();  // cube minimum corner (world, double)
+  double side = 1;
+  double leaf = 1;  // side / ρ^k
+};
+
+void check_options(const rho_grid_options& o, int rho) {
+  const int maxd = rho_grid_max_depth(rho);
+  if (o.depth < 0 || o.depth > maxd)
+    throw InvalidArgument("rho-grid: depth must lie in [0, " + std::to_string(maxd) +
+                          "] for rho = " + std::to_string(rho) + ", got " +
+                          std::to_string(o.depth));
+  if (o.normal_bits != 0 && (o.normal_bits < normal_quantizer::min_bits || o.normal_bits > 16))
+    throw InvalidArgument("rho-grid: normal_bits must be 0 or in [" +
+                          std::to_string(normal_quantizer::min_bits) + ", 16], got " +
+                          std::to_string(o.normal_bits));
+  if (o.material_bits < 0 || o.material_bits > 8)
+    throw InvalidArgument("rho-grid: material_bits must lie in [0, 8], got " +
+                          std::to_string(o.material_bits));
+  if (o.normal_bits + o.material_bits > 16)
+    throw InvalidArgument("rho-grid: normal_bits + material_bits (sigma) must be at most 16");
+}
+
+/// The bounding cube of world points: centred on their box, side = largest extent (slightly
+/// enlarged so the maximum falls inside a cell); a single point (or all identical) gets side 1.
+frame make_frame(const vec3d& lo, const vec3d& hi, int rho, int depth) {
+  frame f;
+  const double extent = (hi - lo).maxCoeff();
+  const vec3d centre = 0.5 * (lo + hi);
+  const double scale = std::max(1.0, centre.cwiseAbs().maxCoeff());
+  f.side = extent > 1e-12 * scale ? extent * (1 + 1e-9) : 1.0;
+  f.min = centre - vec3d::Constant(0.5 * f.side);
+  f.leaf = f.side / std::pow(double(rho), depth);
+  return f;
+}
+
+std::uint32_t pack_attr(std::uint32_t normal, std::uint32_t material, int normal_bits) {
+  return normal | (material << normal_bits);
+}
+
+/// Run-time statistics of the per-level working set.
+struct working_set {
+  std::size_t peak = 0;
+  void note(std::size_t bytes) { peak = std::max(peak, bytes); }
+};
+
+template <int Rho>
+struct level_builder {
+  static constexpr int R3 = Rho * Rho * Rho;
+  using grid = rho_grid<Rho>;
+  using access = detail::rho_grid_access<Rho>;
+  using code = detail::child_code<Rho>;
+
+  static std::uint64_t pow_rho(int e) {
+    std::uint64_t p = 1;
+    for (int i = 0; i < e; ++i) p *= Rho;
+    return p;
+  }
+
+  /// Centre of cell p at level l relative to the cube minimum.
+  static vec3d centre(const cell_pos& p, std::uint64_t span, const frame& f) {
+    return {(double(p[0] * span) + 0.5 * double(span)) * f.leaf,
+            (double(p[1] * span) + 0.5 * double(span)) * f.leaf,
+            (double(p[2] * span) + 0.5 * double(span)) * f.leaf};
+  }
+
+  static bool progress(const rho_grid_options& o, double fr) {
+    return !o.progress || o.progress(fr);
+  }
+};
+
+// ------------------------------------------------------------------------------------------
+// Point clouds
+// ------------------------------------------------------------------------------------------
+template <int Rho>
+rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o) {
+  using lb = level_builder<Rho>;
+  using access = typename lb::access;
+  constexpr int R3 = lb::R3;
+  const auto t0 = std::chrono::steady_clock::now();
+  c.validate("rho-grid input");
+  if (c.empty()) throw InvalidArgument("rho-grid: the input has no points");
+  check_options(o, Rho);
+  const int k = o.depth;
+  const std::size_t n = c.size();
+
+  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (std::size_t i = 0; i < n; ++i) {
+    const vec3d w = c.world(i);
+    lo = lo.cwiseMin(w);
+    hi = hi.cwiseMax(w);
+  }
+  const frame f = make_frame(lo, hi, Rho, k);
+  const int nb = c.normals.empty() ? 0 : o.normal_bits;
+  const int mb = c.materials.empty() ? 0 : o.material_bits;
+  if (mb > 0)
+    for (std::size_t i = 0; i < n; ++i)
+      if (c.materials[i] >= (1u << mb))
+        throw InvalidArgument("rho-grid: material " + std::to_string(c.materials[i]) +
+                              " of point " + std::to_string(i) + " does not fit in " +
+                              std::to_string(mb) + " material bits");
+  std::optional<normal_quantizer> q;
+  if (nb > 0) q.emplace(nb);
+
+  // Leaf position and path key (k base-ρ³ digits, the first level most significant).
+  const std::uint64_t cells_per_axis = lb::pow_rho(k);
+  const vec3d shift = c.origin - f.min;
+  std::vector<cell_pos> leaf(n);
+  std::vector<std::uint64_t> key(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const vec3d r = shift + c.positions[i].cast<double>();
+    for (int a = 0; a < 3; ++a) {
+      const double x = std::floor(r[a] / f.leaf);
+      leaf[i][std::size_t(a)] = std::uint32_t(
+          std::clamp(x, 0.0, double(cells_per_axis - 1)));  // clamp also maps NaN-free rounding
+    }
+    std::uint64_t kk = 0;
+    for (int l = 1; l <= k; ++l) {
+      const std::uint64_t span = lb::pow_rho(k - l);
+      const auto d = [&](int a) { return (leaf[i][std::size_t(a)] / span) % Rho; };
+      kk = kk * R3 + (d(0) + Rho * d(1) + Rho * Rho * d(2));
+    }
+    key[i] = kk;
+  }
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+
+  working_set ws;
+  ws.note(n * (sizeof(cell_pos) + sizeof(std::uint64_t) + sizeof(std::uint32_t)));
+  rho_grid<Rho> g;
+  access::set_frame(g, k, f.min, f.side, nb, mb);
+  auto& codes = access::codes(g);
+  auto& attrs = access::attrs(g);
+  auto& samples = access::samples(g);
+  std::size_t cells = 0;
+  for (int l = 0; l <= k; ++l) {
+    std::uint64_t div = 1;
+    for (int e = 0; e < k - l; ++e) div *= R3;
+    const std::uint64_t span = lb::pow_rho(k - l);
+    for (std::size_t i = 0; i < n;) {
+      const std::uint64_t ck = key[order[i]] / div;
+      std::size_t j = i;
+      typename lb::code cd;
+      while (j < n && key[order[j]] / div == ck) {
+        if (l < k) cd.set(int((key[order[j]] / (div / R3)) % R3));
+        ++j;
+      }
+      const cell_pos& lp = leaf[order[i]];
+      const cell_pos p{std::uint32_t(lp[0] / span), std::uint32_t(lp[1] / span),
+                       std::uint32_t(lp[2] / span)};
+      const vec3d ctr = lb::centre(p, span, f);
+      std::uint32_t best = order[i];
+      double best_d = std::numeric_limits<double>::infinity();
+      for (std::size_t t = i; t < j; ++t) {
+        const double d = (shift + c.positions[order[t]].cast<double>() - ctr).squaredNorm();
+        if (d < best_d) {
+          best_d = d;
+          best = order[t];
+        }
+      }
+      const std::uint32_t nc = nb ? q->encode(c.normals[best]) : 0u;
+      const std::uint32_t mc = mb ? std::uint32_t(c.materials[best]) : 0u;
+      if (nb + mb > 0) attrs.push_back(std::uint16_t(pack_attr(nc, mc, nb)));
+      if (l < k) codes.push_back(cd);
+      if (o.keep_sample_points)
+        samples.push_back((shift + c.positions[best].cast<double>()).cast<float>());
+      ++cells;
+      i = j;
+    }
+    if (cells > 0xffffffffull)
+      throw InvalidArgument("rho-grid: more cells than 32-bit child indices address");
+    if (!lb::progress(o, double(l + 1) / double(k + 1)))
+      throw Cancelled("rho-grid: build cancelled");
+  }
+  access::finish(g, cells, "rho-grid build");
+  auto& st = access::stats(g);
+  st.peak_working_bytes = ws.peak;
+  st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return g;
+}
+
+// ------------------------------------------------------------------------------------------
+// Triangle meshes
+// ------------------------------------------------------------------------------------------
+template <int Rho>
+rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o) {
+  using lb = level_builder<Rho>;
+  using access = typename lb::access;
+  constexpr int R3 = lb::R3;
+  const auto t0 = std::chrono::steady_clock::now();
+  m.validate("rho-grid input mesh");
+  check_options(o, Rho);
+  if (m.vertices.empty()) throw InvalidArgument("rho-grid: the input mesh has no vertices");
+  const int k = o.depth;
+
+  // Frame from the vertices the faces use (all vertices when there are no faces).
+  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& fc : m.faces)
+    for (auto v : fc) {
+      const vec3d w = m.vertices.world(v);
+      lo = lo.cwiseMin(w);
+      hi = hi.cwiseMax(w);
+    }
+  const frame f = make_frame(lo, hi, Rho, k);
+  const vec3d shift = m.vertices.origin - f.min;
+  const auto rel = [&](std::uint32_t v) {
+    const vec3d p = shift + m.vertices.positions[v].cast<double>();
+    return K::Point_3(p.x(), p.y(), p.z());
+  };
+  tri_vector tris;
+  std::vector<std::uint32_t> face_of;
+  tris.reserve(m.faces.size());
+  for (std::size_t i = 0; i < m.faces.size(); ++i) {
+    const auto& fc = m.faces[i];
+    const K::Point_3 a = rel(fc[0]), b = rel(fc[1]), cc = rel(fc[2]);
+    if (CGAL::collinear(a, b, cc)) continue;  // zero area: measure-zero geometry, skipped
+    tris.emplace_back(a, b, cc);
+    face_of.push_back(std::uint32_t(i));
+  }
+  if (tris.empty()) {
+    // No surface: sample the vertices (of the faces, or all of them) as a point cloud.
+    point_cloud pc;
+    pc.origin = m.vertices.origin;
+    std::vector<std::uint32_t> used;
+    if (m.faces.empty()) {
+      used.resize(m.vertices.size());
+      std::iota(used.begin(), used.end(), 0u);
+    } else {
+      for (const auto& fc : m.faces) used.insert(used.end(), fc.begin(), fc.end());
+      std::sort(used.begin(), used.end());
+      used.erase(std::unique(used.begin(), used.end()), used.end());
+    }
+    for (auto v : used) {
+      pc.positions.push_back(m.vertices.positions[v]);
+      if (!m.vertices.normals.empty()) pc.normals.push_back(m.vertices.normals[v]);
+      if (!m.vertices.materials.empty()) pc.materials.push_back(m.vertices.materials[v]);
+    }
+    return build_from_points<Rho>(pc, o);
+  }
+
+  const int nb = o.normal_bits;  // a mesh always has (geometric) normals
+  const int mb = m.vertices.materials.empty() ? 0 : o.material_bits;
+  if (mb > 0)
+    for (std::size_t i = 0; i < m.vertices.size(); ++i)
+      if (m.vertices.materials[i] >= (1u << mb))
+        throw InvalidArgument("rho-grid: material " + std::to_string(m.vertices.materials[i]) +
+                              " of vertex " + std::to_string(i) + " does not fit in " +
+                              std::to_string(mb) + " material bits");
+  std::optional<normal_quantizer> q;
+  if (nb > 0) q.emplace(nb);
+  const std::vector<vec3f> vnormals =
+      nb == 0 ? std::vector<vec3f>{}
+              : (m.vertices.normals.empty() ? area_weighted_normals(m) : m.vertices.normals);
+
+  aabb_tree tree(tris.cbegin(), tris.cend());
+  tree.build();
+  tree.accelerate_distance_queries();
+  (void)tree.closest_point(K::Point_3(0, 0, 0));  // builds the search structure before threads
+
+  std::optional<tbb::global_control> threads;
+  if (o.threads > 0)
+    threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+
+  rho_grid<Rho> g;
+  access::set_frame(g, k, f.min, f.side, nb, mb);
+  auto& codes = access::codes(g);
+  auto& attrs = access::attrs(g);
+  auto& samples = access::samples(g);
+  working_set ws;
+  std::vector<cell_pos> level{cell_pos{0, 0, 0}}, next;
+  std::size_t cells = 0;
+  for (int l = 0; l <= k; ++l) {
+    const std::uint64_t span = lb::pow_rho(k - l);
+    const std::uint64_t child_span = l < k ? span / Rho : 1;
+    const std::size_t nl = level.size();
+    std::vector<typename lb::code> lcodes(l < k ? nl : 0);
+    std::vector<std::uint16_t> lattrs(nb + mb > 0 ? nl : 0);
+    std::vector<vec3f> lsamples(o.keep_sample_points ? nl : 0);
+    ws.note((level.capacity() + nl * R3) * sizeof(cell_pos) + nl * sizeof(typename lb::code) +
+            nl * 2 + lsamples.size() * sizeof(vec3f));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nl, 64), [&](const auto& range) {
+      std::vector<tri_vector::const_iterator> hits;
+      for (std::size_t ci = range.begin(); ci != range.end(); ++ci) {
+        const cell_pos& p = level[ci];
+        const vec3d ctr = lb::centre(p, span, f);
+        const auto [pt, it] =
+            tree.closest_point_and_primitive(K::Point_3(ctr.x(), ctr.y(), ctr.z()));
+        const vec3d s(pt.x(), pt.y(), pt.z());
+        if (o.keep_sample_points) lsamples[ci] = s.cast<float>();
+        const std::size_t ti = std::size_t(it - tris.cbegin());
+        const auto& fc = m.faces[face_of[ti]];
+        if (nb + mb > 0) {
+          // Barycentric coordinates of the closest point (double, Cramer on the normal equations).
+          const auto P = [&](int i) {
+            const auto& v = tris[ti].vertex(i);
+            return vec3d(v.x(), v.y(), v.z());
+          };
+          const vec3d a = P(0), e1 = P(1) - a, e2 = P(2) - a, d = s - a;
+          const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
+          const double den = d11 * d22 - d12 * d12;
+          double b1 = 0, b2 = 0;
+          if (den > 0) {
+            b1 = std::clamp((d22 * e1.dot(d) - d12 * e2.dot(d)) / den, 0.0, 1.0);
+            b2 = std::clamp((d11 * e2.dot(d) - d12 * e1.dot(d)) / den, 0.0, 1.0 - b1);
+          }
+          const double b0 = 1 - b1 - b2;
+          std::uint32_t nc = 0, mc = 0;
+          if (nb > 0) {
+            vec3d nrm = b0 * vnormals[fc[0]].cast<double>() + b1 * vnormals[fc[1]].cast<double>() +
+                        b2 * vnormals[fc[2]].cast<double>();
+            if (!(nrm.norm() > 1e-12) || !all_finite(nrm)) nrm = e1.cross(e2);
+            nc = q->encode(nrm.cast<float>());
+          }
+          if (mb > 0) {
+            const int vmax = b0 >= b1 && b0 >= b2 ? 0 : (b1 >= b2 ? 1 : 2);
+            mc = m.vertices.materials[fc[std::size_t(vmax)]];
+          }
+          lattrs[ci] = std::uint16_t(pack_attr(nc, mc, nb));
+        }
+        if (l == k) continue;
+        // Childhood code: exact triangle/box tests of the triangles meeting this cell.
+        const auto box = [&](std::uint64_t x0, std::uint64_t y0, std::uint64_t z0,
+                             std::uint64_t sp) {
+          return CGAL::Bbox_3(double(x0) * f.leaf, double(y0) * f.leaf, double(z0) * f.leaf,
+                              double(x0 + sp) * f.leaf, double(y0 + sp) * f.leaf,
+                              double(z0 + sp) * f.leaf);
+        };
+        const std::uint64_t bx = p[0] * span, by = p[1] * span, bz = p[2] * span;
+        hits.clear();
+        tree.all_intersected_primitives(box(bx, by, bz, span), std::back_inserter(hits));
+        typename lb::code cd;
+        const double cs = double(child_span) * f.leaf;
+        for (const auto& h : hits) {
+          const CGAL::Bbox_3 tb = h->bbox();
+          const auto range_of = [&](double lo_, double hi_, std::uint64_t base) {
+            const double o0 = double(base) * f.leaf;
+            const int a0 = std::clamp(int(std::floor((lo_ - o0) / cs)) - 1, 0, Rho - 1);
+            const int a1 = std::clamp(int(std::floor((hi_ - o0) / cs)) + 1, 0, Rho - 1);
+            return std::pair{a0, a1};
+          };
+          const auto [x0, x1] = range_of(tb.xmin(), tb.xmax(), bx);
+          const auto [y0, y1] = range_of(tb.ymin(), tb.ymax(), by);
+          const auto [z0, z1] = range_of(tb.zmin(), tb.zmax(), bz);
+          for (int z = z0; z <= z1; ++z)
+            for (int y = y0; y <= y1; ++y)
+              for (int x = x0; x <= x1; ++x) {
+                const int j = x + Rho * y + Rho * Rho * z;
+                if (cd.test(j)) continue;
+                if (CGAL::do_intersect(*h, box(bx + std::uint64_t(x) * child_span,
+                                               by + std::uint64_t(y) * child_span,
+                                               bz + std::uint64_t(z) * child_span, child_span)))
+                  cd.set(j);
+              }
+        }
+        if (cd.empty()) {
+          // Only possible through rounding at a cell face: keep the child holding the sample.
+          const auto axis = [&](double v, std::uint64_t base) {
+            return std::clamp(int(std::floor((v - double(base) * f.leaf) / cs)), 0, Rho - 1);
+          };
+          cd.set(axis(s.x(), bx) + Rho * axis(s.y(), by) + Rho * Rho * axis(s.z(), bz));
+        }
+        lcodes[ci] = cd;
+      }
+    });
+    cells += nl;
+    if (cells > 0xffffffffull)
+      throw InvalidArgument("rho-grid: more cells than 32-bit child indices address");
+    attrs.insert(attrs.end(), lattrs.begin(), lattrs.end());
+    samples.insert(samples.end(), lsamples.begin(), lsamples.end());
+    if (l < k) {
+      next.clear();
+      for (std::size_t ci = 0; ci < nl; ++ci) {
+        const auto& cd = lcodes[ci];
+        for (int j = 0; j < R3; ++j)
+          if (cd.test(j))
+            next.push_back({std::uint32_t(level[ci][0] * Rho + std::uint32_t(j % Rho)),
+                            std::uint32_t(level[ci][1] * Rho + std::uint32_t((j / Rho) % Rho)),
+                            std::uint32_t(level[ci][2] * Rho + std::uint32_t(j / (Rho * Rho)))});
+      }
+      codes.insert(codes.end(), lcodes.begin(), lcodes.end());
+      std::swap(level, next);
+      ws.note((level.capacity() + next.capacity()) * sizeof(cell_pos));
+    }
+    if (!lb::progress(o, double(l + 1) / double(k + 1)))
+      throw Cancelled("rho-grid: build cancelled");
+  }
+  access::finish(g, cells, "rho-grid build");
+  auto& st = access::stats(g);
+  st.peak_working_bytes = ws.peak;
+  st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return g;
+}
+
+}  // namespace
+
+template <int Rho>
+rho_grid<Rho> build_rho_grid(const triangle_mesh& mesh, const rho_grid_options& options) {
+  return build_from_mesh<Rho>(mesh, options);
+}
+template <int Rho>
+rho_grid<Rho> build_rho_grid(const point_cloud& points, const rho_grid_options& options) {
+  return build_from_points<Rho>(points, options);
+}
+
+#define PBR_LOD_RHO_GRID_BUILD(R)                                                        \
+  template rho_grid<R> build_rho_grid<R>(const triangle_mesh&, const rho_grid_options&); \
+  template rho_grid<R> build_rho_grid<R>(const point_cloud&, const rho_grid_options&);
+PBR_LOD_RHO_GRID_BUILD(2)
+PBR_LOD_RHO_GRID_BUILD(3)
+PBR_LOD_RHO_GRID_BUILD(4)
+PBR_LOD_RHO_GRID_BUILD(5)
+#undef PBR_LOD_RHO_GRID_BUILD
+
+}  // namespace pbr_lod

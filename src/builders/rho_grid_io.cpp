@@ -1,0 +1,305 @@
+// ρ-grid packed streams (Duguet & Drettakis 2004, §3.2): NIS and IS layouts, save/load with
+// validation of every length.
+//
+// File layout (little endian):
+//   magic "PBRLODRG", u32 version, u32 ρ, u32 depth k, u32 layout (0 NIS, 1 IS),
+//   u32 normal bits, u32 material bits, f64 origin[3], f64 cube side, f64 build seconds,
+//   u64 cells per level [k + 1], u64 payload bits, payload bytes ⌈bits/8⌉, u64 FNV-1a of all
+//   bytes before it.
+// Payload, pre-order from the root (children in increasing digit order):
+//   NIS  ρ³-bit code of every inner cell, then the σ-bit attribute of every leaf
+//   IS   per cell: σ-bit attribute, then (inner cells) the ρ³-bit code
+// The cells of one level appear in pre-order in path order, which is the breadth-first order of
+// the in-core structure, so reading appends to per-level arrays and needs no reordering.
+#include <algorithm>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <optional>
+
+#include "pbr_lod/builders/detail/rho_grid_impl.hpp"
+#include "pbr_lod/builders/rho_grid.hpp"
+#include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/normal_quantization.hpp"
+
+namespace pbr_lod {
+namespace {
+
+constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'};
+constexpr std::uint32_t version = 1;
+
+struct header_writer {
+  std::vector<unsigned char>& b;
+  template <class T>
+  void put(const T& v) {
+    const auto* p = reinterpret_cast<const unsigned char*>(&v);
+    b.insert(b.end(), p, p + sizeof(T));
+  }
+};
+
+template <class Code>
+void put_code(detail::bit_writer& w, const Code& c, int bits) {
+  int left = bits;
+  for (auto word : c.w) {
+    const int n = std::min<int>(left, Code::word_bits);
+    w.put(std::uint64_t(word), n);
+    left -= n;
+  }
+}
+template <class Code>
+Code get_code(detail::bit_reader& r, int bits) {
+  Code c;
+  int left = bits;
+  for (auto& word : c.w) {
+    const int n = std::min<int>(left, Code::word_bits);
+    word = static_cast<typename Code::word>(r.get(n, "childhood code"));
+    left -= n;
+  }
+  return c;
+}
+
+}  // namespace
+
+template <int Rho>
+std::vector<unsigned char> rho_grid<Rho>::serialise(rho_grid_layout layout) const {
+  std::vector<unsigned char> out;
+  header_writer h{out};
+  for (char c : magic) h.put(c);
+  h.put(version);
+  h.put(std::uint32_t(Rho));
+  h.put(std::uint32_t(depth_));
+  h.put(std::uint32_t(layout));
+  h.put(std::uint32_t(normal_bits_));
+  h.put(std::uint32_t(material_bits_));
+  h.put(origin_.x());
+  h.put(origin_.y());
+  h.put(origin_.z());
+  h.put(side_);
+  h.put(stats_.build_seconds);
+  for (int l = 0; l <= depth_; ++l)
+    h.put(std::uint64_t(level_start_[std::size_t(l) + 1] - level_start_[std::size_t(l)]));
+  const std::uint64_t bits = payload_bits(layout);
+  h.put(bits);
+
+  detail::bit_writer w;
+  const int s = sigma();
+  const bool is = layout == rho_grid_layout::is;
+  std::vector<std::uint32_t> stack{0};
+  while (!stack.empty()) {
+    const std::uint32_t c = stack.back();
+    stack.pop_back();
+    if (is || is_leaf(c)) {
+      if (is) w.put(attribute(c), s);
+    }
+    if (is_leaf(c)) continue;
+    put_code(w, codes_[c], children_per_cell);
+    for (std::uint32_t i = std::uint32_t(codes_[c].count()); i-- > 0;)
+      stack.push_back(first_child_[c] + i);
+  }
+  if (!is)
+    for (std::size_t c = codes_.size(); c < attrs_count_; ++c)
+      w.put(attribute(std::uint32_t(c)), s);
+  if (w.bits() != bits)
+    throw Error("rho-grid: internal error, wrote " + std::to_string(w.bits()) +
+                " payload bits, expected " + std::to_string(bits));
+  out.insert(out.end(), w.bytes().begin(), w.bytes().end());
+  h.put(detail::fnv1a(out.data(), out.size()));
+  return out;
+}
+
+template <int Rho>
+rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
+                                   const std::string& what) {
+  using access = detail::rho_grid_access<Rho>;
+  detail::byte_reader r{bytes, 0, what};
+  for (char c : magic)
+    if (r.get<char>("magic") != c) throw FormatError(what + ": not a pbr_lod rho-grid (bad magic)");
+  const auto ver = r.get<std::uint32_t>("version");
+  if (ver != version)
+    throw FormatError(what + ": version " + std::to_string(ver) + ", this library reads " +
+                      std::to_string(version));
+  const auto rho_in = r.get<std::uint32_t>("rho");
+  if (rho_in != std::uint32_t(Rho))
+    throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
+                      " grid, a rho=" + std::to_string(Rho) + " grid was expected");
+  const auto depth = r.get<std::uint32_t>("depth");
+  if (depth > std::uint32_t(rho_grid_max_depth(Rho)))
+    throw FormatError(what + ": depth " + std::to_string(depth) + " exceeds the maximum " +
+                      std::to_string(rho_grid_max_depth(Rho)));
+  const auto layout = r.get<std::uint32_t>("layout");
+  if (layout > 1) throw FormatError(what + ": unknown layout " + std::to_string(layout));
+  const auto nb = r.get<std::uint32_t>("normal bits");
+  const auto mb = r.get<std::uint32_t>("material bits");
+  if ((nb != 0 && (nb < std::uint32_t(normal_quantizer::min_bits) || nb > 16)) || mb > 8 ||
+      nb + mb > 16)
+    throw FormatError(what + ": unsupported attribute layout (" + std::to_string(nb) +
+                      " normal bits, " + std::to_string(mb) + " material bits)");
+  vec3d origin;
+  origin.x() = r.get<double>("origin");
+  origin.y() = r.get<double>("origin");
+  origin.z() = r.get<double>("origin");
+  const double side = r.get<double>("cube side");
+  const double seconds = r.get<double>("build seconds");
+  if (!all_finite(origin) || !std::isfinite(side) || !(side > 0))
+    throw FormatError(what + ": origin or cube side is not finite and positive");
+  constexpr std::uint64_t R3 = std::uint64_t(Rho) * Rho * Rho;
+  std::vector<std::uint64_t> per_level(depth + 1);
+  std::uint64_t total = 0;
+  for (std::uint32_t l = 0; l <= depth; ++l) {
+    per_level[l] = r.get<std::uint64_t>("cells per level");
+    const std::uint64_t prev = l == 0 ? 1 : per_level[l - 1];
+    if ((l == 0 && per_level[l] != 1) ||
+        (l > 0 && (per_level[l] < prev || per_level[l] > prev * R3)))
+      throw FormatError(what + ": level " + std::to_string(l) + " has " +
+                        std::to_string(per_level[l]) + " cells, impossible below " +
+                        std::to_string(prev) + " cells");
+    total += per_level[l];
+    if (total > 0xffffffffull)
+      throw FormatError(what + ": more cells than 32-bit child indices address");
+  }
+  const std::uint64_t sigma = nb + mb, leaves = per_level[depth], inner = total - leaves;
+  const std::uint64_t expect = inner * R3 + leaves * sigma + (layout == 1 ? inner * sigma : 0);
+  const auto bits = r.get<std::uint64_t>("payload bits");
+  if (bits != expect)
+    throw FormatError(what + ": payload of " + std::to_string(bits) + " bits, the counts need " +
+                      std::to_string(expect));
+  const std::uint64_t payload_bytes = (bits + 7) / 8;
+  if (bytes.size() - r.pos < 8 || bytes.size() - r.pos - 8 != payload_bytes)
+    throw FormatError(what + ": " + std::to_string(bytes.size()) + " bytes, expected " +
+                      std::to_string(r.pos + payload_bytes + 8) + " (truncated or padded)");
+  std::uint64_t stored;
+  std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
+  if (stored != detail::fnv1a(bytes.data(), bytes.size() - 8))
+    throw FormatError(what + ": checksum mismatch (corrupt stream)");
+  if (bits % 8 != 0 && (bytes[r.pos + payload_bytes - 1] >> (bits % 8)) != 0)
+    throw FormatError(what + ": non-zero padding bits after the payload");
+
+  rho_grid g;
+  access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+  auto& codes = access::codes(g);
+  auto& attrs = access::attrs(g);
+  std::vector<std::vector<code_type>> lcodes(depth);
+  std::vector<std::vector<std::uint16_t>> lattrs(depth + 1);
+  detail::bit_reader br(bytes.data() + r.pos, bits, what);
+  std::optional<normal_quantizer> q;
+  if (nb > 0) q.emplace(int(nb));
+  const auto read_attr = [&](std::vector<std::uint16_t>& dst) {
+    const auto a = std::uint32_t(br.get(int(sigma), "attribute"));
+    if (q && !q->valid(a & ((1u << nb) - 1u)))
+      throw FormatError(what + ": invalid normal code " + std::to_string(a & ((1u << nb) - 1u)) +
+                        " at bit " + std::to_string(br.position()));
+    if (sigma > 0) dst.push_back(std::uint16_t(a));
+  };
+  std::vector<std::uint32_t> stack{0};  // levels of the cells still to read
+  while (!stack.empty()) {
+    const std::uint32_t l = stack.back();
+    stack.pop_back();
+    if (layout == 1) read_attr(lattrs[l]);
+    if (l == depth) {
+      if (layout == 1 && lattrs[l].size() > leaves && sigma > 0)
+        throw FormatError(what + ": more leaves than the " + std::to_string(leaves) + " declared");
+      continue;
+    }
+    const auto c = get_code<code_type>(br, int(R3));
+    const int n = c.count();
+    if (n == 0)
+      throw FormatError(what + ": empty childhood code at level " + std::to_string(l) + ", bit " +
+                        std::to_string(br.position()));
+    lcodes[l].push_back(c);
+    if (lcodes[l].size() > per_level[l])
+      throw FormatError(what + ": level " + std::to_string(l) + " has more cells than the " +
+                        std::to_string(per_level[l]) + " declared");
+    for (int i = 0; i < n; ++i) stack.push_back(l + 1);
+  }
+  std::uint64_t leaf_seen = 0;
+  for (std::uint32_t l = 0; l < depth; ++l) {
+    if (lcodes[l].size() != per_level[l])
+      throw FormatError(what + ": level " + std::to_string(l) + " holds " +
+                        std::to_string(lcodes[l].size()) + " cells, " +
+                        std::to_string(per_level[l]) + " declared");
+    leaf_seen = 0;
+    for (const auto& c : lcodes[l]) leaf_seen += std::uint64_t(c.count());
+    if (leaf_seen != per_level[l + 1])
+      throw FormatError(what + ": level " + std::to_string(l + 1) + " holds " +
+                        std::to_string(leaf_seen) + " cells, " + std::to_string(per_level[l + 1]) +
+                        " declared");
+    codes.insert(codes.end(), lcodes[l].begin(), lcodes[l].end());
+  }
+  if (layout == 0) {
+    for (std::uint64_t i = 0; i < leaves; ++i) read_attr(lattrs[depth]);
+  }
+  if (br.position() != bits)
+    throw FormatError(what + ": payload has " + std::to_string(bits - br.position()) +
+                      " bits left over");
+  if (sigma > 0) {
+    if (layout == 1)
+      for (const auto& la : lattrs) attrs.insert(attrs.end(), la.begin(), la.end());
+    else {
+      attrs.assign(inner, 0);
+      attrs.insert(attrs.end(), lattrs[depth].begin(), lattrs[depth].end());
+    }
+  }
+  access::finish(g, total, what);
+  if (layout == 0 && sigma > 0 && inner > 0) {
+    // Rebuild the intermediate samples bottom-up: mean normal of the children, re-quantised;
+    // the first child's material.
+    for (std::size_t c = inner; c-- > 0;) {
+      const auto cc = std::uint32_t(c);
+      const std::uint32_t first = g.first_child(cc);
+      const int n = g.code(cc).count();
+      std::uint32_t nc = 0;
+      if (q) {
+        vec3f sum = vec3f::Zero();
+        for (int i = 0; i < n; ++i) sum += q->decode(g.normal_code(first + std::uint32_t(i)));
+        nc = q->encode(sum.squaredNorm() > 0 ? vec3f(sum) : q->decode(g.normal_code(first)));
+      }
+      const std::uint32_t mat = g.material(first);
+      attrs[c] = std::uint16_t(nc | (mat << nb));
+    }
+  }
+  access::stats(g).build_seconds = std::isfinite(seconds) ? seconds : 0;
+  return g;
+}
+
+template <int Rho>
+void rho_grid<Rho>::save(const std::string& path, rho_grid_layout layout) const {
+  const auto bytes = serialise(layout);
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) throw IoError(path + ": cannot open for writing");
+  f.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  if (!f) throw IoError(path + ": write failed");
+}
+
+namespace {
+std::vector<unsigned char> read_all(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError(path + ": cannot open");
+  std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
+                                   std::istreambuf_iterator<char>());
+  if (f.bad()) throw IoError(path + ": read error");
+  return bytes;
+}
+}  // namespace
+
+template <int Rho>
+rho_grid<Rho> rho_grid<Rho>::load(const std::string& path) {
+  return parse(read_all(path), path);
+}
+
+int rho_grid_file_rho(const std::string& path) {
+  const auto bytes = read_all(path);
+  detail::byte_reader r{bytes, 0, path};
+  for (char c : magic)
+    if (r.get<char>("magic") != c) throw FormatError(path + ": not a pbr_lod rho-grid (bad magic)");
+  (void)r.get<std::uint32_t>("version");
+  const auto rho = r.get<std::uint32_t>("rho");
+  if (rho < 2 || rho > 5) throw FormatError(path + ": rho " + std::to_string(rho) + " unsupported");
+  return int(rho);
+}
+
+template class rho_grid<2>;
+template class rho_grid<3>;
+template class rho_grid<4>;
+template class rho_grid<5>;
+
+}  // namespace pbr_lod
