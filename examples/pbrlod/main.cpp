@@ -30,8 +30,8 @@ namespace pbrlod_tool {
 const std::vector<method_entry>& methods() {
   static const std::vector<method_entry> m = {
       point_octree_method(),
-      {"rho-grid", "Duguet & Drettakis 2004 (issue #4)", "PBRLODRG"},
-      {"pop", "Chen & Nguyen 2001 (issue #5)", "PBRLODPP"},
+      rho_grid_method(),
+      pop_method(),
       {"pca-octree", "Kalaiah & Varshney 2003", ""},
       {"pmr", "Dey & Hudson 2002", ""},
   };

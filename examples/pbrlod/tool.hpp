@@ -214,6 +214,8 @@ const std::vector<method_entry>& methods();
 
 // One per source file under examples/pbrlod/.
 method_entry point_octree_method();
+method_entry rho_grid_method();
+method_entry pop_method();
 
 /// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,
 /// ellipses: eight instantiations), so a builder is compiled for exactly what the scene has.
