@@ -35,7 +35,7 @@ vec3d direction(double theta, double phi) {
 /// arctangent on [0, 1] and the reflection atan(t) = π/2 − atan(1/t).
 double fast_atan2_first_quadrant(double y, double x) {
   const bool swap = y > x;
-  const double t = swap ? x / y : y / x;  // in [0, 1]
+  const double t = swap ? x / y : (x > 0 ? y / x : 0.0);  // in [0, 1]; 0 for the pole
   const double t2 = t * t;
   const double a =
       t * (0.99997726 +
