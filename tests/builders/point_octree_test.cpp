@@ -1,5 +1,6 @@
 // Tests of the point-octree builder (Pajarola 2003). Each case says why its expectation holds.
 #include <gtest/gtest.h>
+#include <limits>
 
 #include <filesystem>
 #include <fstream>
@@ -123,9 +124,10 @@ TEST(PointOctree, BunnyWithEstimatedNormalsAndEllipses) {
   check_invariants(t);
 }
 
-// The parallel build (subtrees in tasks, spliced) gives exactly the sequential tree.
+// The parallel build (subtrees in tasks, spliced; the passes over the root's 150 000 samples
+// split into blocks of 65 536 on several threads) gives exactly the sequential tree.
 TEST(PointOctree, ParallelBuildEqualsSequential) {
-  const auto pts = demo_points(60000, 11);
+  const auto pts = demo_points(150000, 11);
   const auto a = build_point_octree(pts, {.threads = 1});
   const auto b = build_point_octree(pts, {.threads = 4});
   EXPECT_TRUE(a == b);
@@ -254,6 +256,16 @@ TEST(PointOctree, RejectsBadInput) {
   EXPECT_THROW((void)build_point_octree(s), InvalidArgument);
   s.positions[1] = vec3f(1, 1, 1);
   EXPECT_THROW((void)build_point_octree(s, {.normal_bits = 3}), InvalidArgument);
+  // The check runs on several threads; the message still names the first bad position.
+  s.positions.assign(300000, vec3f(1, 2, 3));
+  s.positions[290000] = vec3f(0, std::numeric_limits<float>::infinity(), 0);
+  s.positions[150001] = vec3f(std::nanf(""), 0, 0);
+  try {
+    (void)build_point_octree(s, {.threads = 4});
+    ADD_FAILURE() << "no exception";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("position 150001 "), std::string::npos) << e.what();
+  }
   // Cancel from the progress callback: throws, returns nothing.
   EXPECT_THROW(
       (void)build_point_octree(demo_points(5000), {.progress = [](double f) { return f < 0.05; }}),

@@ -27,6 +27,7 @@
 // point_octree is immutable; const member functions are safe for concurrent readers.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -34,11 +35,13 @@
 #include <numbers>
 #include <ranges>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -229,13 +232,16 @@ class point_octree {
   friend struct detail::point_octree_builder<A>;
   friend struct detail::point_octree_io<A>;
   [[nodiscard]] bool equal(const point_octree& o) const;
-  void derive_selection() {
+  void derive_selection(unsigned threads = std::thread::hardware_concurrency()) {
     selection_.resize(nodes_.size());
-    for (std::size_t i = 0; i < nodes_.size(); ++i) {
-      const node& nd = nodes_[i];
-      selection_[i] = {std::numbers::pi_v<float> * nd.axis_u.norm() * nd.axis_v.norm(),
-                       std::cos(nd.cone_angle), std::sin(nd.cone_angle)};
-    }
+    detail::parallel_chunks(
+        nodes_.size(), std::max(1u, threads), 1u << 15, [&](std::size_t lo, std::size_t hi) {
+          for (std::size_t i = lo; i < hi; ++i) {
+            const node& nd = nodes_[i];
+            selection_[i] = {std::numbers::pi_v<float> * nd.axis_u.norm() * nd.axis_v.norm(),
+                             std::cos(nd.cone_angle), std::sin(nd.cone_angle)};
+          }
+        });
   }
 
   std::vector<node> nodes_;

@@ -111,6 +111,7 @@ struct point_octree_builder {
   std::vector<vec3f> scratch3;    // scatter buffers; subtrees own disjoint ranges of all of these
   std::vector<rgb8> scratch_rgb;
   std::vector<typename tree::orientation_code> scratch_code;
+  unsigned threads = 1;  // for the passes near the root
   std::atomic<std::size_t> done{0};
   std::atomic<bool> cancel{false};
   mutable std::atomic<std::size_t> circle_fallbacks{0};
@@ -130,12 +131,51 @@ struct point_octree_builder {
     if (codes) fresh(scratch_code);
   }
 
-  /// Stable counting-sort scatter of [first, first + count) of one array by octant.
+  /// Per-octant sums of one pass over a node's samples (or one block of them).
+  struct pass_sums {
+    std::array<std::uint32_t, 8> cnt{};
+    std::array<vec3d, 8> psum, nsum, csum;
+    double r2 = 0;
+    float min_dot = 1;
+    pass_sums() {
+      psum.fill(vec3d::Zero());
+      nsum.fill(vec3d::Zero());
+      csum.fill(vec3d::Zero());
+    }
+    pass_sums& operator+=(const pass_sums& o) {
+      for (std::size_t u = 0; u < 8; ++u) {
+        cnt[u] += o.cnt[u];
+        psum[u] += o.psum[u];
+        nsum[u] += o.nsum[u];
+        csum[u] += o.csum[u];
+      }
+      r2 = std::max(r2, o.r2);
+      min_dot = std::min(min_dot, o.min_dot);
+      return *this;
+    }
+  };
+  /// Samples per block of a pass (see build()).
+  static constexpr std::uint32_t block = 1u << 16;
+
+  /// Stable counting-sort scatter of [first, first + count) of one array by octant, block b
+  /// starting each octant at at[b]; then the copy back. Blocks in parallel over `workers`.
   template <class T>
   void scatter(std::vector<T>& v, std::vector<T>& scratch, std::uint32_t first, std::uint32_t count,
-               std::array<std::uint32_t, 8> pos) {
-    for (std::uint32_t k = first; k < first + count; ++k) scratch[pos[oct[k]]++] = v[k];
-    std::copy(scratch.begin() + first, scratch.begin() + first + count, v.begin() + first);
+               const std::vector<std::array<std::uint32_t, 8>>& at, unsigned workers) {
+    parallel_chunks(at.size(), workers, 1, [&](std::size_t b0, std::size_t b1) {
+      for (std::size_t b = b0; b < b1; ++b) {
+        std::array<std::uint32_t, 8> pos = at[b];
+        const std::uint32_t lo = first + static_cast<std::uint32_t>(b) * block;
+        const std::uint32_t hi =
+            at.size() == 1
+                ? first + count
+                : first + static_cast<std::uint32_t>(std::min<std::size_t>(count, (b + 1) * block));
+        for (std::uint32_t k = lo; k < hi; ++k) scratch[pos[oct[k]]++] = v[k];
+      }
+    });
+    parallel_chunks(count, workers, block, [&](std::size_t lo, std::size_t hi) {
+      std::copy(scratch.begin() + first + lo, scratch.begin() + first + hi, v.begin() + first + lo);
+    });
   }
 
   /// Top-down input of a node (Fig. 3): its samples and the averages its parent accumulated.
@@ -147,16 +187,29 @@ struct point_octree_builder {
     std::uint32_t depth;
   };
 
-  static input root_input(const point_set<A>& pts) {
-    input r{0, static_cast<std::uint32_t>(pts.size()), vec3d::Zero(), vec3d::Zero(), vec3d::Zero(),
-            0};
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      r.mean += pts.positions[i].template cast<double>();
-      r.normal_sum += pts.normals[i].template cast<double>();
-      if constexpr (A.colour)
-        r.colour_sum += vec3d(pts.colours[i].r, pts.colours[i].g, pts.colours[i].b);
+  /// The root's sums, block by block (in parallel), combined in block order.
+  static input root_input(const point_set<A>& pts, unsigned workers) {
+    const auto n = static_cast<std::uint32_t>(pts.size());
+    std::vector<std::array<vec3d, 3>> part((n + block - 1) / block);
+    parallel_chunks(part.size(), workers, 1, [&](std::size_t b0, std::size_t b1) {
+      for (std::size_t b = b0; b < b1; ++b) {
+        std::array<vec3d, 3> t{vec3d::Zero(), vec3d::Zero(), vec3d::Zero()};
+        for (std::size_t i = b * block; i < std::min<std::size_t>(n, (b + 1) * block); ++i) {
+          t[0] += pts.positions[i].template cast<double>();
+          t[1] += pts.normals[i].template cast<double>();
+          if constexpr (A.colour)
+            t[2] += vec3d(pts.colours[i].r, pts.colours[i].g, pts.colours[i].b);
+        }
+        part[b] = t;
+      }
+    });
+    input r{0, n, vec3d::Zero(), vec3d::Zero(), vec3d::Zero(), 0};
+    for (const auto& t : part) {
+      r.mean += t[0];
+      r.normal_sum += t[1];
+      r.colour_sum += t[2];
     }
-    r.mean /= static_cast<double>(pts.size());
+    r.mean /= static_cast<double>(n);
     return r;
   }
 
@@ -327,28 +380,46 @@ struct point_octree_builder {
         normal_valid ? vec3f((inp.normal_sum / nlen).template cast<float>()) : vec3f::UnitZ();
 
     // One linear pass (§3): octant of each sample about the split point p̄_c, the children's
-    // sums, the sphere radius about p̄_c and the cone about n̄_c.
-    std::array<std::uint32_t, 8> cnt{};
-    std::array<vec3d, 8> psum, nsum, csum;
-    psum.fill(vec3d::Zero());
-    nsum.fill(vec3d::Zero());
-    csum.fill(vec3d::Zero());
-    double r2 = 0;
-    float min_dot = 1;
+    // sums, the sphere radius about p̄_c and the cone about n̄_c. Ranges longer than a block run
+    // block by block — in parallel near the root — and combine the blocks' sums in block order,
+    // so the tree does not depend on the thread count.
     const bool can_split = count > opt.leaf_size && inp.depth < opt.max_depth;
-    for (std::uint32_t k = first; k < first + count; ++k) {
-      const std::uint32_t i = k;
-      const vec3d p = in.positions[i].template cast<double>();
-      r2 = std::max(r2, (p - m).squaredNorm());
-      min_dot = std::min(min_dot, nbar.dot(in.normals[i]));
-      if (!can_split) continue;
-      const int o = (p.x() >= m.x() ? 1 : 0) | (p.y() >= m.y() ? 2 : 0) | (p.z() >= m.z() ? 4 : 0);
-      oct[k] = static_cast<std::uint8_t>(o);
-      ++cnt[o];
-      psum[o] += p;
-      nsum[o] += in.normals[i].template cast<double>();
-      if constexpr (A.colour) csum[o] += vec3d(in.colours[i].r, in.colours[i].g, in.colours[i].b);
+    const auto scan = [&](std::uint32_t lo, std::uint32_t hi, pass_sums& ps) {
+      for (std::uint32_t k = lo; k < hi; ++k) {
+        const vec3d p = in.positions[k].template cast<double>();
+        ps.r2 = std::max(ps.r2, (p - m).squaredNorm());
+        ps.min_dot = std::min(ps.min_dot, nbar.dot(in.normals[k]));
+        if (!can_split) continue;
+        const int o =
+            (p.x() >= m.x() ? 1 : 0) | (p.y() >= m.y() ? 2 : 0) | (p.z() >= m.z() ? 4 : 0);
+        oct[k] = static_cast<std::uint8_t>(o);
+        ++ps.cnt[o];
+        ps.psum[o] += p;
+        ps.nsum[o] += in.normals[k].template cast<double>();
+        if constexpr (A.colour)
+          ps.csum[o] += vec3d(in.colours[k].r, in.colours[k].g, in.colours[k].b);
+      }
+    };
+    const std::uint32_t blocks = (count + block - 1) / block;
+    const unsigned workers = parallel ? threads : 1;
+    pass_sums all;
+    std::vector<pass_sums> parts;  // per block, when there is more than one
+    if (blocks <= 1) {
+      scan(first, first + count, all);
+    } else {
+      parts.resize(blocks);
+      parallel_chunks(blocks, workers, 1, [&](std::size_t b0, std::size_t b1) {
+        for (std::size_t b = b0; b < b1; ++b)
+          scan(first + static_cast<std::uint32_t>(b) * block,
+               first + static_cast<std::uint32_t>(std::min<std::size_t>(count, (b + 1) * block)),
+               parts[b]);
+      });
+      for (const auto& ps : parts) all += ps;
     }
+    const auto& cnt = all.cnt;
+    const auto &psum = all.psum, &nsum = all.nsum, &csum = all.csum;
+    const double r2 = all.r2;
+    const float min_dot = all.min_dot;
     int nonempty = 0;
     for (auto c : cnt) nonempty += c > 0;
 
@@ -400,12 +471,28 @@ struct point_octree_builder {
       start[static_cast<std::size_t>(o)] = acc;
       acc += cnt[static_cast<std::size_t>(o)];
     }
-    scatter(in.positions, scratch3, first, count, start);
-    scatter(in.normals, scratch3, first, count, start);
-    scatter(in.axis_u, scratch3, first, count, start);
-    scatter(in.axis_v, scratch3, first, count, start);
-    if constexpr (A.colour) scatter(in.colours, scratch_rgb, first, count, start);
-    if (in_codes) scatter(*in_codes, scratch_code, first, count, start);
+    // Where each block's samples of each octant go: the octant's start plus the counts of the
+    // blocks before it.
+    std::vector<std::array<std::uint32_t, 8>> at(std::max<std::size_t>(1, parts.size()));
+    if (parts.empty()) {
+      at[0] = start;
+    } else {
+      std::array<std::uint32_t, 8> next = start;
+      for (std::size_t b = 0; b < parts.size(); ++b)
+        for (std::size_t o = 0; o < 8; ++o) {
+          at[b][o] = next[o];
+          next[o] += parts[b].cnt[o];
+        }
+    }
+    const auto scatter_all = [&](auto& v, auto& scratch) {
+      scatter(v, scratch, first, count, at, workers);
+    };
+    scatter_all(in.positions, scratch3);
+    scatter_all(in.normals, scratch3);
+    scatter_all(in.axis_u, scratch3);
+    scatter_all(in.axis_v, scratch3);
+    if constexpr (A.colour) scatter_all(in.colours, scratch_rgb);
+    if (in_codes) scatter_all(*in_codes, scratch_code);
     const auto first_child = static_cast<std::uint32_t>(L.nodes.size());
     nd.leaf = 0;
     nd.first = first_child;
@@ -428,8 +515,7 @@ struct point_octree_builder {
       std::vector<local> locals(kids.size());
       std::vector<std::future<summary>> futs;
       for (std::size_t j = 0; j < kids.size(); ++j) {
-        // ≈ 0.4 nodes per sample (Table 2): room for the subtree without regrowing.
-        reserve(locals[j], kids[j].count / 2 + 16);
+        reserve(locals[j], node_estimate(kids[j].count));
         locals[j].nodes.resize(1);
         if constexpr (A.colour) locals[j].colours.resize(1);
         if (q) locals[j].codes.resize(1);
@@ -469,6 +555,10 @@ struct point_octree_builder {
     L.nodes[ni] = nd;
     return s;
   }
+
+  /// Room for the nodes of n samples without regrowing: ≈ 0.4 per sample at leaf size 8
+  /// (Table 2; 0.25 was reserved before, so a sequential build regrew its node array once).
+  std::size_t node_estimate(std::size_t n) const { return n * 5 / (opt.leaf_size + 2) + 16; }
 
   /// Room for n nodes in L (on huge pages when large).
   void reserve(local& L, std::size_t n) const {
@@ -544,9 +634,24 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   if (opt.normal_bits != 0 && (opt.normal_bits < 6 || opt.normal_bits > 24))
     throw InvalidArgument("build_point_octree: normal_bits must be 0 or 6..24");
   if (!all_finite(points.origin)) throw InvalidArgument("build_point_octree: origin is not finite");
-  for (std::size_t i = 0; i < points.size(); ++i)
-    if (!all_finite(points.positions[i]))
-      throw InvalidArgument("build_point_octree: position " + std::to_string(i) + " is not finite");
+  const unsigned threads =
+      opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
+  const std::size_t n = points.size();
+  {
+    std::atomic<std::size_t> bad{n};  // the first non-finite position
+    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi && i < bad.load(std::memory_order_relaxed); ++i)
+        if (!all_finite(points.positions[i])) {
+          std::size_t b = bad.load();
+          while (i < b && !bad.compare_exchange_weak(b, i)) {
+          }
+          break;
+        }
+    });
+    if (bad.load() < n)
+      throw InvalidArgument("build_point_octree: position " + std::to_string(bad.load()) +
+                            " is not finite");
+  }
 
   point_octree<A> out;
   auto& st = out.stats_;
@@ -559,18 +664,26 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   // The working copy: the input's attributes plus what §4 estimates from k nearest neighbours.
   point_set<A> work;
   work.origin = points.origin;
-  const auto copy = [](auto& to, const auto& from) {
-    reserve_huge(to, from.size());
-    to.assign(from.begin(), from.end());
+  const auto copy = [&](auto& to, const auto& from) {
+    reserve_huge(to, n);
+    to.resize(n);
+    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
+      std::copy(from.begin() + static_cast<std::ptrdiff_t>(lo),
+                from.begin() + static_cast<std::ptrdiff_t>(hi),
+                to.begin() + static_cast<std::ptrdiff_t>(lo));
+    });
   };
   copy(work.positions, points.positions);
   if constexpr (In.colour) copy(work.colours, points.colours);
   if constexpr (In.normal) {
     copy(work.normals, points.normals);
-    for (auto& n : work.normals) {
-      const float len = n.norm();
-      n = (len > 0 && std::isfinite(len)) ? vec3f(n / len) : vec3f::UnitZ();
-    }
+    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) {
+        vec3f& v = work.normals[i];
+        const float len = v.norm();
+        v = (len > 0 && std::isfinite(len)) ? vec3f(v / len) : vec3f::UnitZ();
+      }
+    });
   } else if constexpr (!In.ellipse) {
     // Neither: both from one k-NN search.
     auto est = estimate_normals_and_ellipses(work.positions, opt.knn, opt.knn_ellipses, true);
@@ -598,8 +711,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   std::vector<typename point_octree<A>::orientation_code> work_codes;
   if (opt.normal_bits > 0) {
     quant.emplace(opt.normal_bits);
-    quantize_samples(work, *quant, work_codes,
-                     opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency()));
+    quantize_samples(work, *quant, work_codes, threads);
   }
   out.normal_bits_ = opt.normal_bits;
 
@@ -608,13 +720,13 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   local L;
   // A point-octree has ≈ 0.4 nodes per sample at leaf size 8 (paper, Table 2); reserving avoids
   // re-copying the node array while it grows.
-  b.reserve(L, work.size() / std::max<std::size_t>(1, opt.leaf_size / 2) + 16);
+  b.reserve(L, b.node_estimate(work.size()));
   L.nodes.resize(1);
   if constexpr (A.colour) L.colours.resize(1);
   if (quant) L.codes.resize(1);
-  const unsigned threads =
-      opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
-  b.build(L, 0, b.root_input(work), threads > 1 && work.size() > 20000);
+  b.threads = threads;
+  const bool parallel = threads > 1 && work.size() > 20000;
+  b.build(L, 0, b.root_input(work, parallel ? threads : 1), parallel);
   if (b.cancel.load()) throw Cancelled("build_point_octree: cancelled");
 
   out.nodes_ = std::move(L.nodes);
@@ -623,7 +735,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   // The build left the samples in leaf order.
   out.samples_ = std::move(work);
   out.sample_codes_ = std::move(work_codes);
-  out.derive_selection();
+  out.derive_selection(threads);
   st.tree_seconds = std::chrono::duration<double>(clock::now() - t1).count();
   st.circle_fallbacks = b.circle_fallbacks.load();
   st.nodes = out.nodes_.size();
