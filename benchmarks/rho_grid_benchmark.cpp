@@ -2,15 +2,21 @@
 // sample of the NIS and IS streams and of the in-core structure) on the Stanford bunny and
 // Buddha at oct/7, tri/4, oct/10, tri/6; build time and peak memory (tri/7 on the bunny);
 // flexible rendering in float and fixed point (§4.1, §5.1); one-pass shadows against the
-// rasteriser's two-pass shadow map (§4.2). docs/rho-grid.md quotes these numbers.
+// rasteriser's two-pass shadow map (§4.2); beyond the paper, the entropy-coded layout (bits per
+// sample of the coded geometry and attributes, encode and decode time, the context choices).
+// docs/rho-grid.md quotes these numbers.
 //
 // Run with --benchmark_repetitions=3 --benchmark_report_aggregates_only=true for medians.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
+#include <algorithm>
+#include <chrono>
 #include <map>
 #include <string>
+#include <tuple>
 
+#include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/builders/rho_grid_render.hpp"
 #include "pbr_lod/io/read.hpp"
@@ -105,6 +111,95 @@ void bm_tri7_bunny(benchmark::State& state) {
   state.counters["rss_before_MB"] = before;
 }
 BENCHMARK(bm_tri7_bunny)->Unit(benchmark::kMillisecond)->Iterations(1);
+
+// Built grids shared by the coding benchmarks (the build is not what they time).
+template <int Rho>
+const rho_grid<Rho>& cached_grid(int model_index, int depth) {
+  static std::map<std::tuple<int, int>, rho_grid<Rho>> cache;
+  const auto key = std::make_tuple(model_index, depth);
+  auto it = cache.find(key);
+  if (it == cache.end())
+    it = cache
+             .emplace(key, build_rho_grid<Rho>(model(model_name(model_index)),
+                                               {.depth = depth, .threads = 2}))
+             .first;
+  return it->second;
+}
+
+// Beyond the paper: the compressed layout at the Table 2 levels. The loop times the encode
+// (serialise(compressed): both streams, header, checksum); decode_ms is the median of 3 parses
+// (decode + validation + the in-core structure). Sizes are the real stream byte counts.
+template <int Rho>
+void bm_coded(benchmark::State& state) {
+  const auto& g = cached_grid<Rho>(int(state.range(0)), int(state.range(1)));
+  std::vector<unsigned char> bytes;
+  for (auto _ : state) {
+    bytes = g.serialise(rho_grid_layout::compressed);
+    benchmark::DoNotOptimize(bytes.data());
+  }
+  std::vector<double> dec;
+  for (int i = 0; i < 3; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto back = rho_grid<Rho>::parse(bytes);
+    dec.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    if (!(back == g)) state.SkipWithError("compressed round trip differs");
+  }
+  std::sort(dec.begin(), dec.end());
+  const auto cs = g.coded_size();
+  const double n = double(g.leaf_count());
+  state.counters["samples"] = n;
+  state.counters["bps_geo"] = cs.bits_per_sample_geometry;
+  state.counters["bps_attr"] = cs.bits_per_sample_attributes;
+  state.counters["bps_file"] = double(cs.file_bytes) * 8 / n;
+  state.counters["bps_nis"] = g.stats().bits_per_sample_nis;
+  state.counters["bps_is"] = g.stats().bits_per_sample_is;
+  state.counters["kB_coded"] = double(cs.file_bytes) / 1e3;
+  state.counters["decode_ms"] = dec[1];
+  state.counters["enc_samples/s"] =
+      benchmark::Counter(n * double(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["dec_samples/s"] = n / (dec[1] / 1e3);
+}
+BENCHMARK(bm_coded<2>)
+    ->ArgNames({"model", "depth"})
+    ->Args({0, 7})
+    ->Args({1, 7})
+    ->Args({0, 10})
+    ->Args({1, 10})
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(bm_coded<3>)
+    ->ArgNames({"model", "depth"})
+    ->Args({0, 4})
+    ->Args({1, 4})
+    ->Args({0, 6})
+    ->Args({1, 6})
+    ->Unit(benchmark::kMillisecond);
+
+// The context choices of the coder: geometry context model (0 level+child, 1 + parent's face
+// neighbours, 2 + child-level neighbours) × attribute predictor (0 parent, 1 previous sibling).
+template <int Rho>
+void bm_coder_contexts(benchmark::State& state) {
+  const auto& g = cached_grid<Rho>(int(state.range(0)), int(state.range(1)));
+  const detail::rho_coder_options o{
+      .geometry = detail::rho_geometry_context(std::uint32_t(state.range(2))),
+      .attributes = detail::rho_attribute_predictor(std::uint32_t(state.range(3)))};
+  detail::rho_coded_streams s;
+  for (auto _ : state) {
+    s = detail::rho_grid_encode(g, o);
+    benchmark::DoNotOptimize(s.geometry.data());
+  }
+  const double n = double(g.leaf_count());
+  state.counters["bps_geo"] = double(s.geometry.size()) * 8 / n;
+  state.counters["bps_attr"] = double(s.attributes.size()) * 8 / n;
+}
+BENCHMARK(bm_coder_contexts<2>)
+    ->ArgNames({"model", "depth", "geo", "attr"})
+    ->ArgsProduct({{0, 1}, {7}, {0, 1, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK(bm_coder_contexts<3>)
+    ->ArgNames({"model", "depth", "geo", "attr"})
+    ->ArgsProduct({{0, 1}, {4}, {0, 1, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
 
 // Point cloud input: the bunny's vertices.
 void bm_points(benchmark::State& state) {

@@ -13,4 +13,5 @@ target_link_libraries(pbr_lod_rho_grid_build PRIVATE CGAL::CGAL Eigen3::Eigen TB
                       pbr_lod_warnings)
 
 target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/rho_grid_io.cpp
+               ${CMAKE_CURRENT_LIST_DIR}/rho_grid_codec.cpp
                $<TARGET_OBJECTS:pbr_lod_rho_grid_build>)

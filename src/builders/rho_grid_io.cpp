@@ -11,12 +11,18 @@
 //   IS   per cell: σ-bit attribute, then (inner cells) the ρ³-bit code
 // The cells of one level appear in pre-order in path order, which is the breadth-first order of
 // the in-core structure, so reading appends to per-level arrays and needs no reordering.
+//
+// Compressed layout (2, beyond the paper; version 2, NIS/IS files stay version 1): the same
+// header up to the cells per level, then u32 geometry context model, u32 attribute predictor,
+// u64 geometry bytes G, u64 attribute bytes A, G + A bytes of the two range-coded streams
+// (rho_grid_codec.cpp), u64 FNV-1a.
 #include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <iterator>
 #include <optional>
 
+#include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/detail/rho_grid_impl.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/core/binary.hpp"
@@ -26,7 +32,8 @@ namespace pbr_lod {
 namespace {
 
 constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'};
-constexpr std::uint32_t version = 1;
+constexpr std::uint32_t version = 1;             // NIS, IS
+constexpr std::uint32_t version_compressed = 2;  // + the compressed layout
 
 struct header_writer {
   std::vector<unsigned char>& b;
@@ -58,26 +65,75 @@ Code get_code(detail::bit_reader& r, int bits) {
   return c;
 }
 
+/// The header common to every layout, up to the cells per level.
+template <int Rho>
+void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_grid_layout layout) {
+  header_writer h{out};
+  for (char c : magic) h.put(c);
+  h.put(layout == rho_grid_layout::compressed ? version_compressed : version);
+  h.put(std::uint32_t(Rho));
+  h.put(std::uint32_t(g.depth()));
+  h.put(std::uint32_t(layout));
+  h.put(std::uint32_t(g.normal_bits()));
+  h.put(std::uint32_t(g.material_bits()));
+  h.put(g.origin().x());
+  h.put(g.origin().y());
+  h.put(g.origin().z());
+  h.put(g.cube_side());
+  h.put(g.stats().build_seconds);
+  for (int l = 0; l <= g.depth(); ++l)
+    h.put(std::uint64_t(g.level_begin(l + 1) - g.level_begin(l)));
+}
+
 }  // namespace
+
+namespace detail {
+template <int Rho>
+std::vector<unsigned char> rho_grid_serialise_compressed(const rho_grid<Rho>& g,
+                                                         const rho_coder_options& options) {
+  std::vector<unsigned char> out;
+  put_header(out, g, rho_grid_layout::compressed);
+  const rho_coded_streams s = rho_grid_encode(g, options);
+  header_writer h{out};
+  h.put(std::uint32_t(options.geometry));
+  h.put(std::uint32_t(options.attributes));
+  h.put(std::uint64_t(s.geometry.size()));
+  h.put(std::uint64_t(s.attributes.size()));
+  out.insert(out.end(), s.geometry.begin(), s.geometry.end());
+  out.insert(out.end(), s.attributes.begin(), s.attributes.end());
+  h.put(fnv1a(out.data(), out.size()));
+  return out;
+}
+}  // namespace detail
+
+template <int Rho>
+rho_grid_coded_size rho_grid<Rho>::coded_size() const {
+  const auto bytes = detail::rho_grid_serialise_compressed(*this, {});
+  // Read the two stream lengths back from the file just written: the sizes are those of the
+  // bytes the decoder reads, never an estimate.
+  std::uint64_t gb = 0, ab = 0;
+  const std::size_t lengths = 8 + 6 * 4 + 5 * 8 + std::size_t(depth_ + 1) * 8 + 2 * 4;
+  std::memcpy(&gb, bytes.data() + lengths, 8);
+  std::memcpy(&ab, bytes.data() + lengths + 8, 8);
+  rho_grid_coded_size s;
+  s.geometry_bytes = gb;
+  s.attribute_bytes = ab;
+  s.file_bytes = bytes.size();
+  const double n = std::max<double>(1, double(leaf_count()));
+  s.bits_per_sample_geometry = double(gb) * 8 / n;
+  s.bits_per_sample_attributes = double(ab) * 8 / n;
+  return s;
+}
 
 template <int Rho>
 std::vector<unsigned char> rho_grid<Rho>::serialise(rho_grid_layout layout) const {
+  if (layout == rho_grid_layout::compressed)
+    return detail::rho_grid_serialise_compressed(*this, {});
+  if (layout != rho_grid_layout::nis && layout != rho_grid_layout::is)
+    throw InvalidArgument("rho-grid: unknown layout " + std::to_string(std::uint32_t(layout)));
   std::vector<unsigned char> out;
+  put_header(out, *this, layout);
   header_writer h{out};
-  for (char c : magic) h.put(c);
-  h.put(version);
-  h.put(std::uint32_t(Rho));
-  h.put(std::uint32_t(depth_));
-  h.put(std::uint32_t(layout));
-  h.put(std::uint32_t(normal_bits_));
-  h.put(std::uint32_t(material_bits_));
-  h.put(origin_.x());
-  h.put(origin_.y());
-  h.put(origin_.z());
-  h.put(side_);
-  h.put(stats_.build_seconds);
-  for (int l = 0; l <= depth_; ++l)
-    h.put(std::uint64_t(level_start_[std::size_t(l) + 1] - level_start_[std::size_t(l)]));
   const std::uint64_t bits = payload_bits(layout);
   h.put(bits);
 
@@ -115,9 +171,9 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   for (char c : magic)
     if (r.get<char>("magic") != c) throw FormatError(what + ": not a pbr_lod rho-grid (bad magic)");
   const auto ver = r.get<std::uint32_t>("version");
-  if (ver != version)
+  if (ver != version && ver != version_compressed)
     throw FormatError(what + ": version " + std::to_string(ver) + ", this library reads " +
-                      std::to_string(version));
+                      std::to_string(version) + " and " + std::to_string(version_compressed));
   const auto rho_in = r.get<std::uint32_t>("rho");
   if (rho_in != std::uint32_t(Rho))
     throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
@@ -127,7 +183,9 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
     throw FormatError(what + ": depth " + std::to_string(depth) + " exceeds the maximum " +
                       std::to_string(rho_grid_max_depth(Rho)));
   const auto layout = r.get<std::uint32_t>("layout");
-  if (layout > 1) throw FormatError(what + ": unknown layout " + std::to_string(layout));
+  if (layout > 2 || (layout == 2) != (ver == version_compressed))
+    throw FormatError(what + ": unknown layout " + std::to_string(layout) + " for version " +
+                      std::to_string(ver));
   const auto nb = r.get<std::uint32_t>("normal bits");
   const auto mb = r.get<std::uint32_t>("material bits");
   if ((nb != 0 && (nb < std::uint32_t(normal_quantizer::min_bits) || nb > 16)) || mb > 8 ||
@@ -156,6 +214,33 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
     total += per_level[l];
     if (total > 0xffffffffull)
       throw FormatError(what + ": more cells than 32-bit child indices address");
+  }
+  if (layout == 2) {
+    rho_grid g;
+    access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+    const auto gm = r.get<std::uint32_t>("geometry context model");
+    const auto am = r.get<std::uint32_t>("attribute predictor");
+    if (gm > 2 || am > 1)
+      throw FormatError(what + ": unknown context model " + std::to_string(gm) + "/" +
+                        std::to_string(am));
+    const auto gbytes = r.get<std::uint64_t>("geometry bytes");
+    const auto abytes = r.get<std::uint64_t>("attribute bytes");
+    const std::uint64_t left = bytes.size() - r.pos;
+    if (left < 8 || gbytes > left - 8 || abytes != left - 8 - gbytes)
+      throw FormatError(what + ": " + std::to_string(bytes.size()) +
+                        " bytes, the header declares " + std::to_string(gbytes) + " + " +
+                        std::to_string(abytes) + " coded bytes (truncated or padded)");
+    std::uint64_t stored;
+    std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
+    if (stored != detail::fnv1a(bytes.data(), bytes.size() - 8))
+      throw FormatError(what + ": checksum mismatch (corrupt stream)");
+    const detail::rho_coder_options opt{.geometry = detail::rho_geometry_context(gm),
+                                        .attributes = detail::rho_attribute_predictor(am)};
+    detail::rho_grid_decode(g, bytes.data() + r.pos, std::size_t(gbytes),
+                            bytes.data() + r.pos + gbytes, std::size_t(abytes), per_level, opt,
+                            what);
+    access::stats(g).build_seconds = std::isfinite(seconds) ? seconds : 0;
+    return g;
   }
   const std::uint64_t sigma = nb + mb, leaves = per_level[depth], inner = total - leaves;
   const std::uint64_t expect = inner * R3 + leaves * sigma + (layout == 1 ? inner * sigma : 0);
@@ -297,6 +382,14 @@ int rho_grid_file_rho(const std::string& path) {
   return int(rho);
 }
 
+template std::vector<unsigned char> detail::rho_grid_serialise_compressed<2>(
+    const rho_grid<2>&, const detail::rho_coder_options&);
+template std::vector<unsigned char> detail::rho_grid_serialise_compressed<3>(
+    const rho_grid<3>&, const detail::rho_coder_options&);
+template std::vector<unsigned char> detail::rho_grid_serialise_compressed<4>(
+    const rho_grid<4>&, const detail::rho_coder_options&);
+template std::vector<unsigned char> detail::rho_grid_serialise_compressed<5>(
+    const rho_grid<5>&, const detail::rho_coder_options&);
 template class rho_grid<2>;
 template class rho_grid<3>;
 template class rho_grid<4>;

@@ -103,6 +103,19 @@ struct rho_grid_stats {
 enum class rho_grid_layout : std::uint32_t {
   nis = 0,  ///< no intermediate samples: codes in pre-order, then the leaf attributes
   is = 1,   ///< intermediate samples: per cell in pre-order, attribute then code (leaf: attribute)
+  /// Beyond the paper: the codes and every cell's attribute (as IS holds them) entropy-coded
+  /// with an adaptive binary range coder, contexts from the neighbourhood (G-PCC style) and
+  /// attributes predicted from the parent cell's (detail/rho_grid_coder.hpp).
+  compressed = 2,
+};
+
+/// Sizes of the compressed layout: the real byte counts of the streams the decoder reads.
+struct rho_grid_coded_size {
+  std::uint64_t geometry_bytes = 0;       ///< range-coded childhood codes
+  std::uint64_t attribute_bytes = 0;      ///< range-coded attributes of every cell (inner + leaf)
+  std::uint64_t file_bytes = 0;           ///< serialise(compressed).size(): + header + checksum
+  double bits_per_sample_geometry = 0;    ///< geometry_bytes·8 / leaf samples
+  double bits_per_sample_attributes = 0;  ///< attribute_bytes·8 / leaf samples
 };
 
 namespace detail {
@@ -215,15 +228,18 @@ class rho_grid {
   }
 
   // ---- storage (§3.2)
-  /// The whole file (header, packed payload, checksum) as bytes.
+  /// The whole file (header, packed or coded payload, checksum) as bytes.
   [[nodiscard]] std::vector<unsigned char> serialise(rho_grid_layout layout) const;
   /// Parses and validates bytes written by serialise(); `what` names the data in messages.
   /// Throws FormatError for anything malformed: magic, version, ρ, every length, the tree shape
-  /// against the counts, normal codes, trailing bits, checksum. An NIS stream has no inner
-  /// attributes: they are rebuilt bottom-up (mean of the children's normals, re-quantised;
+  /// against the counts, normal codes, trailing bits, checksum; for the compressed layout every
+  /// decoded symbol against the counts and ranges, and the exact stream lengths. An NIS stream has
+  /// no inner attributes: they are rebuilt bottom-up (mean of the children's normals, re-quantised;
   /// material of the first child), so load(NIS) equals the build in codes and leaf attributes.
   [[nodiscard]] static rho_grid parse(const std::vector<unsigned char>& bytes,
                                       const std::string& what = "rho-grid stream");
+  /// Encodes the compressed layout and returns its sizes (costs one encode).
+  [[nodiscard]] rho_grid_coded_size coded_size() const;
   /// Writes serialise(layout) to path; throws IoError.
   void save(const std::string& path, rho_grid_layout layout = rho_grid_layout::is) const;
   /// Reads a file written by save(); throws IoError / FormatError.

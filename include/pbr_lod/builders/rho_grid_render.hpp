@@ -347,11 +347,14 @@ template <int Rho>
 /// §4.2: shading and shadows from the directional light o.raster.sun in one traversal, front to
 /// back from the light. Each drawn sample's light-space position picks a texel of an
 /// orthographic light map of `o.raster.shadow_map_size`² texels over the cube; the sample is in
-/// shadow when a sample drawn before it (hence nearer the light) wrote that texel at a depth
-/// more than bias = the sample's cell radius + shadow_bias_texels texels nearer; it then writes
-/// its footprint (its cell's radius) into the map. The colour is the material (or flat) colour
-/// × Lambert (two-sided) when lit, × ambient in shadow — what the rasteriser's two-pass shadows
-/// compose. Needs normals (throws InvalidArgument otherwise) and a non-zero light direction.
+/// shadow when a sample drawn before it (hence nearer the light) wrote that texel with its
+/// cell's far extent (centre depth + half its cell diagonal) nearer than the near extent of the
+/// sample's own cell less shadow_bias_texels texels; it then writes its footprint (disk of half
+/// its cell side) into the map. Comparing extents, not centres, keeps a coarse splat from
+/// shadowing the finer cells of the surface it lies on (test APlaneCastsNoShadowOnItself). The
+/// colour is the material (or flat) colour × Lambert (two-sided) when lit, × ambient in shadow —
+/// what the rasteriser's two-pass shadows compose. Needs normals (throws InvalidArgument otherwise)
+/// and a non-zero light direction.
 template <int Rho>
 [[nodiscard]] image render_rho_grid_one_pass_shadows(const rho_grid<Rho>& g, const camera& cam,
                                                      const rho_grid_render_options& o,
@@ -392,9 +395,13 @@ template <int Rho>
           const float z = -d.dot(L);  // distance from the light, up to a constant
           const float side = float(g.cell_side(c.level));
           const int ix = std::clamp(int(tu), 0, n - 1), iy = std::clamp(int(tv), 0, n - 1);
-          const float bias = std::sqrt(3.0f) * side + o.raster.shadow_bias_texels * texel;
-          const bool shadowed =
-              depth[std::size_t(iy) * std::size_t(n) + std::size_t(ix)] < z - bias;
+          // The sample's surface lies within its cell, r = half the cell's diagonal from the
+          // centre. The map holds each occluder's far extent (centre + its own r), so a sample
+          // is shadowed only by a cell wholly nearer the light than the sample's cell: a coarse
+          // splat beside a leaf (mixed levels, s ≥ 2) no longer shadows the surface it lies on.
+          const float r = 0.5f * std::sqrt(3.0f) * side;
+          const bool shadowed = depth[std::size_t(iy) * std::size_t(n) + std::size_t(ix)] <
+                                z - r - o.raster.shadow_bias_texels * texel;
           // Footprint: the texels whose centres lie within half a cell (+ half a texel) of the
           // sample in the light plane.
           const float fr = (0.5f * side) / texel + 0.5f;
@@ -404,7 +411,7 @@ template <int Rho>
               const float dx = float(x) + 0.5f - tu, dy = float(y) + 0.5f - tv;
               if (dx * dx + dy * dy > fr * fr) continue;
               float& t = depth[std::size_t(y) * std::size_t(n) + std::size_t(x)];
-              t = std::min(t, z);
+              t = std::min(t, z + r);
             }
           vec3f nrm = q.decode(g.normal_code(c.cell));
           if (nrm.dot(p - v.eye) > 0) nrm = -nrm;  // two-sided, as the rasteriser
