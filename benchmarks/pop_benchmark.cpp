@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <tuple>
 
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/io/read.hpp"
@@ -55,12 +56,16 @@ const char* mesh_name(int which) {
   return which == 0 ? "bunny" : which == 1 ? "buddha_res3" : "grid_2M";
 }
 
-const tree& built(int which, pop_sphere_rule rule) {
-  static std::map<std::pair<int, int>, tree> cache;
-  const auto key = std::make_pair(which, static_cast<int>(rule));
+/// quantised: QSplat-style node records (the default); false: float spheres and cones.
+const tree& built(int which, pop_sphere_rule rule, bool quantised = true) {
+  static std::map<std::tuple<int, int, bool>, tree> cache;
+  const auto key = std::make_tuple(which, static_cast<int>(rule), quantised);
   auto it = cache.find(key);
   if (it == cache.end())
-    it = cache.emplace(key, build_pop<with_normals>(mesh(which), {.spheres = rule})).first;
+    it = cache
+             .emplace(key, build_pop<with_normals>(mesh(which),
+                                                   {.spheres = rule, .quantise_nodes = quantised}))
+             .first;
   return it->second;
 }
 
@@ -80,11 +85,13 @@ camera sweep_camera(int which, const tree& t) {
 void bm_build(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0));
   const auto rule = static_cast<pop_sphere_rule>(state.range(1));
+  const auto adjacency = static_cast<pop_adjacency>(state.range(2));
   const auto& m = mesh(which);
   state.SetLabel(mesh_name(which));
   pop_build_stats st;
   for (auto _ : state) {
-    const auto t = build_pop<with_normals>(m, {.spheres = rule, .threads = 2});
+    const auto t =
+        build_pop<with_normals>(m, {.spheres = rule, .threads = 2, .adjacency = adjacency});
     st = t.stats();
     benchmark::DoNotOptimize(t.nodes().data());
   }
@@ -92,6 +99,7 @@ void bm_build(benchmark::State& state) {
   state.counters["Mtri/s"] = benchmark::Counter(
       1e-6 * static_cast<double>(st.triangles) * static_cast<double>(state.iterations()),
       benchmark::Counter::kIsRate);
+  state.counters["prepare_s"] = st.prepare_seconds;
   state.counters["adjacency_s"] = st.adjacency_seconds;
   state.counters["tree_s"] = st.tree_seconds;
   state.counters["leaves/vertex"] =
@@ -103,8 +111,8 @@ void bm_build(benchmark::State& state) {
   state.counters["B/triangle"] = st.bytes_per_triangle;
 }
 BENCHMARK(bm_build)
-    ->ArgsProduct({{0, 1, 2}, {0, 1}})
-    ->ArgNames({"mesh", "exact"})
+    ->ArgsProduct({{0, 1, 2}, {0, 1}, {0, 1}})
+    ->ArgNames({"mesh", "exact", "openmesh"})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
@@ -113,8 +121,8 @@ BENCHMARK(bm_build)
 // node by node. Primitives drawn at a 1-pixel threshold over a fixed view.
 void bm_sphere_ratio(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0));
-  const auto& p = built(which, pop_sphere_rule::paper);
-  const auto& e = built(which, pop_sphere_rule::exact);
+  const auto& p = built(which, pop_sphere_rule::paper, false);
+  const auto& e = built(which, pop_sphere_rule::exact, false);
   state.SetLabel(mesh_name(which));
   double sum = 0, worst = 0, sum_inner = 0, worst_inner = 0;
   std::size_t n_inner = 0;
@@ -153,6 +161,61 @@ void bm_sphere_ratio(benchmark::State& state) {
   state.counters["exact_visited"] = static_cast<double>(se.visited);
 }
 BENCHMARK(bm_sphere_ratio)
+    ->ArgsProduct({{0, 1, 2}, {10, 34}})
+    ->ArgNames({"mesh", "tol_x10"})
+    ->Unit(benchmark::kMillisecond);
+
+// ---- QSplat-style quantised node records (§3.5) vs float ----------------------------------
+// Same tree shape and exact spheres before quantisation: radius ratio quantised / float per
+// node, and what the enlarged spheres cost at a threshold (primitives drawn, PSNR against every
+// triangle, same view as the sweep, the paper's mode 0).
+void bm_quantised(benchmark::State& state) {
+  const int which = static_cast<int>(state.range(0));
+  const float tol = static_cast<float>(state.range(1)) / 10;
+  const auto& q = built(which, pop_sphere_rule::paper, true);
+  const auto& f = built(which, pop_sphere_rule::paper, false);
+  state.SetLabel(mesh_name(which));
+  double sum = 0, worst = 0;
+  for (std::uint32_t i = 0; i < q.nodes().size(); ++i) {
+    const double r = q.at(i).radius / std::max(f.at(i).radius, 1e-30f);
+    sum += r;
+    worst = std::max(worst, r);
+  }
+  const camera cam = sweep_camera(which, f);
+  const view v(cam, f.origin());
+  const render_options ro{.fx = {.shading = true, .colour = false}};
+  static std::map<int, image> refs;
+  if (!refs.count(which)) refs.emplace(which, render_reference(mesh(which), cam, ro));
+  const traverse_options o{
+      .tolerance_px = tol, .metric = projection_metric::eye_z, .backface_cull = true};
+  traverse_stats sq, sf;
+  image iq, iff;
+  for (auto _ : state) {
+    iq = render<with_normals>(v, ro, [&](auto& s) { sq = traverse(q, v, o, s, pop_policy{}); });
+    iff = render<with_normals>(v, ro, [&](auto& s) { sf = traverse(f, v, o, s, pop_policy{}); });
+  }
+  state.counters["radius_ratio_mean"] = sum / static_cast<double>(q.nodes().size());
+  state.counters["radius_ratio_worst"] = worst;
+  state.counters["q_pts"] = static_cast<double>(sq.points);
+  state.counters["q_tris"] = static_cast<double>(sq.triangles);
+  state.counters["f_pts"] = static_cast<double>(sf.points);
+  state.counters["f_tris"] = static_cast<double>(sf.triangles);
+  state.counters["q_culled_bf"] = static_cast<double>(sq.culled_backface);
+  state.counters["f_culled_bf"] = static_cast<double>(sf.culled_backface);
+  state.counters["q_psnr"] = compare_images(refs.at(which), iq).psnr;
+  state.counters["f_psnr"] = compare_images(refs.at(which), iff).psnr;
+  state.counters["q_B/vertex"] = q.stats().bytes_per_vertex;
+  state.counters["f_B/vertex"] = f.stats().bytes_per_vertex;
+  state.counters["q_B/triangle"] = q.stats().bytes_per_triangle;
+  state.counters["f_B/triangle"] = f.stats().bytes_per_triangle;
+  state.counters["q_node_share"] =
+      static_cast<double>(q.stats().node_file_bytes) / static_cast<double>(q.stats().file_bytes);
+  state.counters["q_face_share"] =
+      static_cast<double>(q.stats().face_file_bytes) / static_cast<double>(q.stats().file_bytes);
+  state.counters["q_vertex_share"] =
+      static_cast<double>(q.stats().vertex_file_bytes) / static_cast<double>(q.stats().file_bytes);
+}
+BENCHMARK(bm_quantised)
     ->ArgsProduct({{0, 1, 2}, {10, 34}})
     ->ArgNames({"mesh", "tol_x10"})
     ->Unit(benchmark::kMillisecond);

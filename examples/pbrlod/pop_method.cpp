@@ -21,13 +21,22 @@ json pop_stats_json(const Tree& t, const std::string& path) {
   j.integer("triangles", static_cast<long long>(st.triangles));
   j.integer("vertices", static_cast<long long>(st.vertices));
   j.integer("max_depth", static_cast<long long>(st.max_depth));
+  j.str("adjacency", t.adjacency() == pop_adjacency::openmesh ? "openmesh" : "edge_sort");
+  j.boolean("quantised_nodes", t.quantised_nodes());
   j.integer("isolated_faces", static_cast<long long>(st.isolated_faces));
+  j.integer("nonmanifold_edges", static_cast<long long>(st.nonmanifold_edges));
   j.integer("degenerate_faces", static_cast<long long>(st.degenerate_faces));
   j.boolean("colour", Tree::attrs.colour);
   j.integer("file_bytes", static_cast<long long>(t.file_bytes()));
   j.num("bytes_per_vertex", st.bytes_per_vertex);
   j.num("bytes_per_triangle", st.bytes_per_triangle);
+  j.integer("vertex_file_bytes", static_cast<long long>(st.vertex_file_bytes));
+  j.integer("face_file_bytes", static_cast<long long>(st.face_file_bytes));
+  j.integer("node_file_bytes", static_cast<long long>(st.node_file_bytes));
   j.num("build_seconds", st.build_seconds);
+  j.num("prepare_seconds", st.prepare_seconds);
+  j.num("adjacency_seconds", st.adjacency_seconds);
+  j.num("tree_seconds", st.tree_seconds);
   return j;
 }
 
@@ -45,7 +54,11 @@ int build(const build_request& r) {
                                                                           : pop_sphere_rule::paper;
   o.normal_bits = static_cast<int>(m.integer("normal_bits", 16, 6, 24));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
-  m.finish("pop", "leaf_triangles, spheres, normal_bits, threads");
+  o.adjacency = m.choice("adjacency", "edge_sort", {"edge_sort", "openmesh"}) == "openmesh"
+                    ? pop_adjacency::openmesh
+                    : pop_adjacency::edge_sort;
+  o.quantise_nodes = m.choice("nodes", "quantised", {"quantised", "float"}) == "quantised";
+  m.finish("pop", "leaf_triangles, spheres, normal_bits, threads, adjacency, nodes");
   const loaded_input in = load(r.input);
   if (!in.is_mesh())
     throw InvalidArgument(r.input + ": POP builds from a triangle mesh (its leaves are triangles)");

@@ -1,6 +1,7 @@
 // pbr_lod — the POP builder and file format (Chen & Nguyen 2001; see builders/pop.hpp for the
-// section-by-section map). OpenMesh provides the triangle adjacency that groups triangles into
-// leaves (§3.5); it stays in this file.
+// section-by-section map). The triangle adjacency that groups triangles into leaves (§3.5)
+// comes from a parallel sorted-edge pass or, selectable, OpenMesh's halfedge structure; OpenMesh
+// stays in this file.
 
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/System/omstream.hh>
@@ -18,6 +19,7 @@
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/memory.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/raster/png.hpp"
@@ -29,10 +31,20 @@ namespace {
 
 constexpr std::uint32_t none = std::numeric_limits<std::uint32_t>::max();
 
+void set_file_stats(pop_data& d, std::size_t size);  // with the file format, below
+
 /// f(lo, hi) over contiguous chunks of at least ~2048 indices (core/parallel.hpp).
 template <class F>
 void parallel_chunks(std::size_t n, unsigned threads, F&& f) {
   detail::parallel_chunks(n, threads, 2048, f);
+}
+
+/// v.resize(n) on fresh storage advised for transparent huge pages (core/memory.hpp): first
+/// touch of 4 kB pages was ≈ 20 % of a 2 M-triangle build.
+template <class T>
+void huge_resize(std::vector<T>& v, std::size_t n, const T& value = T()) {
+  reserve_huge(v, n);
+  v.resize(n, value);
 }
 
 /// The smallest float ≥ x (x ≥ 0): stored radii never shrink below what was computed in double.
@@ -40,6 +52,86 @@ float round_up(double x) {
   float f = static_cast<float>(x);
   if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
   return f;
+}
+
+// ---- QSplat-style node quantisation (§3.5; pop_options::quantise_nodes) ----------------------
+// A child's centre is its parent's centre plus the parent's radius times one of 13 offsets per
+// axis, (i − 6)/6 for i = 0..12; its radius is the parent's times (j + 1)/13, j = 0..12. Code 6
+// on every axis with j = 12 is the parent's sphere itself (offset 0, factor exactly 1), which
+// holds any child: every node has a valid code. The float expressions below are the only ones
+// build and load use, so both derive bit-identical spheres.
+constexpr std::uint16_t sphere_code_parent = 6 | 6 << 4 | 6 << 8 | 12 << 12;
+float centre_level(unsigned i) {
+  return static_cast<float>(static_cast<int>(i) - 6) / 6.0f;
+}
+float radius_level(unsigned j) {
+  return static_cast<float>(j + 1) / 13.0f;
+}
+void dequantise_sphere(const vec3f& pc, float pr, std::uint16_t code, vec3f& c, float& r) {
+  for (unsigned k = 0; k < 3; ++k)
+    c[static_cast<int>(k)] = pc[static_cast<int>(k)] + pr * centre_level((code >> (4 * k)) & 15u);
+  r = pr * radius_level(code >> 12);
+}
+/// The code whose sphere holds (c, r) and lies inside the parent (pc, pr), with the smallest
+/// radius among the centre codes tried; checked in double on the dequantised float values, so
+/// the stored sphere is conservative however the float arithmetic rounds. The nearest centre
+/// code is tried first (radius levels are pr/13 apart, so it almost always gives the smallest
+/// radius); the other corners of the centre's grid cell only when it fails; the parent's sphere
+/// when all do.
+std::uint16_t quantise_sphere(const vec3f& pc, float pr, const vec3f& c, float r) {
+  if (!(pr > 0)) return sphere_code_parent;
+  const vec3d cd = c.cast<double>(), pcd = pc.cast<double>();
+  std::array<std::array<unsigned, 2>, 3> cand{};
+  for (int k = 0; k < 3; ++k) {
+    const double t = std::clamp(6.0 + 6.0 * (cd[k] - pcd[k]) / pr, 0.0, 12.0);
+    const auto lo = static_cast<unsigned>(std::floor(t)), hi = static_cast<unsigned>(std::ceil(t));
+    cand[static_cast<std::size_t>(k)] = t - lo <= 0.5 ? std::array{lo, hi} : std::array{hi, lo};
+  }
+  // radius code for centre code cc, or 13 when no radius level fits
+  const auto try_centre = [&](std::uint16_t cc) -> unsigned {
+    vec3f cq;
+    float unused;
+    dequantise_sphere(pc, pr, cc, cq, unused);
+    const vec3d cqd = cq.cast<double>();
+    const double need = (cd - cqd).norm() + static_cast<double>(r);
+    const double room = static_cast<double>(pr) - (cqd - pcd).norm();
+    auto j = static_cast<unsigned>(
+        std::clamp(std::ceil(13.0 * need / static_cast<double>(pr)) - 1.0, 0.0, 12.0));
+    while (j < 12 && static_cast<double>(pr * radius_level(j)) < need) ++j;
+    while (j > 0 && static_cast<double>(pr * radius_level(j - 1)) >= need) --j;
+    const double rq = static_cast<double>(pr * radius_level(j));
+    return rq < need || rq > room ? 13u : j;
+  };
+  for (unsigned m = 0; m < 8; ++m) {
+    const unsigned ix = cand[0][m & 1u], iy = cand[1][(m >> 1) & 1u], iz = cand[2][(m >> 2) & 1u];
+    const auto cc = static_cast<std::uint16_t>(ix | iy << 4 | iz << 8);
+    const unsigned j = try_centre(cc);
+    if (j < 13) return static_cast<std::uint16_t>(cc | j << 12);
+  }
+  return sphere_code_parent;
+}
+/// 2-bit normal cones (QSplat): half-angles asin(1/16), asin(4/16), asin(9/16), π (no culling);
+/// a cone is rounded up to the next level.
+float cone_level(unsigned k) {
+  static const std::array<float, 4> levels = {
+      round_up(std::asin(1.0 / 16)), round_up(std::asin(4.0 / 16)), round_up(std::asin(9.0 / 16)),
+      std::numbers::pi_v<float>};
+  return levels[k];
+}
+unsigned cone_code(float angle) {
+  unsigned k = 0;
+  while (k < 3 && cone_level(k) < angle) ++k;
+  return k;
+}
+/// RGB 565 (QSplat's 16-bit colour): encode keeps the top bits, decode replicates them, so
+/// encode(decode(x)) == x.
+std::uint16_t rgb565(rgb8 c) {
+  return static_cast<std::uint16_t>((c.r >> 3) << 11 | (c.g >> 2) << 5 | (c.b >> 3));
+}
+rgb8 from565(std::uint16_t v) {
+  const unsigned r = (v >> 11) & 31u, g = (v >> 5) & 63u, b = v & 31u;
+  return {static_cast<std::uint8_t>(r << 3 | r >> 2), static_cast<std::uint8_t>(g << 2 | g >> 4),
+          static_cast<std::uint8_t>(b << 3 | b >> 2)};
 }
 
 /// Vertex position from its 16-bit code (§3.5). The same expression in build and load, so a
@@ -132,13 +224,12 @@ struct rgb_sum {
   }
 };
 
-/// Leaves (§3.5): groups of at most `max` edge-adjacent triangles, grown breadth-first from the
-/// first ungrouped triangle in input order over OpenMesh's face–face adjacency. Faces the
-/// halfedge structure refuses (non-manifold edges or vertices, duplicates, repeated indices)
-/// have no adjacency and become leaves of their own. Returns CSR arrays (start, faces).
-void group_faces(std::size_t n_vertices, std::span<const std::array<std::uint32_t, 3>> faces,
-                 std::uint32_t max, std::vector<std::uint32_t>& start,
-                 std::vector<std::uint32_t>& members, std::size_t& isolated) {
+/// Face–face adjacency through OpenMesh's halfedge structure (the route, kept as
+/// pop_adjacency::openmesh). nbr[3f + j] = the j-th neighbour of face f in OpenMesh's ff_iter
+/// order, `none` past the last. Faces add_face refuses (non-manifold edge or vertex, duplicate,
+/// inconsistent orientation, repeated index) get no neighbours and are counted in `isolated`.
+void openmesh_adjacency(std::size_t n_vertices, std::span<const std::array<std::uint32_t, 3>> faces,
+                        std::vector<std::uint32_t>& nbr, std::size_t& isolated) {
   using om_mesh = OpenMesh::TriMesh_ArrayKernelT<>;
   om_mesh om;
   om.reserve(n_vertices, 3 * faces.size(), faces.size());
@@ -165,26 +256,156 @@ void group_faces(std::size_t n_vertices, std::span<const std::array<std::uint32_
     }
     if (was) ::omerr().enable();
   }
+  nbr.assign(3 * faces.size(), none);
   isolated = 0;
-  std::vector<char> taken(faces.size(), 0);
+  for (std::size_t f = 0; f < faces.size(); ++f) {
+    if (om_of[f] < 0) {
+      ++isolated;
+      continue;
+    }
+    std::size_t j = 0;
+    for (auto it = om.ff_iter(om_mesh::FaceHandle(om_of[f])); it.is_valid() && j < 3; ++it) {
+      const std::uint32_t h = input_of[static_cast<std::size_t>(it->idx())];
+      if (h != none) nbr[3 * f + j++] = h;
+    }
+  }
+}
+
+/// Face–face adjacency by sorting the undirected edge keys (min vertex, max vertex, face) —
+/// pop_adjacency::edge_sort. The sort is a counting sort on the min vertex (CSR buckets) and a
+/// small sort on the max vertex inside each bucket, the buckets in parallel: O(n), and no
+/// halfedge structure to build. Rules, so that it is defined on any input:
+///   - a face repeating a vertex index has no edges (no neighbours; counted in `isolated`);
+///   - a face with the same vertex set as an earlier face (in any order or orientation) is a
+///     duplicate: no neighbours, counted in `isolated`, and invisible to the other faces;
+///   - an edge shared by exactly two remaining faces links them (whatever their orientation);
+///   - an edge shared by three or more is non-manifold: it links none of them (`nonmanifold`).
+/// nbr[3f + k] = the face across edge k (corners k, k+1) of f, or `none`.
+void edge_sort_adjacency(std::size_t n_vertices,
+                         std::span<const std::array<std::uint32_t, 3>> faces, unsigned threads,
+                         std::vector<std::uint32_t>& nbr, std::size_t& isolated,
+                         std::size_t& nonmanifold) {
+  const std::size_t nf = faces.size();
+  const auto bad = [&](std::size_t f) {
+    const auto& F = faces[f];
+    return F[0] == F[1] || F[1] == F[2] || F[0] == F[2];
+  };
+  // Bucket sizes by min vertex, then exclusive offsets.
+  std::vector<std::uint32_t> offset(n_vertices + 1, 0);
+  for (std::size_t f = 0; f < nf; ++f) {
+    if (bad(f)) continue;
+    const auto& F = faces[f];
+    for (std::size_t k = 0; k < 3; ++k) ++offset[std::min(F[k], F[(k + 1) % 3]) + 1];
+  }
+  for (std::size_t v = 0; v < n_vertices; ++v) offset[v + 1] += offset[v];
+  // entry = (max vertex, 3 f + k), scattered into its min vertex's bucket.
+  struct entry {
+    std::uint32_t other, slot;
+  };
+  std::vector<entry> e;
+  reserve_huge(e, offset[n_vertices]);
+  e.resize(offset[n_vertices]);
+  {
+    std::vector<std::uint32_t> fill(offset.begin(), offset.end() - 1);
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (bad(f)) continue;
+      const auto& F = faces[f];
+      for (std::uint32_t k = 0; k < 3; ++k) {
+        const std::uint32_t a = F[k], b = F[(k + 1) % 3];
+        e[fill[std::min(a, b)]++] = {std::max(a, b), static_cast<std::uint32_t>(3 * f + k)};
+      }
+    }
+  }
+  reserve_huge(nbr, 3 * nf);
+  nbr.assign(3 * nf, none);
+  std::vector<char> dup(nf, 0);
+  const auto same_set = [&](std::uint32_t f, std::uint32_t g) {
+    auto a = faces[f], b = faces[g];
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    return a == b;
+  };
+  // Pass 1: sort each bucket by (other, slot) and mark duplicates. A duplicate g of an earlier
+  // face f shares all three edges with it; only the run of g's edge 0 marks g, so every mark
+  // has one writer.
+  parallel_chunks(n_vertices, threads, [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t v = lo; v < hi; ++v) {
+      entry* b = e.data() + offset[v];
+      entry* end = e.data() + offset[v + 1];
+      std::sort(b, end, [](const entry& x, const entry& y) {
+        return x.other < y.other || (x.other == y.other && x.slot < y.slot);
+      });
+      for (entry* r = b; r < end;) {
+        entry* q = r;
+        while (q < end && q->other == r->other) ++q;
+        if (q - r >= 2)
+          for (entry* x = r; x < q; ++x) {
+            if (x->slot % 3 != 0) continue;
+            const std::uint32_t g = x->slot / 3;
+            for (entry* y = r; y < q; ++y)
+              if (y->slot / 3 < g && same_set(y->slot / 3, g)) {
+                dup[g] = 1;
+                break;
+              }
+          }
+        r = q;
+      }
+    }
+  });
+  // Pass 2: link manifold edges among the non-duplicate faces; each slot has one writer.
+  std::vector<std::size_t> nm_count(threads + 1, 0);
+  std::mutex nm_mutex;
+  parallel_chunks(n_vertices, threads, [&](std::size_t lo, std::size_t hi) {
+    std::size_t local = 0;
+    for (std::size_t v = lo; v < hi; ++v) {
+      const entry* b = e.data() + offset[v];
+      const entry* end = e.data() + offset[v + 1];
+      for (const entry* r = b; r < end;) {
+        const entry* q = r;
+        std::array<std::uint32_t, 2> live{};
+        std::size_t n_live = 0;
+        for (; q < end && q->other == r->other; ++q)
+          if (!dup[q->slot / 3]) {
+            if (n_live < 2) live[n_live] = q->slot;
+            ++n_live;
+          }
+        if (n_live == 2) {
+          nbr[live[0]] = live[1] / 3;
+          nbr[live[1]] = live[0] / 3;
+        } else if (n_live > 2) {
+          ++local;
+        }
+        r = q;
+      }
+    }
+    const std::lock_guard lock(nm_mutex);
+    nm_count[0] += local;
+  });
+  nonmanifold = nm_count[0];
+  isolated = 0;
+  for (std::size_t f = 0; f < nf; ++f) isolated += (bad(f) || dup[f]) ? 1 : 0;
+}
+
+/// Leaves (§3.5): groups of at most `max` edge-adjacent triangles, grown breadth-first over
+/// nbr (3 slots per face, `none` = no neighbour) from the first ungrouped triangle in input
+/// order. Returns CSR arrays (start, members).
+void group_faces(std::size_t nf, const std::vector<std::uint32_t>& nbr, std::uint32_t max,
+                 std::vector<std::uint32_t>& start, std::vector<std::uint32_t>& members) {
+  std::vector<char> taken(nf, 0);
   start.clear();
   members.clear();
-  start.reserve(faces.size() / 2 + 2);
-  members.reserve(faces.size());
-  for (std::size_t f = 0; f < faces.size(); ++f) {
+  reserve_huge(start, nf / 2 + 2);
+  reserve_huge(members, nf);
+  for (std::size_t f = 0; f < nf; ++f) {
     if (taken[f]) continue;
     const std::size_t g0 = members.size();
     start.push_back(static_cast<std::uint32_t>(g0));
     members.push_back(static_cast<std::uint32_t>(f));
     taken[f] = 1;
-    if (om_of[f] < 0) {
-      ++isolated;
-      continue;
-    }
     for (std::size_t k = g0; k < members.size() && members.size() - g0 < max; ++k) {
-      const om_mesh::FaceHandle fh(om_of[members[k]]);
-      for (auto it = om.ff_iter(fh); it.is_valid() && members.size() - g0 < max; ++it) {
-        const std::uint32_t h = input_of[static_cast<std::size_t>(it->idx())];
+      const std::size_t m = members[k];
+      for (std::size_t j = 0; j < 3 && members.size() - g0 < max; ++j) {
+        const std::uint32_t h = nbr[3 * m + j];
         if (h == none || taken[h]) continue;
         taken[h] = 1;
         members.push_back(h);
@@ -319,6 +540,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   if (mesh.faces.empty()) throw InvalidArgument("build_pop: the mesh has no triangles");
   if (mesh.faces.size() >= none || mesh.num_vertices() >= none)
     throw InvalidArgument("build_pop: more than 2^32 - 1 vertices or triangles");
+  if (opt.adjacency == pop_adjacency::edge_sort && mesh.faces.size() > none / 3)
+    throw InvalidArgument(
+        "build_pop: the edge-sort adjacency indexes 3 edges per face in 32 bits: at most " +
+        std::to_string(none / 3) + " triangles");
   const bool textured = !mesh.face_texcoords.empty() && !mesh.texture_path.empty();
   if (colour && !textured && mesh.vertices.colours.empty())
     throw InvalidArgument(
@@ -331,6 +556,9 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   d.origin = mesh.vertices.origin;
   d.normal_bits = opt.normal_bits;
   d.spheres = opt.spheres;
+  d.adjacency = opt.adjacency;
+  d.quantised_nodes = opt.quantise_nodes;
+  const bool qn = opt.quantise_nodes;
   const std::size_t nv = mesh.num_vertices(), nf = mesh.num_faces();
   const auto& P = mesh.vertices.positions;
 
@@ -341,10 +569,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     const float ext = bb.max[k] - bb.min[k];
     d.q_step[k] = ext > 0 ? ext / 65535.0f : 0.0f;
   }
-  d.vertex_q.resize(nv);
-  d.positions.resize(nv);
-  d.vertex_normal_codes.resize(nv);
-  d.normals.resize(nv);
+  huge_resize(d.vertex_q, nv);
+  huge_resize(d.positions, nv);
+  huge_resize(d.vertex_normal_codes, nv);
+  huge_resize(d.normals, nv);
   const std::vector<vec3f> est_normals =
       mesh.vertices.normals.empty() ? area_weighted_normals(mesh) : std::vector<vec3f>{};
   const std::vector<vec3f>& N = mesh.vertices.normals.empty() ? est_normals : mesh.vertices.normals;
@@ -392,10 +620,14 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   }
 
   // Per triangle: geometric normal, colour, sphere (§3.1).
-  std::vector<vec3f> face_normal(nf);
-  std::vector<vec3d> face_centre(nf);
-  std::vector<double> face_radius(nf);
-  std::vector<char> degenerate(nf, 0);
+  std::vector<vec3f> face_normal;
+  std::vector<vec3d> face_centre;
+  std::vector<double> face_radius;
+  std::vector<char> degenerate;
+  huge_resize(face_normal, nf);
+  huge_resize(face_centre, nf);
+  huge_resize(face_radius, nf);
+  huge_resize(degenerate, nf, char{0});
   parallel_chunks(nf, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t f = lo; f < hi; ++f) {
       const auto& F = mesh.faces[f];
@@ -425,19 +657,36 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       static_cast<std::size_t>(std::count(degenerate.begin(), degenerate.end(), char{1}));
 
   // Leaves (§3.5).
+  const auto t_prep = clock::now();
   std::vector<std::uint32_t> gstart, gfaces;
-  group_faces(nv, mesh.faces, opt.max_leaf_triangles, gstart, gfaces, d.stats.isolated_faces);
+  {
+    std::vector<std::uint32_t> nbr;
+    if (opt.adjacency == pop_adjacency::openmesh)
+      openmesh_adjacency(nv, mesh.faces, nbr, d.stats.isolated_faces);
+    else
+      edge_sort_adjacency(nv, mesh.faces, threads, nbr, d.stats.isolated_faces,
+                          d.stats.nonmanifold_edges);
+    group_faces(nf, nbr, opt.max_leaf_triangles, gstart, gfaces);
+  }
   const std::size_t n_leaves = gstart.size() - 1;
   const auto t_adj = clock::now();
 
-  // Split key of a leaf: the mean of its triangles' corners.
-  std::vector<vec3f> key(n_leaves);
+  // Split key of a leaf: the mean of its triangles' corners, stored with the leaf's index so
+  // that the splits below run over one contiguous array (no indirection through a permutation).
+  struct keyed {
+    vec3f key;
+    std::uint32_t id;
+  };
+  std::vector<keyed> perm;
+  reserve_huge(perm, n_leaves);
+  perm.resize(n_leaves);
   parallel_chunks(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t g = lo; g < hi; ++g) {
       vec3d s = vec3d::Zero();
       for (std::uint32_t k = gstart[g]; k < gstart[g + 1]; ++k)
         for (auto i : mesh.faces[gfaces[k]]) s += d.positions[i].cast<double>();
-      key[g] = (s / (3.0 * (gstart[g + 1] - gstart[g]))).cast<float>();
+      perm[g] = {(s / (3.0 * (gstart[g + 1] - gstart[g]))).cast<float>(),
+                 static_cast<std::uint32_t>(g)};
     }
   });
 
@@ -447,21 +696,19 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     std::uint32_t lo, hi, first = 0, count = 0, parent = none;
     std::uint16_t depth = 0;
   };
-  std::vector<std::uint32_t> perm(n_leaves);
-  std::iota(perm.begin(), perm.end(), 0u);
   std::vector<topo> tn;
-  tn.reserve(2 * n_leaves);
+  reserve_huge(tn, 2 * n_leaves);
   tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
   const auto split = [&](std::uint32_t lo, std::uint32_t hi) {
     box3 b;
-    for (std::uint32_t i = lo; i < hi; ++i) b.extend(key[perm[i]]);
+    for (std::uint32_t i = lo; i < hi; ++i) b.extend(perm[i].key);
     const vec3f e = b.extent();
     const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
     const std::uint32_t mid = lo + (hi - lo) / 2;
     std::nth_element(perm.begin() + lo, perm.begin() + mid, perm.begin() + hi,
-                     [&](std::uint32_t x, std::uint32_t y) {
-                       const float kx = key[x][axis], ky = key[y][axis];
-                       return kx < ky || (kx == ky && x < y);
+                     [axis](const keyed& x, const keyed& y) {
+                       const float kx = x.key[axis], ky = y.key[axis];
+                       return kx < ky || (kx == ky && x.id < y.id);
                      });
     return mid;
   };
@@ -502,9 +749,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
 
   // Faces in leaf order; leaves point at their range.
   const std::size_t nn = tn.size();
-  d.nodes.resize(nn);
-  d.faces.resize(nf);
-  std::vector<std::uint32_t> leaf_group(nn, none);
+  huge_resize(d.nodes, nn);
+  huge_resize(d.faces, nf);
+  std::vector<std::uint32_t> leaf_group;
+  huge_resize(leaf_group, nn, none);
   {
     std::uint32_t next = 0;
     for (std::size_t i = 0; i < nn; ++i) {
@@ -512,7 +760,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       nd.parent = tn[i].parent;
       nd.depth = tn[i].depth;
       if (tn[i].count == 0) {
-        const std::uint32_t g = perm[tn[i].lo];
+        const std::uint32_t g = perm[tn[i].lo].id;
         leaf_group[i] = g;
         nd.leaf = 1;
         nd.first = next;
@@ -525,8 +773,8 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       }
     }
   }
-  if (colour) d.node_colours.resize(nn);
-  d.node_normal_codes.resize(nn);
+  if (colour) huge_resize(d.node_colours, nn);
+  huge_resize(d.node_normal_codes, nn);
 
   // Bottom-up, one level at a time (children of a level all lie in the next one).
   std::vector<std::size_t> contained(threads + 1, 0);
@@ -609,8 +857,11 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
             cone = std::max(cone, angle_between(nd.normal, d.nodes[c].normal) +
                                       static_cast<double>(d.nodes[c].cone_angle));
         }
+        // Quantised: cones and colours of a parent are computed from its children's quantised
+        // values, so a child's cone stays inside its parent's after rounding.
         nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
-        if (colour) d.node_colours[i] = csum.mean();
+        if (qn) nd.cone_angle = cone_level(cone_code(nd.cone_angle));
+        if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
       }
       static std::mutex m;
       const std::lock_guard lock(m);
@@ -618,6 +869,26 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     });
   }
   d.stats.contained_inner = contained[0];
+
+  // Quantised spheres, top down (a parent's quantised sphere before its children's). The exact
+  // sphere of each node is replaced by the smallest coded sphere that holds it and lies inside
+  // the parent's: by induction every stored sphere holds its subtree, and children stay inside
+  // parents (the coherent traversal and culling rely on both).
+  if (qn) {
+    huge_resize(d.node_sphere_codes, nn, sphere_code_parent);
+    for (std::size_t li = 1; li < levels.size(); ++li) {
+      const auto [a, b] = levels[li];
+      parallel_chunks(b - a, threads, [&](std::size_t lo, std::size_t hi) {
+        for (std::size_t i = a + lo; i < a + hi; ++i) {
+          auto& nd = d.nodes[i];
+          const auto& pa = d.nodes[nd.parent];
+          const std::uint16_t code = quantise_sphere(pa.centre, pa.radius, nd.centre, nd.radius);
+          d.node_sphere_codes[i] = code;
+          dequantise_sphere(pa.centre, pa.radius, code, nd.centre, nd.radius);
+        }
+      });
+    }
+  }
 
   const auto t1 = clock::now();
   auto& st = d.stats;
@@ -631,31 +902,39 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     }
     st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   }
-  st.adjacency_seconds = std::chrono::duration<double>(t_adj - t0).count();
+  st.prepare_seconds = std::chrono::duration<double>(t_prep - t0).count();
+  st.adjacency_seconds = std::chrono::duration<double>(t_adj - t_prep).count();
   st.tree_seconds = std::chrono::duration<double>(t1 - t_adj).count();
   st.build_seconds = std::chrono::duration<double>(t1 - t0).count();
-  st.file_bytes = pop_file_bytes(d);
-  st.bytes_per_vertex = static_cast<double>(st.file_bytes) / static_cast<double>(nv);
-  st.bytes_per_triangle = static_cast<double>(st.file_bytes) / static_cast<double>(nf);
+  set_file_stats(d, pop_file_bytes(d));
   return d;
 }
 
 // ---------------------------------------------------------------------------------------------
-// Storage (§3.5). Little-endian file:
-//   header   "PBRLODPP" | u32 version | u32 flags (1 = colour) | u32 normal_bits | u32 sphere rule
+// Storage (§3.5). Little-endian file, version 2:
+//   header   "PBRLODPP" | u32 version | u32 flags (1 = colour, 2 = quantised nodes)
+//            | u32 normal_bits | u32 sphere rule | u32 adjacency
 //            | u64 vertices | u64 faces | u64 nodes | f64 origin[3] | f32 q_min[3] | f32 q_step[3]
-//            | build stats: f64 build, adjacency, tree seconds | u64 isolated, degenerate,
-//              contained_inner
+//            | build stats: f64 build, prepare, adjacency, tree seconds | u64 isolated,
+//              non-manifold edges, degenerate, contained_inner
+//            | quantised nodes only: f32 root centre[3], f32 root radius
 //   vertices u16 q[3] | normal code (u16 when normal_bits ≤ 16, else u32) | [u8 rgb[3]]
 //   faces    u32 v[3]                          (in leaf order)
-//   nodes    f32 centre[3] | f32 radius | f32 cone | normal code | u32 first | u8 count | u8 leaf
-//            | [u8 rgb[3]]                    (breadth first; parent and depth are derived)
+//   nodes    quantised (QSplat-style, breadth first; first child / first face, parent and depth
+//            are derived from the counts):
+//              u16 sphere code (4 bits each: centre x, y, z offset, radius; levels 0..12;
+//              relative to the parent) | normal code | u8 (bits 0–1 cone level, 2–3 count − 1,
+//              4 leaf; 5–7 zero) | [u16 RGB 565]
+//            float: f32 centre[3] | f32 radius | f32 cone | normal code | u32 first | u8 count
+//              | u8 leaf | [u8 rgb[3]]
 //   trailer  u64 FNV-1a of every byte before it
+// Version 1 (float nodes, fewer stats) is rejected: rebuild the file.
 // ---------------------------------------------------------------------------------------------
 namespace {
 constexpr char pop_magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'P'};
-constexpr std::uint32_t pop_version = 1;
-constexpr std::size_t header_bytes = 8 + 4 * 4 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 6;
+constexpr std::uint32_t pop_version = 2;
+constexpr std::size_t header_bytes = 8 + 4 * 5 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 8;
+constexpr std::size_t root_bytes = 16;
 
 std::size_t code_bytes(int bits) {
   return bits <= 16 ? 2 : 4;
@@ -664,7 +943,8 @@ std::size_t vertex_bytes(int bits, bool colour) {
   return 6 + code_bytes(bits) + (colour ? 3 : 0);
 }
 constexpr std::size_t face_bytes = 12;
-std::size_t node_bytes(int bits, bool colour) {
+std::size_t node_bytes(int bits, bool colour, bool quantised) {
+  if (quantised) return 2 + code_bytes(bits) + 1 + (colour ? 2 : 0);
   return 12 + 4 + 4 + code_bytes(bits) + 4 + 1 + 1 + (colour ? 3 : 0);
 }
 
@@ -672,20 +952,36 @@ std::size_t node_bytes(int bits, bool colour) {
 
 std::size_t pop_file_bytes(const pop_data& d) {
   const bool colour = !d.node_colours.empty();
-  return header_bytes + d.positions.size() * vertex_bytes(d.normal_bits, colour) +
-         d.faces.size() * face_bytes + d.nodes.size() * node_bytes(d.normal_bits, colour) + 8;
+  return header_bytes + (d.quantised_nodes ? root_bytes : 0) +
+         d.positions.size() * vertex_bytes(d.normal_bits, colour) + d.faces.size() * face_bytes +
+         d.nodes.size() * node_bytes(d.normal_bits, colour, d.quantised_nodes) + 8;
 }
+
+namespace {
+void set_file_stats(pop_data& d, std::size_t size) {
+  auto& st = d.stats;
+  const bool colour = !d.node_colours.empty();
+  st.file_bytes = size;
+  st.vertex_file_bytes = d.positions.size() * vertex_bytes(d.normal_bits, colour);
+  st.face_file_bytes = d.faces.size() * face_bytes;
+  st.node_file_bytes = d.nodes.size() * node_bytes(d.normal_bits, colour, d.quantised_nodes);
+  st.bytes_per_vertex = static_cast<double>(size) / static_cast<double>(d.positions.size());
+  st.bytes_per_triangle = static_cast<double>(size) / static_cast<double>(d.faces.size());
+}
+}  // namespace
 
 void save_pop_data(const pop_data& d, const std::string& path) {
   const bool colour = !d.node_colours.empty();
+  const bool qn = d.quantised_nodes;
   const int bits = d.normal_bits;
   byte_writer w;
   w.bytes.reserve(pop_file_bytes(d));
   for (char c : pop_magic) w.put(c);
   w.put(pop_version);
-  w.put(static_cast<std::uint32_t>(colour ? 1u : 0u));
+  w.put(static_cast<std::uint32_t>((colour ? 1u : 0u) | (qn ? 2u : 0u)));
   w.put(static_cast<std::uint32_t>(bits));
   w.put(static_cast<std::uint32_t>(d.spheres));
+  w.put(static_cast<std::uint32_t>(d.adjacency));
   w.put(static_cast<std::uint64_t>(d.positions.size()));
   w.put(static_cast<std::uint64_t>(d.faces.size()));
   w.put(static_cast<std::uint64_t>(d.nodes.size()));
@@ -693,11 +989,17 @@ void save_pop_data(const pop_data& d, const std::string& path) {
   for (int k = 0; k < 3; ++k) w.put(d.q_min[k]);
   for (int k = 0; k < 3; ++k) w.put(d.q_step[k]);
   w.put(d.stats.build_seconds);
+  w.put(d.stats.prepare_seconds);
   w.put(d.stats.adjacency_seconds);
   w.put(d.stats.tree_seconds);
   w.put(static_cast<std::uint64_t>(d.stats.isolated_faces));
+  w.put(static_cast<std::uint64_t>(d.stats.nonmanifold_edges));
   w.put(static_cast<std::uint64_t>(d.stats.degenerate_faces));
   w.put(static_cast<std::uint64_t>(d.stats.contained_inner));
+  if (qn) {
+    for (int k = 0; k < 3; ++k) w.put(d.nodes[0].centre[k]);
+    w.put(d.nodes[0].radius);
+  }
   for (std::size_t i = 0; i < d.positions.size(); ++i) {
     for (auto q : d.vertex_q[i]) w.put(q);
     w.put_code(d.vertex_normal_codes[i], bits);
@@ -707,6 +1009,14 @@ void save_pop_data(const pop_data& d, const std::string& path) {
     for (auto v : f) w.put(v);
   for (std::size_t i = 0; i < d.nodes.size(); ++i) {
     const auto& nd = d.nodes[i];
+    if (qn) {
+      w.put(d.node_sphere_codes[i]);
+      w.put_code(d.node_normal_codes[i], bits);
+      w.put(static_cast<std::uint8_t>(cone_code(nd.cone_angle) | (nd.count - 1u) << 2 |
+                                      (nd.leaf ? 16u : 0u)));
+      if (colour) w.put(rgb565(d.node_colours[i]));
+      continue;
+    }
     for (int k = 0; k < 3; ++k) w.put(nd.centre[k]);
     w.put(nd.radius);
     w.put(nd.cone_angle);
@@ -735,29 +1045,36 @@ pop_data load_pop_data(const std::string& path, bool colour) {
     if (r.get<char>("magic") != c)
       throw FormatError(path + ": not a pbr_lod POP file (bad magic, expected PBRLODPP)");
   const auto version = r.get<std::uint32_t>("version");
+  if (version == 1)
+    throw FormatError(path +
+                      ": POP file version 1 (float node records) is no longer read; this "
+                      "library reads version 2 — rebuild the file with pbrlod build --method pop");
   if (version != pop_version)
     throw FormatError(path + ": version " + std::to_string(version) +
                       ", this library reads version " + std::to_string(pop_version));
   const auto flags = r.get<std::uint32_t>("flags");
-  if (flags & ~1u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
+  if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
   if (((flags & 1u) != 0) != colour)
     throw FormatError(path + ((flags & 1u)
                                   ? ": the file has colours, the requested pop_tree has none"
                                   : ": the file has no colours, the requested pop_tree "
                                     "needs them"));
+  const bool qn = (flags & 2u) != 0;
   const auto bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
   if (bits < normal_quantizer::min_bits || bits > normal_quantizer::max_bits)
     throw FormatError(path + ": normal bits " + std::to_string(bits) + " outside 6..24");
   const auto rule = r.get<std::uint32_t>("sphere rule");
   if (rule > 1) throw FormatError(path + ": unknown sphere rule " + std::to_string(rule));
+  const auto adjacency = r.get<std::uint32_t>("adjacency");
+  if (adjacency > 1) throw FormatError(path + ": unknown adjacency " + std::to_string(adjacency));
   const auto nv = r.get<std::uint64_t>("vertex count");
   const auto nf = r.get<std::uint64_t>("face count");
   const auto nn = r.get<std::uint64_t>("node count");
-  const std::uint64_t vb = vertex_bytes(bits, colour), nb = node_bytes(bits, colour);
+  const std::uint64_t vb = vertex_bytes(bits, colour), nb = node_bytes(bits, colour, qn);
   const std::uint64_t size = bytes.size();
   if (nv == 0 || nf == 0 || nn == 0 || nv >= none || nf >= none || nn >= none || nv > size / vb ||
       nf > size / face_bytes || nn > size / nb ||
-      header_bytes + nv * vb + nf * face_bytes + nn * nb + 8 != size)
+      header_bytes + (qn ? root_bytes : 0) + nv * vb + nf * face_bytes + nn * nb + 8 != size)
     throw FormatError(path + ": " + std::to_string(nv) + " vertices, " + std::to_string(nf) +
                       " faces and " + std::to_string(nn) + " nodes do not match the file size " +
                       std::to_string(size));
@@ -770,17 +1087,30 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   pop_data d;
   d.normal_bits = bits;
   d.spheres = static_cast<pop_sphere_rule>(rule);
+  d.adjacency = static_cast<pop_adjacency>(adjacency);
+  d.quantised_nodes = qn;
   for (int k = 0; k < 3; ++k) d.origin[k] = r.get<double>("origin");
   if (!all_finite(d.origin)) throw FormatError(path + ": origin is not finite");
   for (int k = 0; k < 3; ++k) d.q_min[k] = r.get_finite("quantisation origin", 0);
   for (int k = 0; k < 3; ++k) d.q_step[k] = r.get_finite("quantisation step", 0);
   if ((d.q_step.array() < 0).any()) throw FormatError(path + ": negative quantisation step");
   d.stats.build_seconds = r.get<double>("stats");
+  d.stats.prepare_seconds = r.get<double>("stats");
   d.stats.adjacency_seconds = r.get<double>("stats");
   d.stats.tree_seconds = r.get<double>("stats");
   d.stats.isolated_faces = r.get<std::uint64_t>("stats");
+  d.stats.nonmanifold_edges = r.get<std::uint64_t>("stats");
   d.stats.degenerate_faces = r.get<std::uint64_t>("stats");
   d.stats.contained_inner = r.get<std::uint64_t>("stats");
+  vec3f root_centre = vec3f::Zero();
+  float root_radius = 0;
+  if (qn) {
+    root_centre = r.get_vec("root centre", 0);
+    root_radius = r.get_finite("root radius", 0);
+    if (!(root_radius >= 0) || !std::isfinite(root_radius * 2))
+      throw FormatError(path + ": root radius " + std::to_string(root_radius) +
+                        " is negative or too large");
+  }
 
   const auto check_code = [&](std::uint32_t c, const char* what, std::size_t i) {
     if (!quant.valid(c))
@@ -788,11 +1118,11 @@ pop_data load_pop_data(const std::string& path, bool colour) {
                         std::to_string(c) + " outside the " + std::to_string(quant.size()) +
                         "-entry table");
   };
-  d.vertex_q.resize(nv);
-  d.positions.resize(nv);
-  d.vertex_normal_codes.resize(nv);
-  d.normals.resize(nv);
-  if (colour) d.colours.resize(nv);
+  huge_resize(d.vertex_q, nv);
+  huge_resize(d.positions, nv);
+  huge_resize(d.vertex_normal_codes, nv);
+  huge_resize(d.normals, nv);
+  if (colour) huge_resize(d.colours, nv);
   for (std::size_t i = 0; i < nv; ++i) {
     for (auto& q : d.vertex_q[i]) q = r.get<std::uint16_t>("vertex");
     d.positions[i] = dequantise(d.vertex_q[i], d.q_min, d.q_step);
@@ -803,7 +1133,7 @@ pop_data load_pop_data(const std::string& path, bool colour) {
     d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
     if (colour) d.colours[i] = r.get<rgb8>("vertex colour");
   }
-  d.faces.resize(nf);
+  huge_resize(d.faces, nf);
   for (std::size_t i = 0; i < nf; ++i)
     for (auto& v : d.faces[i]) {
       v = r.get<std::uint32_t>("face");
@@ -811,11 +1141,32 @@ pop_data load_pop_data(const std::string& path, bool colour) {
         throw FormatError(path + ": face " + std::to_string(i) + " references vertex " +
                           std::to_string(v) + ", but there are " + std::to_string(nv));
     }
-  d.nodes.resize(nn);
-  d.node_normal_codes.resize(nn);
-  if (colour) d.node_colours.resize(nn);
+  huge_resize(d.nodes, nn);
+  huge_resize(d.node_normal_codes, nn);
+  if (qn) huge_resize(d.node_sphere_codes, nn);
+  if (colour) huge_resize(d.node_colours, nn);
   for (std::size_t i = 0; i < nn; ++i) {
     auto& nd = d.nodes[i];
+    if (qn) {
+      const auto code = r.get<std::uint16_t>("node sphere");
+      for (unsigned k = 0; k < 4; ++k)
+        if (((code >> (4 * k)) & 15u) > 12u)
+          throw FormatError(path + ": node " + std::to_string(i) + " has sphere code " +
+                            std::to_string(code) + " with a level above 12");
+      d.node_sphere_codes[i] = code;
+      d.node_normal_codes[i] = r.get_code(bits, "node normal");
+      check_code(d.node_normal_codes[i], "node", i);
+      nd.normal = quant.decode(d.node_normal_codes[i]);
+      const auto packed = r.get<std::uint8_t>("node flags");
+      if (packed & 0xe0u)
+        throw FormatError(path + ": node " + std::to_string(i) + " has unknown flag bits " +
+                          std::to_string(packed));
+      nd.cone_angle = cone_level(packed & 3u);
+      nd.count = static_cast<std::uint8_t>(((packed >> 2) & 3u) + 1u);
+      nd.leaf = static_cast<std::uint8_t>((packed >> 4) & 1u);
+      if (colour) d.node_colours[i] = from565(r.get<std::uint16_t>("node colour"));
+      continue;  // spheres and first: below, once the parents are known
+    }
     for (int k = 0; k < 3; ++k) nd.centre[k] = r.get_finite("node centre", i);
     nd.radius = r.get_finite("node radius", i);
     nd.cone_angle = r.get_finite("node cone", i);
@@ -831,15 +1182,44 @@ pop_data load_pop_data(const std::string& path, bool colour) {
       throw FormatError(path + ": node " + std::to_string(i) +
                         " has a negative radius, a cone outside [0, π] or a bad leaf flag");
   }
+  if (qn) {
+    // Breadth first with contiguous children: an inner node's first child follows the children
+    // of the inner nodes before it, a leaf's first face the faces of the leaves before it.
+    std::uint64_t next_child = 1, next_face = 0;
+    for (std::size_t i = 0; i < nn; ++i) {
+      auto& nd = d.nodes[i];
+      if (nd.leaf) {
+        nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_face, none));
+        next_face += nd.count;
+      } else {
+        nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_child, none));
+        next_child += nd.count;
+      }
+    }
+    if (next_child != nn || next_face != nf)
+      throw FormatError(path + ": the node counts give " + std::to_string(next_child) +
+                        " nodes and " + std::to_string(next_face) + " faces, the file has " +
+                        std::to_string(nn) + " and " + std::to_string(nf));
+  }
   // The tree: breadth first, children after their parent, every node reached once, leaves
   // partitioning the faces. Anything else is a corrupt file, not something to traverse.
   std::vector<char> reached(nn, 0), face_seen(nf, 0);
   reached[0] = 1;
   auto& st = d.stats;
+  if (qn) {
+    d.nodes[0].centre = root_centre;
+    d.nodes[0].radius = root_radius;
+  }
   for (std::size_t i = 0; i < nn; ++i) {
     auto& nd = d.nodes[i];
     if (!reached[i])
       throw FormatError(path + ": node " + std::to_string(i) + " is not reachable from the root");
+    if (qn && i > 0) {  // the parent (an earlier node) has its sphere
+      const auto& pa = d.nodes[nd.parent];
+      dequantise_sphere(pa.centre, pa.radius, d.node_sphere_codes[i], nd.centre, nd.radius);
+      if (!all_finite(nd.centre))
+        throw FormatError(path + ": node " + std::to_string(i) + " has a non-finite centre");
+    }
     const std::uint64_t end = std::uint64_t{nd.first} + nd.count;
     if (nd.leaf) {
       if (nd.count < 1 || nd.count > 4 || end > nf)
@@ -874,9 +1254,7 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   st.vertices = nv;
   st.triangles = nf;
   st.nodes = nn;
-  st.file_bytes = size;
-  st.bytes_per_vertex = static_cast<double>(size) / static_cast<double>(nv);
-  st.bytes_per_triangle = static_cast<double>(size) / static_cast<double>(nf);
+  set_file_stats(d, size);
   return d;
 }
 
@@ -886,7 +1264,9 @@ bool operator==(const pop_data& a, const pop_data& b) {
          a.node_colours == b.node_colours && a.vertex_q == b.vertex_q && a.q_min == b.q_min &&
          a.q_step == b.q_step && a.vertex_normal_codes == b.vertex_normal_codes &&
          a.node_normal_codes == b.node_normal_codes && a.normal_bits == b.normal_bits &&
-         a.spheres == b.spheres && a.stats == b.stats;
+         a.spheres == b.spheres && a.adjacency == b.adjacency &&
+         a.quantised_nodes == b.quantised_nodes && a.node_sphere_codes == b.node_sphere_codes &&
+         a.stats == b.stats;
 }
 
 }  // namespace pbr_lod::detail
