@@ -233,6 +233,37 @@ std::uint32_t code_attribute(Coder& rc, attribute_model& m, const std::optional<
   return nc | (mat << nb);
 }
 
+/// The attribute stream, shared by the encoder and the decoder: the root's attribute, then each
+/// inner cell's children in breadth-first order, each coded against its parent's attribute (or,
+/// with sibling_or_parent, its previous sibling's). get(i) is cell i's attribute (already decoded
+/// when decoding); put(i, v) receives what code_attribute returns for cell i.
+template <bool Encode, int Rho, class Coder, class Get, class Put>
+void walk_attributes(Coder& rc, const rho_grid<Rho>& g, const rho_coder_options& options, Get&& get,
+                     Put&& put, const std::string& what) {
+  const int nb = g.normal_bits(), mb = g.material_bits();
+  std::optional<normal_quantizer> q;
+  std::optional<normal_split> ns;
+  if (nb > 0) {
+    q.emplace(nb);
+    ns.emplace(*q);
+  }
+  attribute_model m(mb);
+  const auto code = [&](std::uint32_t i, int level, std::uint32_t pred) {
+    put(i, code_attribute<Encode>(rc, m, ns, nb, mb, level, pred, Encode ? get(i) : 0u, what));
+  };
+  code(0, 0, 0);
+  int level = 0;
+  for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
+    while (c >= g.level_begin(level + 1)) ++level;
+    const std::uint32_t first = g.first_child(c), n = std::uint32_t(g.code(c).count());
+    for (std::uint32_t k = 0; k < n; ++k)
+      code(first + k, level + 1,
+           (options.attributes == rho_attribute_predictor::sibling_or_parent && k > 0)
+               ? std::uint32_t(get(first + k - 1))
+               : std::uint32_t(get(c)));
+  }
+}
+
 }  // namespace
 
 template <int Rho>
@@ -260,29 +291,9 @@ rho_coded_streams rho_grid_encode(const rho_grid<Rho>& g, const rho_coder_option
   }
   if (g.sigma() > 0) {
     range_encoder rc;
-    const int nb = g.normal_bits(), mb = g.material_bits();
-    std::optional<normal_quantizer> q;
-    std::optional<normal_split> ns;
-    if (nb > 0) {
-      q.emplace(nb);
-      ns.emplace(*q);
-    }
-    attribute_model m(mb);
-    const std::string what;
-    (void)code_attribute<true>(rc, m, ns, nb, mb, 0, 0, g.attribute(0), what);
-    int level = 0;
-    for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
-      while (c >= g.level_begin(level + 1)) ++level;
-      const std::uint32_t first = g.first_child(c), n = std::uint32_t(g.code(c).count());
-      for (std::uint32_t k = 0; k < n; ++k) {
-        const std::uint32_t pred =
-            (options.attributes == rho_attribute_predictor::sibling_or_parent && k > 0)
-                ? g.attribute(first + k - 1)
-                : g.attribute(c);
-        (void)code_attribute<true>(rc, m, ns, nb, mb, level + 1, pred, g.attribute(first + k),
-                                   what);
-      }
-    }
+    walk_attributes<true>(
+        rc, g, options, [&](std::uint32_t i) { return g.attribute(i); },
+        [](std::uint32_t, std::uint32_t) {}, "");
     out.attributes = rc.finish();
   }
   return out;
@@ -323,33 +334,14 @@ void rho_grid_decode(rho_grid<Rho>& g, const unsigned char* geometry, std::size_
   auto& attrs = access::attrs(g);
   if (g.sigma() > 0) attrs.assign(total, 0);
   access::finish(g, total, what);
-  const int nb = g.normal_bits(), mb = g.material_bits();
   if (g.sigma() == 0) {
     if (attributes_size != 0) throw FormatError(what + ": attribute stream of a grid with σ = 0");
     return;
   }
   range_decoder rc(attributes, attributes_size, what + " (attributes)");
-  std::optional<normal_quantizer> q;
-  std::optional<normal_split> ns;
-  if (nb > 0) {
-    q.emplace(nb);
-    ns.emplace(*q);
-  }
-  attribute_model m(mb);
-  attrs[0] = std::uint16_t(code_attribute<false>(rc, m, ns, nb, mb, 0, 0, 0, what));
-  int level = 0;
-  for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
-    while (c >= g.level_begin(level + 1)) ++level;
-    const std::uint32_t first = g.first_child(c), n = std::uint32_t(g.code(c).count());
-    for (std::uint32_t k = 0; k < n; ++k) {
-      const std::uint32_t pred =
-          (options.attributes == rho_attribute_predictor::sibling_or_parent && k > 0)
-              ? attrs[first + k - 1]
-              : attrs[c];
-      attrs[first + k] =
-          std::uint16_t(code_attribute<false>(rc, m, ns, nb, mb, level + 1, pred, 0, what));
-    }
-  }
+  walk_attributes<false>(
+      rc, g, options, [&](std::uint32_t i) { return attrs[i]; },
+      [&](std::uint32_t i, std::uint32_t v) { attrs[i] = std::uint16_t(v); }, what);
   rc.finish();
 }
 
