@@ -89,6 +89,28 @@ camera default_camera(const rho_grid<Rho>& g, int w = 256) {
   return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {w, w});
 }
 
+/// Every truncation (lengths 0, then steps of 1 + n/step) and 200 random single-bit flips (the
+/// checksum catches them) of a serialised grid are FormatErrors.
+void expect_cuts_and_flips_throw(const std::vector<unsigned char>& bytes, std::size_t step,
+                                 std::mt19937& rng) {
+  for (std::size_t n = 0; n < bytes.size(); n += 1 + n / step) {
+    const std::vector<unsigned char> cut(bytes.begin(), bytes.begin() + std::ptrdiff_t(n));
+    EXPECT_THROW((void)rho_grid<3>::parse(cut), FormatError) << "cut at " << n;
+  }
+  for (int i = 0; i < 200; ++i) {
+    auto bad = bytes;
+    bad[rng() % bad.size()] ^= static_cast<unsigned char>(1u << (rng() % 8));
+    EXPECT_THROW((void)rho_grid<3>::parse(bad), FormatError);
+  }
+}
+
+/// The bytes with their FNV-1a trailer recomputed, so a corruption must be caught by parsing.
+std::vector<unsigned char> reseal(std::vector<unsigned char> b) {
+  const std::uint64_t h = detail::fnv1a(b.data(), b.size() - 8);
+  std::memcpy(b.data() + b.size() - 8, &h, 8);
+  return b;
+}
+
 // ---------------------------------------------------------------------------------------------
 // §3.2, Table 1
 // ---------------------------------------------------------------------------------------------
@@ -350,21 +372,8 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
   const auto g = build_rho_grid<3>(bunny_small(), {.depth = 2});
   for (auto layout : {rho_grid_layout::nis, rho_grid_layout::is}) {
     const auto bytes = g.serialise(layout);
-    for (std::size_t n = 0; n < bytes.size(); n += 1 + n / 16) {
-      const std::vector<unsigned char> cut(bytes.begin(), bytes.begin() + std::ptrdiff_t(n));
-      EXPECT_THROW((void)rho_grid<3>::parse(cut), FormatError) << "cut at " << n;
-    }
     std::mt19937 rng(3);
-    for (int i = 0; i < 200; ++i) {
-      auto bad = bytes;
-      bad[rng() % bad.size()] ^= static_cast<unsigned char>(1u << (rng() % 8));
-      EXPECT_THROW((void)rho_grid<3>::parse(bad), FormatError);
-    }
-    const auto reseal = [](std::vector<unsigned char> b) {
-      const std::uint64_t h = detail::fnv1a(b.data(), b.size() - 8);
-      std::memcpy(b.data() + b.size() - 8, &h, 8);
-      return b;
-    };
+    expect_cuts_and_flips_throw(bytes, 16, rng);
     // The first payload code: in NIS at payload bit 0, in IS after the root's σ bits. Flipping
     // each of its 27 bits adds or removes a child: the counts no longer agree.
     const std::size_t payload = 8 + 6 * 4 + 5 * 8 + 3 * 8 + 8;
@@ -560,21 +569,8 @@ TEST(RhoGridCompressed, BunnyMeetsTheTargets) {
 TEST(RhoGridCompressed, TruncatedOrCorruptStreamsAreErrors) {
   const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
   const auto bytes = g.serialise(rho_grid_layout::compressed);
-  for (std::size_t n = 0; n < bytes.size(); n += 1 + n / 32) {
-    const std::vector<unsigned char> cut(bytes.begin(), bytes.begin() + std::ptrdiff_t(n));
-    EXPECT_THROW((void)rho_grid<3>::parse(cut), FormatError) << "cut at " << n;
-  }
   std::mt19937 rng(3);
-  for (int i = 0; i < 200; ++i) {
-    auto bad = bytes;
-    bad[rng() % bad.size()] ^= static_cast<unsigned char>(1u << (rng() % 8));
-    EXPECT_THROW((void)rho_grid<3>::parse(bad), FormatError);
-  }
-  const auto reseal = [](std::vector<unsigned char> b) {
-    const std::uint64_t h = detail::fnv1a(b.data(), b.size() - 8);
-    std::memcpy(b.data() + b.size() - 8, &h, 8);
-    return b;
-  };
+  expect_cuts_and_flips_throw(bytes, 32, rng);
   const std::size_t counts = 8 + 6 * 4 + 5 * 8, models = counts + 4 * 8, lengths = models + 8;
   const auto expect_error = [&](std::vector<unsigned char> b, const char* why) {
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(std::move(b))), FormatError) << why;
