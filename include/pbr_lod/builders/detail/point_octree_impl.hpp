@@ -14,6 +14,7 @@
 #include <numeric>
 #include <optional>
 #include <thread>
+#include <utility>
 
 #include <Eigen/Eigenvalues>
 
@@ -156,6 +157,12 @@ struct point_octree_builder {
   };
   /// Samples per block of a pass (see build()).
   static constexpr std::uint32_t block = 1u << 16;
+  /// [lo, hi) of block b of the range [first, first + count).
+  static std::pair<std::uint32_t, std::uint32_t> block_range(std::uint32_t first,
+                                                             std::uint32_t count, std::size_t b) {
+    return {first + static_cast<std::uint32_t>(b) * block,
+            first + static_cast<std::uint32_t>(std::min<std::size_t>(count, (b + 1) * block))};
+  }
 
   /// Stable counting-sort scatter of [first, first + count) of one array by octant, block b
   /// starting each octant at at[b]; then the copy back. Blocks in parallel over `workers`.
@@ -165,11 +172,7 @@ struct point_octree_builder {
     parallel_chunks(at.size(), workers, 1, [&](std::size_t b0, std::size_t b1) {
       for (std::size_t b = b0; b < b1; ++b) {
         std::array<std::uint32_t, 8> pos = at[b];
-        const std::uint32_t lo = first + static_cast<std::uint32_t>(b) * block;
-        const std::uint32_t hi =
-            at.size() == 1
-                ? first + count
-                : first + static_cast<std::uint32_t>(std::min<std::size_t>(count, (b + 1) * block));
+        const auto [lo, hi] = block_range(first, count, b);
         for (std::uint32_t k = lo; k < hi; ++k) scratch[pos[oct[k]]++] = v[k];
       }
     });
@@ -194,7 +197,8 @@ struct point_octree_builder {
     parallel_chunks(part.size(), workers, 1, [&](std::size_t b0, std::size_t b1) {
       for (std::size_t b = b0; b < b1; ++b) {
         std::array<vec3d, 3> t{vec3d::Zero(), vec3d::Zero(), vec3d::Zero()};
-        for (std::size_t i = b * block; i < std::min<std::size_t>(n, (b + 1) * block); ++i) {
+        const auto [lo, hi] = block_range(0, n, b);
+        for (std::uint32_t i = lo; i < hi; ++i) {
           t[0] += pts.positions[i].template cast<double>();
           t[1] += pts.normals[i].template cast<double>();
           if constexpr (A.colour)
@@ -409,10 +413,10 @@ struct point_octree_builder {
     } else {
       parts.resize(blocks);
       parallel_chunks(blocks, workers, 1, [&](std::size_t b0, std::size_t b1) {
-        for (std::size_t b = b0; b < b1; ++b)
-          scan(first + static_cast<std::uint32_t>(b) * block,
-               first + static_cast<std::uint32_t>(std::min<std::size_t>(count, (b + 1) * block)),
-               parts[b]);
+        for (std::size_t b = b0; b < b1; ++b) {
+          const auto [lo, hi] = block_range(first, count, b);
+          scan(lo, hi, parts[b]);
+        }
       });
       for (const auto& ps : parts) all += ps;
     }
