@@ -64,12 +64,21 @@ normal_quantizer::normal_quantizer(int q_bits) {
   dirs_.reserve(per_octant_);
   row_cos_.resize(std::size_t(k_));
   row_sin_.resize(std::size_t(k_));
+  row_margin_.resize(std::size_t(k_));
   double bound = 0;
   for (int i = 0; i < k_; ++i) {
     const double lo = band_edge(i - 1, k_), hi = band_edge(i, k_);
     const double theta = 0.5 * (lo + hi);
     row_cos_[std::size_t(i)] = std::cos(theta);
     row_sin_[std::size_t(i)] = std::sin(theta);
+    // search_row()'s neighbour margin, in cells: a cell edge is where the two neighbours' exact
+    // dot products tie; off the edge by f cells they differ by ≈ f·w² for a cell of angular
+    // width w (w = sin θ·(π/2)/(i + 1)), and the float table moves each dot product by up to
+    // ≈ 2.5e-7. Ten times that error, plus the 1.7e-6 rad of the fast arctangent. Beyond 5 % of a
+    // cell (fine tables, q ≳ 19) the branch costs more than it saves: both neighbours always.
+    const double w = std::sin(theta) * half_pi / double(i + 1);
+    const double margin = 1e-4 + 2.5e-6 / (w * w) + 2e-6 * double(i + 1) / half_pi;
+    row_margin_[std::size_t(i)] = margin < 0.05 ? margin : 1.0;
     const double cell = half_pi / double(i + 1);
     for (int j = 0; j <= i; ++j)
       dirs_.push_back(direction(theta, cell * (double(j) + 0.5)).cast<float>());
@@ -94,12 +103,17 @@ void normal_quantizer::throw_invalid_code(std::uint32_t code) const {
                                                                 double& best_dot,
                                                                 std::uint32_t& best) const {
   // Within a row the distance grows with the longitude difference, so the nearest sample is in
-  // the cell containing φ; its neighbours are checked too because the float table entries are
-  // not exactly at the cell centres.
+  // the cell containing φ. Its neighbour on the nearer side can still win the comparison when φ
+  // lies within row_margin_ cells of the cell edge: the float table entries are neither exactly
+  // at the cell centres nor exactly unit length (≈ 1e-7 off), which at fine tables is worth a
+  // noticeable fraction of a cell in the double dot product. Elsewhere one candidate suffices.
   // φ_cells = φ / (π/2) ≥ 0, so truncation is the floor.
-  const int j0 = std::min(static_cast<int>(phi_cells * double(row + 1)), row);
+  const double pos = phi_cells * double(row + 1);
+  const int j0 = std::min(static_cast<int>(pos), row);
+  const double frac = pos - double(j0);
+  const double margin = row_margin_[std::size_t(row)];
   const std::uint32_t first = std::uint32_t(row) * std::uint32_t(row + 1) / 2;
-  for (int j = std::max(0, j0 - 1); j <= std::min(row, j0 + 1); ++j) {
+  const auto test = [&](int j) {
     const std::uint32_t t = first + std::uint32_t(j);
     const vec3f& d = dirs_[t];
     const double dot = ax * double(d.x()) + ay * double(d.y()) + az * double(d.z());
@@ -107,7 +121,12 @@ void normal_quantizer::throw_invalid_code(std::uint32_t code) const {
       best_dot = dot;
       best = t;
     }
-  }
+  };
+  // Candidates in ascending j, as the exhaustive j0 − 1 … j0 + 1 scan visited them (ties keep the
+  // first).
+  if (frac < margin && j0 > 0) test(j0 - 1);
+  test(j0);
+  if (frac > 1 - margin && j0 < row) test(j0 + 1);
 }
 
 std::uint32_t normal_quantizer::encode(const vec3f& n) const {

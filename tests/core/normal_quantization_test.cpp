@@ -185,6 +185,38 @@ TEST(NormalQuantizer, EncodeFindsTheNearestOnBoundaries) {
   }
 }
 
+// encode() compares a row's neighbouring cell only when the longitude lies within a margin of
+// the cell edge (the float table makes the two dot products compete there). Directions just off
+// cell edges, by 10⁻⁶ to 10⁻² of a cell on either side, at the rows' own latitudes and on band
+// edges, must still get the brute-force nearest; at q ≥ 19 the margin is the whole cell.
+TEST(NormalQuantizer, EncodeFindsTheNearestJustOffCellEdges) {
+  for (const auto& [q, wanted] : {std::pair{12, 1500}, {16, 1500}, {18, 400}, {20, 120}}) {
+    const normal_quantizer nq(q);
+    const int k = nq.latitude_steps();
+    const double hp = std::numbers::pi / 2;
+    const auto edge = [k](int i) {
+      if (i < 0) return 0.0;
+      const double x = double(i + 1) * (i + 2) / (double(k) * (k + 1));
+      return 2 * std::asin(std::sqrt(std::min(1.0, x / 2)));
+    };
+    std::vector<vec3f> near_edges;
+    std::mt19937_64 rng{static_cast<std::uint64_t>(q)};
+    std::uniform_int_distribution<int> row(0, k - 1);
+    while (near_edges.size() < std::size_t(wanted)) {
+      const int i = row(rng);
+      if (i == 0) continue;  // one cell: no edge inside the row
+      const int j = 1 + int(rng() % std::uint64_t(i));
+      for (const double off : {-1e-2, -1e-3, -1e-4, -1e-5, -1e-6, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2}) {
+        const double phi = hp * (j + off) / (i + 1);
+        for (const double th : {0.5 * (edge(i - 1) + edge(i)), edge(i)})
+          near_edges.emplace_back(float(std::sin(th) * std::cos(phi)),
+                                  float(std::sin(th) * std::sin(phi)), float(std::cos(th)));
+      }
+    }
+    expect_nearest(nq, near_edges);
+  }
+}
+
 struct error_stats {
   double worst = 0, mean = 0;
 };

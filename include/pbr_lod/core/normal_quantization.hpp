@@ -87,11 +87,12 @@ class normal_quantizer {
 
   int bits_ = 0;
   int k_ = 0;
-  std::uint32_t per_octant_ = 0;  // k(k+1)/2
-  std::uint32_t index_mask_ = 0;  // 2^(q−3) − 1
-  std::vector<vec3f> dirs_;       // first octant, index t
-  std::vector<double> row_cos_;   // cos θ_i
-  std::vector<double> row_sin_;   // sin θ_i
+  std::uint32_t per_octant_ = 0;    // k(k+1)/2
+  std::uint32_t index_mask_ = 0;    // 2^(q−3) − 1
+  std::vector<vec3f> dirs_;         // first octant, index t
+  std::vector<double> row_cos_;     // cos θ_i
+  std::vector<double> row_sin_;     // sin θ_i
+  std::vector<double> row_margin_;  // search_row(): how near a cell edge both neighbours compete
   double max_error_deg_ = 0;
 };
 
