@@ -41,6 +41,7 @@
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/memory.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
@@ -233,7 +234,7 @@ class point_octree {
   friend struct detail::point_octree_io<A>;
   [[nodiscard]] bool equal(const point_octree& o) const;
   void derive_selection(unsigned threads = std::thread::hardware_concurrency()) {
-    selection_.resize(nodes_.size());
+    detail::resize_fresh(selection_, nodes_.size(), std::max(1u, threads));
     detail::parallel_chunks(
         nodes_.size(), std::max(1u, threads), 1u << 15, [&](std::size_t lo, std::size_t hi) {
           for (std::size_t i = lo; i < hi; ++i) {

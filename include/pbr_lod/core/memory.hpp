@@ -10,11 +10,18 @@
 #include <cstddef>
 #include <vector>
 
+#include "pbr_lod/core/parallel.hpp"
+
 namespace pbr_lod::detail {
 
 /// madvise(MADV_HUGEPAGE) on the 2 MB-aligned part of [data, data + bytes); a no-op where that
 /// is unavailable or the range holds no whole huge page. Never throws, never fails visibly.
 void advise_huge_pages(const void* data, std::size_t bytes) noexcept;
+
+/// Faults in the pages of [data, data + bytes) for writing without touching their contents
+/// (MADV_POPULATE_WRITE, Linux ≥ 5.14): lets several threads take the first-touch cost of one
+/// fresh buffer instead of the one that later writes it. A no-op elsewhere; never throws.
+void populate_pages(const void* data, std::size_t bytes) noexcept;
 
 /// v.reserve(n), advising huge pages for the new storage when it is large (≥ 4 MB) and not yet
 /// touched. Call before filling v.
@@ -29,6 +36,22 @@ void reserve_huge(std::vector<T, Alloc>& v, std::size_t n) {
     v.reserve(n);
   }
   if (n * sizeof(T) >= (std::size_t{4} << 20)) advise_huge_pages(v.data(), n * sizeof(T));
+}
+
+/// v.resize(n) for a buffer about to be overwritten: reserve_huge(), then the new pages are
+/// faulted in by up to `threads` threads (populate_pages) before the value-initialising resize,
+/// which then only streams zeros through mapped memory. On the 2-core VM the first touch of a
+/// fresh 2 MB page costs ≈ 1–2 ms; a sequential resize of a 30 MB array paid all of it on one core.
+template <class T, class Alloc>
+void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads) {
+  const std::size_t old = v.size();
+  if (n > old) {
+    reserve_huge(v, n);
+    const auto* from = reinterpret_cast<const unsigned char*>(v.data() + old);
+    parallel_chunks((n - old) * sizeof(T), threads, std::size_t{1} << 21,
+                    [&](std::size_t lo, std::size_t hi) { populate_pages(from + lo, hi - lo); });
+  }
+  v.resize(n);
 }
 
 }  // namespace pbr_lod::detail

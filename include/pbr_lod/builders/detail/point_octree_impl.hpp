@@ -118,14 +118,12 @@ struct point_octree_builder {
   mutable std::atomic<std::size_t> circle_fallbacks{0};
 
   point_octree_builder(point_set<A>& pts, std::vector<typename tree::orientation_code>* codes,
-                       const point_octree_options& o, const normal_quantizer* quant)
-      : in(pts), in_codes(codes), opt(o), q(quant) {
-    // Scratch written by the scatters only: reserved on huge pages, never value-initialised
-    // pages first (see core/memory.hpp for what first touch costs here).
-    const auto fresh = [n = pts.size()](auto& v) {
-      reserve_huge(v, n);
-      v.resize(n);
-    };
+                       const point_octree_options& o, const normal_quantizer* quant,
+                       unsigned workers)
+      : in(pts), in_codes(codes), opt(o), q(quant), threads(workers) {
+    // Scratch written by the scatters only: on huge pages, faulted in by all workers (see
+    // core/memory.hpp for what first touch costs here).
+    const auto fresh = [n = pts.size(), workers](auto& v) { resize_fresh(v, n, workers); };
     fresh(oct);
     fresh(scratch3);
     if constexpr (A.colour) fresh(scratch_rgb);
@@ -532,8 +530,7 @@ struct point_octree_builder {
           report();
         sums[j] = futs[j].get();
       }
-      for (std::size_t j = 0; j < kids.size(); ++j)
-        splice(L, first_child + static_cast<std::uint32_t>(j), locals[j]);
+      splice(L, first_child, locals, workers);
     } else {
       for (std::size_t j = 0; j < kids.size(); ++j) {
         sums[j] = build(L, first_child + static_cast<std::uint32_t>(j), kids[j], false);
@@ -571,21 +568,42 @@ struct point_octree_builder {
     if (q) reserve_huge(L.codes, n);
   }
 
-  /// Moves subtree `sub` (root at its index 0) into L: the root to `at`, the rest appended.
-  void splice(local& L, std::uint32_t at, local& sub) const {
-    const auto offset = static_cast<std::uint32_t>(L.nodes.size()) - 1;  // local i ≥ 1 → i + offset
-    const auto remap = [&](node nd) {
-      if (!nd.leaf) nd.first += offset;
-      return nd;
-    };
-    L.nodes[at] = remap(sub.nodes[0]);
-    if constexpr (A.colour) L.colours[at] = sub.colours[0];
-    if (q) L.codes[at] = sub.codes[0];
-    for (std::size_t i = 1; i < sub.nodes.size(); ++i) L.nodes.push_back(remap(sub.nodes[i]));
-    if constexpr (A.colour)
-      L.colours.insert(L.colours.end(), sub.colours.begin() + 1, sub.colours.end());
-    if (q) L.codes.insert(L.codes.end(), sub.codes.begin() + 1, sub.codes.end());
-    sub = {};
+  /// Moves the subtrees of `subs` (each rooted at its index 0) into L: root j to `at + j`, the
+  /// rest appended in order, child indices shifted. The layout is the sequential build's. The
+  /// tail is sized once and its fresh pages are faulted in by all workers — first touch of new
+  /// memory is most of a splice's cost on a VM — then each subtree is copied by one worker.
+  void splice(local& L, std::uint32_t at, std::vector<local>& subs, unsigned workers) const {
+    std::vector<std::uint32_t> base(subs.size());  // where subtree j's nodes 1.. go
+    std::size_t total = L.nodes.size();
+    for (std::size_t j = 0; j < subs.size(); ++j) {
+      base[j] = static_cast<std::uint32_t>(total);
+      total += subs[j].nodes.size() - 1;
+    }
+    resize_fresh(L.nodes, total, workers);
+    if constexpr (A.colour) resize_fresh(L.colours, total, workers);
+    if (q) resize_fresh(L.codes, total, workers);
+    parallel_chunks(subs.size(), workers, 1, [&](std::size_t j0, std::size_t j1) {
+      for (std::size_t j = j0; j < j1; ++j) {
+        local& sub = subs[j];
+        const std::uint32_t offset = base[j] - 1;  // local i ≥ 1 → i + offset
+        const auto remap = [offset](node nd) {
+          if (!nd.leaf) nd.first += offset;
+          return nd;
+        };
+        const std::uint32_t root = at + static_cast<std::uint32_t>(j);
+        L.nodes[root] = remap(sub.nodes[0]);
+        std::transform(sub.nodes.begin() + 1, sub.nodes.end(), L.nodes.begin() + base[j], remap);
+        if constexpr (A.colour) {
+          L.colours[root] = sub.colours[0];
+          std::copy(sub.colours.begin() + 1, sub.colours.end(), L.colours.begin() + base[j]);
+        }
+        if (q) {
+          L.codes[root] = sub.codes[0];
+          std::copy(sub.codes.begin() + 1, sub.codes.end(), L.codes.begin() + base[j]);
+        }
+        sub = {};
+      }
+    });
   }
 
   /// The whole build: validation, estimation (§4 end), quantisation (§5), the tree.
@@ -607,8 +625,7 @@ template <attributes A>
 void quantize_samples(point_set<A>& pts, const normal_quantizer& q,
                       std::vector<typename point_octree<A>::orientation_code>& codes,
                       unsigned threads) {
-  reserve_huge(codes, pts.size());
-  codes.resize(pts.size());
+  resize_fresh(codes, pts.size(), threads);
   parallel_for(pts.size(), threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t i = lo; i < hi; ++i) {
       const float a = pts.axis_u[i].norm(), b = pts.axis_v[i].norm();
@@ -669,8 +686,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   point_set<A> work;
   work.origin = points.origin;
   const auto copy = [&](auto& to, const auto& from) {
-    reserve_huge(to, n);
-    to.resize(n);
+    resize_fresh(to, n, threads);
     parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
       std::copy(from.begin() + static_cast<std::ptrdiff_t>(lo),
                 from.begin() + static_cast<std::ptrdiff_t>(hi),
@@ -720,7 +736,8 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   out.normal_bits_ = opt.normal_bits;
 
   const auto t1 = clock::now();
-  point_octree_builder<A> b(work, quant ? &work_codes : nullptr, opt, quant ? &*quant : nullptr);
+  point_octree_builder<A> b(work, quant ? &work_codes : nullptr, opt, quant ? &*quant : nullptr,
+                            threads);
   local L;
   // A point-octree has ≈ 0.4 nodes per sample at leaf size 8 (paper, Table 2); reserving avoids
   // re-copying the node array while it grows.
@@ -728,7 +745,6 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   L.nodes.resize(1);
   if constexpr (A.colour) L.colours.resize(1);
   if (quant) L.codes.resize(1);
-  b.threads = threads;
   const bool parallel = threads > 1 && work.size() > 20000;
   b.build(L, 0, b.root_input(work, parallel ? threads : 1), parallel);
   if (b.cancel.load()) throw Cancelled("build_point_octree: cancelled");
