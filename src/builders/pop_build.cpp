@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <fstream>
 #include <mutex>
 #include <numeric>
@@ -30,6 +31,9 @@ namespace pbr_lod::detail {
 namespace {
 
 constexpr std::uint32_t none = std::numeric_limits<std::uint32_t>::max();
+/// Three u32 per face: the adjacency's neighbours, and the same type as pop_data::faces, so the
+/// adjacency's storage is recycled for the faces in leaf order once the grouping is done.
+using face_slots = std::array<std::uint32_t, 3>;
 
 void set_file_stats(pop_data& d, std::size_t size);  // with the file format, below
 
@@ -142,9 +146,12 @@ vec3f dequantise(const std::array<std::uint16_t, 3>& q, const vec3f& mn, const v
           mn.z() + static_cast<float>(q[2]) * step.z()};
 }
 
+/// cos of the angle between unit vectors a and b, measured in double and clamped to [−1, 1].
+double clamped_cos(const vec3f& a, const vec3f& b) {
+  return std::clamp(a.cast<double>().dot(b.cast<double>()), -1.0, 1.0);
+}
 double angle_between(const vec3f& a, const vec3f& b) {
-  const double c = std::clamp(a.cast<double>().dot(b.cast<double>()), -1.0, 1.0);
-  return std::acos(c);
+  return std::acos(clamped_cos(a, b));
 }
 
 /// Sphere (double centre x, radius r) made safe to store in float: the float centre, and a
@@ -225,11 +232,11 @@ struct rgb_sum {
 };
 
 /// Face–face adjacency through OpenMesh's halfedge structure (the route, kept as
-/// pop_adjacency::openmesh). nbr[3f + j] = the j-th neighbour of face f in OpenMesh's ff_iter
+/// pop_adjacency::openmesh). nbr[f][j] = the j-th neighbour of face f in OpenMesh's ff_iter
 /// order, `none` past the last. Faces add_face refuses (non-manifold edge or vertex, duplicate,
 /// inconsistent orientation, repeated index) get no neighbours and are counted in `isolated`.
 void openmesh_adjacency(std::size_t n_vertices, std::span<const std::array<std::uint32_t, 3>> faces,
-                        std::vector<std::uint32_t>& nbr, std::size_t& isolated) {
+                        std::vector<face_slots>& nbr, std::size_t& isolated) {
   using om_mesh = OpenMesh::TriMesh_ArrayKernelT<>;
   om_mesh om;
   om.reserve(n_vertices, 3 * faces.size(), faces.size());
@@ -256,7 +263,7 @@ void openmesh_adjacency(std::size_t n_vertices, std::span<const std::array<std::
     }
     if (was) ::omerr().enable();
   }
-  nbr.assign(3 * faces.size(), none);
+  nbr.assign(faces.size(), {none, none, none});
   isolated = 0;
   for (std::size_t f = 0; f < faces.size(); ++f) {
     if (om_of[f] < 0) {
@@ -266,7 +273,7 @@ void openmesh_adjacency(std::size_t n_vertices, std::span<const std::array<std::
     std::size_t j = 0;
     for (auto it = om.ff_iter(om_mesh::FaceHandle(om_of[f])); it.is_valid() && j < 3; ++it) {
       const std::uint32_t h = input_of[static_cast<std::size_t>(it->idx())];
-      if (h != none) nbr[3 * f + j++] = h;
+      if (h != none) nbr[f][j++] = h;
     }
   }
 }
@@ -280,10 +287,10 @@ void openmesh_adjacency(std::size_t n_vertices, std::span<const std::array<std::
 ///     duplicate: no neighbours, counted in `isolated`, and invisible to the other faces;
 ///   - an edge shared by exactly two remaining faces links them (whatever their orientation);
 ///   - an edge shared by three or more is non-manifold: it links none of them (`nonmanifold`).
-/// nbr[3f + k] = the face across edge k (corners k, k+1) of f, or `none`.
+/// nbr[f][k] = the face across edge k (corners k, k+1) of f, or `none`.
 void edge_sort_adjacency(std::size_t n_vertices,
                          std::span<const std::array<std::uint32_t, 3>> faces, unsigned threads,
-                         std::vector<std::uint32_t>& nbr, std::size_t& isolated,
+                         std::vector<face_slots>& nbr, std::size_t& isolated,
                          std::size_t& nonmanifold) {
   const std::size_t nf = faces.size();
   const auto bad = [&](std::size_t f) {
@@ -316,8 +323,8 @@ void edge_sort_adjacency(std::size_t n_vertices,
       }
     }
   }
-  reserve_huge(nbr, 3 * nf);
-  nbr.assign(3 * nf, none);
+  reserve_huge(nbr, nf);
+  nbr.assign(nf, {none, none, none});
   std::vector<char> dup(nf, 0);
   const auto same_set = [&](std::uint32_t f, std::uint32_t g) {
     auto a = faces[f], b = faces[g];
@@ -370,8 +377,8 @@ void edge_sort_adjacency(std::size_t n_vertices,
             ++n_live;
           }
         if (n_live == 2) {
-          nbr[live[0]] = live[1] / 3;
-          nbr[live[1]] = live[0] / 3;
+          nbr[live[0] / 3][live[0] % 3] = live[1] / 3;
+          nbr[live[1] / 3][live[1] % 3] = live[0] / 3;
         } else if (n_live > 2) {
           ++local;
         }
@@ -389,7 +396,7 @@ void edge_sort_adjacency(std::size_t n_vertices,
 /// Leaves (§3.5): groups of at most `max` edge-adjacent triangles, grown breadth-first over
 /// nbr (3 slots per face, `none` = no neighbour) from the first ungrouped triangle in input
 /// order. Returns CSR arrays (start, members).
-void group_faces(std::size_t nf, const std::vector<std::uint32_t>& nbr, std::uint32_t max,
+void group_faces(std::size_t nf, const std::vector<face_slots>& nbr, std::uint32_t max,
                  std::vector<std::uint32_t>& start, std::vector<std::uint32_t>& members) {
   std::vector<char> taken(nf, 0);
   start.clear();
@@ -405,7 +412,7 @@ void group_faces(std::size_t nf, const std::vector<std::uint32_t>& nbr, std::uin
     for (std::size_t k = g0; k < members.size() && members.size() - g0 < max; ++k) {
       const std::size_t m = members[k];
       for (std::size_t j = 0; j < 3 && members.size() - g0 < max; ++j) {
-        const std::uint32_t h = nbr[3 * m + j];
+        const std::uint32_t h = nbr[m][j];
         if (h == none || taken[h]) continue;
         taken[h] = 1;
         members.push_back(h);
@@ -454,8 +461,9 @@ bool paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
   int best = -1;
   for (std::size_t i = 0; i < n; ++i) {
     bool holds = true;
+    // r[j] > r[i] fails without the square root: d + r[j] ≥ r[j] for d ≥ 0 in floating point.
     for (std::size_t j = 0; j < n && holds; ++j)
-      holds = j == i || (c[j] - c[i]).norm() + r[j] <= r[i];
+      holds = j == i || (r[j] <= r[i] && (c[j] - c[i]).norm() + r[j] <= r[i]);
     if (holds && (best < 0 || r[i] > r[static_cast<std::size_t>(best)])) best = static_cast<int>(i);
   }
   if (best >= 0) {
@@ -562,6 +570,34 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   const std::size_t nv = mesh.num_vertices(), nf = mesh.num_faces();
   const auto& P = mesh.vertices.positions;
 
+  // Leaves (§3.5). The edge adjacency and the grouping read only the faces, so with two or more
+  // threads they run on their own thread(s) while the vertices, normals and colours are prepared
+  // (the grouping is sequential, and so are the area-weighted vertex normals). Neither side depends
+  // on how the threads are shared out: the output is the same for any `threads`.
+  std::vector<std::uint32_t> gstart, gfaces;
+  const bool overlap = threads >= 2;
+  const unsigned adj_threads = overlap ? threads / 2 : threads;
+  const unsigned prep_threads = overlap ? threads - adj_threads : threads;
+  double adjacency_seconds = 0;
+  std::vector<face_slots> nbr;  // becomes d.faces below (same size: nf × 3 u32)
+  std::exception_ptr adjacency_error;
+  const auto build_leaves = [&] {
+    try {
+      const auto ta = clock::now();
+      if (opt.adjacency == pop_adjacency::openmesh)
+        openmesh_adjacency(nv, mesh.faces, nbr, d.stats.isolated_faces);
+      else
+        edge_sort_adjacency(nv, mesh.faces, adj_threads, nbr, d.stats.isolated_faces,
+                            d.stats.nonmanifold_edges);
+      group_faces(nf, nbr, opt.max_leaf_triangles, gstart, gfaces);
+      adjacency_seconds = std::chrono::duration<double>(clock::now() - ta).count();
+    } catch (...) {
+      adjacency_error = std::current_exception();
+    }
+  };
+  std::jthread leaves_thread;  // joined on every path out of this function
+  if (overlap) leaves_thread = std::jthread(build_leaves);
+
   // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
   box3 bb = box3::of(P);
   d.q_min = bb.min;
@@ -573,10 +609,28 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   huge_resize(d.positions, nv);
   huge_resize(d.vertex_normal_codes, nv);
   huge_resize(d.normals, nv);
-  const std::vector<vec3f> est_normals =
-      mesh.vertices.normals.empty() ? area_weighted_normals(mesh) : std::vector<vec3f>{};
-  const std::vector<vec3f>& N = mesh.vertices.normals.empty() ? est_normals : mesh.vertices.normals;
-  parallel_chunks(nv, threads, [&](std::size_t lo, std::size_t hi) {
+  // Without vertex normals: area_weighted_normals(mesh), bit for bit (the same sums, in face
+  // order, and the same normalisation below), but in huge-page memory and without its float
+  // copy: its 36 MB of fresh 4 kB pages were a visible part of a 2 M-triangle build.
+  const bool estimate = mesh.vertices.normals.empty();
+  std::vector<vec3d> normal_sum;
+  if (estimate) {
+    reserve_huge(normal_sum, nv);
+    normal_sum.assign(nv, vec3d::Zero());
+    for (const auto& F : mesh.faces) {
+      const vec3d a = P[F[0]].cast<double>(), b = P[F[1]].cast<double>(),
+                  c = P[F[2]].cast<double>();
+      const vec3d n = (b - a).cross(c - a);  // |n| = twice the area: the area weighting
+      for (auto i : F) normal_sum[i] += n;
+    }
+  }
+  const auto vertex_normal = [&](std::size_t i) -> vec3f {
+    if (!estimate) return mesh.vertices.normals[i];
+    const double len = normal_sum[i].norm();
+    return len > 0 && std::isfinite(len) ? vec3f((normal_sum[i] / len).cast<float>())
+                                         : vec3f::Zero();
+  };
+  parallel_chunks(nv, prep_threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t i = lo; i < hi; ++i) {
       std::array<std::uint16_t, 3> q{};
       for (int k = 0; k < 3; ++k) {
@@ -587,7 +641,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       }
       d.vertex_q[i] = q;
       d.positions[i] = dequantise(q, d.q_min, d.q_step);
-      d.vertex_normal_codes[i] = quant.encode(N[i]);
+      d.vertex_normal_codes[i] = quant.encode(vertex_normal(i));
       d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
     }
   });
@@ -619,55 +673,28 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     face_colour.resize(nf);
   }
 
-  // Per triangle: geometric normal, colour, sphere (§3.1).
-  std::vector<vec3f> face_normal;
-  std::vector<vec3d> face_centre;
-  std::vector<double> face_radius;
-  std::vector<char> degenerate;
-  huge_resize(face_normal, nf);
-  huge_resize(face_centre, nf);
-  huge_resize(face_radius, nf);
-  huge_resize(degenerate, nf, char{0});
-  parallel_chunks(nf, threads, [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t f = lo; f < hi; ++f) {
-      const auto& F = mesh.faces[f];
-      const vec3d a = d.positions[F[0]].cast<double>(), b = d.positions[F[1]].cast<double>(),
-                  c = d.positions[F[2]].cast<double>();
-      const vec3d n = (b - a).cross(c - a);
-      const double len = n.norm();
-      if (len > 0 && std::isfinite(len)) {
-        face_normal[f] = (n / len).cast<float>();
-      } else {
-        face_normal[f] = vec3f::Zero();
-        degenerate[f] = 1;
-      }
-      pop_triangle_circle(a, b, c, face_centre[f], face_radius[f]);
-      if (colour) {
+  // Per triangle colour (§3.1). The triangles' normals and spheres are computed where they are
+  // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
+  // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
+  if (colour)
+    parallel_chunks(nf, prep_threads, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t f = lo; f < hi; ++f) {
         if (textured) {
           face_colour[f] = tex.average(mesh.face_texcoords[f]);
         } else {
           rgb_sum s;
-          for (auto i : F) s.add(d.colours[i]);
+          for (auto i : mesh.faces[f]) s.add(d.colours[i]);
           face_colour[f] = s.mean();
         }
       }
-    }
-  });
-  d.stats.degenerate_faces =
-      static_cast<std::size_t>(std::count(degenerate.begin(), degenerate.end(), char{1}));
+    });
 
-  // Leaves (§3.5).
   const auto t_prep = clock::now();
-  std::vector<std::uint32_t> gstart, gfaces;
-  {
-    std::vector<std::uint32_t> nbr;
-    if (opt.adjacency == pop_adjacency::openmesh)
-      openmesh_adjacency(nv, mesh.faces, nbr, d.stats.isolated_faces);
-    else
-      edge_sort_adjacency(nv, mesh.faces, threads, nbr, d.stats.isolated_faces,
-                          d.stats.nonmanifold_edges);
-    group_faces(nf, nbr, opt.max_leaf_triangles, gstart, gfaces);
-  }
+  if (overlap)
+    leaves_thread.join();
+  else
+    build_leaves();
+  if (adjacency_error) std::rethrow_exception(adjacency_error);
   const std::size_t n_leaves = gstart.size() - 1;
   const auto t_adj = clock::now();
 
@@ -690,8 +717,52 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     }
   });
 
-  // Topology (§3.1, QSplat): breadth first; a node over leaves [lo, hi) of `perm` is split at the
-  // median of the longest axis of its keys' box, and each half again: up to four children.
+  // Topology (§3.1, QSplat): a node over leaves [lo, hi) of `perm` is split at the median of
+  // the longest axis of its keys' box, and each half again: up to four children. The 4-ary tree
+  // is therefore the binary median-split tree with every other level merged, and where each
+  // split falls (lo + (hi − lo)/2) depends only on lo and hi. So `perm` is ordered first, by a
+  // depth-first recursive binary partition (subtrees in parallel; cache-friendly), and the
+  // breadth-first node list is then derived from the ranges alone. The order of `perm` does not
+  // depend on how the work is scheduled: each split selects by a total order (key, leaf id), so
+  // the set of leaves in each half is unique, and below a single leaf there is nothing to order.
+  const auto split = [&](std::uint32_t lo, std::uint32_t hi) {
+    box3 b;
+    for (std::uint32_t i = lo; i < hi; ++i) b.extend(perm[i].key);
+    const vec3f e = b.extent();
+    const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
+    const std::uint32_t mid = lo + (hi - lo) / 2;
+    // One comparator per axis (a constant offset instead of an indexed key).
+    const auto select = [&]<int k>(std::integral_constant<int, k>) {
+      std::nth_element(perm.begin() + lo, perm.begin() + mid, perm.begin() + hi,
+                       [](const keyed& x, const keyed& y) {
+                         const float kx = x.key[k], ky = y.key[k];
+                         return kx < ky || (kx == ky && x.id < y.id);
+                       });
+    };
+    if (axis == 0)
+      select(std::integral_constant<int, 0>{});
+    else if (axis == 1)
+      select(std::integral_constant<int, 1>{});
+    else
+      select(std::integral_constant<int, 2>{});
+    return mid;
+  };
+  // `budget` threads for the subtree; one half goes to a new thread while the budget allows.
+  const auto partition = [&](const auto& self, std::uint32_t lo, std::uint32_t hi,
+                             unsigned budget) -> void {
+    if (hi - lo <= 1) return;
+    const std::uint32_t m = split(lo, hi);
+    if (budget > 1 && hi - lo >= 8192) {
+      std::thread other([&, m, hi, budget] { self(self, m, hi, budget / 2); });
+      self(self, lo, m, budget - budget / 2);
+      other.join();
+    } else {
+      self(self, lo, m, 1);
+      self(self, m, hi, 1);
+    }
+  };
+  partition(partition, 0, static_cast<std::uint32_t>(n_leaves), threads);
+
   struct topo {
     std::uint32_t lo, hi, first = 0, count = 0, parent = none;
     std::uint16_t depth = 0;
@@ -699,92 +770,97 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   std::vector<topo> tn;
   reserve_huge(tn, 2 * n_leaves);
   tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
-  const auto split = [&](std::uint32_t lo, std::uint32_t hi) {
-    box3 b;
-    for (std::uint32_t i = lo; i < hi; ++i) b.extend(perm[i].key);
-    const vec3f e = b.extent();
-    const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
-    const std::uint32_t mid = lo + (hi - lo) / 2;
-    std::nth_element(perm.begin() + lo, perm.begin() + mid, perm.begin() + hi,
-                     [axis](const keyed& x, const keyed& y) {
-                       const float kx = x.key[axis], ky = y.key[axis];
-                       return kx < ky || (kx == ky && x.id < y.id);
-                     });
-    return mid;
-  };
-  std::vector<std::array<std::uint32_t, 5>> cuts;  // per node of a level: up to 4 parts
   std::vector<std::pair<std::size_t, std::size_t>> levels;
   for (std::size_t a = 0; a < tn.size();) {
     const std::size_t b = tn.size();
     levels.emplace_back(a, b);
-    cuts.assign(b - a, {});
-    parallel_chunks(b - a, threads, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t i = lo; i < hi; ++i) {
-        const topo& t = tn[a + i];
-        auto& cut = cuts[i];
-        cut.fill(0);
-        if (t.hi - t.lo <= 1) continue;
-        const std::uint32_t m = split(t.lo, t.hi);
-        std::uint32_t k = 0;
-        cut[k++] = t.lo;
-        if (m - t.lo >= 2) cut[k++] = split(t.lo, m);
-        cut[k++] = m;
-        if (t.hi - m >= 2) cut[k++] = split(m, t.hi);
-        for (std::uint32_t j = k; j < 5; ++j) cut[j] = t.hi;  // k parts: cut[0..k]
-      }
-    });
-    for (std::size_t i = 0; i < b - a; ++i) {
-      const auto& cut = cuts[i];
-      if (tn[a + i].hi - tn[a + i].lo <= 1) continue;
-      tn[a + i].first = static_cast<std::uint32_t>(tn.size());
-      for (std::size_t j = 0; j < 4 && cut[j] < cut[j + 1]; ++j) {
-        tn.push_back({cut[j], cut[j + 1], 0, 0, static_cast<std::uint32_t>(a + i),
-                      static_cast<std::uint16_t>(tn[a + i].depth + 1)});
-        ++tn[a + i].count;
-      }
+    for (std::size_t i = a; i < b; ++i) {
+      const std::uint32_t lo = tn[i].lo, hi = tn[i].hi;
+      if (hi - lo <= 1) continue;
+      const std::uint32_t m = lo + (hi - lo) / 2;
+      std::array<std::uint32_t, 5> cut{};
+      std::uint32_t k = 0;
+      cut[k++] = lo;
+      if (m - lo >= 2) cut[k++] = lo + (m - lo) / 2;
+      cut[k++] = m;
+      if (hi - m >= 2) cut[k++] = m + (hi - m) / 2;
+      cut[k] = hi;  // k parts: cut[0..k]
+      tn[i].first = static_cast<std::uint32_t>(tn.size());
+      tn[i].count = k;
+      const auto depth = static_cast<std::uint16_t>(tn[i].depth + 1);
+      for (std::uint32_t j = 0; j < k; ++j)
+        tn.push_back({cut[j], cut[j + 1], 0, 0, static_cast<std::uint32_t>(i), depth});
     }
     a = b;
   }
   if (levels.size() > 65535) throw InvalidArgument("build_pop: tree deeper than 65535 levels");
 
-  // Faces in leaf order; leaves point at their range.
+  // Faces in leaf order; leaves point at their range. Two parallel passes over fixed blocks of
+  // nodes: faces per block, then (after a prefix sum) the records and the faces themselves.
   const std::size_t nn = tn.size();
   huge_resize(d.nodes, nn);
-  huge_resize(d.faces, nf);
+  // The adjacency (nf × 3 u32, huge pages) is dead after the grouping: its storage takes the
+  // faces (every entry is overwritten below), instead of 24 MB of fresh, zeroed pages.
+  d.faces.swap(nbr);
+  std::vector<face_slots>().swap(nbr);
+  if (d.faces.size() != nf) d.faces.resize(nf);
   std::vector<std::uint32_t> leaf_group;
-  huge_resize(leaf_group, nn, none);
+  reserve_huge(leaf_group, nn);
+  leaf_group.resize(nn);
   {
-    std::uint32_t next = 0;
-    for (std::size_t i = 0; i < nn; ++i) {
-      auto& nd = d.nodes[i];
-      nd.parent = tn[i].parent;
-      nd.depth = tn[i].depth;
-      if (tn[i].count == 0) {
-        const std::uint32_t g = perm[tn[i].lo].id;
-        leaf_group[i] = g;
-        nd.leaf = 1;
-        nd.first = next;
-        nd.count = static_cast<std::uint8_t>(gstart[g + 1] - gstart[g]);
-        for (std::uint32_t k = gstart[g]; k < gstart[g + 1]; ++k)
-          d.faces[next++] = mesh.faces[gfaces[k]];
-      } else {
-        nd.first = tn[i].first;
-        nd.count = static_cast<std::uint8_t>(tn[i].count);
+    const std::size_t blocks = std::max<std::size_t>(1, std::min<std::size_t>(threads, nn / 4096));
+    std::vector<std::uint32_t> block_faces(blocks + 1, 0);
+    const auto block_lo = [&](std::size_t t) { return nn * t / blocks; };
+    const auto group_of = [&](std::size_t i) { return perm[tn[i].lo].id; };
+    detail::parallel_chunks(blocks, threads, 1, [&](std::size_t b0, std::size_t b1) {
+      for (std::size_t t = b0; t < b1; ++t) {
+        std::uint32_t sum = 0;
+        for (std::size_t i = block_lo(t); i < block_lo(t + 1); ++i)
+          if (tn[i].count == 0) sum += gstart[group_of(i) + 1] - gstart[group_of(i)];
+        block_faces[t + 1] = sum;
       }
-    }
+    });
+    for (std::size_t t = 0; t < blocks; ++t) block_faces[t + 1] += block_faces[t];
+    detail::parallel_chunks(blocks, threads, 1, [&](std::size_t b0, std::size_t b1) {
+      for (std::size_t t = b0; t < b1; ++t) {
+        std::uint32_t next = block_faces[t];
+        for (std::size_t i = block_lo(t); i < block_lo(t + 1); ++i) {
+          auto& nd = d.nodes[i];
+          nd.parent = tn[i].parent;
+          nd.depth = tn[i].depth;
+          if (tn[i].count == 0) {
+            const std::uint32_t g = group_of(i);
+            leaf_group[i] = g;
+            nd.leaf = 1;
+            nd.first = next;
+            nd.count = static_cast<std::uint8_t>(gstart[g + 1] - gstart[g]);
+            for (std::uint32_t k = gstart[g]; k < gstart[g + 1]; ++k)
+              d.faces[next++] = mesh.faces[gfaces[k]];
+          } else {
+            leaf_group[i] = none;
+            nd.first = tn[i].first;
+            nd.count = static_cast<std::uint8_t>(tn[i].count);
+          }
+        }
+      }
+    });
   }
   if (colour) huge_resize(d.node_colours, nn);
   huge_resize(d.node_normal_codes, nn);
 
   // Bottom-up, one level at a time (children of a level all lie in the next one).
   std::vector<std::size_t> contained(threads + 1, 0);
+  std::size_t degenerate_faces = 0;
   const bool exact = opt.spheres == pop_sphere_rule::exact;
   for (std::size_t li = levels.size(); li-- > 0;) {
     const auto [a, b] = levels[li];
     parallel_chunks(b - a, threads, [&](std::size_t lo, std::size_t hi) {
       std::size_t local_contained = 0;
+      std::size_t local_degenerate = 0;
       std::array<vec3d, 12> cc;
       std::array<double, 12> cr;
+      std::array<vec3f, 4> fn;
+      std::array<bool, 4> fdeg{};
       for (std::size_t i = a + lo; i < a + hi; ++i) {
         auto& nd = d.nodes[i];
         vec3d x;
@@ -793,41 +869,48 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         rgb_sum csum;
         std::size_t m = 0;
         if (nd.leaf) {
-          const std::uint32_t g = leaf_group[i];
-          const std::size_t k0 = gstart[g], k1 = gstart[g + 1];
-          for (std::size_t k = k0; k < k1; ++k) {
-            const std::uint32_t f = gfaces[k];
-            for (auto v : mesh.faces[f]) nsum += d.normals[v].cast<double>();
-            if (colour) csum.add(face_colour[f]);
+          // The leaf's triangles are d.faces[first, first + count) (= its group's faces).
+          const std::size_t nt = nd.count;
+          const std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
+          for (std::size_t j = 0; j < nt; ++j) {
+            const auto& F = tri[j];
+            for (auto v : F) nsum += d.normals[v].cast<double>();
+            if (colour) csum.add(face_colour[gfaces[gstart[leaf_group[i]] + j]]);
+            // Geometric normal (zero and `degenerate` when the cross product vanishes).
+            const vec3d p0 = d.positions[F[0]].cast<double>(),
+                        p1 = d.positions[F[1]].cast<double>(),
+                        p2 = d.positions[F[2]].cast<double>();
+            const vec3d n = (p1 - p0).cross(p2 - p0);
+            const double len = n.norm();
+            fdeg[j] = !(len > 0 && std::isfinite(len));
+            fn[j] = fdeg[j] ? vec3f::Zero() : vec3f((n / len).cast<float>());
+            local_degenerate += fdeg[j] ? 1 : 0;
+            // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
+            if (nt == 1 || !exact) pop_triangle_circle(p0, p1, p2, cc[j], cr[j]);
           }
-          if (k1 - k0 == 1) {
-            x = face_centre[gfaces[k0]];
-            r = face_radius[gfaces[k0]];
+          if (nt == 1) {
+            x = cc[0];
+            r = cr[0];
           } else if (exact) {  // smallest sphere of the leaf's corners
-            for (std::size_t k = k0; k < k1; ++k)
-              for (auto v : mesh.faces[gfaces[k]]) {
+            for (std::size_t j = 0; j < nt; ++j)
+              for (auto v : tri[j]) {
                 cc[m] = d.positions[v].cast<double>();
                 cr[m++] = 0;
               }
             min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
             m = 0;
           } else {  // the paper's rules over the triangles' spheres
-            for (std::size_t k = k0; k < k1; ++k) {
-              cc[m] = face_centre[gfaces[k]];
-              cr[m++] = face_radius[gfaces[k]];
-            }
-            paper_sphere(cc.data(), cr.data(), m, x, r);
-            m = 0;
+            paper_sphere(cc.data(), cr.data(), nt, x, r);
           }
           // Every corner, measured from the stored centre.
-          for (std::size_t k = k0; k < k1; ++k)
-            for (auto v : mesh.faces[gfaces[k]]) {
+          for (std::size_t j = 0; j < nt; ++j)
+            for (auto v : tri[j]) {
               cc[m] = d.positions[v].cast<double>();
               cr[m++] = 0;
             }
           finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
           if (!(nsum.squaredNorm() > 0))
-            for (std::size_t k = k0; k < k1; ++k) nsum += face_normal[gfaces[k]].cast<double>();
+            for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
         } else {
           for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
             const auto& ch = d.nodes[c];
@@ -848,10 +931,12 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         nd.normal = quant.decode(code);
         double cone = 0;
         if (nd.leaf) {
-          for (std::uint32_t f = nd.first; f < nd.first + nd.count; ++f) {
-            const std::uint32_t src = gfaces[gstart[leaf_group[i]] + (f - nd.first)];
-            if (!degenerate[src]) cone = std::max(cone, angle_between(nd.normal, face_normal[src]));
-          }
+          // The largest angle to a face normal is the acos of the smallest cosine (acos is
+          // monotone): one acos per leaf instead of one per triangle.
+          double min_cos = 2;
+          for (std::size_t j = 0; j < nd.count; ++j)
+            if (!fdeg[j]) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
+          if (min_cos <= 1) cone = std::acos(min_cos);
         } else {
           for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
             cone = std::max(cone, angle_between(nd.normal, d.nodes[c].normal) +
@@ -866,9 +951,11 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       static std::mutex m;
       const std::lock_guard lock(m);
       contained[0] += local_contained;
+      degenerate_faces += local_degenerate;
     });
   }
   d.stats.contained_inner = contained[0];
+  d.stats.degenerate_faces = degenerate_faces;
 
   // Quantised spheres, top down (a parent's quantised sphere before its children's). The exact
   // sphere of each node is replaced by the smallest coded sphere that holds it and lies inside
@@ -903,7 +990,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   }
   st.prepare_seconds = std::chrono::duration<double>(t_prep - t0).count();
-  st.adjacency_seconds = std::chrono::duration<double>(t_adj - t_prep).count();
+  st.adjacency_seconds = adjacency_seconds;
   st.tree_seconds = std::chrono::duration<double>(t1 - t_adj).count();
   st.build_seconds = std::chrono::duration<double>(t1 - t0).count();
   set_file_stats(d, pop_file_bytes(d));

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "pbr_lod/builders/pop.hpp"
+#include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
@@ -362,6 +363,64 @@ TEST(PopBuild, EdgeSortMatchesOpenMeshOnManifoldMeshes) {
   const auto c3 = build_pop<with_normals>(bunny, {.threads = 3});
   EXPECT_EQ(c1.faces(), c3.faces());
   EXPECT_EQ(c1.nodes(), c3.nodes());
+}
+
+/// The file save() writes, without the four build timings (header bytes [100, 132)) and the
+/// checksum that covers them: everything else is the build's output and must be reproducible.
+std::vector<char> file_without_timings(const pop_n& t, const std::string& name) {
+  const std::string path = temp_path(name);
+  t.save(path);
+  std::ifstream in(path, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::remove(path);
+  EXPECT_GT(bytes.size(), 140u);
+  if (bytes.size() <= 140) return bytes;
+  std::fill(bytes.begin() + 100, bytes.begin() + 132, char{0});
+  bytes.resize(bytes.size() - 8);
+  return bytes;
+}
+
+// The build is parallel in several places — the depth-first median split (one half of a subtree
+// on another thread), the node records and face gather over blocks, the bottom-up and top-down
+// passes, the edge sort, and the adjacency/grouping running beside the vertex pass — and none
+// may change the output: the same file bytes for any thread count. The grid is large enough
+// (≈ 20 k leaves) for the split to hand subtrees to threads; the bunny has no vertex normals
+// (estimated) and the Buddha res3 has duplicate and non-manifold faces.
+TEST(PopBuild, OutputIsIndependentOfThreadCount) {
+  const auto grid = grid_mesh(200);
+  const auto& rm = real_meshes::get();
+  for (const triangle_mesh* m : {&grid, &rm.bunny, &rm.buddha})
+    for (const auto rule : {pop_sphere_rule::paper, pop_sphere_rule::exact})
+      for (const bool quantised : {true, false}) {
+        const auto one = build_pop<with_normals>(
+            *m, {.spheres = rule, .threads = 1, .quantise_nodes = quantised});
+        const auto ref = file_without_timings(one, "threads1.lod");
+        for (const unsigned threads : {2u, 3u, 4u, 7u}) {
+          const auto t = build_pop<with_normals>(
+              *m, {.spheres = rule, .threads = threads, .quantise_nodes = quantised});
+          EXPECT_TRUE(file_without_timings(t, "threadsN.lod") == ref)
+              << m->faces.size() << " triangles, rule " << static_cast<int>(rule) << ", quantised "
+              << quantised << ", threads " << threads;
+          EXPECT_EQ(t.stats().degenerate_faces, one.stats().degenerate_faces);
+          EXPECT_EQ(t.stats().isolated_faces, one.stats().isolated_faces);
+        }
+      }
+}
+
+// Without vertex normals the build estimates them as area_weighted_normals() does (its own copy,
+// in huge-page memory, fused with the quantisation): the decoded vertex normals must equal the
+// quantised area-weighted normals exactly.
+TEST(PopBuild, EstimatedVertexNormalsAreTheAreaWeightedOnes) {
+  const auto& m = real_meshes::get().bunny;
+  ASSERT_TRUE(m.vertices.normals.empty());
+  const auto t = build_pop<with_normals>(m);
+  const std::vector<vec3f> n = area_weighted_normals(m);
+  const normal_quantizer q(16);
+  ASSERT_EQ(t.vertex_normals().size(), n.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < n.size(); ++i)
+    differ += t.vertex_normals()[i] == q.decode(q.encode(n[i])) ? 0 : 1;
+  EXPECT_EQ(differ, 0u);
 }
 
 TEST(PopBuild, OneTriangle) {

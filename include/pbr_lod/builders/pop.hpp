@@ -104,10 +104,12 @@ struct pop_options {
 };
 
 struct pop_build_stats {
-  double build_seconds = 0;      ///< whole build
-  double prepare_seconds = 0;    ///< vertex quantisation, per-face normals, colours, spheres
-  double adjacency_seconds = 0;  ///< edge adjacency (edge sort or OpenMesh) + grouping into leaves
-  double tree_seconds = 0;       ///< top-down split + bottom-up spheres, attributes, cones
+  double build_seconds = 0;    ///< whole build
+  double prepare_seconds = 0;  ///< validation, vertex quantisation and normals, face colours
+  /// edge adjacency (edge sort or OpenMesh) + grouping into leaves; with threads ≥ 2 this runs
+  /// beside the prepare step, so prepare + adjacency + tree may exceed build_seconds
+  double adjacency_seconds = 0;
+  double tree_seconds = 0;  ///< split, node records, bottom-up spheres/normals/cones, quantisation
   std::size_t vertices = 0, triangles = 0;
   std::size_t nodes = 0, leaves = 0, max_depth = 0;
   std::array<std::size_t, 4> leaves_by_size{};  ///< leaves with 1, 2, 3, 4 triangles
