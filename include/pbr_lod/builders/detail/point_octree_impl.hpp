@@ -562,6 +562,7 @@ struct point_octree_builder {
       }
       for (const auto& e : errors)
         if (e) std::rethrow_exception(e);
+      if (cancel.load(std::memory_order_relaxed)) return {};
       splice(L, first_child, locals, workers);
     } else {
       for (std::size_t j = 0; j < kids.size(); ++j) {
