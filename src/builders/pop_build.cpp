@@ -609,26 +609,14 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   huge_resize(d.positions, nv);
   huge_resize(d.vertex_normal_codes, nv);
   huge_resize(d.normals, nv);
-  // Without vertex normals: area_weighted_normals(mesh), bit for bit (the same sums, in face
-  // order, and the same normalisation below), but in huge-page memory and without its float
-  // copy: its 36 MB of fresh 4 kB pages were a visible part of a 2 M-triangle build.
+  // Without vertex normals: area_weighted_normals(mesh), bit for bit, from its double sums,
+  // normalised in the quantisation loop below: no float copy (its 36 MB of fresh 4 kB pages
+  // were a visible part of a 2 M-triangle build).
   const bool estimate = mesh.vertices.normals.empty();
-  std::vector<vec3d> normal_sum;
-  if (estimate) {
-    reserve_huge(normal_sum, nv);
-    normal_sum.assign(nv, vec3d::Zero());
-    for (const auto& F : mesh.faces) {
-      const vec3d a = P[F[0]].cast<double>(), b = P[F[1]].cast<double>(),
-                  c = P[F[2]].cast<double>();
-      const vec3d n = (b - a).cross(c - a);  // |n| = twice the area: the area weighting
-      for (auto i : F) normal_sum[i] += n;
-    }
-  }
+  const std::vector<vec3d> normal_sum =
+      estimate ? area_weighted_normal_sums(mesh) : std::vector<vec3d>{};
   const auto vertex_normal = [&](std::size_t i) -> vec3f {
-    if (!estimate) return mesh.vertices.normals[i];
-    const double len = normal_sum[i].norm();
-    return len > 0 && std::isfinite(len) ? vec3f((normal_sum[i] / len).cast<float>())
-                                         : vec3f::Zero();
+    return estimate ? unit_or_zero(normal_sum[i]) : mesh.vertices.normals[i];
   };
   parallel_chunks(nv, prep_threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t i = lo; i < hi; ++i) {

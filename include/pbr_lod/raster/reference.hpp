@@ -10,6 +10,7 @@
 //    square whose side is the projection of that diameter at the point's depth.
 #pragma once
 
+#include <cmath>
 #include <vector>
 
 #include "pbr_lod/core/camera.hpp"
@@ -34,5 +35,16 @@ namespace pbr_lod {
 /// times twice its area, to its three vertices); unit length, or zero for a vertex without a
 /// face of non-zero area.
 [[nodiscard]] std::vector<vec3f> area_weighted_normals(const triangle_mesh& m);
+
+/// The unnormalised sums behind area_weighted_normals(), in double, faces in input order (on
+/// huge pages when large): area_weighted_normals(m)[i] == unit_or_zero(sums[i]). For builders
+/// that normalise on the way, without the float copy.
+[[nodiscard]] std::vector<vec3d> area_weighted_normal_sums(const triangle_mesh& m);
+
+/// s normalised to float, or zero when s has no (finite) length.
+[[nodiscard]] inline vec3f unit_or_zero(const vec3d& s) {
+  const double len = s.norm();
+  return len > 0 && std::isfinite(len) ? vec3f((s / len).cast<float>()) : vec3f::Zero();
+}
 
 }  // namespace pbr_lod
