@@ -713,12 +713,14 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // breadth-first node list is then derived from the ranges alone. The order of `perm` does not
   // depend on how the work is scheduled: each split selects by a total order (key, leaf id), so
   // the set of leaves in each half is unique, and below a single leaf there is nothing to order.
+  // Where a range splits: the partition below and the topology after it must agree exactly.
+  const auto mid_of = [](std::uint32_t lo, std::uint32_t hi) { return lo + (hi - lo) / 2; };
   const auto split = [&](std::uint32_t lo, std::uint32_t hi) {
     box3 b;
     for (std::uint32_t i = lo; i < hi; ++i) b.extend(perm[i].key);
     const vec3f e = b.extent();
     const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
-    const std::uint32_t mid = lo + (hi - lo) / 2;
+    const std::uint32_t mid = mid_of(lo, hi);
     // One comparator per axis (a constant offset instead of an indexed key).
     const auto select = [&]<int k>(std::integral_constant<int, k>) {
       std::nth_element(perm.begin() + lo, perm.begin() + mid, perm.begin() + hi,
@@ -765,13 +767,13 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     for (std::size_t i = a; i < b; ++i) {
       const std::uint32_t lo = tn[i].lo, hi = tn[i].hi;
       if (hi - lo <= 1) continue;
-      const std::uint32_t m = lo + (hi - lo) / 2;
+      const std::uint32_t m = mid_of(lo, hi);
       std::array<std::uint32_t, 5> cut{};
       std::uint32_t k = 0;
       cut[k++] = lo;
-      if (m - lo >= 2) cut[k++] = lo + (m - lo) / 2;
+      if (m - lo >= 2) cut[k++] = mid_of(lo, m);
       cut[k++] = m;
-      if (hi - m >= 2) cut[k++] = m + (hi - m) / 2;
+      if (hi - m >= 2) cut[k++] = mid_of(m, hi);
       cut[k] = hi;  // k parts: cut[0..k]
       tn[i].first = static_cast<std::uint32_t>(tn.size());
       tn[i].count = k;
