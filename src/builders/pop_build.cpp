@@ -43,14 +43,6 @@ void parallel_chunks(std::size_t n, unsigned threads, F&& f) {
   detail::parallel_chunks(n, threads, 2048, f);
 }
 
-/// v.resize(n) on fresh storage advised for transparent huge pages (core/memory.hpp): first
-/// touch of 4 kB pages was ≈ 20 % of a 2 M-triangle build.
-template <class T>
-void huge_resize(std::vector<T>& v, std::size_t n, const T& value = T()) {
-  reserve_huge(v, n);
-  v.resize(n, value);
-}
-
 /// The smallest float ≥ x (x ≥ 0): stored radii never shrink below what was computed in double.
 float round_up(double x) {
   float f = static_cast<float>(x);
@@ -85,6 +77,14 @@ void dequantise_sphere(const vec3f& pc, float pr, std::uint16_t code, vec3f& c, 
 std::uint16_t quantise_sphere(const vec3f& pc, float pr, const vec3f& c, float r) {
   if (!(pr > 0)) return sphere_code_parent;
   const vec3d cd = c.cast<double>(), pcd = pc.cast<double>();
+  // A radius above 12/13 of the parent's fits no level below 12 (pr·(j + 1)/13 ≤ 12/13·pr), and
+  // level 12 (pr itself) fits only at the parent's own centre: every other centre code lies
+  // ≥ pr/6 off it (≥ pr/7 after float rounding while |pc| ≤ 2¹⁶·pr), leaving at most 6/7·pr of
+  // room. The loop below would return the parent's code whatever it tried (7.6 % of the nodes
+  // of the 2 M-triangle grid, a third of its tries).
+  if (static_cast<double>(r) > (12.0 / 13.0) * (1 + 1e-6) * static_cast<double>(pr) &&
+      pcd.cwiseAbs().maxCoeff() <= 65536.0 * static_cast<double>(pr))
+    return sphere_code_parent;
   std::array<std::array<unsigned, 2>, 3> cand{};
   for (int k = 0; k < 3; ++k) {
     const double t = std::clamp(6.0 + 6.0 * (cd[k] - pcd[k]) / pr, 0.0, 12.0);
@@ -99,6 +99,7 @@ std::uint16_t quantise_sphere(const vec3f& pc, float pr, const vec3f& c, float r
     const vec3d cqd = cq.cast<double>();
     const double need = (cd - cqd).norm() + static_cast<double>(r);
     const double room = static_cast<double>(pr) - (cqd - pcd).norm();
+    if (need > room) return 13u;  // no rq is both ≥ need and ≤ room
     auto j = static_cast<unsigned>(
         std::clamp(std::ceil(13.0 * need / static_cast<double>(pr)) - 1.0, 0.0, 12.0));
     while (j < 12 && static_cast<double>(pr * radius_level(j)) < need) ++j;
@@ -605,10 +606,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     const float ext = bb.max[k] - bb.min[k];
     d.q_step[k] = ext > 0 ? ext / 65535.0f : 0.0f;
   }
-  huge_resize(d.vertex_q, nv);
-  huge_resize(d.positions, nv);
-  huge_resize(d.vertex_normal_codes, nv);
-  huge_resize(d.normals, nv);
+  resize_fresh(d.vertex_q, nv, prep_threads);
+  resize_fresh(d.positions, nv, prep_threads);
+  resize_fresh(d.vertex_normal_codes, nv, prep_threads);
+  resize_fresh(d.normals, nv, prep_threads);
   // Without vertex normals: area_weighted_normals(mesh), bit for bit, from its double sums,
   // normalised in the quantisation loop below: no float copy (its 36 MB of fresh 4 kB pages
   // were a visible part of a 2 M-triangle build).
@@ -693,8 +694,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     std::uint32_t id;
   };
   std::vector<keyed> perm;
-  reserve_huge(perm, n_leaves);
-  perm.resize(n_leaves);
+  resize_fresh(perm, n_leaves, threads);
   parallel_chunks(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t g = lo; g < hi; ++g) {
       vec3d s = vec3d::Zero();
@@ -788,15 +788,14 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // Faces in leaf order; leaves point at their range. Two parallel passes over fixed blocks of
   // nodes: faces per block, then (after a prefix sum) the records and the faces themselves.
   const std::size_t nn = tn.size();
-  huge_resize(d.nodes, nn);
+  resize_fresh(d.nodes, nn, threads);
   // The adjacency (nf × 3 u32, huge pages) is dead after the grouping: its storage takes the
   // faces (every entry is overwritten below), instead of 24 MB of fresh, zeroed pages.
   d.faces.swap(nbr);
   std::vector<face_slots>().swap(nbr);
   if (d.faces.size() != nf) d.faces.resize(nf);
   std::vector<std::uint32_t> leaf_group;
-  reserve_huge(leaf_group, nn);
-  leaf_group.resize(nn);
+  resize_fresh(leaf_group, nn, threads);
   {
     const std::size_t blocks = std::max<std::size_t>(1, std::min<std::size_t>(threads, nn / 4096));
     std::vector<std::uint32_t> block_faces(blocks + 1, 0);
@@ -835,8 +834,8 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       }
     });
   }
-  if (colour) huge_resize(d.node_colours, nn);
-  huge_resize(d.node_normal_codes, nn);
+  if (colour) resize_fresh(d.node_colours, nn, threads);
+  resize_fresh(d.node_normal_codes, nn, threads);
 
   // Bottom-up, one level at a time (children of a level all lie in the next one).
   std::vector<std::size_t> contained(threads + 1, 0);
@@ -952,7 +951,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // the parent's: by induction every stored sphere holds its subtree, and children stay inside
   // parents (the coherent traversal and culling rely on both).
   if (qn) {
-    huge_resize(d.node_sphere_codes, nn, sphere_code_parent);
+    resize_fresh(d.node_sphere_codes, nn, threads, sphere_code_parent);
     for (std::size_t li = 1; li < levels.size(); ++li) {
       const auto [a, b] = levels[li];
       parallel_chunks(b - a, threads, [&](std::size_t lo, std::size_t hi) {
@@ -1195,11 +1194,11 @@ pop_data load_pop_data(const std::string& path, bool colour) {
                         std::to_string(c) + " outside the " + std::to_string(quant.size()) +
                         "-entry table");
   };
-  huge_resize(d.vertex_q, nv);
-  huge_resize(d.positions, nv);
-  huge_resize(d.vertex_normal_codes, nv);
-  huge_resize(d.normals, nv);
-  if (colour) huge_resize(d.colours, nv);
+  resize_fresh(d.vertex_q, nv, 1);
+  resize_fresh(d.positions, nv, 1);
+  resize_fresh(d.vertex_normal_codes, nv, 1);
+  resize_fresh(d.normals, nv, 1);
+  if (colour) resize_fresh(d.colours, nv, 1);
   for (std::size_t i = 0; i < nv; ++i) {
     for (auto& q : d.vertex_q[i]) q = r.get<std::uint16_t>("vertex");
     d.positions[i] = dequantise(d.vertex_q[i], d.q_min, d.q_step);
@@ -1210,7 +1209,7 @@ pop_data load_pop_data(const std::string& path, bool colour) {
     d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
     if (colour) d.colours[i] = r.get<rgb8>("vertex colour");
   }
-  huge_resize(d.faces, nf);
+  resize_fresh(d.faces, nf, 1);
   for (std::size_t i = 0; i < nf; ++i)
     for (auto& v : d.faces[i]) {
       v = r.get<std::uint32_t>("face");
@@ -1218,10 +1217,10 @@ pop_data load_pop_data(const std::string& path, bool colour) {
         throw FormatError(path + ": face " + std::to_string(i) + " references vertex " +
                           std::to_string(v) + ", but there are " + std::to_string(nv));
     }
-  huge_resize(d.nodes, nn);
-  huge_resize(d.node_normal_codes, nn);
-  if (qn) huge_resize(d.node_sphere_codes, nn);
-  if (colour) huge_resize(d.node_colours, nn);
+  resize_fresh(d.nodes, nn, 1);
+  resize_fresh(d.node_normal_codes, nn, 1);
+  if (qn) resize_fresh(d.node_sphere_codes, nn, 1);
+  if (colour) resize_fresh(d.node_colours, nn, 1);
   for (std::size_t i = 0; i < nn; ++i) {
     auto& nd = d.nodes[i];
     if (qn) {

@@ -38,12 +38,13 @@ void reserve_huge(std::vector<T, Alloc>& v, std::size_t n) {
   if (n * sizeof(T) >= (std::size_t{4} << 20)) advise_huge_pages(v.data(), n * sizeof(T));
 }
 
-/// v.resize(n) for a buffer about to be overwritten: reserve_huge(), then the new pages are
-/// faulted in by up to `threads` threads (populate_pages) before the value-initialising resize,
-/// which then only streams zeros through mapped memory. On the 2-core VM the first touch of a
-/// fresh 2 MB page costs ≈ 1–2 ms; a sequential resize of a 30 MB array paid all of it on one core.
+/// v.resize(n, value) for a buffer about to be filled: reserve_huge(), then the new pages are
+/// faulted in by up to `threads` threads (populate_pages) before the resize, which then only
+/// streams `value` through mapped memory. On the 2-core VM the first touch of a fresh 2 MB page
+/// costs ≈ 1–2 ms; a sequential resize of a 30 MB array paid all of it on one core.
 template <class T, class Alloc>
-void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads) {
+void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads,
+                  const T& value = T()) {
   const std::size_t old = v.size();
   if (n > old) {
     reserve_huge(v, n);
@@ -51,7 +52,7 @@ void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads) {
     parallel_chunks((n - old) * sizeof(T), threads, std::size_t{1} << 21,
                     [&](std::size_t lo, std::size_t hi) { populate_pages(from + lo, hi - lo); });
   }
-  v.resize(n);
+  v.resize(n, value);
 }
 
 }  // namespace pbr_lod::detail
