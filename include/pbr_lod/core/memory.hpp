@@ -43,8 +43,7 @@ void reserve_huge(std::vector<T, Alloc>& v, std::size_t n) {
 /// streams `value` through mapped memory. On the 2-core VM the first touch of a fresh 2 MB page
 /// costs ≈ 1–2 ms; a sequential resize of a 30 MB array paid all of it on one core.
 template <class T, class Alloc>
-void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads,
-                  const T& value = T()) {
+void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads, const T& value = T()) {
   const std::size_t old = v.size();
   if (n > old) {
     reserve_huge(v, n);
