@@ -837,114 +837,152 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   if (colour) resize_fresh(d.node_colours, nn, threads);
   resize_fresh(d.node_normal_codes, nn, threads);
 
-  // Bottom-up, one level at a time (children of a level all lie in the next one).
-  std::vector<std::size_t> contained(threads + 1, 0);
-  std::size_t degenerate_faces = 0;
+  // Bottom-up (children before parents) and, with quantised nodes, top-down (parents before
+  // children). Work units are the subtrees below the first level with at least 64 nodes per
+  // thread, handed out one at a time (their sizes differ: leaves sit at different depths), each
+  // done level by level inside itself while its records are in cache; the few levels above them
+  // run on this thread. In the breadth-first layout the nodes of one subtree at one level are a
+  // contiguous range. A node's values depend only on its children's (bottom-up) or its parent's
+  // (top-down), so the output does not depend on the schedule.
+  struct alignas(64) counts {
+    std::size_t contained = 0, degenerate = 0;
+  };
+  std::vector<counts> per_worker(threads);
   const bool exact = opt.spheres == pop_sphere_rule::exact;
-  for (std::size_t li = levels.size(); li-- > 0;) {
-    const auto [a, b] = levels[li];
-    parallel_chunks(b - a, threads, [&](std::size_t lo, std::size_t hi) {
-      std::size_t local_contained = 0;
-      std::size_t local_degenerate = 0;
-      std::array<vec3d, 12> cc;
-      std::array<double, 12> cr;
-      std::array<vec3f, 4> fn;
-      std::array<bool, 4> fdeg{};
-      for (std::size_t i = a + lo; i < a + hi; ++i) {
-        auto& nd = d.nodes[i];
-        vec3d x;
-        double r = 0;
-        vec3d nsum = vec3d::Zero();
-        rgb_sum csum;
-        std::size_t m = 0;
-        if (nd.leaf) {
-          // The leaf's triangles are d.faces[first, first + count) (= its group's faces).
-          const std::size_t nt = nd.count;
-          const std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
-          for (std::size_t j = 0; j < nt; ++j) {
-            const auto& F = tri[j];
-            for (auto v : F) nsum += d.normals[v].cast<double>();
-            if (colour) csum.add(face_colour[gfaces[gstart[leaf_group[i]] + j]]);
-            // Geometric normal (zero and `degenerate` when the cross product vanishes).
-            const vec3d p0 = d.positions[F[0]].cast<double>(),
-                        p1 = d.positions[F[1]].cast<double>(),
-                        p2 = d.positions[F[2]].cast<double>();
-            const vec3d n = (p1 - p0).cross(p2 - p0);
-            const double len = n.norm();
-            fdeg[j] = !(len > 0 && std::isfinite(len));
-            fn[j] = fdeg[j] ? vec3f::Zero() : vec3f((n / len).cast<float>());
-            local_degenerate += fdeg[j] ? 1 : 0;
-            // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
-            if (nt == 1 || !exact) pop_triangle_circle(p0, p1, p2, cc[j], cr[j]);
-          }
-          if (nt == 1) {
-            x = cc[0];
-            r = cr[0];
-          } else if (exact) {  // smallest sphere of the leaf's corners
-            for (std::size_t j = 0; j < nt; ++j)
-              for (auto v : tri[j]) {
-                cc[m] = d.positions[v].cast<double>();
-                cr[m++] = 0;
-              }
-            min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
-            m = 0;
-          } else {  // the paper's rules over the triangles' spheres
-            paper_sphere(cc.data(), cr.data(), nt, x, r);
-          }
-          // Every corner, measured from the stored centre.
-          for (std::size_t j = 0; j < nt; ++j)
-            for (auto v : tri[j]) {
-              cc[m] = d.positions[v].cast<double>();
-              cr[m++] = 0;
-            }
-          finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
-          if (!(nsum.squaredNorm() > 0))
-            for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
-        } else {
-          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
-            const auto& ch = d.nodes[c];
-            cc[m] = ch.centre.cast<double>();
-            cr[m++] = ch.radius;
-            nsum += ch.normal.cast<double>();
-            if (colour) csum.add(d.node_colours[c]);
-          }
-          if (exact)
-            min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
-          else
-            local_contained += paper_sphere(cc.data(), cr.data(), m, x, r) ? 1 : 0;
-          finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
-        }
-        // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
-        const std::uint32_t code = quant.encode(nsum.cast<float>());
-        d.node_normal_codes[i] = code;
-        nd.normal = quant.decode(code);
-        double cone = 0;
-        if (nd.leaf) {
-          // The largest angle to a face normal is the acos of the smallest cosine (acos is
-          // monotone): one acos per leaf instead of one per triangle.
-          double min_cos = 2;
-          for (std::size_t j = 0; j < nd.count; ++j)
-            if (!fdeg[j]) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
-          if (min_cos <= 1) cone = std::acos(min_cos);
-        } else {
-          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
-            cone = std::max(cone, angle_between(nd.normal, d.nodes[c].normal) +
-                                      static_cast<double>(d.nodes[c].cone_angle));
-        }
-        // Quantised: cones and colours of a parent are computed from its children's quantised
-        // values, so a child's cone stays inside its parent's after rounding.
-        nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
-        if (qn) nd.cone_angle = cone_level(cone_code(nd.cone_angle));
-        if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
+  const auto bottom_up = [&](std::size_t i, counts& acc) {
+    std::array<vec3d, 12> cc;
+    std::array<double, 12> cr;
+    std::array<vec3f, 4> fn;
+    std::array<bool, 4> fdeg{};
+    auto& nd = d.nodes[i];
+    vec3d x;
+    double r = 0;
+    vec3d nsum = vec3d::Zero();
+    rgb_sum csum;
+    std::size_t m = 0;
+    if (nd.leaf) {
+      // The leaf's triangles are d.faces[first, first + count) (= its group's faces).
+      const std::size_t nt = nd.count;
+      const std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
+      for (std::size_t j = 0; j < nt; ++j) {
+        const auto& F = tri[j];
+        for (auto v : F) nsum += d.normals[v].cast<double>();
+        if (colour) csum.add(face_colour[gfaces[gstart[leaf_group[i]] + j]]);
+        // Geometric normal (zero and `degenerate` when the cross product vanishes).
+        const vec3d p0 = d.positions[F[0]].cast<double>(), p1 = d.positions[F[1]].cast<double>(),
+                    p2 = d.positions[F[2]].cast<double>();
+        const vec3d n = (p1 - p0).cross(p2 - p0);
+        const double len = n.norm();
+        fdeg[j] = !(len > 0 && std::isfinite(len));
+        fn[j] = fdeg[j] ? vec3f::Zero() : vec3f((n / len).cast<float>());
+        acc.degenerate += fdeg[j] ? 1 : 0;
+        // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
+        if (nt == 1 || !exact) pop_triangle_circle(p0, p1, p2, cc[j], cr[j]);
       }
-      static std::mutex m;
-      const std::lock_guard lock(m);
-      contained[0] += local_contained;
-      degenerate_faces += local_degenerate;
-    });
+      if (nt == 1) {
+        x = cc[0];
+        r = cr[0];
+      } else if (exact) {  // smallest sphere of the leaf's corners
+        for (std::size_t j = 0; j < nt; ++j)
+          for (auto v : tri[j]) {
+            cc[m] = d.positions[v].cast<double>();
+            cr[m++] = 0;
+          }
+        min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
+        m = 0;
+      } else {  // the paper's rules over the triangles' spheres
+        paper_sphere(cc.data(), cr.data(), nt, x, r);
+      }
+      // Every corner, measured from the stored centre.
+      for (std::size_t j = 0; j < nt; ++j)
+        for (auto v : tri[j]) {
+          cc[m] = d.positions[v].cast<double>();
+          cr[m++] = 0;
+        }
+      finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
+      if (!(nsum.squaredNorm() > 0))
+        for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
+    } else {
+      for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+        const auto& ch = d.nodes[c];
+        cc[m] = ch.centre.cast<double>();
+        cr[m++] = ch.radius;
+        nsum += ch.normal.cast<double>();
+        if (colour) csum.add(d.node_colours[c]);
+      }
+      if (exact)
+        min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
+      else
+        acc.contained += paper_sphere(cc.data(), cr.data(), m, x, r) ? 1 : 0;
+      finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
+    }
+    // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
+    const std::uint32_t code = quant.encode(nsum.cast<float>());
+    d.node_normal_codes[i] = code;
+    nd.normal = quant.decode(code);
+    double cone = 0;
+    if (nd.leaf) {
+      // The largest angle to a face normal is the acos of the smallest cosine (acos is
+      // monotone): one acos per leaf instead of one per triangle.
+      double min_cos = 2;
+      for (std::size_t j = 0; j < nd.count; ++j)
+        if (!fdeg[j]) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
+      if (min_cos <= 1) cone = std::acos(min_cos);
+    } else {
+      for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
+        cone = std::max(cone, angle_between(nd.normal, d.nodes[c].normal) +
+                                  static_cast<double>(d.nodes[c].cone_angle));
+    }
+    // Quantised: cones and colours of a parent are computed from its children's quantised
+    // values, so a child's cone stays inside its parent's after rounding.
+    nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
+    if (qn) nd.cone_angle = cone_level(cone_code(nd.cone_angle));
+    if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
+  };
+  const auto top_down = [&](std::size_t i) {
+    auto& nd = d.nodes[i];
+    const auto& pa = d.nodes[nd.parent];
+    const std::uint16_t code = quantise_sphere(pa.centre, pa.radius, nd.centre, nd.radius);
+    d.node_sphere_codes[i] = code;
+    dequantise_sphere(pa.centre, pa.radius, code, nd.centre, nd.radius);
+  };
+  std::size_t split_level = levels.size();
+  for (std::size_t li = 0; li < levels.size(); ++li)
+    if (levels[li].second - levels[li].first >= 64 * std::size_t{threads}) {
+      split_level = li;
+      break;
+    }
+  // The node ranges of the subtree below `root`, level by level from the root's.
+  const auto subtree_levels = [&](std::size_t root,
+                                  std::vector<std::pair<std::size_t, std::size_t>>& out) {
+    out.assign(1, {root, root + 1});
+    for (;;) {
+      const auto [a, b] = out.back();
+      std::size_t lo = nn, hi = 0;
+      for (std::size_t i = a; i < b; ++i)
+        if (!d.nodes[i].leaf) {
+          lo = std::min<std::size_t>(lo, d.nodes[i].first);
+          hi = std::max<std::size_t>(hi, d.nodes[i].first + d.nodes[i].count);
+        }
+      if (hi == 0) return;
+      out.emplace_back(lo, hi);
+    }
+  };
+  const std::size_t roots_begin = split_level < levels.size() ? levels[split_level].first : nn;
+  const std::size_t roots =
+      split_level < levels.size() ? levels[split_level].second - roots_begin : 0;
+  parallel_tasks(roots, threads, [&](std::size_t t, unsigned w) {
+    std::vector<std::pair<std::size_t, std::size_t>> sub;
+    subtree_levels(roots_begin + t, sub);
+    for (std::size_t k = sub.size(); k-- > 0;)
+      for (std::size_t i = sub[k].first; i < sub[k].second; ++i) bottom_up(i, per_worker[w]);
+  });
+  for (std::size_t li = std::min(split_level, levels.size()); li-- > 0;)
+    for (std::size_t i = levels[li].first; i < levels[li].second; ++i) bottom_up(i, per_worker[0]);
+  for (const auto& c : per_worker) {
+    d.stats.contained_inner += c.contained;
+    d.stats.degenerate_faces += c.degenerate;
   }
-  d.stats.contained_inner = contained[0];
-  d.stats.degenerate_faces = degenerate_faces;
 
   // Quantised spheres, top down (a parent's quantised sphere before its children's). The exact
   // sphere of each node is replaced by the smallest coded sphere that holds it and lies inside
@@ -952,18 +990,14 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // parents (the coherent traversal and culling rely on both).
   if (qn) {
     resize_fresh(d.node_sphere_codes, nn, threads, sphere_code_parent);
-    for (std::size_t li = 1; li < levels.size(); ++li) {
-      const auto [a, b] = levels[li];
-      parallel_chunks(b - a, threads, [&](std::size_t lo, std::size_t hi) {
-        for (std::size_t i = a + lo; i < a + hi; ++i) {
-          auto& nd = d.nodes[i];
-          const auto& pa = d.nodes[nd.parent];
-          const std::uint16_t code = quantise_sphere(pa.centre, pa.radius, nd.centre, nd.radius);
-          d.node_sphere_codes[i] = code;
-          dequantise_sphere(pa.centre, pa.radius, code, nd.centre, nd.radius);
-        }
-      });
-    }
+    for (std::size_t li = 1; li < std::min(split_level, levels.size()); ++li)
+      for (std::size_t i = levels[li].first; i < levels[li].second; ++i) top_down(i);
+    parallel_tasks(roots, threads, [&](std::size_t t, unsigned) {
+      std::vector<std::pair<std::size_t, std::size_t>> sub;
+      subtree_levels(roots_begin + t, sub);
+      for (const auto& [a, b] : sub)
+        for (std::size_t i = a; i < b; ++i) top_down(i);
+    });
   }
 
   const auto t1 = clock::now();

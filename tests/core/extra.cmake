@@ -1,1 +1,2 @@
-target_sources(test_core PRIVATE ${CMAKE_CURRENT_LIST_DIR}/normal_quantization_test.cpp ${CMAKE_CURRENT_LIST_DIR}/estimation_test.cpp)
+target_sources(test_core PRIVATE ${CMAKE_CURRENT_LIST_DIR}/normal_quantization_test.cpp ${CMAKE_CURRENT_LIST_DIR}/estimation_test.cpp
+                                 ${CMAKE_CURRENT_LIST_DIR}/parallel_test.cpp)
