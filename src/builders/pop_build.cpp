@@ -7,6 +7,7 @@
 #include <OpenMesh/Core/System/omstream.hh>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -532,6 +533,67 @@ void pop_paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& cen
   paper_sphere(c, r, n, centre, radius);
 }
 
+namespace {
+// ---- the leaves' split keys (§3.1 topology) ----------------------------------------------------
+/// Order-preserving map of a finite float to an unsigned integer (−0 maps as +0, so equal floats
+/// map to equal integers), and back.
+std::uint32_t ordered_bits(float f) {
+  const auto u = std::bit_cast<std::uint32_t>(f + 0.0f);  // + 0.0f turns −0 into +0
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+float from_ordered_bits(std::uint32_t u) {
+  return std::bit_cast<float>((u & 0x80000000u) ? (u & 0x7fffffffu) : ~u);
+}
+/// A leaf's split key (the mean of its triangles' corners, as ordered_bits) and its index.
+struct split_key {
+  std::array<std::uint32_t, 3> k;
+  std::uint32_t id;
+};
+/// The split order along axis K, (key, leaf index), as one integer: a total order.
+template <int K>
+std::uint64_t rank_on(const split_key& x) {
+  return std::uint64_t{x.k[K]} << 32 | x.id;
+}
+/// std::nth_element(a, a + m, a + n) by rank_on<K>: the element of rank m at a[m], the smaller
+/// ones before it, the larger after. Quickselect with a median-of-three pivot and a branch-free
+/// (Lomuto) partition: which side a key falls on is a coin toss, and the branches on it were most
+/// of std::nth_element's time. After 64 rounds (a pathological input) std::nth_element finishes,
+/// so the worst case stays O(n log n).
+template <int K>
+void select_rank(split_key* a, std::size_t n, std::size_t m) {
+  const auto less = [](const split_key& x, const split_key& y) {
+    return rank_on<K>(x) < rank_on<K>(y);
+  };
+  std::size_t lo = 0, hi = n;
+  for (int round = 0; hi - lo > 16; ++round) {
+    if (round == 64) {
+      std::nth_element(a + lo, a + m, a + hi, less);
+      return;
+    }
+    std::size_t i0 = lo, i1 = lo + (hi - lo) / 2, i2 = hi - 1;
+    if (less(a[i1], a[i0])) std::swap(i0, i1);
+    if (less(a[i2], a[i1])) i1 = less(a[i2], a[i0]) ? i0 : i2;
+    std::swap(a[i1], a[hi - 1]);
+    const std::uint64_t pivot = rank_on<K>(a[hi - 1]);
+    std::size_t i = lo;
+    for (std::size_t j = lo; j < hi - 1; ++j) {
+      const split_key t = a[j];
+      const bool smaller = rank_on<K>(t) < pivot;
+      a[j] = a[i];
+      a[i] = t;
+      i += smaller ? 1 : 0;
+    }
+    std::swap(a[i], a[hi - 1]);
+    if (m == i) return;
+    if (m < i)
+      hi = i;
+    else
+      lo = i + 1;
+  }
+  std::sort(a + lo, a + hi, less);
+}
+}  // namespace
+
 // ---------------------------------------------------------------------------------------------
 // Build
 // ---------------------------------------------------------------------------------------------
@@ -689,18 +751,15 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
 
   // Split key of a leaf: the mean of its triangles' corners, stored with the leaf's index so
   // that the splits below run over one contiguous array (no indirection through a permutation).
-  struct keyed {
-    vec3f key;
-    std::uint32_t id;
-  };
-  std::vector<keyed> perm;
+  std::vector<split_key> perm;
   resize_fresh(perm, n_leaves, threads);
   parallel_chunks(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t g = lo; g < hi; ++g) {
       vec3d s = vec3d::Zero();
       for (std::uint32_t k = gstart[g]; k < gstart[g + 1]; ++k)
         for (auto i : mesh.faces[gfaces[k]]) s += d.positions[i].cast<double>();
-      perm[g] = {(s / (3.0 * (gstart[g + 1] - gstart[g]))).cast<float>(),
+      const vec3f key = (s / (3.0 * (gstart[g + 1] - gstart[g]))).cast<float>();
+      perm[g] = {{ordered_bits(key.x()), ordered_bits(key.y()), ordered_bits(key.z())},
                  static_cast<std::uint32_t>(g)};
     }
   });
@@ -711,30 +770,30 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // split falls (lo + (hi − lo)/2) depends only on lo and hi. So `perm` is ordered first, by a
   // depth-first recursive binary partition (subtrees in parallel; cache-friendly), and the
   // breadth-first node list is then derived from the ranges alone. The order of `perm` does not
-  // depend on how the work is scheduled: each split selects by a total order (key, leaf id), so
-  // the set of leaves in each half is unique, and below a single leaf there is nothing to order.
+  // depend on how the work is scheduled, nor on the selection algorithm: each split selects by a
+  // total order (key, leaf id), so the set of leaves in each half is unique, and below a single
+  // leaf there is nothing to order.
   // Where a range splits: the partition below and the topology after it must agree exactly.
   const auto mid_of = [](std::uint32_t lo, std::uint32_t hi) { return lo + (hi - lo) / 2; };
   const auto split = [&](std::uint32_t lo, std::uint32_t hi) {
-    box3 b;
-    for (std::uint32_t i = lo; i < hi; ++i) b.extend(perm[i].key);
-    const vec3f e = b.extent();
+    // The box of the keys, in the order-preserving integers (the same extremes as in float).
+    std::array<std::uint32_t, 3> mn{~0u, ~0u, ~0u}, mx{0u, 0u, 0u};
+    for (std::uint32_t i = lo; i < hi; ++i)
+      for (std::size_t k = 0; k < 3; ++k) {
+        mn[k] = std::min(mn[k], perm[i].k[k]);
+        mx[k] = std::max(mx[k], perm[i].k[k]);
+      }
+    vec3f e;
+    for (std::size_t k = 0; k < 3; ++k)
+      e[static_cast<int>(k)] = from_ordered_bits(mx[k]) - from_ordered_bits(mn[k]);
     const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
     const std::uint32_t mid = mid_of(lo, hi);
-    // One comparator per axis (a constant offset instead of an indexed key).
-    const auto select = [&]<int k>(std::integral_constant<int, k>) {
-      std::nth_element(perm.begin() + lo, perm.begin() + mid, perm.begin() + hi,
-                       [](const keyed& x, const keyed& y) {
-                         const float kx = x.key[k], ky = y.key[k];
-                         return kx < ky || (kx == ky && x.id < y.id);
-                       });
-    };
     if (axis == 0)
-      select(std::integral_constant<int, 0>{});
+      select_rank<0>(perm.data() + lo, hi - lo, mid - lo);
     else if (axis == 1)
-      select(std::integral_constant<int, 1>{});
+      select_rank<1>(perm.data() + lo, hi - lo, mid - lo);
     else
-      select(std::integral_constant<int, 2>{});
+      select_rank<2>(perm.data() + lo, hi - lo, mid - lo);
     return mid;
   };
   // `budget` threads for the subtree; one half goes to a new thread while the budget allows.
