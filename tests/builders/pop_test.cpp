@@ -407,6 +407,51 @@ TEST(PopBuild, OutputIsIndependentOfThreadCount) {
       }
 }
 
+// The topology (§3.1, QSplat): every node's leaves, in order, split at their median along the
+// longest axis of their keys' box (the mean of each leaf's corners), and each half again. Checked
+// on the binary splits the 4-ary nodes are made of: all keys of the first half are ≤ all keys of
+// the second along the split axis. A selection that misplaces one leaf fails it.
+TEST(PopBuild, SplitsAreMediansAlongTheLongestAxis) {
+  const auto grid = grid_mesh(120);
+  for (const triangle_mesh* m : {&grid, &real_meshes::get().bunny}) {
+    const auto t = build_pop<with_normals>(*m, {.threads = 2});
+    std::vector<vec3f> keys;  // leaves in depth-first order = the split order
+    const auto collect = [&](const auto& self, std::uint32_t i) -> void {
+      const auto& nd = t.nodes()[i];
+      if (!nd.leaf) {
+        for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) self(self, c);
+        return;
+      }
+      vec3d s = vec3d::Zero();
+      for (std::uint32_t f = nd.first; f < nd.first + nd.count; ++f)
+        for (auto v : t.faces()[f]) s += t.positions()[v].cast<double>();
+      keys.push_back((s / (3.0 * nd.count)).cast<float>());
+    };
+    collect(collect, 0);
+    ASSERT_EQ(keys.size(), t.stats().leaves);
+    std::size_t bad = 0, splits = 0;
+    const auto check = [&](const auto& self, std::size_t lo, std::size_t hi) -> void {
+      if (hi - lo <= 1) return;
+      box3 b;
+      for (std::size_t i = lo; i < hi; ++i) b.extend(keys[i]);
+      const vec3f e = b.extent();
+      const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
+      const std::size_t mid = lo + (hi - lo) / 2;
+      float first_max = -std::numeric_limits<float>::infinity();
+      float second_min = std::numeric_limits<float>::infinity();
+      for (std::size_t i = lo; i < mid; ++i) first_max = std::max(first_max, keys[i][axis]);
+      for (std::size_t i = mid; i < hi; ++i) second_min = std::min(second_min, keys[i][axis]);
+      ++splits;
+      bad += first_max <= second_min ? 0 : 1;
+      self(self, lo, mid);
+      self(self, mid, hi);
+    };
+    check(check, 0, keys.size());
+    EXPECT_EQ(bad, 0u) << "of " << splits << " splits, " << m->faces.size() << " triangles";
+    EXPECT_EQ(splits, keys.size() - 1);
+  }
+}
+
 // Without vertex normals the build estimates them as area_weighted_normals() does (its own copy,
 // in huge-page memory, fused with the quantisation): the decoded vertex normals must equal the
 // quantised area-weighted normals exactly.
