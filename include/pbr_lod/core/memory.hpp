@@ -38,19 +38,32 @@ void reserve_huge(std::vector<T, Alloc>& v, std::size_t n) {
   if (n * sizeof(T) >= (std::size_t{4} << 20)) advise_huge_pages(v.data(), n * sizeof(T));
 }
 
-/// v.resize(n, value) for a buffer about to be filled: reserve_huge(), then the new pages are
-/// faulted in by up to `threads` threads (populate_pages) before the resize, which then only
-/// streams `value` through mapped memory. On the 2-core VM the first touch of a fresh 2 MB page
-/// costs ≈ 1–2 ms; a sequential resize of a 30 MB array paid all of it on one core.
+/// reserve_huge(v, n), then the pages [v.size(), n) will occupy faulted in by up to `threads`
+/// threads (populate_pages). On the 2-core VM the first touch of a fresh 2 MB page costs
+/// ≈ 1–2 ms; a sequential resize of a 30 MB array paid all of it on one core.
 template <class T, class Alloc>
-void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads, const T& value = T()) {
+void populate_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads) {
   const std::size_t old = v.size();
-  if (n > old) {
-    reserve_huge(v, n);
-    const auto* from = reinterpret_cast<const unsigned char*>(v.data() + old);
-    parallel_chunks((n - old) * sizeof(T), threads, std::size_t{1} << 21,
-                    [&](std::size_t lo, std::size_t hi) { populate_pages(from + lo, hi - lo); });
-  }
+  if (n <= old) return;
+  reserve_huge(v, n);
+  const auto* from = reinterpret_cast<const unsigned char*>(v.data() + old);
+  parallel_chunks((n - old) * sizeof(T), threads, std::size_t{1} << 21,
+                  [&](std::size_t lo, std::size_t hi) { populate_pages(from + lo, hi - lo); });
+}
+
+/// v.resize(n) for a buffer about to be overwritten: populate_fresh(), then the resize, which
+/// only streams the default values through mapped memory (nothing for types whose default
+/// constructor leaves them uninitialised, such as Eigen vectors).
+template <class T, class Alloc>
+void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads) {
+  populate_fresh(v, n, threads);
+  v.resize(n);
+}
+
+/// v.resize(n, value) on pages faulted in by up to `threads` threads (populate_fresh()).
+template <class T, class Alloc>
+void resize_fresh(std::vector<T, Alloc>& v, std::size_t n, unsigned threads, const T& value) {
+  populate_fresh(v, n, threads);
   v.resize(n, value);
 }
 
