@@ -166,6 +166,16 @@ void finalise(const vec3d& x, double r, const vec3d* c, const double* cr, std::s
   for (std::size_t i = 0; i < n; ++i) need = std::max(need, (c[i] - xc).norm() + cr[i]);
   out_r = round_up(need);
 }
+/// finalise() for n points (radius 0): the largest distance is the root of the largest square
+/// (sqrt is correctly rounded, so monotone, and d + 0 = d), one root instead of n.
+void finalise_points(const vec3d& x, double r, const vec3d* c, std::size_t n, vec3f& out_c,
+                     float& out_r) {
+  out_c = x.cast<float>();
+  const vec3d xc = out_c.cast<double>();
+  double far2 = 0;
+  for (std::size_t i = 0; i < n; ++i) far2 = std::max(far2, (c[i] - xc).squaredNorm());
+  out_r = round_up(std::max(std::isfinite(r) ? r : 0.0, std::sqrt(far2)));
+}
 
 struct texture {
   image img;
@@ -453,7 +463,9 @@ void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& 
     centre = a + (ab.squaredNorm() * ac.cross(w) + ac.squaredNorm() * w.cross(ab)) / (2 * w2);
     if (!all_finite(centre)) longest_edge();
   }
-  radius = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
+  // sqrt is correctly rounded, so monotone: one root of the largest square is the largest root.
+  radius = std::sqrt(std::max(
+      {(a - centre).squaredNorm(), (b - centre).squaredNorm(), (c - centre).squaredNorm()}));
 }
 
 namespace {
@@ -514,9 +526,9 @@ bool paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
     double t = 0;
     if (rho2 + h * h > br * br && std::abs(h) > 0) t = (rho2 + h * h - br * br) / (2 * h);
     const vec3d x = bc + t * nrm;
-    double dist = 0;
-    for (std::size_t i = 0; i < 4; ++i) dist = std::max(dist, (c[i] - x).norm());
-    const double rk = dist + rmax;
+    double dist2 = 0;  // the largest squared distance: one root for the largest (monotone)
+    for (std::size_t i = 0; i < 4; ++i) dist2 = std::max(dist2, (c[i] - x).squaredNorm());
+    const double rk = std::sqrt(dist2) + rmax;
     if (rk < radius) {
       radius = rk;
       centre = x;
@@ -954,11 +966,8 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       }
       // Every corner, measured from the stored centre.
       for (std::size_t j = 0; j < nt; ++j)
-        for (auto v : tri[j]) {
-          cc[m] = d.positions[v].cast<double>();
-          cr[m++] = 0;
-        }
-      finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
+        for (auto v : tri[j]) cc[m++] = d.positions[v].cast<double>();
+      finalise_points(x, r, cc.data(), m, nd.centre, nd.radius);
       if (!(nsum.squaredNorm() > 0))
         for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
     } else {
