@@ -140,6 +140,15 @@ rgb8 from565(std::uint16_t v) {
           static_cast<std::uint8_t>(b << 3 | b >> 2)};
 }
 
+/// clamp(lround(s), 0, 65535) without the library call (a visible part of the vertex pass):
+/// the same value for every double s, NaN included (0). Below 65535 the truncation is exact and
+/// s − ⌊s⌋ is exact, so halves round away from zero as lround does.
+std::uint16_t round_to_u16(double s) {
+  if (!(s > 0)) return 0;
+  if (s >= 65535) return 65535;
+  const auto i = static_cast<std::uint32_t>(s);
+  return static_cast<std::uint16_t>(i + (s - static_cast<double>(i) >= 0.5 ? 1u : 0u));
+}
 /// Vertex position from its 16-bit code (§3.5). The same expression in build and load, so a
 /// loaded tree holds bit-identical positions.
 vec3f dequantise(const std::array<std::uint16_t, 3>& q, const vec3f& mn, const vec3f& step) {
@@ -699,8 +708,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       for (int k = 0; k < 3; ++k) {
         const double s =
             d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
-        q[static_cast<std::size_t>(k)] =
-            static_cast<std::uint16_t>(std::clamp<long>(std::lround(s), 0, 65535));
+        q[static_cast<std::size_t>(k)] = round_to_u16(s);
       }
       d.vertex_q[i] = q;
       d.positions[i] = dequantise(q, d.q_min, d.q_step);
