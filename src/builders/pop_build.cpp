@@ -1044,16 +1044,19 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       out.emplace_back(lo, hi);
     }
   };
+  // split_level == levels.size() (a small tree): no subtrees, every level on this thread.
   const std::size_t roots_begin = split_level < levels.size() ? levels[split_level].first : nn;
   const std::size_t roots =
       split_level < levels.size() ? levels[split_level].second - roots_begin : 0;
+  // Each subtree's ranges, found by the bottom-up task and walked again top-down.
+  std::vector<std::vector<std::pair<std::size_t, std::size_t>>> subtrees(roots);
   parallel_tasks(roots, threads, [&](std::size_t t, unsigned w) {
-    std::vector<std::pair<std::size_t, std::size_t>> sub;
+    auto& sub = subtrees[t];
     subtree_levels(roots_begin + t, sub);
     for (std::size_t k = sub.size(); k-- > 0;)
       for (std::size_t i = sub[k].first; i < sub[k].second; ++i) bottom_up(i, per_worker[w]);
   });
-  for (std::size_t li = std::min(split_level, levels.size()); li-- > 0;)
+  for (std::size_t li = split_level; li-- > 0;)
     for (std::size_t i = levels[li].first; i < levels[li].second; ++i) bottom_up(i, per_worker[0]);
   for (const auto& c : per_worker) {
     d.stats.contained_inner += c.contained;
@@ -1066,12 +1069,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // parents (the coherent traversal and culling rely on both).
   if (qn) {
     resize_fresh(d.node_sphere_codes, nn, threads, sphere_code_parent);
-    for (std::size_t li = 1; li < std::min(split_level, levels.size()); ++li)
+    for (std::size_t li = 1; li < split_level; ++li)
       for (std::size_t i = levels[li].first; i < levels[li].second; ++i) top_down(i);
     parallel_tasks(roots, threads, [&](std::size_t t, unsigned) {
-      std::vector<std::pair<std::size_t, std::size_t>> sub;
-      subtree_levels(roots_begin + t, sub);
-      for (const auto& [a, b] : sub)
+      for (const auto& [a, b] : subtrees[t])
         for (std::size_t i = a; i < b; ++i) top_down(i);
     });
   }
