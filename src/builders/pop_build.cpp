@@ -326,9 +326,14 @@ void edge_sort_adjacency(std::size_t n_vertices,
     for (std::size_t k = 0; k < 3; ++k) ++offset[std::min(F[k], F[(k + 1) % 3]) + 1];
   }
   for (std::size_t v = 0; v < n_vertices; ++v) offset[v + 1] += offset[v];
-  // entry = (max vertex, 3 f + k), scattered into its min vertex's bucket.
+  // entry = (max vertex, 3 f + k, the face's third corner), scattered into its min vertex's
+  // bucket. With the third corner the duplicate test is local to an edge's run: two faces on
+  // the same edge {a, b} (neither repeating a vertex) have the same vertex set exactly when their
+  // third corners agree. So a face is a duplicate of an earlier one exactly when, in the run of
+  // any of its edges, an earlier face has its third corner, and one pass over the buckets both
+  // finds the duplicates and links the edges.
   struct entry {
-    std::uint32_t other, slot;
+    std::uint32_t other, slot, third;
   };
   std::vector<entry> e;
   reserve_huge(e, offset[n_vertices]);
@@ -340,68 +345,62 @@ void edge_sort_adjacency(std::size_t n_vertices,
       const auto& F = faces[f];
       for (std::uint32_t k = 0; k < 3; ++k) {
         const std::uint32_t a = F[k], b = F[(k + 1) % 3];
-        e[fill[std::min(a, b)]++] = {std::max(a, b), static_cast<std::uint32_t>(3 * f + k)};
+        e[fill[std::min(a, b)]++] = {std::max(a, b), static_cast<std::uint32_t>(3 * f + k),
+                                     F[(k + 2) % 3]};
       }
     }
   }
   reserve_huge(nbr, nf);
   nbr.assign(nf, {none, none, none});
   std::vector<char> dup(nf, 0);
-  const auto same_set = [&](std::uint32_t f, std::uint32_t g) {
-    auto a = faces[f], b = faces[g];
-    std::sort(a.begin(), a.end());
-    std::sort(b.begin(), b.end());
-    return a == b;
-  };
-  // Pass 1: sort each bucket by (other, slot) and mark duplicates. A duplicate g of an earlier
-  // face f shares all three edges with it; only the run of g's edge 0 marks g, so every mark
-  // has one writer.
-  parallel_chunks(n_vertices, threads, [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t v = lo; v < hi; ++v) {
-      entry* b = e.data() + offset[v];
-      entry* end = e.data() + offset[v + 1];
-      std::sort(b, end, [](const entry& x, const entry& y) {
-        return x.other < y.other || (x.other == y.other && x.slot < y.slot);
-      });
-      for (entry* r = b; r < end;) {
-        entry* q = r;
-        while (q < end && q->other == r->other) ++q;
-        if (q - r >= 2)
-          for (entry* x = r; x < q; ++x) {
-            if (x->slot % 3 != 0) continue;
-            const std::uint32_t g = x->slot / 3;
-            for (entry* y = r; y < q; ++y)
-              if (y->slot / 3 < g && same_set(y->slot / 3, g)) {
-                dup[g] = 1;
-                break;
-              }
-          }
-        r = q;
-      }
-    }
-  });
-  // Pass 2: link manifold edges among the non-duplicate faces; each slot has one writer.
+  // (other, slot) as one integer: the order the buckets are sorted in (slots are unique).
+  const auto key = [](const entry& x) { return std::uint64_t{x.other} << 32 | x.slot; };
+  // Each bucket sorted by (other, slot), then its runs (one per edge) in ascending face order:
+  // a face of a run is a duplicate when an earlier face of the run has its third corner; only
+  // the run of its edge 0 marks it, so every mark has one writer. An edge shared by exactly two
+  // remaining faces links them; each slot has one writer.
   std::vector<std::size_t> nm_count(threads + 1, 0);
   std::mutex nm_mutex;
   parallel_chunks(n_vertices, threads, [&](std::size_t lo, std::size_t hi) {
     std::size_t local = 0;
     for (std::size_t v = lo; v < hi; ++v) {
-      const entry* b = e.data() + offset[v];
-      const entry* end = e.data() + offset[v + 1];
+      entry* b = e.data() + offset[v];
+      entry* end = e.data() + offset[v + 1];
+      if (end - b <= 32) {  // a vertex's few edges: insertion sort (std::sort's call and setup
+                            // cost more than the sorting)
+        for (entry* x = b + 1; x < end; ++x) {
+          const entry t = *x;
+          const std::uint64_t kt = key(t);
+          entry* y = x;
+          for (; y > b && key(y[-1]) > kt; --y) *y = y[-1];
+          *y = t;
+        }
+      } else {
+        std::sort(b, end, [&](const entry& x, const entry& y) { return key(x) < key(y); });
+      }
       for (const entry* r = b; r < end;) {
-        const entry* q = r;
-        std::array<std::uint32_t, 2> live{};
-        std::size_t n_live = 0;
-        for (; q < end && q->other == r->other; ++q)
-          if (!dup[q->slot / 3]) {
-            if (n_live < 2) live[n_live] = q->slot;
+        const entry* q = r + 1;
+        while (q < end && q->other == r->other) ++q;
+        if (q - r >= 2) {  // a run of one (a border edge) links nothing
+          std::array<std::uint32_t, 2> live{};
+          std::size_t n_live = 0;
+          for (const entry* x = r; x < q; ++x) {
+            // A face appears once per run (no repeated vertex), so earlier = ahead in the run.
+            bool is_dup = false;
+            for (const entry* y = r; y < x && !is_dup; ++y) is_dup = y->third == x->third;
+            if (is_dup) {
+              if (x->slot % 3 == 0) dup[x->slot / 3] = 1;
+              continue;
+            }
+            if (n_live < 2) live[n_live] = x->slot;
             ++n_live;
           }
-        if (n_live == 2) {
-          nbr[live[0] / 3][live[0] % 3] = live[1] / 3;
-          nbr[live[1] / 3][live[1] % 3] = live[0] / 3;
-        } else if (n_live > 2) {
-          ++local;
+          if (n_live == 2) {
+            nbr[live[0] / 3][live[0] % 3] = live[1] / 3;
+            nbr[live[1] / 3][live[1] % 3] = live[0] / 3;
+          } else if (n_live > 2) {
+            ++local;
+          }
         }
         r = q;
       }
