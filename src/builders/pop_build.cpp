@@ -161,9 +161,6 @@ vec3f dequantise(const std::array<std::uint16_t, 3>& q, const vec3f& mn, const v
 double clamped_cos(const vec3f& a, const vec3f& b) {
   return std::clamp(a.cast<double>().dot(b.cast<double>()), -1.0, 1.0);
 }
-double angle_between(const vec3f& a, const vec3f& b) {
-  return std::acos(clamped_cos(a, b));
-}
 
 /// Sphere (double centre x, radius r) made safe to store in float: the float centre, and a
 /// radius rounded up so that it still holds every child sphere measured from that centre.
@@ -448,11 +445,16 @@ void group_faces(std::size_t nf, const std::vector<face_slots>& nbr, std::uint32
 // Spheres (§3.1)
 // ---------------------------------------------------------------------------------------------
 
-void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& centre,
-                         double& radius) {
-  const vec3d ab = b - a, ac = c - a, bc = c - b;
+namespace {
+/// pop_triangle_circle() given ab = b − a, ac = c − a and w = ab × ac, which its callers have
+/// at hand (the leaves need w as the face normal, the 4-child rule as the base's normal).
+[[gnu::always_inline]] inline void triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c,
+                                                   const vec3d& ab, const vec3d& ac,
+                                                   const vec3d& w, double w2, vec3d& centre,
+                                                   double& radius) {
+  const vec3d bc = c - b;
+  const double lab = ab.squaredNorm(), lac = ac.squaredNorm(), lbc = bc.squaredNorm();
   const auto longest_edge = [&] {
-    const double lab = ab.squaredNorm(), lac = ac.squaredNorm(), lbc = bc.squaredNorm();
     if (lab >= lac && lab >= lbc)
       centre = 0.5 * (a + b);
     else if (lac >= lbc)
@@ -462,18 +464,24 @@ void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& 
   };
   // An angle exceeds 90° where the two edges leaving its corner have a negative dot product.
   const bool obtuse = ab.dot(ac) < 0 || (-ab).dot(bc) < 0 || ac.dot(bc) < 0;
-  const vec3d w = ab.cross(ac);
-  const double w2 = w.squaredNorm();
-  const double scale = std::max({ab.squaredNorm(), ac.squaredNorm(), bc.squaredNorm()});
+  const double scale = std::max({lab, lac, lbc});
   if (obtuse || !(w2 > 1e-24 * scale * scale)) {
     longest_edge();  // obtuse (paper), or degenerate: the circumcentre is at infinity
   } else {
-    centre = a + (ab.squaredNorm() * ac.cross(w) + ac.squaredNorm() * w.cross(ab)) / (2 * w2);
+    centre = a + (lab * ac.cross(w) + lac * w.cross(ab)) / (2 * w2);
     if (!all_finite(centre)) longest_edge();
   }
   // sqrt is correctly rounded, so monotone: one root of the largest square is the largest root.
   radius = std::sqrt(std::max(
       {(a - centre).squaredNorm(), (b - centre).squaredNorm(), (c - centre).squaredNorm()}));
+}
+}  // namespace
+
+void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& centre,
+                         double& radius) {
+  const vec3d ab = b - a, ac = c - a;
+  const vec3d w = ab.cross(ac);
+  triangle_circle(a, b, c, ab, ac, w, w.squaredNorm(), centre, radius);
 }
 
 namespace {
@@ -517,11 +525,13 @@ bool paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
       if (i != k) base[m++] = c[i];
     vec3d bc;
     double br;
-    pop_triangle_circle(base[0], base[1], base[2], bc, br);
+    const vec3d e1 = base[1] - base[0], e2 = base[2] - base[0];
+    vec3d nrm = e1.cross(e2);  // the base's normal, and the circle's ab × ac
+    const double n2 = nrm.squaredNorm();
+    triangle_circle(base[0], base[1], base[2], e1, e2, nrm, n2, bc, br);
     const vec3d to4 = c[k] - bc;
-    vec3d nrm = (base[1] - base[0]).cross(base[2] - base[0]);
-    if (nrm.squaredNorm() > 0) {
-      nrm.normalize();
+    if (n2 > 0) {
+      nrm /= std::sqrt(n2);  // Eigen's normalize(), without recomputing the squared norm
     } else {  // collinear base: any direction across the line, towards the fourth centre
       const vec3d line = (base[1] - base[0]).squaredNorm() > (base[2] - base[0]).squaredNorm()
                              ? vec3d(base[1] - base[0])
@@ -928,7 +938,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   std::vector<counts> per_worker(threads);
   const bool exact = opt.spheres == pop_sphere_rule::exact;
   const auto bottom_up = [&](std::size_t i, counts& acc) {
-    std::array<vec3d, 12> cc;
+    std::array<vec3d, 12> cc, corner;
     std::array<double, 12> cr;
     std::array<vec3f, 4> fn;
     std::array<bool, 4> fdeg{};
@@ -947,34 +957,29 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         for (auto v : F) nsum += d.normals[v].cast<double>();
         if (colour) csum.add(face_colour[gfaces[gstart[leaf_group[i]] + j]]);
         // Geometric normal (zero and `degenerate` when the cross product vanishes).
-        const vec3d p0 = d.positions[F[0]].cast<double>(), p1 = d.positions[F[1]].cast<double>(),
-                    p2 = d.positions[F[2]].cast<double>();
-        const vec3d n = (p1 - p0).cross(p2 - p0);
-        const double len = n.norm();
+        vec3d* p = corner.data() + 3 * j;
+        for (std::size_t k = 0; k < 3; ++k) p[k] = d.positions[F[k]].cast<double>();
+        const vec3d e1 = p[1] - p[0], e2 = p[2] - p[0];
+        const vec3d n = e1.cross(e2);
+        const double n2 = n.squaredNorm();
+        const double len = std::sqrt(n2);  // n.norm()
         fdeg[j] = !(len > 0 && std::isfinite(len));
         fn[j] = fdeg[j] ? vec3f::Zero() : vec3f((n / len).cast<float>());
         acc.degenerate += fdeg[j] ? 1 : 0;
         // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
-        if (nt == 1 || !exact) pop_triangle_circle(p0, p1, p2, cc[j], cr[j]);
+        if (nt == 1 || !exact) triangle_circle(p[0], p[1], p[2], e1, e2, n, n2, cc[j], cr[j]);
       }
       if (nt == 1) {
         x = cc[0];
         r = cr[0];
       } else if (exact) {  // smallest sphere of the leaf's corners
-        for (std::size_t j = 0; j < nt; ++j)
-          for (auto v : tri[j]) {
-            cc[m] = d.positions[v].cast<double>();
-            cr[m++] = 0;
-          }
-        min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
-        m = 0;
+        for (std::size_t k = 0; k < 3 * nt; ++k) cr[k] = 0;
+        min_sphere_of_spheres(corner.data(), cr.data(), 3 * nt, x, r);
       } else {  // the paper's rules over the triangles' spheres
         paper_sphere(cc.data(), cr.data(), nt, x, r);
       }
       // Every corner, measured from the stored centre.
-      for (std::size_t j = 0; j < nt; ++j)
-        for (auto v : tri[j]) cc[m++] = d.positions[v].cast<double>();
-      finalise_points(x, r, cc.data(), m, nd.centre, nd.radius);
+      finalise_points(x, r, corner.data(), 3 * nt, nd.centre, nd.radius);
       if (!(nsum.squaredNorm() > 0))
         for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
     } else {
@@ -1004,9 +1009,32 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         if (!fdeg[j]) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
       if (min_cos <= 1) cone = std::acos(min_cos);
     } else {
-      for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
-        cone = std::max(cone, angle_between(nd.normal, d.nodes[c].normal) +
-                                  static_cast<double>(d.nodes[c].cone_angle));
+      // max over children of acos(cos to the child's axis) + the child's cone. Children with
+      // the same cone (quantised cones have four levels) need one acos, of their smallest
+      // cosine; a child with an unbounded cone (π) makes this one unbounded without any.
+      std::array<double, 4> cs;
+      std::array<float, 4> ca;
+      const std::size_t nc = nd.count;
+      bool unbounded = false;
+      for (std::size_t j = 0; j < nc; ++j) {
+        const auto& ch = d.nodes[nd.first + j];
+        cs[j] = clamped_cos(nd.normal, ch.normal);
+        ca[j] = ch.cone_angle;
+        unbounded = unbounded || ca[j] >= std::numbers::pi_v<float>;
+      }
+      if (unbounded) {
+        cone = std::numbers::pi;  // the result is clamped to π below
+      } else {
+        for (std::size_t j = 0; j < nc; ++j) {
+          bool seen = false;
+          for (std::size_t k = 0; k < j; ++k) seen = seen || ca[k] == ca[j];
+          if (seen) continue;
+          double min_cos = cs[j];
+          for (std::size_t k = j + 1; k < nc; ++k)
+            if (ca[k] == ca[j]) min_cos = std::min(min_cos, cs[k]);
+          cone = std::max(cone, std::acos(min_cos) + static_cast<double>(ca[j]));
+        }
+      }
     }
     // Quantised: cones and colours of a parent are computed from its children's quantised
     // values, so a child's cone stays inside its parent's after rounding.
