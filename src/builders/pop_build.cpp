@@ -449,9 +449,8 @@ namespace {
 /// pop_triangle_circle() given ab = b − a, ac = c − a and w = ab × ac, which its callers have
 /// at hand (the leaves need w as the face normal, the 4-child rule as the base's normal).
 [[gnu::always_inline]] inline void triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c,
-                                                   const vec3d& ab, const vec3d& ac,
-                                                   const vec3d& w, double w2, vec3d& centre,
-                                                   double& radius) {
+                                                   const vec3d& ab, const vec3d& ac, const vec3d& w,
+                                                   double w2, vec3d& centre, double& radius) {
   const vec3d bc = c - b;
   const double lab = ab.squaredNorm(), lac = ac.squaredNorm(), lbc = bc.squaredNorm();
   const auto longest_edge = [&] {
