@@ -635,7 +635,8 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
                           std::to_string(opt.max_leaf_triangles));
   if (opt.spheres != pop_sphere_rule::paper && opt.spheres != pop_sphere_rule::exact)
     throw InvalidArgument("build_pop: unknown sphere rule");
-  const normal_quantizer quant(opt.normal_bits);  // throws on bad bits
+  const auto shared_quant = normal_quantizer::shared(opt.normal_bits);  // throws on bad bits
+  const normal_quantizer& quant = *shared_quant;
   mesh.validate("build_pop");
   if (mesh.faces.empty()) throw InvalidArgument("build_pop: the mesh has no triangles");
   if (mesh.faces.size() >= none || mesh.num_vertices() >= none)
@@ -910,8 +911,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
             nd.leaf = 1;
             nd.first = next;
             nd.count = static_cast<std::uint8_t>(gstart[g + 1] - gstart[g]);
-            for (std::uint32_t k = gstart[g]; k < gstart[g + 1]; ++k)
-              d.faces[next++] = mesh.faces[gfaces[k]];
+            next += nd.count;  // the faces themselves are copied by the bottom-up pass
           } else {
             leaf_group[i] = none;
             nd.first = tn[i].first;
@@ -948,13 +948,16 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     rgb_sum csum;
     std::size_t m = 0;
     if (nd.leaf) {
-      // The leaf's triangles are d.faces[first, first + count) (= its group's faces).
+      // The leaf's triangles, its group's faces, go to d.faces[first, first + count) here,
+      // where they are read anyway (a separate copy pass cost a second cache miss per face).
       const std::size_t nt = nd.count;
-      const std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
+      std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
+      const std::uint32_t* members = gfaces.data() + gstart[leaf_group[i]];
+      for (std::size_t j = 0; j < nt; ++j) tri[j] = mesh.faces[members[j]];
       for (std::size_t j = 0; j < nt; ++j) {
         const auto& F = tri[j];
         for (auto v : F) nsum += d.normals[v].cast<double>();
-        if (colour) csum.add(face_colour[gfaces[gstart[leaf_group[i]] + j]]);
+        if (colour) csum.add(face_colour[members[j]]);
         // Geometric normal (zero and `degenerate` when the cross product vanishes).
         vec3d* p = corner.data() + 3 * j;
         for (std::size_t k = 0; k < 3; ++k) p[k] = d.positions[F[k]].cast<double>();
@@ -1296,7 +1299,8 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   if (stored != fnv1a(bytes.data(), bytes.size() - 8))
     throw FormatError(path + ": checksum mismatch (corrupt file)");
 
-  const normal_quantizer quant(bits);
+  const auto shared_quant = normal_quantizer::shared(bits);
+  const normal_quantizer& quant = *shared_quant;
   pop_data d;
   d.normal_bits = bits;
   d.spheres = static_cast<pop_sphere_rule>(rule);

@@ -3,8 +3,10 @@
 #include "pbr_lod/core/normal_quantization.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <numbers>
 #include <string>
 
@@ -89,6 +91,17 @@ normal_quantizer::normal_quantizer(int q_bits) {
     bound = std::max({bound, angle(direction(lo, 0), sample), angle(direction(hi, 0), sample)});
   }
   max_error_deg_ = (bound + table_slack) * 180.0 / std::numbers::pi;
+}
+
+std::shared_ptr<const normal_quantizer> normal_quantizer::shared(int q_bits) {
+  if (q_bits < min_bits || q_bits > max_shared_bits)
+    return std::make_shared<normal_quantizer>(q_bits);
+  constexpr auto n = std::size_t(max_shared_bits - min_bits + 1);
+  static std::array<std::once_flag, n> once;
+  static std::array<std::shared_ptr<const normal_quantizer>, n> built;
+  const auto i = std::size_t(q_bits - min_bits);
+  std::call_once(once[i], [&] { built[i] = std::make_shared<normal_quantizer>(q_bits); });
+  return built[i];
 }
 
 void normal_quantizer::throw_invalid_code(std::uint32_t code) const {

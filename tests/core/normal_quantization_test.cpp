@@ -6,8 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <random>
+#include <thread>
 #include <vector>
 
 #include "pbr_lod/core/error.hpp"
@@ -67,6 +69,27 @@ TEST(NormalQuantizer, BitsOutOfRangeThrow) {
   EXPECT_THROW(normal_quantizer(25), InvalidArgument);
   EXPECT_THROW(normal_quantizer(-1), InvalidArgument);
   EXPECT_NO_THROW(normal_quantizer(normal_quantizer::min_bits));
+}
+
+// shared(): one instance per q up to max_shared_bits, the same from every thread, behaving as a
+// fresh quantizer; above that a fresh one each time; bad bits throw as the constructor does.
+TEST(NormalQuantizer, SharedInstances) {
+  std::vector<std::shared_ptr<const normal_quantizer>> got(8);
+  {
+    std::vector<std::thread> pool;
+    for (std::size_t t = 0; t < got.size(); ++t)
+      pool.emplace_back([&got, t] { got[t] = normal_quantizer::shared(16); });
+    for (auto& th : pool) th.join();
+  }
+  for (const auto& g : got) EXPECT_EQ(g.get(), got[0].get());
+  EXPECT_NE(normal_quantizer::shared(12).get(), got[0].get());
+  EXPECT_EQ(normal_quantizer::shared(12)->bits(), 12);
+  const normal_quantizer fresh(16);
+  for (const auto& n : random_normals(10000, 7)) EXPECT_EQ(got[0]->encode(n), fresh.encode(n));
+  const int above = normal_quantizer::max_shared_bits + 1;
+  EXPECT_NE(normal_quantizer::shared(above).get(), normal_quantizer::shared(above).get());
+  EXPECT_THROW((void)normal_quantizer::shared(5), InvalidArgument);
+  EXPECT_THROW((void)normal_quantizer::shared(25), InvalidArgument);
 }
 
 // Every valid code decodes to a unit vector in its own octant (no component is zero: no table

@@ -23,6 +23,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "pbr_lod/core/math.hpp"
@@ -39,6 +40,13 @@ class normal_quantizer {
 
   /// Throws InvalidArgument unless min_bits ≤ q_bits ≤ max_bits.
   explicit normal_quantizer(int q_bits);
+
+  /// A quantizer for q_bits shared by every caller: built once per q ≤ max_shared_bits and kept
+  /// for the life of the program (at most 1.5 MB each), built afresh above that (its table is
+  /// up to 25 MB). Building the q = 16 table takes ≈ 0.15 ms, 1 % of a 69 k-triangle POP build.
+  /// Thread-safe. Throws InvalidArgument as the constructor does.
+  [[nodiscard]] static std::shared_ptr<const normal_quantizer> shared(int q_bits);
+  static constexpr int max_shared_bits = 20;
 
   /// The code of the table direction nearest to n (largest dot product, evaluated in double
   /// against the float table entries that decode() returns; ties go to the first candidate in a

@@ -760,17 +760,16 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   st.estimation_seconds = std::chrono::duration<double>(clock::now() - t0).count();
   progress(0.1);
 
-  std::optional<normal_quantizer> quant;
+  std::shared_ptr<const normal_quantizer> quant;
   std::vector<typename point_octree<A>::orientation_code> work_codes;
   if (opt.normal_bits > 0) {
-    quant.emplace(opt.normal_bits);
+    quant = normal_quantizer::shared(opt.normal_bits);
     quantize_samples(work, *quant, work_codes, threads);
   }
   out.normal_bits_ = opt.normal_bits;
 
   const auto t1 = clock::now();
-  point_octree_builder<A> b(work, quant ? &work_codes : nullptr, opt, quant ? &*quant : nullptr,
-                            threads);
+  point_octree_builder<A> b(work, quant ? &work_codes : nullptr, opt, quant.get(), threads);
   local L;
   // A point-octree has ≈ 0.4 nodes per sample at leaf size 8 (paper, Table 2); reserving avoids
   // re-copying the node array while it grows.
