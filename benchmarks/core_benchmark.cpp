@@ -40,6 +40,25 @@ void BM_Encode(benchmark::State& state) {
 }
 BENCHMARK(BM_Encode)->Arg(9)->Arg(12)->Arg(13)->Arg(16)->Arg(24);
 
+// Each encode's input depends on the previous code (a perturbation of 1e-30 that changes no
+// code): the latency a builder sees when an encode's result feeds the next step, as in a
+// bottom-up pass (BM_Encode measures throughput, where independent encodes overlap).
+void BM_EncodeLatency(benchmark::State& state) {
+  const pbr_lod::normal_quantizer nq(static_cast<int>(state.range(0)));
+  const auto normals = random_normals(1 << 16);
+  for (auto _ : state) {
+    std::uint32_t c = 0;
+    for (const auto& n : normals) {
+      pbr_lod::vec3f m = n;
+      m.x() += static_cast<float>(c & 1u) * 1e-30f;
+      c = nq.encode(m);
+    }
+    benchmark::DoNotOptimize(c);
+  }
+  rate(state, normals.size(), "normals/s");
+}
+BENCHMARK(BM_EncodeLatency)->Arg(12)->Arg(16);
+
 void BM_Decode(benchmark::State& state) {
   const pbr_lod::normal_quantizer nq(static_cast<int>(state.range(0)));
   std::vector<std::uint32_t> codes;

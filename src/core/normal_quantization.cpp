@@ -38,11 +38,12 @@ vec3d direction(double theta, double phi) {
 double fast_atan2_first_quadrant(double y, double x) {
   const bool swap = y > x;
   const double t = swap ? x / y : (x > 0 ? y / x : 0.0);  // in [0, 1]; 0 for the pole
-  const double t2 = t * t;
+  const double t2 = t * t, t4 = t2 * t2;
+  // The polynomial in t² by Estrin's scheme (pairs, then powers t⁴): half the dependent steps of
+  // Horner's, on the encoder's critical path.
   const double a =
-      t * (0.99997726 +
-           t2 * (-0.33262347 +
-                 t2 * (0.19354346 + t2 * (-0.11643287 + t2 * (0.05265332 - t2 * 0.01172120)))));
+      t * ((0.99997726 - 0.33262347 * t2) +
+           t4 * ((0.19354346 - 0.11643287 * t2) + t4 * (0.05265332 - 0.01172120 * t2)));
   return swap ? half_pi - a : a;
 }
 
@@ -146,19 +147,24 @@ std::uint32_t normal_quantizer::encode(const vec3f& n) const {
   const double x = n.x(), y = n.y(), z = n.z();
   const double len2 = x * x + y * y + z * z;
   if (!(len2 > 0) || !std::isfinite(len2)) return 0;  // NaN, Inf or zero: as +z
-  const double inv = 1.0 / std::sqrt(len2);
+  const double len = std::sqrt(len2), inv = 1.0 / len;
   const std::uint32_t octant = (x < 0 ? 1u : 0u) | (y < 0 ? 2u : 0u) | (z < 0 ? 4u : 0u);
   // Fold into the first octant: the table is symmetric under sign flips, so the nearest
   // direction of the folded normal in the first octant's table is the nearest overall (mirroring
   // a direction of another octant into this one never moves it away from n).
-  const double ax = std::abs(x) * inv, ay = std::abs(y) * inv, az = std::abs(z) * inv;
+  const double fx = std::abs(x), fy = std::abs(y), fz = std::abs(z);
+  const double ax = fx * inv, ay = fy * inv, az = fz * inv;
   const double rho2 = ax * ax + ay * ay;
   const double sin_theta = std::sqrt(rho2);
   // φ only picks the longitude cell of a row, whose neighbours are searched too, so an error far
-  // below the narrowest cell (π/2 / k ≥ 7.7e-4 rad at q = 24) cannot change the result.
-  const double phi_cells = fast_atan2_first_quadrant(ay, ax) * (1.0 / half_pi);
-  // The band containing θ: i(i+1) ≤ (1 − cos θ)·k(k+1) < (i+1)(i+2); 1 − cos θ = ρ²/(1 + cos θ).
-  const double u = rho2 / (1.0 + az) * double(k_) * double(k_ + 1);
+  // below the narrowest cell (π/2 / k ≥ 7.7e-4 rad at q = 24) cannot change the result. It is
+  // taken from the unnormalised |x|, |y| (the ratio is the same up to rounding), so it does not
+  // wait for the normalisation: the encoder's time is mostly its dependency chain.
+  const double phi_cells = fast_atan2_first_quadrant(fy, fx) * (1.0 / half_pi);
+  // The band containing θ: i(i+1) ≤ (1 − cos θ)·k(k+1) < (i+1)(i+2); 1 − cos θ = ρ²/(1 + cos θ)
+  // = (x² + y²)/(|n|² + |z|·|n|), again without waiting for the division. Only the first row
+  // searched depends on it: the walk below visits every row that can hold the nearest entry.
+  const double u = (fx * fx + fy * fy) / (len2 + fz * len) * double(k_) * double(k_ + 1);
   const int row0 = std::clamp(static_cast<int>(std::floor(std::sqrt(u + 0.25) - 0.5)), 0, k_ - 1);
 
   double best_dot = -std::numeric_limits<double>::infinity();
