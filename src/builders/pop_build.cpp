@@ -532,9 +532,7 @@ bool paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
     if (n2 > 0) {
       nrm /= std::sqrt(n2);  // Eigen's normalize(), without recomputing the squared norm
     } else {  // collinear base: any direction across the line, towards the fourth centre
-      const vec3d line = (base[1] - base[0]).squaredNorm() > (base[2] - base[0]).squaredNorm()
-                             ? vec3d(base[1] - base[0])
-                             : vec3d(base[2] - base[0]);
+      const vec3d line = e1.squaredNorm() > e2.squaredNorm() ? e1 : e2;
       nrm = line.squaredNorm() > 0 ? vec3d(to4 - line * (to4.dot(line) / line.squaredNorm())) : to4;
       if (nrm.squaredNorm() > 0) nrm.normalize();
     }
