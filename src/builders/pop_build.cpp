@@ -934,10 +934,21 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   };
   std::vector<counts> per_worker(threads);
   const bool exact = opt.spheres == pop_sphere_rule::exact;
-  const auto bottom_up = [&](std::size_t i, counts& acc) {
+  // A node's work is split in two: its sphere, colour and normal sum (geometry(), which keeps
+  // the leaf's face normals for the cone), then the encode of the sum, its decode and the cone
+  // (orient()). Nodes are done in blocks of `block`: the geometry of the whole block, then its
+  // encodes back to back, which do not depend on each other, so they overlap in the pipeline
+  // (bench_core: BM_Encode, independent encodes, against BM_EncodeLatency, a chain of them).
+  constexpr std::size_t block = 32;
+  struct pending {
+    vec3f nsum;
+    std::array<vec3f, 4> fn;  // a leaf's face normals; fdeg bit j: face j is degenerate
+    std::uint8_t fdeg;
+  };
+  const auto geometry = [&](std::size_t i, counts& acc, pending& out) {
     std::array<vec3d, 12> cc, corner;
     std::array<double, 12> cr;
-    std::array<vec3f, 4> fn;
+    auto& fn = out.fn;
     std::array<bool, 4> fdeg{};
     auto& nd = d.nodes[i];
     vec3d x;
@@ -996,8 +1007,14 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         acc.contained += paper_sphere(cc.data(), cr.data(), m, x, r) ? 1 : 0;
       finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
     }
-    // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
-    const std::uint32_t code = quant.encode(nsum.cast<float>());
+    out.nsum = nsum.cast<float>();
+    out.fdeg = static_cast<std::uint8_t>(fdeg[0] | fdeg[1] << 1 | fdeg[2] << 2 | fdeg[3] << 3);
+    if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
+  };
+  // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
+  const auto orient = [&](std::size_t i, std::uint32_t code, const pending& in) {
+    auto& nd = d.nodes[i];
+    const auto& fn = in.fn;
     d.node_normal_codes[i] = code;
     nd.normal = quant.decode(code);
     double cone = 0;
@@ -1006,7 +1023,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       // monotone): one acos per leaf instead of one per triangle.
       double min_cos = 2;
       for (std::size_t j = 0; j < nd.count; ++j)
-        if (!fdeg[j]) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
+        if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
       if (min_cos <= 1) cone = std::acos(min_cos);
     } else {
       // max over children of acos(cos to the child's axis) + the child's cone. Children with
@@ -1040,7 +1057,17 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     // values, so a child's cone stays inside its parent's after rounding.
     nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
     if (qn) nd.cone_angle = cone_level(cone_code(nd.cone_angle));
-    if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
+  };
+  // Nodes [a, b) of one level (their children are done).
+  const auto bottom_up = [&](std::size_t a, std::size_t b, counts& acc) {
+    std::array<pending, block> p;
+    std::array<std::uint32_t, block> code;
+    for (std::size_t lo = a; lo < b; lo += block) {
+      const std::size_t n = std::min(block, b - lo);
+      for (std::size_t k = 0; k < n; ++k) geometry(lo + k, acc, p[k]);
+      for (std::size_t k = 0; k < n; ++k) code[k] = quant.encode(p[k].nsum);
+      for (std::size_t k = 0; k < n; ++k) orient(lo + k, code[k], p[k]);
+    }
   };
   const auto top_down = [&](std::size_t i) {
     auto& nd = d.nodes[i];
@@ -1081,10 +1108,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     auto& sub = subtrees[t];
     subtree_levels(roots_begin + t, sub);
     for (std::size_t k = sub.size(); k-- > 0;)
-      for (std::size_t i = sub[k].first; i < sub[k].second; ++i) bottom_up(i, per_worker[w]);
+      bottom_up(sub[k].first, sub[k].second, per_worker[w]);
   });
   for (std::size_t li = split_level; li-- > 0;)
-    for (std::size_t i = levels[li].first; i < levels[li].second; ++i) bottom_up(i, per_worker[0]);
+    bottom_up(levels[li].first, levels[li].second, per_worker[0]);
   for (const auto& c : per_worker) {
     d.stats.contained_inner += c.contained;
     d.stats.degenerate_faces += c.degenerate;
