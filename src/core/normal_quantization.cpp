@@ -47,6 +47,30 @@ double fast_atan2_first_quadrant(double y, double x) {
   return swap ? half_pi - a : a;
 }
 
+/// A point of the first octant's octahedral triangle u, v ≥ 0, u + v ≤ 1, which stands for the
+/// direction (u, v, 1 − u − v)/‖·‖.
+struct pt2 {
+  double u, v;
+};
+
+/// Clips the convex polygon `poly` to a·u + b·v + c ≥ 0 (Sutherland–Hodgman; keeps the order).
+void clip(std::vector<pt2>& poly, std::vector<pt2>& tmp, double a, double b, double c) {
+  tmp.clear();
+  pt2 p = poly.back();
+  double fp = a * p.u + b * p.v + c;
+  for (const pt2 q : poly) {  // edge p → q
+    const double fq = a * q.u + b * q.v + c;
+    if ((fp >= 0) != (fq >= 0)) {
+      const double t = fp / (fp - fq);
+      tmp.push_back({p.u + t * (q.u - p.u), p.v + t * (q.v - p.v)});
+    }
+    if (fq >= 0) tmp.push_back(q);
+    p = q;
+    fp = fq;
+  }
+  poly.swap(tmp);
+}
+
 /// Angle between two unit vectors, accurate also for tiny angles.
 double angle(const vec3d& a, const vec3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b));
@@ -92,6 +116,107 @@ normal_quantizer::normal_quantizer(int q_bits) {
     bound = std::max({bound, angle(direction(lo, 0), sample), angle(direction(hi, 0), sample)});
   }
   max_error_deg_ = (bound + table_slack) * 180.0 / std::numbers::pi;
+  build_cells();
+}
+
+// The candidate grid. Central projection onto the octant's face u + v + w = 1 maps great circles
+// to straight lines, so the set of folded normals whose largest dot product is with entry c,
+// {p : p·(d_c − d_m) ≥ 0 for every entry m}, is a convex polygon in (u, v). Clipping the
+// triangle by the half-planes of c's neighbours (its row's next columns, and the three columns
+// nearest its longitude in the rows above and below) gives a polygon that contains it (fewer
+// half-planes can only enlarge it; two columns to either side give the same candidate counts in
+// every cell at q = 6 … 16); c goes into every cell that polygon meets. So a cell lists every entry
+// that is the nearest anywhere in it, and the largest dot product over its list is the largest over
+// the table. The half-planes are widened by 1e-13 (the encoder's double dot products round by ≈
+// 1e-16) and the cells by 1e-9 (the rounding of the cell coordinates), so rounding cannot lose a
+// candidate.
+void normal_quantizer::build_cells() {
+  if (bits_ > 16) return;  // 2^(q−3) entries must fit 16 bits, and finer tables need finer grids
+  grid_ = 8;
+  while (grid_ < 2 * std::uint32_t(k_)) grid_ *= 2;
+  const std::size_t n_cells = std::size_t(grid_) * grid_;
+  std::vector<std::uint8_t> count(n_cells, 0);
+  cells_.assign(n_cells, ~std::uint64_t{0});
+  constexpr double eps = 1e-13, m = 1e-9;
+  const double g = grid_, inv_g = 1.0 / g;  // exact: a power of two
+  std::vector<pt2> poly, tmp;
+  std::vector<std::array<double, 4>> edges;  // start u, v and direction du, dv
+  for (int i = 0; i < k_; ++i)
+    for (int j = 0; j <= i; ++j) {
+      const std::uint32_t c = std::uint32_t(i) * std::uint32_t(i + 1) / 2 + std::uint32_t(j);
+      const vec3d dc = dirs_[c].cast<double>();
+      poly.assign({{0, 0}, {1, 0}, {0, 1}});
+      // Nearest first (the polygon shrinks early, so later clips are cheap): the columns at c's
+      // longitude, then one column to either side.
+      for (int spread = 0; spread <= 1 && !poly.empty(); ++spread)
+        for (int r = std::max(0, i - 1); r <= std::min(k_ - 1, i + 1) && !poly.empty(); ++r) {
+          const int centre = r == i ? j : int(std::lround((j + 0.5) * (r + 1) / (i + 1) - 0.5));
+          const std::array<int, 2> cols = {centre - spread, centre + spread};
+          for (int t = 0; t < (spread == 0 ? 1 : 2) && !poly.empty(); ++t) {
+            const int cj = cols[std::size_t(t)];
+            if (cj < 0 || cj > r) continue;
+            const std::uint32_t o = std::uint32_t(r) * std::uint32_t(r + 1) / 2 + std::uint32_t(cj);
+            if (o == c) continue;
+            // p·(d_c − d_o) with p = (u, v, 1 − u − v)
+            const vec3d dd = dc - dirs_[o].cast<double>();
+            clip(poly, tmp, dd.x() - dd.z(), dd.y() - dd.z(), dd.z() + eps);
+          }
+        }
+      if (poly.empty()) continue;
+      // The polygon's edges, for the separating-axis test below.
+      edges.clear();
+      for (std::size_t e = 0; e < poly.size(); ++e) {
+        const pt2 a = poly[e], b = poly[e + 1 < poly.size() ? e + 1 : 0];
+        edges.push_back({a.u, a.v, b.u - a.u, b.v - a.v});
+      }
+      double u0 = 2, u1 = -1, v0 = 2, v1 = -1;
+      for (const auto& p : poly) {
+        u0 = std::min(u0, p.u);
+        u1 = std::max(u1, p.u);
+        v0 = std::min(v0, p.v);
+        v1 = std::max(v1, p.v);
+      }
+      const auto cell_of = [&](double x) {
+        return std::uint32_t(std::clamp(std::floor(x * g), 0.0, g - 1));
+      };
+      const std::uint32_t iu0 = cell_of(u0 - m), iu1 = cell_of(u1 + m), iv0 = cell_of(v0 - m),
+                          iv1 = cell_of(v1 + m);
+      for (std::uint32_t iu = iu0; iu <= iu1; ++iu)
+        for (std::uint32_t iv = iv0; iv <= iv1; ++iv) {
+          // Separating axis: the polygon is counter-clockwise, so a cell lies wholly outside
+          // it when all four corners are strictly right of one of its edges
+          const double cu0 = iu * inv_g - m, cu1 = (iu + 1) * inv_g + m, cv0 = iv * inv_g - m,
+                       cv1 = (iv + 1) * inv_g + m;
+          // (The corner farthest to the left of an edge decides: the test is linear.)
+          bool apart = false;
+          for (const auto& e : edges) {
+            const double x = e[3] < 0 ? cu1 : cu0, y = e[2] > 0 ? cv1 : cv0;
+            if (e[2] * (y - e[1]) - e[3] * (x - e[0]) < 0) {
+              apart = true;
+              break;
+            }
+          }
+          if (apart) continue;
+          const std::size_t at = std::size_t(iu) * grid_ + iv;
+          if (count[at] < 4) {
+            const int shift = 16 * count[at];
+            cells_[at] =
+                (cells_[at] & ~(std::uint64_t{0xFFFF} << shift)) | (std::uint64_t{c} << shift);
+          }
+          count[at] = std::uint8_t(std::min(5, count[at] + 1));
+        }
+    }
+  // Unused slots repeat the first candidate (the encoder then tests four without branching on
+  // the count); cells with more than four candidates, or none, keep 0xFFFF in the first slot.
+  for (std::size_t at = 0; at < n_cells; ++at) {
+    if (count[at] == 0 || count[at] > 4) {
+      cells_[at] = ~std::uint64_t{0};
+      continue;
+    }
+    const std::uint64_t first = cells_[at] & 0xFFFF;
+    for (int k = count[at]; k < 4; ++k)
+      cells_[at] = (cells_[at] & ~(std::uint64_t{0xFFFF} << (16 * k))) | (first << (16 * k));
+  }
 }
 
 std::shared_ptr<const normal_quantizer> normal_quantizer::shared(int q_bits) {
@@ -154,6 +279,26 @@ std::uint32_t normal_quantizer::encode(const vec3f& n) const {
   // a direction of another octant into this one never moves it away from n).
   const double fx = std::abs(x), fy = std::abs(y), fz = std::abs(z);
   const double ax = fx * inv, ay = fy * inv, az = fz * inv;
+  if (!cells_.empty()) {
+    // The cell of the octahedral coordinates (fx, fy)/(fx + fy + fz) ∈ [0, 1] (the sum is at
+    // least the largest |component| of a nonzero float vector, so the scale is finite).
+    const double scale = double(grid_) / (fx + fy + fz);
+    const auto iu = std::min(static_cast<std::uint32_t>(fx * scale), grid_ - 1);
+    const auto iv = std::min(static_cast<std::uint32_t>(fy * scale), grid_ - 1);
+    const std::uint64_t cell = cells_[std::size_t(iu) * grid_ + iv];
+    if ((cell & 0xFFFF) != 0xFFFF) {
+      double best_dot = -std::numeric_limits<double>::infinity();
+      std::uint32_t best = 0;
+      for (int k = 0; k < 4; ++k) {  // ascending index, repeats at the end: ties keep the first
+        const auto t = static_cast<std::uint32_t>(cell >> (16 * k)) & 0xFFFFu;
+        const vec3f& d = dirs_[t];
+        const double dot = ax * double(d.x()) + ay * double(d.y()) + az * double(d.z());
+        best = dot > best_dot ? t : best;
+        best_dot = std::max(dot, best_dot);
+      }
+      return (octant << (bits_ - 3)) | best;
+    }
+  }
   const double rho2 = ax * ax + ay * ay;
   const double sin_theta = std::sqrt(rho2);
   // φ only picks the longitude cell of a row, whose neighbours are searched too, so an error far

@@ -240,6 +240,46 @@ TEST(NormalQuantizer, EncodeFindsTheNearestJustOffCellEdges) {
   }
 }
 
+// Up to q = 16 encode() looks the folded normal up in a grid over its octahedral coordinates
+// (u, v) = (|x|, |y|)/(|x| + |y| + |z|) and compares only the cell's candidates. The hard places
+// for that are the cell edges and corners (rounding can put a normal in the neighbouring cell)
+// and the octant's edges u + v = 1, u = 0, v = 0: directions exactly on them and 10⁻¹² … 10⁻⁶ of
+// a cell off, at every q the grid serves, must get the brute-force nearest.
+TEST(NormalQuantizer, EncodeFindsTheNearestOnCandidateGridEdges) {
+  for (int q = normal_quantizer::min_bits; q <= 17; ++q) {
+    const normal_quantizer nq(q);
+    const std::uint32_t g = nq.candidate_grid();
+    if (q > 16) {
+      EXPECT_EQ(g, 0u) << "q = " << q;
+      continue;
+    }
+    ASSERT_GE(g, 2u * std::uint32_t(nq.latitude_steps())) << "q = " << q;
+    ASSERT_EQ(g & (g - 1), 0u) << "q = " << q;
+    std::vector<vec3f> hard;
+    std::mt19937_64 rng{static_cast<std::uint64_t>(q) + 5};
+    std::uniform_int_distribution<std::uint32_t> cell(0, g);
+    std::uniform_int_distribution<int> octant(0, 7);
+    const auto add = [&](double u, double v) {
+      if (u < 0 || v < 0 || u + v > 1) return;
+      const int o = octant(rng);
+      hard.emplace_back(float((o & 1) ? -u : u), float((o & 2) ? -v : v),
+                        float((o & 4) ? -(1 - u - v) : 1 - u - v));
+    };
+    while (hard.size() < 1500) {
+      const std::uint32_t a = cell(rng), b = cell(rng);
+      for (const double off : {0.0, 1e-12, -1e-12, 1e-9, -1e-9, 1e-6, -1e-6}) {
+        const double u = (a + off) / g, v = (b + off) / g;
+        add(u, v);                    // a cell corner
+        add(u, (b + 0.37) / g);       // a vertical cell edge
+        add((a + 0.61) / g, v);       // a horizontal one
+        add(u, 1 - u - off / g);      // the octant's edge u + v = 1
+        add(0.0 + std::abs(off), v);  // u = 0 (x = 0, then just off it)
+      }
+    }
+    expect_nearest(nq, hard);
+  }
+}
+
 // Between two latitude rows lies a curve where the best entry of one row and the best of the
 // next are equally near; the row walk prunes a row by a bound on its dot products, which must
 // allow for the float entries not being exactly unit length. Directions on that curve (found by

@@ -32,7 +32,9 @@ namespace pbr_lod {
 
 /// Encodes unit normals as q-bit codes and back. Immutable after construction: const member
 /// functions are safe for concurrent readers. The table holds k(k+1)/2 float directions
-/// (q = 16: 8128 entries, 95 kB; q = 24: 2.1 M entries, 25 MB).
+/// (q = 16: 8128 entries, 95 kB; q = 24: 2.1 M entries, 25 MB); up to q = 16 a candidate grid
+/// for encode() adds 8 B per cell (q = 16: 256², 512 kB, ≈ 3 ms to build; q = 12: 64², 32 kB).
+/// Construct once and share (shared()) rather than per call.
 class normal_quantizer {
  public:
   static constexpr int min_bits = 6;   ///< k = 3: 6 directions per octant, worst error ≈ 24°
@@ -43,7 +45,8 @@ class normal_quantizer {
 
   /// A quantizer for q_bits shared by every caller: built once per q ≤ max_shared_bits and kept
   /// for the life of the program (at most 1.5 MB each), built afresh above that (its table is
-  /// up to 25 MB). Building the q = 16 table takes ≈ 0.15 ms, 1 % of a 69 k-triangle POP build.
+  /// up to 25 MB). Building the q = 16 table and its candidate grid takes ≈ 3 ms, a fifth of a
+  /// 69 k-triangle POP build.
   /// Thread-safe. Throws InvalidArgument as the constructor does.
   [[nodiscard]] static std::shared_ptr<const normal_quantizer> shared(int q_bits);
   static constexpr int max_shared_bits = 20;
@@ -80,6 +83,10 @@ class normal_quantizer {
   [[nodiscard]] int bits() const { return bits_; }
   /// k, the number of latitude rows per octant.
   [[nodiscard]] int latitude_steps() const { return k_; }
+  /// Cells per side of encode()'s candidate grid over the octant's octahedral coordinates
+  /// (|x|, |y|)/(|x| + |y| + |z|), the smallest power of two ≥ 2k; 0 above q = 16, where
+  /// encode() searches the latitude rows instead (docs/normal-quantization.md).
+  [[nodiscard]] std::uint32_t candidate_grid() const { return grid_; }
 
   /// A guaranteed upper bound on the angle between a unit n and decode(encode(n)), in degrees
   /// (from the band geometry: the worst point of row i's band is on a band edge, half a
@@ -92,6 +99,7 @@ class normal_quantizer {
   [[noreturn]] void throw_invalid_code(std::uint32_t code) const;
   void search_row(int row, double ax, double ay, double az, double phi_cells, double& best_dot,
                   std::uint32_t& best) const;
+  void build_cells();
 
   int bits_ = 0;
   int k_ = 0;
@@ -101,6 +109,12 @@ class normal_quantizer {
   std::vector<double> row_cos_;     // cos θ_i
   std::vector<double> row_sin_;     // sin θ_i
   std::vector<double> row_margin_;  // search_row(): how near a cell edge both neighbours compete
+  // Candidate grid (q ≤ 16): the folded normal's octahedral coordinates (|x|, |y|)/‖n‖₁ pick one
+  // of grid_ × grid_ cells; each holds up to four entries, every one whose region can meet the
+  // cell, in ascending index (16 bits each, 0xFFFF = none). A cell whose first slot is 0xFFFF
+  // has more than four (or lies outside the octant): the row search decides there.
+  std::uint32_t grid_ = 0;
+  std::vector<std::uint64_t> cells_;
   double max_error_deg_ = 0;
 };
 
