@@ -32,8 +32,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <numeric>
-#include <optional>
 #include <vector>
 
 #include "pbr_lod/builders/rho_grid.hpp"
@@ -323,13 +323,13 @@ template <int Rho>
                                     const rho_grid_render_options& o,
                                     rho_grid_traverse_stats* stats = nullptr) {
   const view v(cam, g.origin());
-  std::optional<normal_quantizer> q;
-  if (g.has_normals()) q.emplace(g.normal_bits());
+  // One table per process (normal_quantizer::shared), not one per frame.
+  std::shared_ptr<const normal_quantizer> q;
+  if (g.has_normals()) q = normal_quantizer::shared(g.normal_bits());
   rho_grid_traverse_stats st;
   const auto go = [&]<attributes A>() {
-    return render<A>(v, o.raster, [&](auto& sink) {
-      st = detail::rho_grid_draw<A>(g, v, o, q ? &*q : nullptr, sink);
-    });
+    return render<A>(v, o.raster,
+                     [&](auto& sink) { st = detail::rho_grid_draw<A>(g, v, o, q.get(), sink); });
   };
   image img;
   if (g.has_normals() && g.has_materials())
@@ -366,7 +366,8 @@ template <int Rho>
     throw InvalidArgument("rho-grid: one-pass shadows need a non-zero light direction");
   const vec3f L = dir.normalized();
   const view v(cam, g.origin());
-  const normal_quantizer q(g.normal_bits());
+  const auto shared_q = normal_quantizer::shared(g.normal_bits());
+  const normal_quantizer& q = *shared_q;
   // Orthographic light frame over the cube.
   const vec3f lu = any_orthogonal(L), lv = L.cross(lu);
   const float half = float(0.5 * std::sqrt(3.0) * g.cube_side());

@@ -11,10 +11,10 @@
 #include <exception>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <numbers>
 #include <numeric>
-#include <optional>
 #include <thread>
 #include <utility>
 
@@ -965,8 +965,8 @@ struct point_octree_io {
 
     tree t;
     t.normal_bits_ = bits;
-    std::optional<normal_quantizer> q;
-    if (bits > 0) q.emplace(bits);
+    std::shared_ptr<const normal_quantizer> q;  // one table per process, not one per load
+    if (bits > 0) q = normal_quantizer::shared(bits);
     auto& s = t.samples_;
     s.origin.x() = r.get<double>("origin");
     s.origin.y() = r.get<double>("origin");
@@ -988,8 +988,8 @@ struct point_octree_io {
       nd.count = r.get<std::uint32_t>("node count");
       nd.leaf = r.get<std::uint8_t>("node leaf");
       nd.depth = r.get<std::uint8_t>("node depth");
-      get_orientation(r, q ? &*q : nullptr, q ? &t.node_codes_[i] : nullptr, nd.normal, nd.axis_u,
-                      nd.axis_v, i);
+      get_orientation(r, q.get(), q ? &t.node_codes_[i] : nullptr, nd.normal, nd.axis_u, nd.axis_v,
+                      i);
       if constexpr (A.colour) t.node_colours_[i] = r.get<rgb8>("node colour");
       if (nd.radius < 0 || nd.cone_angle < 0 || nd.leaf > 1)
         throw FormatError(path + ": node " + std::to_string(i) +
@@ -999,8 +999,8 @@ struct point_octree_io {
     if (q) t.sample_codes_.resize(n_samples);
     for (std::size_t i = 0; i < n_samples; ++i) {
       s.positions[i] = r.get_vec("sample position", i);
-      get_orientation(r, q ? &*q : nullptr, q ? &t.sample_codes_[i] : nullptr, s.normals[i],
-                      s.axis_u[i], s.axis_v[i], i);
+      get_orientation(r, q.get(), q ? &t.sample_codes_[i] : nullptr, s.normals[i], s.axis_u[i],
+                      s.axis_v[i], i);
       if constexpr (A.colour) s.colours[i] = r.get<rgb8>("sample colour");
     }
     validate_tree(t, path);
