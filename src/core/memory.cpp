@@ -2,12 +2,34 @@
 #include "pbr_lod/core/memory.hpp"
 
 #include <cstdint>
+#include <new>
 
 #if defined(__linux__)
 #include <sys/mman.h>
 #endif
 
 namespace pbr_lod::detail {
+
+void* map_pages(std::size_t bytes) {
+  if (bytes == 0) return nullptr;
+#if defined(__linux__)
+  void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) throw std::bad_alloc();
+  return p;
+#else
+  return ::operator new(bytes);
+#endif
+}
+
+void unmap_pages(void* p, std::size_t bytes) noexcept {
+  if (p == nullptr) return;
+#if defined(__linux__)
+  (void)munmap(p, bytes);
+#else
+  (void)bytes;
+  ::operator delete(p);
+#endif
+}
 
 void advise_huge_pages(const void* data, std::size_t bytes) noexcept {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)

@@ -135,7 +135,9 @@ void normal_quantizer::build_cells() {
   grid_ = 8;
   while (grid_ < 2 * std::uint32_t(k_)) grid_ *= 2;
   const std::size_t n_cells = std::size_t(grid_) * grid_;
-  std::vector<std::uint8_t> count(n_cells, 0);
+  // While filling, a cell's slots fill in order (0xFFFF = free) and 0xFFFE in the first slot
+  // marks a fifth candidate: no side array.
+  constexpr std::uint64_t free_slot = 0xFFFF, overflow = 0xFFFE;
   cells_.assign(n_cells, ~std::uint64_t{0});
   constexpr double eps = 1e-13, m = 1e-9;
   const double g = grid_, inv_g = 1.0 / g;  // exact: a power of two
@@ -197,25 +199,27 @@ void normal_quantizer::build_cells() {
             }
           }
           if (apart) continue;
-          const std::size_t at = std::size_t(iu) * grid_ + iv;
-          if (count[at] < 4) {
-            const int shift = 16 * count[at];
-            cells_[at] =
-                (cells_[at] & ~(std::uint64_t{0xFFFF} << shift)) | (std::uint64_t{c} << shift);
-          }
-          count[at] = std::uint8_t(std::min(5, count[at] + 1));
+          std::uint64_t& cell = cells_[std::size_t(iu) * grid_ + iv];
+          if ((cell & 0xFFFF) == overflow) continue;
+          int used = 0;
+          while (used < 4 && (cell >> (16 * used) & 0xFFFF) != free_slot) ++used;
+          if (used == 4)
+            cell = (cell & ~std::uint64_t{0xFFFF}) | overflow;
+          else
+            cell = (cell & ~(free_slot << (16 * used))) | (std::uint64_t{c} << (16 * used));
         }
     }
   // Unused slots repeat the first candidate (the encoder then tests four without branching on
-  // the count); cells with more than four candidates, or none, keep 0xFFFF in the first slot.
-  for (std::size_t at = 0; at < n_cells; ++at) {
-    if (count[at] == 0 || count[at] > 4) {
-      cells_[at] = ~std::uint64_t{0};
+  // the count); cells with more than four candidates, or none, get 0xFFFF in every slot.
+  for (auto& cell : cells_) {
+    const std::uint64_t first = cell & 0xFFFF;
+    if (first == free_slot || first == overflow) {
+      cell = ~std::uint64_t{0};
       continue;
     }
-    const std::uint64_t first = cells_[at] & 0xFFFF;
-    for (int k = count[at]; k < 4; ++k)
-      cells_[at] = (cells_[at] & ~(std::uint64_t{0xFFFF} << (16 * k))) | (first << (16 * k));
+    for (int k = 1; k < 4; ++k)
+      if ((cell >> (16 * k) & 0xFFFF) == free_slot)
+        cell = (cell & ~(free_slot << (16 * k))) | (first << (16 * k));
   }
 }
 

@@ -14,6 +14,31 @@
 
 namespace pbr_lod::detail {
 
+/// Storage in its own anonymous mapping (mmap, whole pages), outside the malloc heap; throws
+/// std::bad_alloc when the system refuses. operator new where mmap is unavailable.
+void* map_pages(std::size_t bytes);
+/// Releases map_pages(bytes) storage. Never throws.
+void unmap_pages(void* p, std::size_t bytes) noexcept;
+
+/// Allocator for tables that live as long as the program (normal_quantizer::shared()): their
+/// storage does not come from the malloc heap, so they cannot land in the free space that
+/// repeated builds reuse there. (On the 2-core VM a 512 kB table allocated from the heap moved
+/// glibc into trimming ≈ 4 MB at the end of every 67 k-triangle POP build, and each build then
+/// paid ≈ 1 000 page faults, +40 % time; docs/normal-quantization.md.)
+template <class T>
+struct mapped_allocator {
+  using value_type = T;
+  mapped_allocator() noexcept = default;
+  template <class U>
+  mapped_allocator(const mapped_allocator<U>&) noexcept {}  // NOLINT: rebinding is implicit
+  T* allocate(std::size_t n) { return static_cast<T*>(map_pages(n * sizeof(T))); }
+  void deallocate(T* p, std::size_t n) noexcept { unmap_pages(p, n * sizeof(T)); }
+  template <class U>
+  bool operator==(const mapped_allocator<U>&) const noexcept {
+    return true;
+  }
+};
+
 /// madvise(MADV_HUGEPAGE) on the 2 MB-aligned part of [data, data + bytes); a no-op where that
 /// is unavailable or the range holds no whole huge page. Never throws, never fails visibly.
 void advise_huge_pages(const void* data, std::size_t bytes) noexcept;

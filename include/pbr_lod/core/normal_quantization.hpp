@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "pbr_lod/core/math.hpp"
+#include "pbr_lod/core/memory.hpp"
 
 namespace pbr_lod {
 
@@ -114,7 +115,7 @@ class normal_quantizer {
   // cell, in ascending index (16 bits each, 0xFFFF = none). A cell whose first slot is 0xFFFF
   // has more than four (or lies outside the octant): the row search decides there.
   std::uint32_t grid_ = 0;
-  std::vector<std::uint64_t> cells_;
+  std::vector<std::uint64_t, detail::mapped_allocator<std::uint64_t>> cells_;
   double max_error_deg_ = 0;
 };
 
