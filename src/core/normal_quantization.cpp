@@ -186,10 +186,11 @@ void normal_quantizer::build_cells() {
       for (std::uint32_t iu = iu0; iu <= iu1; ++iu)
         for (std::uint32_t iv = iv0; iv <= iv1; ++iv) {
           // Separating axis: the polygon is counter-clockwise, so a cell lies wholly outside
-          // it when all four corners are strictly right of one of its edges
+          // it when all four corners are strictly right of one of its edges; the corner
+          // farthest to the left decides (the test is linear in the corner). The bounding-box
+          // axes need no test: the loops visit only cells that overlap the polygon's box.
           const double cu0 = iu * inv_g - m, cu1 = (iu + 1) * inv_g + m, cv0 = iv * inv_g - m,
                        cv1 = (iv + 1) * inv_g + m;
-          // (The corner farthest to the left of an edge decides: the test is linear.)
           bool apart = false;
           for (const auto& e : edges) {
             const double x = e[3] < 0 ? cu1 : cu0, y = e[2] > 0 ? cv1 : cv0;
