@@ -949,7 +949,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     std::array<vec3d, 12> cc, corner;
     std::array<double, 12> cr;
     auto& fn = out.fn;
-    std::array<bool, 4> fdeg{};
+    out.fdeg = 0;
     auto& nd = d.nodes[i];
     vec3d x;
     double r = 0;
@@ -974,9 +974,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         const vec3d n = e1.cross(e2);
         const double n2 = n.squaredNorm();
         const double len = std::sqrt(n2);  // n.norm()
-        fdeg[j] = !(len > 0 && std::isfinite(len));
-        fn[j] = fdeg[j] ? vec3f::Zero() : vec3f((n / len).cast<float>());
-        acc.degenerate += fdeg[j] ? 1 : 0;
+        const bool deg = !(len > 0 && std::isfinite(len));
+        fn[j] = deg ? vec3f::Zero() : vec3f((n / len).cast<float>());
+        out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
+        acc.degenerate += deg ? 1 : 0;
         // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
         if (nt == 1 || !exact) triangle_circle(p[0], p[1], p[2], e1, e2, n, n2, cc[j], cr[j]);
       }
@@ -1008,7 +1009,6 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
     }
     out.nsum = nsum.cast<float>();
-    out.fdeg = static_cast<std::uint8_t>(fdeg[0] | fdeg[1] << 1 | fdeg[2] << 2 | fdeg[3] << 3);
     if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
   };
   // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
