@@ -1,2 +1,2 @@
 target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/version.cpp ${CMAKE_CURRENT_LIST_DIR}/synthetic.cpp
-               ${CMAKE_CURRENT_LIST_DIR}/memory.cpp)
+               ${CMAKE_CURRENT_LIST_DIR}/memory.cpp ${CMAKE_CURRENT_LIST_DIR}/parallel.cpp)

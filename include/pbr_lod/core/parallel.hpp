@@ -1,18 +1,45 @@
-// pbr_lod — deterministic fork-join over index ranges with std::thread (no scheduler state, so
-// a library call never depends on a pool its caller configured).
+// pbr_lod — deterministic fork-join over index ranges. The work runs on a persistent pool of
+// threads (oneTBB's, reached through src/core/parallel.cpp, so TBB stays out of this header):
+// no thread is created per call, and what a call computes depends only on its arguments, never
+// on the pool, how many of its threads take part or in which order they pick up the work.
 #pragma once
 
 #include <algorithm>
-#include <atomic>
 #include <cstddef>
-#include <thread>
-#include <vector>
+#include <memory>
+#include <type_traits>
 
 namespace pbr_lod::detail {
 
+/// fn(ctx, task, worker) for every task in [0, n), each exactly once, on at most `threads`
+/// threads at a time (the calling thread is one of them); worker ∈ [0, max(threads, 1)), and no
+/// two tasks run concurrently under the same worker id. Tasks are handed out one at a time, so
+/// a slow core or a long task leaves the others busy. An exception thrown by a task is rethrown
+/// here (the first one, after the tasks already running have finished; tasks not yet started
+/// may be skipped). A call from inside a task waits only for its own tasks (it never picks up
+/// its caller's), so nesting is safe.
+void run_tasks(std::size_t n, unsigned threads, void (*fn)(void*, std::size_t, unsigned),
+               void* ctx);
+
+/// f(task, worker) for every task in [0, n) on up to `threads` workers (worker 0 is the calling
+/// thread when it runs alone), tasks handed out one at a time: for tasks of uneven size, where
+/// fixed chunks leave a worker idle. Each task runs once, in no fixed order and on no fixed
+/// worker, so f must not depend on either beyond per-worker accumulators combined afterwards.
+template <class F>
+void parallel_tasks(std::size_t n, unsigned threads, F&& f) {
+  if (threads <= 1 || n <= 1) {
+    for (std::size_t t = 0; t < n; ++t) f(t, 0u);
+    return;
+  }
+  using G = std::remove_reference_t<F>;
+  run_tasks(
+      n, threads, [](void* ctx, std::size_t t, unsigned w) { (*static_cast<G*>(ctx))(t, w); },
+      const_cast<void*>(static_cast<const void*>(std::addressof(f))));
+}
+
 /// f(lo, hi) over up to `threads` contiguous chunks of [0, n), each at least about min_chunk
-/// long; the calling thread takes the first. Each index is visited once and the chunking depends
-/// only on n, threads and min_chunk, so results that combine per-chunk values are reproducible.
+/// long. Each index is visited once and the chunking depends only on n, threads and min_chunk,
+/// so results that combine per-chunk values are reproducible.
 template <class F>
 void parallel_chunks(std::size_t n, unsigned threads, std::size_t min_chunk, F&& f) {
   threads = std::max(
@@ -22,28 +49,24 @@ void parallel_chunks(std::size_t n, unsigned threads, std::size_t min_chunk, F&&
     f(std::size_t{0}, n);
     return;
   }
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t)
-    pool.emplace_back([&, t] { f(n * t / threads, n * (t + 1) / threads); });
-  f(std::size_t{0}, n / threads);
-  for (auto& th : pool) th.join();
+  parallel_tasks(threads, threads,
+                 [&](std::size_t t, unsigned) { f(n * t / threads, n * (t + 1) / threads); });
 }
 
-/// f(task, worker) for every task in [0, n) on up to `threads` workers (worker 0 is the calling
-/// thread), tasks handed out one at a time from a shared counter: for tasks of uneven size, where
-/// fixed chunks leave a worker idle. Each task runs once, in no fixed order and on no fixed
-/// worker, so f must not depend on either beyond per-worker accumulators combined afterwards.
+/// f(lo, hi) over `pieces` contiguous, nearly equal ranges of [0, n) (fewer when n is small, so
+/// that each holds at least min_piece), handed out one at a time to up to `threads` workers: for
+/// element-wise passes, where more pieces than threads keep every core busy when one is slower
+/// (a busy neighbour on a VM) or a piece costs more than another.
 template <class F>
-void parallel_tasks(std::size_t n, unsigned threads, F&& f) {
-  threads = static_cast<unsigned>(std::max<std::size_t>(1, std::min<std::size_t>(threads, n)));
-  std::atomic<std::size_t> next{0};
-  const auto work = [&](unsigned worker) {
-    for (std::size_t t; (t = next.fetch_add(1, std::memory_order_relaxed)) < n;) f(t, worker);
-  };
-  std::vector<std::thread> pool;
-  for (unsigned w = 1; w < threads; ++w) pool.emplace_back(work, w);
-  work(0);
-  for (auto& th : pool) th.join();
+void parallel_pieces(std::size_t n, unsigned threads, std::size_t pieces, std::size_t min_piece,
+                     F&& f) {
+  pieces = std::max<std::size_t>(1, std::min(pieces, n / std::max<std::size_t>(1, min_piece)));
+  if (threads <= 1 || pieces == 1) {
+    f(std::size_t{0}, n);
+    return;
+  }
+  parallel_tasks(pieces, threads,
+                 [&](std::size_t t, unsigned) { f(n * t / pieces, n * (t + 1) / pieces); });
 }
 
 }  // namespace pbr_lod::detail
