@@ -38,10 +38,12 @@ using face_slots = std::array<std::uint32_t, 3>;
 
 void set_file_stats(pop_data& d, std::size_t size);  // with the file format, below
 
-/// f(lo, hi) over contiguous chunks of at least ~2048 indices (core/parallel.hpp).
+/// f(lo, hi) over contiguous pieces of at least 2048 indices, 8 per thread, handed out one at a
+/// time (core/parallel.hpp): every caller's work is element by element, and more pieces than
+/// threads keep both cores busy when one of them runs slower.
 template <class F>
 void parallel_chunks(std::size_t n, unsigned threads, F&& f) {
-  detail::parallel_chunks(n, threads, 2048, f);
+  detail::parallel_pieces(n, threads, 8 * std::size_t{threads}, 2048, f);
 }
 
 /// The smallest float ≥ x (x ≥ 0): stored radii never shrink below what was computed in double.
@@ -686,92 +688,100 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       adjacency_error = std::current_exception();
     }
   };
-  std::jthread leaves_thread;  // joined on every path out of this function
-  if (overlap) leaves_thread = std::jthread(build_leaves);
-
-  // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
-  box3 bb = box3::of(P);
-  d.q_min = bb.min;
-  for (int k = 0; k < 3; ++k) {
-    const float ext = bb.max[k] - bb.min[k];
-    d.q_step[k] = ext > 0 ? ext / 65535.0f : 0.0f;
-  }
-  resize_fresh(d.vertex_q, nv, prep_threads);
-  resize_fresh(d.positions, nv, prep_threads);
-  resize_fresh(d.vertex_normal_codes, nv, prep_threads);
-  resize_fresh(d.normals, nv, prep_threads);
-  // Without vertex normals: area_weighted_normals(mesh), bit for bit, from its double sums,
-  // normalised in the quantisation loop below: no float copy (its 36 MB of fresh 4 kB pages
-  // were a visible part of a 2 M-triangle build).
-  const bool estimate = mesh.vertices.normals.empty();
-  const std::vector<vec3d> normal_sum =
-      estimate ? area_weighted_normal_sums(mesh) : std::vector<vec3d>{};
-  const auto vertex_normal = [&](std::size_t i) -> vec3f {
-    return estimate ? unit_or_zero(normal_sum[i]) : mesh.vertices.normals[i];
-  };
-  parallel_chunks(nv, prep_threads, [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t i = lo; i < hi; ++i) {
-      std::array<std::uint16_t, 3> q{};
-      for (int k = 0; k < 3; ++k) {
-        const double s =
-            d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
-        q[static_cast<std::size_t>(k)] = round_to_u16(s);
-      }
-      d.vertex_q[i] = q;
-      d.positions[i] = dequantise(q, d.q_min, d.q_step);
-      d.vertex_normal_codes[i] = quant.encode(vertex_normal(i));
-      d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
-    }
-  });
-
-  // Colours: vertex colours, or with a texture the texel under each corner averaged per vertex.
   std::vector<rgb8> face_colour;
   texture tex;
-  if (colour) {
-    if (textured) {
-      tex.img = read_png(mesh.texture_path);
-      if (tex.img.width <= 0 || tex.img.height <= 0)
-        throw FormatError(mesh.texture_path + ": empty texture");
-      for (std::size_t f = 0; f < nf; ++f)
-        for (const auto& uv : mesh.face_texcoords[f])
-          if (!all_finite(uv))
-            throw InvalidArgument("build_pop: face " + std::to_string(f) +
-                                  " has a non-finite texture coordinate");
-      std::vector<rgb_sum> acc(nv);
-      for (std::size_t f = 0; f < nf; ++f)
-        for (std::size_t k = 0; k < 3; ++k) {
-          const vec2d t = tex.texel(mesh.face_texcoords[f][k]);
-          acc[mesh.faces[f][k]].add(tex.at(t.x(), t.y()));
-        }
-      d.colours.resize(nv);
-      for (std::size_t i = 0; i < nv; ++i) d.colours[i] = acc[i].n > 0 ? acc[i].mean() : rgb8{};
-    } else {
-      d.colours = mesh.vertices.colours;
+  clock::time_point t_prep;
+  const auto prepare = [&] {
+    // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
+    box3 bb = box3::of(P);
+    d.q_min = bb.min;
+    for (int k = 0; k < 3; ++k) {
+      const float ext = bb.max[k] - bb.min[k];
+      d.q_step[k] = ext > 0 ? ext / 65535.0f : 0.0f;
     }
-    face_colour.resize(nf);
-  }
-
-  // Per triangle colour (§3.1). The triangles' normals and spheres are computed where they are
-  // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
-  // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
-  if (colour)
-    parallel_chunks(nf, prep_threads, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t f = lo; f < hi; ++f) {
-        if (textured) {
-          face_colour[f] = tex.average(mesh.face_texcoords[f]);
-        } else {
-          rgb_sum s;
-          for (auto i : mesh.faces[f]) s.add(d.colours[i]);
-          face_colour[f] = s.mean();
+    resize_fresh(d.vertex_q, nv, prep_threads);
+    resize_fresh(d.positions, nv, prep_threads);
+    resize_fresh(d.vertex_normal_codes, nv, prep_threads);
+    resize_fresh(d.normals, nv, prep_threads);
+    // Without vertex normals: area_weighted_normals(mesh), bit for bit, from its double sums,
+    // normalised in the quantisation loop below: no float copy (its 36 MB of fresh 4 kB pages
+    // were a visible part of a 2 M-triangle build).
+    const bool estimate = mesh.vertices.normals.empty();
+    const std::vector<vec3d> normal_sum =
+        estimate ? area_weighted_normal_sums(mesh) : std::vector<vec3d>{};
+    const auto vertex_normal = [&](std::size_t i) -> vec3f {
+      return estimate ? unit_or_zero(normal_sum[i]) : mesh.vertices.normals[i];
+    };
+    parallel_chunks(nv, prep_threads, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) {
+        std::array<std::uint16_t, 3> q{};
+        for (int k = 0; k < 3; ++k) {
+          const double s =
+              d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
+          q[static_cast<std::size_t>(k)] = round_to_u16(s);
         }
+        d.vertex_q[i] = q;
+        d.positions[i] = dequantise(q, d.q_min, d.q_step);
+        d.vertex_normal_codes[i] = quant.encode(vertex_normal(i));
+        d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
       }
     });
 
-  const auto t_prep = clock::now();
+    // Colours: vertex colours, or with a texture the texel under each corner averaged per vertex.
+    if (colour) {
+      if (textured) {
+        tex.img = read_png(mesh.texture_path);
+        if (tex.img.width <= 0 || tex.img.height <= 0)
+          throw FormatError(mesh.texture_path + ": empty texture");
+        for (std::size_t f = 0; f < nf; ++f)
+          for (const auto& uv : mesh.face_texcoords[f])
+            if (!all_finite(uv))
+              throw InvalidArgument("build_pop: face " + std::to_string(f) +
+                                    " has a non-finite texture coordinate");
+        std::vector<rgb_sum> acc(nv);
+        for (std::size_t f = 0; f < nf; ++f)
+          for (std::size_t k = 0; k < 3; ++k) {
+            const vec2d t = tex.texel(mesh.face_texcoords[f][k]);
+            acc[mesh.faces[f][k]].add(tex.at(t.x(), t.y()));
+          }
+        d.colours.resize(nv);
+        for (std::size_t i = 0; i < nv; ++i) d.colours[i] = acc[i].n > 0 ? acc[i].mean() : rgb8{};
+      } else {
+        d.colours = mesh.vertices.colours;
+      }
+      face_colour.resize(nf);
+    }
+
+    // Per triangle colour (§3.1). The triangles' normals and spheres are computed where they are
+    // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
+    // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
+    if (colour)
+      parallel_chunks(nf, prep_threads, [&](std::size_t lo, std::size_t hi) {
+        for (std::size_t f = lo; f < hi; ++f) {
+          if (textured) {
+            face_colour[f] = tex.average(mesh.face_texcoords[f]);
+          } else {
+            rgb_sum s;
+            for (auto i : mesh.faces[f]) s.add(d.colours[i]);
+            face_colour[f] = s.mean();
+          }
+        }
+      });
+
+    t_prep = clock::now();
+  };
+  // Two tasks on the pool (core/parallel.hpp), so a worker that is already awake takes one.
   if (overlap)
-    leaves_thread.join();
-  else
+    parallel_tasks(2, 2, [&](std::size_t t, unsigned) {
+      if (t == 0)
+        build_leaves();
+      else
+        prepare();
+    });
+  else {
+    prepare();
     build_leaves();
+  }
   if (adjacency_error) std::rethrow_exception(adjacency_error);
   const std::size_t n_leaves = gstart.size() - 1;
   const auto t_adj = clock::now();
@@ -823,21 +833,33 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       select_rank<2>(perm.data() + lo, hi - lo, mid - lo);
     return mid;
   };
-  // `budget` threads for the subtree; one half goes to a new thread while the budget allows.
-  const auto partition = [&](const auto& self, std::uint32_t lo, std::uint32_t hi,
-                             unsigned budget) -> void {
+  const auto partition = [&](const auto& self, std::uint32_t lo, std::uint32_t hi) -> void {
     if (hi - lo <= 1) return;
     const std::uint32_t m = split(lo, hi);
-    if (budget > 1 && hi - lo >= 8192) {
-      std::thread other([&, m, hi, budget] { self(self, m, hi, budget / 2); });
-      self(self, lo, m, budget - budget / 2);
-      other.join();
-    } else {
-      self(self, lo, m, 1);
-      self(self, m, hi, 1);
-    }
+    self(self, lo, m);
+    self(self, m, hi);
   };
-  partition(partition, 0, static_cast<std::uint32_t>(n_leaves), threads);
+  // The top levels one at a time, each level's ranges as tasks on the pool, until there are
+  // enough ranges to share out (8 per thread) or they are small; then each range's subtree as
+  // one task. The ranges of a level are disjoint, so the order they are done in does not matter.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges{
+      {0, static_cast<std::uint32_t>(n_leaves)}};
+  while (threads > 1 && ranges.size() < 8 * std::size_t{threads} && n_leaves >= 8192) {
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> next(2 * ranges.size());
+    bool small = false;
+    parallel_tasks(ranges.size(), threads, [&](std::size_t t, unsigned) {
+      const auto [lo, hi] = ranges[t];
+      const std::uint32_t m = hi - lo >= 2 ? split(lo, hi) : hi;
+      next[2 * t] = {lo, m};
+      next[2 * t + 1] = {m, hi};
+    });
+    ranges.swap(next);
+    for (const auto& [lo, hi] : ranges) small = small || hi - lo < 4096;
+    if (small) break;
+  }
+  parallel_tasks(ranges.size(), threads, [&](std::size_t t, unsigned) {
+    partition(partition, ranges[t].first, ranges[t].second);
+  });
 
   struct topo {
     std::uint32_t lo, hi, first = 0, count = 0, parent = none;
