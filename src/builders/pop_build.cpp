@@ -60,11 +60,23 @@ float round_up(double x) {
 // holds any child: every node has a valid code. The float expressions below are the only ones
 // build and load use, so both derive bit-identical spheres.
 constexpr std::uint16_t sphere_code_parent = 6 | 6 << 4 | 6 << 8 | 12 << 12;
+// The levels as tables: the same correctly rounded float quotients, without a division per use
+// (quantise_sphere() tried up to eight centres, each with four of them).
+constexpr std::array<float, 16> centre_levels = [] {
+  std::array<float, 16> t{};
+  for (int i = 0; i < 16; ++i) t[static_cast<std::size_t>(i)] = static_cast<float>(i - 6) / 6.0f;
+  return t;
+}();
+constexpr std::array<float, 16> radius_levels = [] {
+  std::array<float, 16> t{};
+  for (int j = 0; j < 16; ++j) t[static_cast<std::size_t>(j)] = static_cast<float>(j + 1) / 13.0f;
+  return t;
+}();
 float centre_level(unsigned i) {
-  return static_cast<float>(static_cast<int>(i) - 6) / 6.0f;
+  return centre_levels[i & 15u];
 }
 float radius_level(unsigned j) {
-  return static_cast<float>(j + 1) / 13.0f;
+  return radius_levels[j & 15u];
 }
 void dequantise_sphere(const vec3f& pc, float pr, std::uint16_t code, vec3f& c, float& r) {
   for (unsigned k = 0; k < 3; ++k)
