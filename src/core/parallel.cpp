@@ -2,10 +2,12 @@
 #include "pbr_lod/core/parallel.hpp"
 
 #include <tbb/blocked_range.h>
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <array>
 #include <mutex>
 
@@ -13,11 +15,14 @@ namespace pbr_lod::detail {
 namespace {
 
 /// One arena per thread budget, created on first use and kept: an arena caps how many threads
-/// work on a call at once (max_concurrency = threads) and numbers them 0 .. threads − 1, which
-/// is what parallel_tasks hands out as worker ids. Budgets above the table's size share the
-/// last arena's cap of threads (a budget above the core count gains nothing anyway).
+/// work on a call at once (max_concurrency) and numbers them from 0, which is what
+/// parallel_tasks hands out as worker ids. A budget above the machine's concurrency gets an
+/// arena of the machine's size: more threads than cores gain nothing, and TBB would warn on
+/// stderr that it cannot supply them.
 constexpr std::size_t max_budget = 64;
 tbb::task_arena& arena_for(unsigned threads) {
+  static const auto cores = static_cast<unsigned>(std::max(1, tbb::info::default_concurrency()));
+  threads = std::min(threads, cores);
   // Never destroyed: a call from another static object's destructor still finds its arena.
   static auto* const arenas = new std::array<tbb::task_arena*, max_budget + 1>{};
   static std::mutex mutex;
@@ -38,7 +43,7 @@ void run_tasks(std::size_t n, unsigned threads, void (*fn)(void*, std::size_t, u
     return;
   }
   tbb::task_arena& arena = arena_for(threads);
-  const unsigned budget = static_cast<unsigned>(std::min<std::size_t>(threads, max_budget));
+  const auto budget = static_cast<unsigned>(std::max(1, arena.max_concurrency()));  // ≤ threads
   arena.execute([&] {
     // Isolated: a thread waiting here for this call's tasks runs none of an outer call's, so a
     // task's worker id is never reused by another of its own call's tasks while it waits.
