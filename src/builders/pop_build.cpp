@@ -7,6 +7,7 @@
 #include <OpenMesh/Core/System/omstream.hh>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -15,6 +16,7 @@
 #include <fstream>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <span>
 #include <thread>
 
@@ -320,63 +322,61 @@ void openmesh_adjacency(std::size_t n_vertices, std::span<const std::array<std::
 ///   - an edge shared by exactly two remaining faces links them (whatever their orientation);
 ///   - an edge shared by three or more is non-manifold: it links none of them (`nonmanifold`).
 /// nbr[f][k] = the face across edge k (corners k, k+1) of f, or `none`.
-void edge_sort_adjacency(std::size_t n_vertices,
-                         std::span<const std::array<std::uint32_t, 3>> faces, unsigned threads,
-                         std::vector<face_slots>& nbr, std::size_t& isolated,
-                         std::size_t& nonmanifold) {
-  const std::size_t nf = faces.size();
-  const auto bad = [&](std::size_t f) {
-    const auto& F = faces[f];
-    return F[0] == F[1] || F[1] == F[2] || F[0] == F[2];
-  };
-  // Bucket sizes by min vertex, then exclusive offsets.
-  std::vector<std::uint32_t> offset(n_vertices + 1, 0);
-  for (std::size_t f = 0; f < nf; ++f) {
-    if (bad(f)) continue;
-    const auto& F = faces[f];
-    for (std::size_t k = 0; k < 3; ++k) ++offset[std::min(F[k], F[(k + 1) % 3]) + 1];
-  }
-  for (std::size_t v = 0; v < n_vertices; ++v) offset[v + 1] += offset[v];
-  // entry = (max vertex, 3 f + k, the face's third corner), scattered into its min vertex's
-  // bucket. With the third corner the duplicate test is local to an edge's run: two faces on
-  // the same edge {a, b} (neither repeating a vertex) have the same vertex set exactly when their
-  // third corners agree. So a face is a duplicate of an earlier one exactly when, in the run of
-  // any of its edges, an earlier face has its third corner, and one pass over the buckets both
-  // finds the duplicates and links the edges.
-  struct entry {
-    std::uint32_t other, slot, third;
-  };
-  std::vector<entry> e;
-  reserve_huge(e, offset[n_vertices]);
-  e.resize(offset[n_vertices]);
-  {
-    std::vector<std::uint32_t> fill(offset.begin(), offset.end() - 1);
+///
+/// In steps, so that the bucket pass can be shared out piece by piece with other work: the
+/// constructor does the counting sort, bucket(lo, hi) the buckets of vertices [lo, hi) (any
+/// order, any thread; each slot and mark has one writer), isolated() counts at the end.
+class edge_sorter {
+ public:
+  edge_sorter(std::size_t n_vertices, std::span<const std::array<std::uint32_t, 3>> faces,
+              std::vector<face_slots>& nbr)
+      : faces_(faces), nbr_(nbr), offset_(n_vertices + 1, 0) {
+    const std::size_t nf = faces.size();
+    // Bucket sizes by min vertex, then exclusive offsets.
     for (std::size_t f = 0; f < nf; ++f) {
       if (bad(f)) continue;
       const auto& F = faces[f];
-      for (std::uint32_t k = 0; k < 3; ++k) {
-        const std::uint32_t a = F[k], b = F[(k + 1) % 3];
-        e[fill[std::min(a, b)]++] = {std::max(a, b), static_cast<std::uint32_t>(3 * f + k),
-                                     F[(k + 2) % 3]};
+      for (std::size_t k = 0; k < 3; ++k) ++offset_[std::min(F[k], F[(k + 1) % 3]) + 1];
+    }
+    for (std::size_t v = 0; v < n_vertices; ++v) offset_[v + 1] += offset_[v];
+    // entry = (max vertex, 3 f + k, the face's third corner), scattered into its min vertex's
+    // bucket. With the third corner the duplicate test is local to an edge's run: two faces on
+    // the same edge {a, b} (neither repeating a vertex) have the same vertex set exactly when
+    // their third corners agree. So a face is a duplicate of an earlier one exactly when, in the
+    // run of any of its edges, an earlier face has its third corner, and one pass over the
+    // buckets both finds the duplicates and links the edges.
+    reserve_huge(e_, offset_[n_vertices]);
+    e_.resize(offset_[n_vertices]);
+    {
+      std::vector<std::uint32_t> fill(offset_.begin(), offset_.end() - 1);
+      for (std::size_t f = 0; f < nf; ++f) {
+        if (bad(f)) continue;
+        const auto& F = faces[f];
+        for (std::uint32_t k = 0; k < 3; ++k) {
+          const std::uint32_t a = F[k], b = F[(k + 1) % 3];
+          e_[fill[std::min(a, b)]++] = {std::max(a, b), static_cast<std::uint32_t>(3 * f + k),
+                                        F[(k + 2) % 3]};
+        }
       }
     }
+    reserve_huge(nbr, nf);
+    nbr.assign(nf, {none, none, none});
+    dup_.assign(nf, 0);
   }
-  reserve_huge(nbr, nf);
-  nbr.assign(nf, {none, none, none});
-  std::vector<char> dup(nf, 0);
-  // (other, slot) as one integer: the order the buckets are sorted in (slots are unique).
-  const auto key = [](const entry& x) { return std::uint64_t{x.other} << 32 | x.slot; };
-  // Each bucket sorted by (other, slot), then its runs (one per edge) in ascending face order:
-  // a face of a run is a duplicate when an earlier face of the run has its third corner; only
-  // the run of its edge 0 marks it, so every mark has one writer. An edge shared by exactly two
-  // remaining faces links them; each slot has one writer.
-  std::vector<std::size_t> nm_count(threads + 1, 0);
-  std::mutex nm_mutex;
-  parallel_chunks(n_vertices, threads, [&](std::size_t lo, std::size_t hi) {
-    std::size_t local = 0;
+  std::size_t vertices() const { return offset_.size() - 1; }
+
+  /// Each bucket of [lo, hi) sorted by (other, slot), then its runs (one per edge) in ascending
+  /// face order: a face of a run is a duplicate when an earlier face of the run has its third
+  /// corner; only the run of its edge 0 marks it, so every mark has one writer. An edge shared
+  /// by exactly two remaining faces links them; each slot has one writer. Returns the number of
+  /// non-manifold edges (three or more remaining faces) found.
+  std::size_t bucket(std::size_t lo, std::size_t hi) {
+    // (other, slot) as one integer: the order the buckets are sorted in (slots are unique).
+    const auto key = [](const entry& x) { return std::uint64_t{x.other} << 32 | x.slot; };
+    std::size_t nonmanifold = 0;
     for (std::size_t v = lo; v < hi; ++v) {
-      entry* b = e.data() + offset[v];
-      entry* end = e.data() + offset[v + 1];
+      entry* b = e_.data() + offset_[v];
+      entry* end = e_.data() + offset_[v + 1];
       if (end - b <= 32) {  // a vertex's few edges: insertion sort (std::sort's call and setup
                             // cost more than the sorting)
         for (entry* x = b + 1; x < end; ++x) {
@@ -400,29 +400,46 @@ void edge_sort_adjacency(std::size_t n_vertices,
             bool is_dup = false;
             for (const entry* y = r; y < x && !is_dup; ++y) is_dup = y->third == x->third;
             if (is_dup) {
-              if (x->slot % 3 == 0) dup[x->slot / 3] = 1;
+              if (x->slot % 3 == 0) dup_[x->slot / 3] = 1;
               continue;
             }
             if (n_live < 2) live[n_live] = x->slot;
             ++n_live;
           }
           if (n_live == 2) {
-            nbr[live[0] / 3][live[0] % 3] = live[1] / 3;
-            nbr[live[1] / 3][live[1] % 3] = live[0] / 3;
+            nbr_[live[0] / 3][live[0] % 3] = live[1] / 3;
+            nbr_[live[1] / 3][live[1] % 3] = live[0] / 3;
           } else if (n_live > 2) {
-            ++local;
+            ++nonmanifold;
           }
         }
         r = q;
       }
     }
-    const std::lock_guard lock(nm_mutex);
-    nm_count[0] += local;
-  });
-  nonmanifold = nm_count[0];
-  isolated = 0;
-  for (std::size_t f = 0; f < nf; ++f) isolated += (bad(f) || dup[f]) ? 1 : 0;
-}
+    return nonmanifold;
+  }
+
+  /// Faces repeating a vertex index or duplicating an earlier face (after every bucket).
+  std::size_t isolated() const {
+    std::size_t n = 0;
+    for (std::size_t f = 0; f < faces_.size(); ++f) n += (bad(f) || dup_[f]) ? 1 : 0;
+    return n;
+  }
+
+ private:
+  struct entry {
+    std::uint32_t other, slot, third;
+  };
+  bool bad(std::size_t f) const {
+    const auto& F = faces_[f];
+    return F[0] == F[1] || F[1] == F[2] || F[0] == F[2];
+  }
+  std::span<const std::array<std::uint32_t, 3>> faces_;
+  std::vector<face_slots>& nbr_;
+  std::vector<std::uint32_t> offset_;
+  std::vector<entry> e_;
+  std::vector<char> dup_;
+};
 
 /// Leaves (§3.5): groups of at most `max` edge-adjacent triangles, grown breadth-first over
 /// nbr (3 slots per face, `none` = no neighbour) from the first ungrouped triangle in input
@@ -675,126 +692,167 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   const std::size_t nv = mesh.num_vertices(), nf = mesh.num_faces();
   const auto& P = mesh.vertices.positions;
 
-  // Leaves (§3.5). The edge adjacency and the grouping read only the faces, so with two or more
-  // threads they run on their own thread(s) while the vertices, normals and colours are prepared
-  // (the grouping is sequential, and so are the area-weighted vertex normals). Neither side depends
-  // on how the threads are shared out: the output is the same for any `threads`.
+  // Leaves (§3.5) and vertices. The edge adjacency and the grouping read only the faces, the
+  // vertex pass (§3.5 quantisation, normals) only the vertices, so they run side by side. The
+  // grouping is sequential and comes last on the adjacency side, so the work is shared out in
+  // pieces to keep it short: the thread that runs the adjacency side (task 0) sorts the edges,
+  // then takes bucket pieces; the vertex side (task 1) sums the area-weighted normals, then takes
+  // bucket pieces while there are any, else vertex pieces; once every bucket is done task 0
+  // groups the faces and then takes the vertex pieces left. Other tasks (threads > 2) take
+  // whatever is ready. No task waits for another that may not have started (only for bucket
+  // pieces already taken), so the tasks may run in any order, on any number of threads. Each
+  // piece's writes are its own: the output is the same for any `threads`.
   std::vector<std::uint32_t> gstart, gfaces;
-  const bool overlap = threads >= 2;
-  const unsigned adj_threads = overlap ? threads / 2 : threads;
-  const unsigned prep_threads = overlap ? threads - adj_threads : threads;
   double adjacency_seconds = 0;
   std::vector<face_slots> nbr;  // becomes d.faces below (same size: nf × 3 u32)
-  std::exception_ptr adjacency_error;
-  const auto build_leaves = [&] {
-    try {
-      const auto ta = clock::now();
-      if (opt.adjacency == pop_adjacency::openmesh)
-        openmesh_adjacency(nv, mesh.faces, nbr, d.stats.isolated_faces);
-      else
-        edge_sort_adjacency(nv, mesh.faces, adj_threads, nbr, d.stats.isolated_faces,
-                            d.stats.nonmanifold_edges);
-      group_faces(nf, nbr, opt.max_leaf_triangles, gstart, gfaces);
-      adjacency_seconds = std::chrono::duration<double>(clock::now() - ta).count();
-    } catch (...) {
-      adjacency_error = std::current_exception();
-    }
+  const bool by_edges = opt.adjacency == pop_adjacency::edge_sort;
+  const auto pieces = [&](std::size_t n) {
+    return threads > 1 ? std::max<std::size_t>(1, std::min<std::size_t>(8 * threads, n / 2048))
+                       : std::size_t{1};
   };
-  std::vector<rgb8> face_colour;
-  texture tex;
-  clock::time_point t_prep;
-  const auto prepare = [&] {
-    // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
+  const std::size_t bucket_pieces = by_edges ? pieces(nv) : 0, vertex_pieces = pieces(nv);
+  std::optional<edge_sorter> sorter;
+  std::atomic<bool> sorted{false}, normals_ready{false};
+  std::atomic<std::size_t> next_bucket{0}, buckets_done{0}, next_vertex{0}, nonmanifold{0};
+
+  const bool estimate = mesh.vertices.normals.empty();
+  std::vector<vec3d> normal_sum;  // without vertex normals: area_weighted_normal_sums(mesh)
+  const auto set_up_vertices = [&] {
     box3 bb = box3::of(P);
     d.q_min = bb.min;
     for (int k = 0; k < 3; ++k) {
       const float ext = bb.max[k] - bb.min[k];
       d.q_step[k] = ext > 0 ? ext / 65535.0f : 0.0f;
     }
-    resize_fresh(d.vertex_q, nv, prep_threads);
-    resize_fresh(d.positions, nv, prep_threads);
-    resize_fresh(d.vertex_normal_codes, nv, prep_threads);
-    resize_fresh(d.normals, nv, prep_threads);
-    // Without vertex normals: area_weighted_normals(mesh), bit for bit, from its double sums,
-    // normalised in the quantisation loop below: no float copy (its 36 MB of fresh 4 kB pages
-    // were a visible part of a 2 M-triangle build).
-    const bool estimate = mesh.vertices.normals.empty();
-    const std::vector<vec3d> normal_sum =
-        estimate ? area_weighted_normal_sums(mesh) : std::vector<vec3d>{};
-    const auto vertex_normal = [&](std::size_t i) -> vec3f {
-      return estimate ? unit_or_zero(normal_sum[i]) : mesh.vertices.normals[i];
-    };
-    parallel_chunks(nv, prep_threads, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t i = lo; i < hi; ++i) {
-        std::array<std::uint16_t, 3> q{};
-        for (int k = 0; k < 3; ++k) {
-          const double s =
-              d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
-          q[static_cast<std::size_t>(k)] = round_to_u16(s);
-        }
-        d.vertex_q[i] = q;
-        d.positions[i] = dequantise(q, d.q_min, d.q_step);
-        d.vertex_normal_codes[i] = quant.encode(vertex_normal(i));
-        d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
-      }
-    });
-
-    // Colours: vertex colours, or with a texture the texel under each corner averaged per vertex.
-    if (colour) {
-      if (textured) {
-        tex.img = read_png(mesh.texture_path);
-        if (tex.img.width <= 0 || tex.img.height <= 0)
-          throw FormatError(mesh.texture_path + ": empty texture");
-        for (std::size_t f = 0; f < nf; ++f)
-          for (const auto& uv : mesh.face_texcoords[f])
-            if (!all_finite(uv))
-              throw InvalidArgument("build_pop: face " + std::to_string(f) +
-                                    " has a non-finite texture coordinate");
-        std::vector<rgb_sum> acc(nv);
-        for (std::size_t f = 0; f < nf; ++f)
-          for (std::size_t k = 0; k < 3; ++k) {
-            const vec2d t = tex.texel(mesh.face_texcoords[f][k]);
-            acc[mesh.faces[f][k]].add(tex.at(t.x(), t.y()));
-          }
-        d.colours.resize(nv);
-        for (std::size_t i = 0; i < nv; ++i) d.colours[i] = acc[i].n > 0 ? acc[i].mean() : rgb8{};
-      } else {
-        d.colours = mesh.vertices.colours;
-      }
-      face_colour.resize(nf);
-    }
-
-    // Per triangle colour (§3.1). The triangles' normals and spheres are computed where they are
-    // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
-    // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
-    if (colour)
-      parallel_chunks(nf, prep_threads, [&](std::size_t lo, std::size_t hi) {
-        for (std::size_t f = lo; f < hi; ++f) {
-          if (textured) {
-            face_colour[f] = tex.average(mesh.face_texcoords[f]);
-          } else {
-            rgb_sum s;
-            for (auto i : mesh.faces[f]) s.add(d.colours[i]);
-            face_colour[f] = s.mean();
-          }
-        }
-      });
-
-    t_prep = clock::now();
+    resize_fresh(d.vertex_q, nv, 1);
+    resize_fresh(d.positions, nv, 1);
+    resize_fresh(d.vertex_normal_codes, nv, 1);
+    resize_fresh(d.normals, nv, 1);
+    // area_weighted_normals(mesh), bit for bit, from its double sums, normalised in the vertex
+    // loop: no float copy (its 36 MB of fresh 4 kB pages were a visible part of a 2 M-triangle
+    // build).
+    if (estimate) normal_sum = area_weighted_normal_sums(mesh);
+    normals_ready.store(true, std::memory_order_release);
   };
-  // Two tasks on the pool (core/parallel.hpp), so a worker that is already awake takes one.
-  if (overlap)
-    parallel_tasks(2, 2, [&](std::size_t t, unsigned) {
-      if (t == 0)
-        build_leaves();
-      else
-        prepare();
-    });
-  else {
-    prepare();
-    build_leaves();
+  // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
+  const auto vertex_piece = [&](std::size_t piece) {
+    const std::size_t lo = nv * piece / vertex_pieces, hi = nv * (piece + 1) / vertex_pieces;
+    for (std::size_t i = lo; i < hi; ++i) {
+      std::array<std::uint16_t, 3> q{};
+      for (int k = 0; k < 3; ++k) {
+        const double s =
+            d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
+        q[static_cast<std::size_t>(k)] = round_to_u16(s);
+      }
+      d.vertex_q[i] = q;
+      d.positions[i] = dequantise(q, d.q_min, d.q_step);
+      d.vertex_normal_codes[i] =
+          quant.encode(estimate ? unit_or_zero(normal_sum[i]) : mesh.vertices.normals[i]);
+      d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
+    }
+  };
+  // One piece of either kind, if one is ready: true when it did one.
+  const auto take_bucket = [&] {
+    if (!sorted.load(std::memory_order_acquire)) return false;
+    const std::size_t b = next_bucket.fetch_add(1, std::memory_order_relaxed);
+    if (b >= bucket_pieces) return false;
+    const std::size_t n = sorter->vertices();
+    // Counted as done even if it throws, so that task 0 never waits for it.
+    struct done {
+      std::atomic<std::size_t>& c;
+      ~done() { c.fetch_add(1, std::memory_order_release); }
+    } mark{buckets_done};
+    nonmanifold.fetch_add(sorter->bucket(n * b / bucket_pieces, n * (b + 1) / bucket_pieces),
+                          std::memory_order_relaxed);
+    return true;
+  };
+  const auto take_vertex = [&] {
+    if (!normals_ready.load(std::memory_order_acquire)) return false;
+    const std::size_t v = next_vertex.fetch_add(1, std::memory_order_relaxed);
+    if (v >= vertex_pieces) return false;
+    vertex_piece(v);
+    return true;
+  };
+  const auto adjacency_side = [&] {
+    const auto ta = clock::now();
+    if (by_edges) {
+      sorter.emplace(nv, mesh.faces, nbr);
+      sorted.store(true, std::memory_order_release);
+      while (take_bucket()) {
+      }
+      // Pieces other tasks took are running: wait for them, helping with the vertices.
+      while (buckets_done.load(std::memory_order_acquire) < bucket_pieces)
+        if (!take_vertex()) std::this_thread::yield();
+      d.stats.isolated_faces = sorter->isolated();
+      d.stats.nonmanifold_edges = nonmanifold.load(std::memory_order_relaxed);
+      sorter.reset();
+    } else {
+      openmesh_adjacency(nv, mesh.faces, nbr, d.stats.isolated_faces);
+    }
+    group_faces(nf, nbr, opt.max_leaf_triangles, gstart, gfaces);
+    adjacency_seconds = std::chrono::duration<double>(clock::now() - ta).count();
+    while (take_vertex()) {
+    }
+  };
+  const auto vertex_side = [&] {
+    set_up_vertices();
+    while (take_bucket() || take_vertex()) {
+    }
+  };
+  parallel_tasks(std::max(2u, threads), threads, [&](std::size_t t, unsigned) {
+    if (t == 0)
+      adjacency_side();
+    else if (t == 1)
+      vertex_side();
+    else
+      while (take_bucket() || take_vertex()) {
+      }
+  });
+
+  // Colours: vertex colours, or with a texture the texel under each corner averaged per vertex.
+  std::vector<rgb8> face_colour;
+  texture tex;
+  if (colour) {
+    if (textured) {
+      tex.img = read_png(mesh.texture_path);
+      if (tex.img.width <= 0 || tex.img.height <= 0)
+        throw FormatError(mesh.texture_path + ": empty texture");
+      for (std::size_t f = 0; f < nf; ++f)
+        for (const auto& uv : mesh.face_texcoords[f])
+          if (!all_finite(uv))
+            throw InvalidArgument("build_pop: face " + std::to_string(f) +
+                                  " has a non-finite texture coordinate");
+      std::vector<rgb_sum> acc(nv);
+      for (std::size_t f = 0; f < nf; ++f)
+        for (std::size_t k = 0; k < 3; ++k) {
+          const vec2d t = tex.texel(mesh.face_texcoords[f][k]);
+          acc[mesh.faces[f][k]].add(tex.at(t.x(), t.y()));
+        }
+      d.colours.resize(nv);
+      for (std::size_t i = 0; i < nv; ++i) d.colours[i] = acc[i].n > 0 ? acc[i].mean() : rgb8{};
+    } else {
+      d.colours = mesh.vertices.colours;
+    }
+    face_colour.resize(nf);
   }
-  if (adjacency_error) std::rethrow_exception(adjacency_error);
+
+  // Per triangle colour (§3.1). The triangles' normals and spheres are computed where they are
+  // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
+  // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
+  if (colour)
+    parallel_chunks(nf, threads, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t f = lo; f < hi; ++f) {
+        if (textured) {
+          face_colour[f] = tex.average(mesh.face_texcoords[f]);
+        } else {
+          rgb_sum s;
+          for (auto i : mesh.faces[f]) s.add(d.colours[i]);
+          face_colour[f] = s.mean();
+        }
+      }
+    });
+  std::vector<vec3d>().swap(normal_sum);
+  const auto t_prep = clock::now();
   const std::size_t n_leaves = gstart.size() - 1;
   const auto t_adj = clock::now();
 
