@@ -1,6 +1,9 @@
 // Tests of the point-octree builder (Pajarola 2003). Each case says why its expectation holds.
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <limits>
+#include <thread>
 
 #include <filesystem>
 #include <fstream>
@@ -269,6 +272,31 @@ TEST(PointOctree, RejectsBadInput) {
   // Cancel from the progress callback: throws, returns nothing.
   EXPECT_THROW(
       (void)build_point_octree(demo_points(5000), {.progress = [](double f) { return f < 0.05; }}),
+      Cancelled);
+}
+
+// A parallel build reports progress only on the calling thread, rising from 0 to 1, with reports
+// from inside the subtrees (not only between them); cancelling mid-build stops it.
+TEST(PointOctree, ProgressOnTheCallingThreadDuringParallelBuild) {
+  const auto pts = demo_points(400000, 3);
+  const auto caller = std::this_thread::get_id();
+  std::vector<double> seen;
+  bool other_thread = false;
+  const auto t = build_point_octree(pts, {.threads = 2, .progress = [&](double f) {
+                                            other_thread = other_thread ||
+                                                           std::this_thread::get_id() != caller;
+                                            seen.push_back(f);
+                                            return true;
+                                          }});
+  EXPECT_FALSE(other_thread);
+  ASSERT_GE(seen.size(), 8u);
+  EXPECT_EQ(seen.front(), 0.0);
+  EXPECT_EQ(seen.back(), 1.0);
+  EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+  // Reports strictly between the start of the tree (0.1) and its end: inside the subtree phase.
+  EXPECT_GE(std::count_if(seen.begin(), seen.end(), [](double f) { return f > 0.1 && f < 1; }), 4);
+  EXPECT_THROW(
+      (void)build_point_octree(pts, {.threads = 2, .progress = [](double f) { return f < 0.5; }}),
       Cancelled);
 }
 

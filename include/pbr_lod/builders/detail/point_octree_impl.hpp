@@ -6,13 +6,11 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <cstring>
 #include <exception>
 #include <fstream>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <numbers>
 #include <numeric>
 #include <thread>
@@ -114,7 +112,8 @@ struct point_octree_builder {
   std::vector<vec3f> scratch3;    // scatter buffers; subtrees own disjoint ranges of all of these
   std::vector<rgb8> scratch_rgb;
   std::vector<typename tree::orientation_code> scratch_code;
-  unsigned threads = 1;  // for the passes near the root
+  unsigned threads = 1;                                 // for the passes near the root
+  std::thread::id caller = std::this_thread::get_id();  // the only thread that calls progress
   std::atomic<std::size_t> done{0};
   std::atomic<bool> cancel{false};
   mutable std::atomic<std::size_t> circle_fallbacks{0};
@@ -530,36 +529,21 @@ struct point_octree_builder {
         if constexpr (A.colour) locals[j].colours.resize(1);
         if (q) locals[j].codes.resize(1);
       }
-      std::atomic<std::size_t> next{0};
+      // The subtrees as tasks on the pool (core/parallel.hpp), largest first. The calling thread
+      // reports progress between the subtrees it builds and inside them (below); a pool thread
+      // never calls the user's callback.
       std::vector<std::exception_ptr> errors(kids.size());
-      std::mutex done_mutex;
-      std::condition_variable finished;
-      std::size_t running = std::min<std::size_t>(workers, kids.size());
-      {
-        std::vector<std::jthread> pool;
-        for (std::size_t t = 0; t < running; ++t)
-          pool.emplace_back([&] {
-            for (std::size_t i = next++; i < order.size(); i = next++) {
-              const std::size_t j = order[i];
-              try {
-                sums[j] = build(locals[j], 0, kids[j], false);
-              } catch (...) {
-                errors[j] = std::current_exception();
-                cancel.store(true);
-              }
-            }
-            const std::lock_guard lock(done_mutex);
-            --running;
-            finished.notify_one();
-          });
-        std::unique_lock lock(done_mutex);
-        while (
-            !finished.wait_for(lock, std::chrono::milliseconds(50), [&] { return running == 0; })) {
-          lock.unlock();
-          report();
-          lock.lock();
+      parallel_tasks(order.size(), workers, [&](std::size_t i, unsigned) {
+        const std::size_t j = order[i];
+        try {
+          if (!cancel.load(std::memory_order_relaxed))
+            sums[j] = build(locals[j], 0, kids[j], false);
+        } catch (...) {
+          errors[j] = std::current_exception();
+          cancel.store(true);
         }
-      }
+        if (std::this_thread::get_id() == caller) report();
+      });
       for (const auto& e : errors)
         if (e) std::rethrow_exception(e);
       if (cancel.load(std::memory_order_relaxed)) return {};
@@ -567,7 +551,8 @@ struct point_octree_builder {
     } else {
       for (std::size_t j = 0; j < kids.size(); ++j) {
         sums[j] = build(L, first_child + static_cast<std::uint32_t>(j), kids[j], false);
-        if (parallel) report();
+        // Large nodes only: a few dozen reports per subtree, not a clock read per node.
+        if (parallel || (count >= 65536 && std::this_thread::get_id() == caller)) report();
       }
     }
     if (cancel.load(std::memory_order_relaxed)) return {};
