@@ -104,10 +104,12 @@ struct pop_options {
 };
 
 struct pop_build_stats {
-  double build_seconds = 0;    ///< whole build
-  double prepare_seconds = 0;  ///< validation, vertex quantisation and normals, face colours
-  /// edge adjacency (edge sort or OpenMesh) + grouping into leaves; with threads ≥ 2 this runs
-  /// beside the prepare step, so prepare + adjacency + tree may exceed build_seconds
+  double build_seconds = 0;  ///< whole build
+  /// from the start to the end of the first phase and the face colours: validation, vertex
+  /// quantisation and normals, which share the threads with the edge adjacency and grouping
+  double prepare_seconds = 0;
+  /// edge adjacency (edge sort or OpenMesh) + grouping into leaves, inside the first phase; so
+  /// prepare + adjacency + tree may exceed build_seconds
   double adjacency_seconds = 0;
   double tree_seconds = 0;  ///< split, node records, bottom-up spheres/normals/cones, quantisation
   std::size_t vertices = 0, triangles = 0;
