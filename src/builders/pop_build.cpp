@@ -43,9 +43,10 @@ void set_file_stats(pop_data& d, std::size_t size);  // with the file format, be
 /// f(lo, hi) over contiguous pieces of at least 2048 indices, 8 per thread, handed out one at a
 /// time (core/parallel.hpp): every caller's work is element by element, and more pieces than
 /// threads keep both cores busy when one of them runs slower.
+constexpr std::size_t pieces_per_thread = 8, min_piece = 2048;
 template <class F>
 void parallel_chunks(std::size_t n, unsigned threads, F&& f) {
-  detail::parallel_pieces(n, threads, 8 * std::size_t{threads}, 2048, f);
+  detail::parallel_pieces(n, threads, pieces_per_thread * threads, min_piece, f);
 }
 
 /// The smallest float ≥ x (x ≥ 0): stored radii never shrink below what was computed in double.
@@ -363,8 +364,6 @@ class edge_sorter {
     nbr.assign(nf, {none, none, none});
     dup_.assign(nf, 0);
   }
-  std::size_t vertices() const { return offset_.size() - 1; }
-
   /// Each bucket of [lo, hi) sorted by (other, slot), then its runs (one per edge) in ascending
   /// face order: a face of a run is a duplicate when an earlier face of the run has its third
   /// corner; only the run of its edge 0 marks it, so every mark has one writer. An edge shared
@@ -706,11 +705,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   double adjacency_seconds = 0;
   std::vector<face_slots> nbr;  // becomes d.faces below (same size: nf × 3 u32)
   const bool by_edges = opt.adjacency == pop_adjacency::edge_sort;
-  const auto pieces = [&](std::size_t n) {
-    return threads > 1 ? std::max<std::size_t>(1, std::min<std::size_t>(8 * threads, n / 2048))
-                       : std::size_t{1};
-  };
-  const std::size_t bucket_pieces = by_edges ? pieces(nv) : 0, vertex_pieces = pieces(nv);
+  // The same pieces as parallel_chunks() above, over the vertices (the buckets are by vertex).
+  const std::size_t vertex_pieces =
+      piece_count(nv, threads, pieces_per_thread * threads, min_piece);
+  const std::size_t bucket_pieces = by_edges ? vertex_pieces : 0;
   std::optional<edge_sorter> sorter;
   std::atomic<bool> sorted{false}, normals_ready{false};
   std::atomic<std::size_t> next_bucket{0}, buckets_done{0}, next_vertex{0}, nonmanifold{0};
@@ -736,7 +734,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   };
   // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
   const auto vertex_piece = [&](std::size_t piece) {
-    const std::size_t lo = nv * piece / vertex_pieces, hi = nv * (piece + 1) / vertex_pieces;
+    const auto [lo, hi] = piece_range(nv, vertex_pieces, piece);
     for (std::size_t i = lo; i < hi; ++i) {
       std::array<std::uint16_t, 3> q{};
       for (int k = 0; k < 3; ++k) {
@@ -756,14 +754,13 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     if (!sorted.load(std::memory_order_acquire)) return false;
     const std::size_t b = next_bucket.fetch_add(1, std::memory_order_relaxed);
     if (b >= bucket_pieces) return false;
-    const std::size_t n = sorter->vertices();
     // Counted as done even if it throws, so that task 0 never waits for it.
     struct done {
       std::atomic<std::size_t>& c;
       ~done() { c.fetch_add(1, std::memory_order_release); }
     } mark{buckets_done};
-    nonmanifold.fetch_add(sorter->bucket(n * b / bucket_pieces, n * (b + 1) / bucket_pieces),
-                          std::memory_order_relaxed);
+    const auto [lo, hi] = piece_range(nv, bucket_pieces, b);
+    nonmanifold.fetch_add(sorter->bucket(lo, hi), std::memory_order_relaxed);
     return true;
   };
   const auto take_vertex = [&] {

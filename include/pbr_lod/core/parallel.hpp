@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <memory>
 #include <type_traits>
+#include <utility>
 
 namespace pbr_lod::detail {
 
@@ -53,20 +54,37 @@ void parallel_chunks(std::size_t n, unsigned threads, std::size_t min_chunk, F&&
                  [&](std::size_t t, unsigned) { f(n * t / threads, n * (t + 1) / threads); });
 }
 
-/// f(lo, hi) over `pieces` contiguous, nearly equal ranges of [0, n) (fewer when n is small, so
-/// that each holds at least min_piece), handed out one at a time to up to `threads` workers: for
-/// element-wise passes, where more pieces than threads keep every core busy when one is slower
-/// (a busy neighbour on a VM) or a piece costs more than another.
+/// How many ranges parallel_pieces() cuts [0, n) into: `pieces`, fewer when n is small so that
+/// each holds at least min_piece, and one when threads ≤ 1. For callers that hand out the same
+/// pieces themselves (piece_range()).
+inline std::size_t piece_count(std::size_t n, unsigned threads, std::size_t pieces,
+                               std::size_t min_piece) {
+  if (threads <= 1) return 1;
+  return std::max<std::size_t>(1, std::min(pieces, n / std::max<std::size_t>(1, min_piece)));
+}
+
+/// Range i of [0, n) cut into `count` contiguous, nearly equal ranges.
+inline std::pair<std::size_t, std::size_t> piece_range(std::size_t n, std::size_t count,
+                                                       std::size_t i) {
+  return {n * i / count, n * (i + 1) / count};
+}
+
+/// f(lo, hi) over piece_count() contiguous, nearly equal ranges of [0, n), handed out one at a
+/// time to up to `threads` workers: for element-wise passes, where more pieces than threads keep
+/// every core busy when one is slower (a busy neighbour on a VM) or a piece costs more than
+/// another.
 template <class F>
 void parallel_pieces(std::size_t n, unsigned threads, std::size_t pieces, std::size_t min_piece,
                      F&& f) {
-  pieces = std::max<std::size_t>(1, std::min(pieces, n / std::max<std::size_t>(1, min_piece)));
-  if (threads <= 1 || pieces == 1) {
+  const std::size_t count = piece_count(n, threads, pieces, min_piece);
+  if (count == 1) {
     f(std::size_t{0}, n);
     return;
   }
-  parallel_tasks(pieces, threads,
-                 [&](std::size_t t, unsigned) { f(n * t / pieces, n * (t + 1) / pieces); });
+  parallel_tasks(count, threads, [&](std::size_t t, unsigned) {
+    const auto [lo, hi] = piece_range(n, count, t);
+    f(lo, hi);
+  });
 }
 
 }  // namespace pbr_lod::detail
