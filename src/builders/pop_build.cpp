@@ -103,33 +103,43 @@ std::uint16_t quantise_sphere(const vec3f& pc, float pr, const vec3f& c, float r
   if (static_cast<double>(r) > (12.0 / 13.0) * (1 + 1e-6) * static_cast<double>(pr) &&
       pcd.cwiseAbs().maxCoeff() <= 65536.0 * static_cast<double>(pr))
     return sphere_code_parent;
+  // Per axis, the two centre codes in the order they are tried (nearest first) and, for each,
+  // the squared distances along that axis from the coded centre to the child's centre and to
+  // the parent's: every try below then sums three of them (as Eigen's norm() does, x + y then
+  // + z, so the results are those of the vector expressions, bit for bit).
   std::array<std::array<unsigned, 2>, 3> cand{};
+  std::array<std::array<double, 2>, 3> to_child{}, to_parent{};
   for (int k = 0; k < 3; ++k) {
+    const auto ks = static_cast<std::size_t>(k);
     const double t = std::clamp(6.0 + 6.0 * (cd[k] - pcd[k]) / pr, 0.0, 12.0);
-    const auto lo = static_cast<unsigned>(std::floor(t)), hi = static_cast<unsigned>(std::ceil(t));
-    cand[static_cast<std::size_t>(k)] = t - lo <= 0.5 ? std::array{lo, hi} : std::array{hi, lo};
+    const auto lo = static_cast<unsigned>(t);                          // floor: t ≥ 0
+    const unsigned hi = lo + (static_cast<double>(lo) < t ? 1u : 0u);  // ceil
+    cand[ks] = t - lo <= 0.5 ? std::array{lo, hi} : std::array{hi, lo};
+    for (std::size_t s = 0; s < 2; ++s) {
+      // dequantise_sphere()'s centre coordinate, in float as there
+      const float q = pc[k] + pr * centre_level(cand[ks][s]);
+      const double dc = cd[k] - static_cast<double>(q), dp = static_cast<double>(q) - pcd[k];
+      to_child[ks][s] = dc * dc;
+      to_parent[ks][s] = dp * dp;
+    }
   }
-  // radius code for centre code cc, or 13 when no radius level fits
-  const auto try_centre = [&](std::uint16_t cc) -> unsigned {
-    vec3f cq;
-    float unused;
-    dequantise_sphere(pc, pr, cc, cq, unused);
-    const vec3d cqd = cq.cast<double>();
-    const double need = (cd - cqd).norm() + static_cast<double>(r);
-    const double room = static_cast<double>(pr) - (cqd - pcd).norm();
-    if (need > room) return 13u;  // no rq is both ≥ need and ≤ room
-    auto j = static_cast<unsigned>(
-        std::clamp(std::ceil(13.0 * need / static_cast<double>(pr)) - 1.0, 0.0, 12.0));
+  // The smallest radius level j with pr·level(j) ≥ need: levels grow with j, so the two walks
+  // below end there from any first guess (13·need/pr, by a multiplication instead of a division).
+  const double guess_scale = 13.0 / static_cast<double>(pr);
+  for (unsigned m = 0; m < 8; ++m) {
+    const unsigned sx = m & 1u, sy = (m >> 1) & 1u, sz = (m >> 2) & 1u;
+    const double need =
+        std::sqrt(to_child[0][sx] + to_child[1][sy] + to_child[2][sz]) + static_cast<double>(r);
+    const double room =
+        static_cast<double>(pr) - std::sqrt(to_parent[0][sx] + to_parent[1][sy] + to_parent[2][sz]);
+    if (need > room) continue;  // no level is both ≥ need and ≤ room
+    const double g = need * guess_scale;
+    unsigned j = g >= 12.0 ? 12u : g > 0.0 ? static_cast<unsigned>(g) : 0u;
     while (j < 12 && static_cast<double>(pr * radius_level(j)) < need) ++j;
     while (j > 0 && static_cast<double>(pr * radius_level(j - 1)) >= need) --j;
     const double rq = static_cast<double>(pr * radius_level(j));
-    return rq < need || rq > room ? 13u : j;
-  };
-  for (unsigned m = 0; m < 8; ++m) {
-    const unsigned ix = cand[0][m & 1u], iy = cand[1][(m >> 1) & 1u], iz = cand[2][(m >> 2) & 1u];
-    const auto cc = static_cast<std::uint16_t>(ix | iy << 4 | iz << 8);
-    const unsigned j = try_centre(cc);
-    if (j < 13) return static_cast<std::uint16_t>(cc | j << 12);
+    if (rq < need || rq > room) continue;
+    return static_cast<std::uint16_t>(cand[0][sx] | cand[1][sy] << 4 | cand[2][sz] << 8 | j << 12);
   }
   return sphere_code_parent;
 }
@@ -477,10 +487,12 @@ void group_faces(std::size_t nf, const std::vector<face_slots>& nbr, std::uint32
 
 namespace {
 /// pop_triangle_circle() given ab = b − a, ac = c − a and w = ab × ac, which its callers have
-/// at hand (the leaves need w as the face normal, the 4-child rule as the base's normal).
-[[gnu::always_inline]] inline void triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c,
-                                                   const vec3d& ab, const vec3d& ac, const vec3d& w,
-                                                   double w2, vec3d& centre, double& radius) {
+/// at hand (the leaves need w as the face normal, the 4-child rule as the base's normal), with
+/// the squared radius: the 4-child rule needs only that.
+[[gnu::always_inline]] inline void triangle_circle_sq(const vec3d& a, const vec3d& b,
+                                                      const vec3d& c, const vec3d& ab,
+                                                      const vec3d& ac, const vec3d& w, double w2,
+                                                      vec3d& centre, double& radius2) {
   const vec3d bc = c - b;
   const double lab = ab.squaredNorm(), lac = ac.squaredNorm(), lbc = bc.squaredNorm();
   const auto longest_edge = [&] {
@@ -500,9 +512,16 @@ namespace {
     centre = a + (lab * ac.cross(w) + lac * w.cross(ab)) / (2 * w2);
     if (!all_finite(centre)) longest_edge();
   }
-  // sqrt is correctly rounded, so monotone: one root of the largest square is the largest root.
-  radius = std::sqrt(std::max(
-      {(a - centre).squaredNorm(), (b - centre).squaredNorm(), (c - centre).squaredNorm()}));
+  radius2 = std::max(
+      {(a - centre).squaredNorm(), (b - centre).squaredNorm(), (c - centre).squaredNorm()});
+}
+/// The same with the radius: sqrt is correctly rounded, so monotone, and one root of the largest
+/// square is the largest root.
+[[gnu::always_inline]] inline void triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c,
+                                                   const vec3d& ab, const vec3d& ac, const vec3d& w,
+                                                   double w2, vec3d& centre, double& radius) {
+  triangle_circle_sq(a, b, c, ab, ac, w, w2, centre, radius);
+  radius = std::sqrt(radius);
 }
 }  // namespace
 
@@ -547,38 +566,47 @@ bool paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
   // face's circle centre perpendicular to it; we take the point on that line where the fourth
   // centre is no farther than the face's corners (the face circle's centre itself when it
   // already is). Radius: distance to the corners plus the largest radius. Minimum over faces.
-  radius = std::numeric_limits<double>::infinity();
+  // With the face's circle centre b, its squared radius ρ², the unnormalised face normal n and
+  // v = c_k − b, the point b + s·n is at squared distance ρ² + s²|n|² from the face's corners and
+  // |v|² − 2s(v·n) + s²|n|² from c_k: they agree at s = (|v|² − ρ²) / (2 v·n). So no normalised
+  // normal and no face radius are needed (two square roots and three divisions per face fewer
+  // than with the unit normal and the signed height h = v·n/|n|, the same point up to rounding),
+  // and the faces compare by squared distance: one root at the end.
+  double best2 = std::numeric_limits<double>::infinity();
   for (std::size_t k = 0; k < 4; ++k) {
     std::array<vec3d, 3> base;
     for (std::size_t i = 0, m = 0; i < 4; ++i)
       if (i != k) base[m++] = c[i];
     vec3d bc;
-    double br;
+    double br2;
     const vec3d e1 = base[1] - base[0], e2 = base[2] - base[0];
     vec3d nrm = e1.cross(e2);  // the base's normal, and the circle's ab × ac
     const double n2 = nrm.squaredNorm();
-    triangle_circle(base[0], base[1], base[2], e1, e2, nrm, n2, bc, br);
+    triangle_circle_sq(base[0], base[1], base[2], e1, e2, nrm, n2, bc, br2);
     const vec3d to4 = c[k] - bc;
-    if (n2 > 0) {
-      nrm /= std::sqrt(n2);  // Eigen's normalize(), without recomputing the squared norm
-    } else {  // collinear base: any direction across the line, towards the fourth centre
+    const double far = to4.squaredNorm() - br2;  // > 0: c_k lies outside the face's sphere
+    if (!(n2 > 0)) {  // collinear base: any direction across the line, towards the fourth centre
       const vec3d line = e1.squaredNorm() > e2.squaredNorm() ? e1 : e2;
       nrm = line.squaredNorm() > 0 ? vec3d(to4 - line * (to4.dot(line) / line.squaredNorm())) : to4;
-      if (nrm.squaredNorm() > 0) nrm.normalize();
     }
     const double h = to4.dot(nrm);
-    const double rho2 = std::max(0.0, to4.squaredNorm() - h * h);
-    double t = 0;
-    if (rho2 + h * h > br * br && std::abs(h) > 0) t = (rho2 + h * h - br * br) / (2 * h);
-    const vec3d x = bc + t * nrm;
+    const double s = far > 0 && h != 0 ? far / (2 * h) : 0.0;
+    const vec3d x = bc + s * nrm;
     double dist2 = 0;  // the largest squared distance: one root for the largest (monotone)
     for (std::size_t i = 0; i < 4; ++i) dist2 = std::max(dist2, (c[i] - x).squaredNorm());
-    const double rk = std::sqrt(dist2) + rmax;
-    if (rk < radius) {
-      radius = rk;
+    if (dist2 < best2) {  // false for NaN and ∞ (a near-flat face far off)
+      best2 = dist2;
       centre = x;
     }
   }
+  if (!(best2 < std::numeric_limits<double>::infinity())) {
+    // No face gave a finite sphere (not seen): the centres' mean, where the callers' finalise()
+    // measures the radius that holds every child.
+    centre = 0.25 * (c[0] + c[1] + c[2] + c[3]);
+    best2 = 0;
+    for (std::size_t i = 0; i < 4; ++i) best2 = std::max(best2, (c[i] - centre).squaredNorm());
+  }
+  radius = std::sqrt(best2) + rmax;
   return false;
 }
 }  // namespace

@@ -208,6 +208,42 @@ TEST(PopSpheres, PaperInnerRulesBoundTheirChildren) {
   EXPECT_EQ(x, c3[1]);
 }
 
+// The 4-child rule where the tetrahedron of centres is flat: coplanar, collinear, coincident,
+// and the same far from the origin. The sphere must be finite and hold every child.
+TEST(PopSpheres, PaperFourChildRuleOnDegenerateCentres) {
+  const std::vector<std::array<vec3d, 4>> shapes = {
+      {vec3d(0, 0, 0), vec3d(1, 0, 0), vec3d(0, 1, 0), vec3d(1, 1, 0)},          // coplanar square
+      {vec3d(0, 0, 0), vec3d(1, 0, 0), vec3d(2, 0, 0), vec3d(3, 0, 0)},          // collinear
+      {vec3d(0, 0, 0), vec3d(0, 0, 0), vec3d(0, 0, 0), vec3d(0, 0, 0)},          // coincident
+      {vec3d(0, 0, 0), vec3d(0, 0, 0), vec3d(0, 0, 0), vec3d(0, 0, 1)},          // three coincide
+      {vec3d(0, 0, 0), vec3d(1, 0, 0), vec3d(0, 1, 0), vec3d(0.3, 0.3, 1e-12)},  // near-flat
+  };
+  for (const double offset : {0.0, 1e7}) {
+    for (const auto& shape : shapes) {
+      for (const double rr : {0.0, 0.25}) {
+        std::array<vec3d, 4> c;
+        std::array<double, 4> r{};
+        for (std::size_t i = 0; i < 4; ++i) {
+          c[i] = shape[i] + vec3d(offset, -offset, offset);
+          r[i] = rr * static_cast<double>(i % 2);  // unequal radii: rule 0 cannot take one
+        }
+        vec3d x;
+        double R;
+        detail::pop_paper_sphere(c.data(), r.data(), 4, x, R);
+        ASSERT_TRUE(all_finite(x)) << "offset " << offset;
+        ASSERT_TRUE(std::isfinite(R));
+        for (std::size_t i = 0; i < 4; ++i)
+          EXPECT_LE((c[i] - x).norm() + r[i], R * (1 + 1e-12) + 1e-9) << "child " << i;
+        // Not absurdly large either: at most the centres' spread plus the largest radius, twice.
+        double spread = 0;
+        for (std::size_t i = 0; i < 4; ++i)
+          for (std::size_t j = 0; j < 4; ++j) spread = std::max(spread, (c[i] - c[j]).norm());
+        EXPECT_LE(R, 2 * (spread + 0.25) + 1e-9);
+      }
+    }
+  }
+}
+
 // ---- build ----------------------------------------------------------------------------------
 
 TEST(PopBuild, GridBothRules) {
