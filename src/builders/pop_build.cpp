@@ -359,7 +359,7 @@ class edge_sorter {
     reserve_huge(e_, offset_[n_vertices]);
     e_.resize(offset_[n_vertices]);
     {
-      std::vector<std::uint32_t> fill(offset_.begin(), offset_.end() - 1);
+      scratch_vector<std::uint32_t> fill(offset_.begin(), offset_.end() - 1);
       for (std::size_t f = 0; f < nf; ++f) {
         if (bad(f)) continue;
         const auto& F = faces[f];
@@ -445,17 +445,17 @@ class edge_sorter {
   }
   std::span<const std::array<std::uint32_t, 3>> faces_;
   std::vector<face_slots>& nbr_;
-  std::vector<std::uint32_t> offset_;
-  std::vector<entry> e_;
-  std::vector<char> dup_;
+  scratch_vector<std::uint32_t> offset_;
+  scratch_vector<entry> e_;
+  scratch_vector<char> dup_;
 };
 
 /// Leaves (§3.5): groups of at most `max` edge-adjacent triangles, grown breadth-first over
 /// nbr (3 slots per face, `none` = no neighbour) from the first ungrouped triangle in input
 /// order. Returns CSR arrays (start, members).
 void group_faces(std::size_t nf, const std::vector<face_slots>& nbr, std::uint32_t max,
-                 std::vector<std::uint32_t>& start, std::vector<std::uint32_t>& members) {
-  std::vector<char> taken(nf, 0);
+                 scratch_vector<std::uint32_t>& start, scratch_vector<std::uint32_t>& members) {
+  scratch_vector<char> taken(nf, 0);
   start.clear();
   members.clear();
   reserve_huge(start, nf / 2 + 2);
@@ -729,7 +729,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // whatever is ready. No task waits for another that may not have started (only for bucket
   // pieces already taken), so the tasks may run in any order, on any number of threads. Each
   // piece's writes are its own: the output is the same for any `threads`.
-  std::vector<std::uint32_t> gstart, gfaces;
+  scratch_vector<std::uint32_t> gstart, gfaces;
   double adjacency_seconds = 0;
   std::vector<face_slots> nbr;  // becomes d.faces below (same size: nf × 3 u32)
   const bool by_edges = opt.adjacency == pop_adjacency::edge_sort;
@@ -883,7 +883,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
 
   // Split key of a leaf: the mean of its triangles' corners, stored with the leaf's index so
   // that the splits below run over one contiguous array (no indirection through a permutation).
-  std::vector<split_key> perm;
+  scratch_vector<split_key> perm;
   resize_fresh(perm, n_leaves, threads);
   parallel_chunks(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t g = lo; g < hi; ++g) {
@@ -960,7 +960,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     std::uint32_t lo, hi, first = 0, count = 0, parent = none;
     std::uint16_t depth = 0;
   };
-  std::vector<topo> tn;
+  scratch_vector<topo> tn;
   reserve_huge(tn, 2 * n_leaves);
   tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
   std::vector<std::pair<std::size_t, std::size_t>> levels;
@@ -997,7 +997,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   d.faces.swap(nbr);
   std::vector<face_slots>().swap(nbr);
   if (d.faces.size() != nf) d.faces.resize(nf);
-  std::vector<std::uint32_t> leaf_group;
+  scratch_vector<std::uint32_t> leaf_group;
   resize_fresh(leaf_group, nn, threads);
   {
     const std::size_t blocks = std::max<std::size_t>(1, std::min<std::size_t>(threads, nn / 4096));

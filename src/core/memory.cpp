@@ -2,7 +2,10 @@
 #include "pbr_lod/core/memory.hpp"
 
 #include <cstdint>
+#include <map>
+#include <mutex>
 #include <new>
+#include <unordered_map>
 
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -29,6 +32,100 @@ void unmap_pages(void* p, std::size_t bytes) noexcept {
   (void)bytes;
   ::operator delete(p);
 #endif
+}
+
+namespace {
+// Kept blocks by mapped size (total ≤ recycled_bytes_cap), and the mapped size of each block
+// handed out: a kept block may serve a smaller request, so the size a caller gives back is not
+// always the size to keep or unmap.
+struct recycled_store {
+  std::mutex m;
+  std::multimap<std::size_t, void*> kept_blocks;
+  std::unordered_map<void*, std::size_t> lent;
+  std::size_t kept = 0;
+  ~recycled_store() {
+    for (const auto& [bytes, p] : kept_blocks) unmap_pages(p, bytes);
+  }
+};
+recycled_store& store() {
+  static recycled_store s;
+  return s;
+}
+std::size_t whole_pages(std::size_t bytes) {
+  constexpr std::size_t page = 4096;
+  return (bytes + page - 1) / page * page;
+}
+}  // namespace
+
+void* recycled_pages(std::size_t bytes) {
+  if (bytes < recycled_min_bytes) return ::operator new(bytes);
+  const std::size_t want = whole_pages(bytes);
+  auto& s = store();
+  const std::lock_guard lock(s.m);
+  // The smallest kept block that holds the request and is at most a third larger.
+  const auto it = s.kept_blocks.lower_bound(want);
+  if (it != s.kept_blocks.end() && it->first - want <= want / 3) {
+    const auto [size, p] = *it;
+    s.lent.emplace(p, size);  // may throw: nothing is taken yet
+    s.kept -= size;
+    s.kept_blocks.erase(it);
+    return p;
+  }
+  void* p = map_pages(want);
+  try {
+    s.lent.emplace(p, want);
+  } catch (...) {
+    unmap_pages(p, want);
+    throw;
+  }
+  return p;
+}
+
+void recycle_pages(void* p, std::size_t bytes) noexcept {
+  if (p == nullptr) return;
+  if (bytes < recycled_min_bytes) {
+    ::operator delete(p);
+    return;
+  }
+  auto& s = store();
+  std::size_t size = whole_pages(bytes);
+  {
+    const std::lock_guard lock(s.m);
+    if (const auto it = s.lent.find(p); it != s.lent.end()) {
+      size = it->second;
+      s.lent.erase(it);
+    }
+    // Room for it: the smallest kept blocks go first (a block larger than the cap is not kept).
+    while (size <= recycled_bytes_cap && s.kept + size > recycled_bytes_cap) {
+      const auto first = s.kept_blocks.begin();
+      unmap_pages(first->second, first->first);
+      s.kept -= first->first;
+      s.kept_blocks.erase(first);
+    }
+    if (size <= recycled_bytes_cap) {
+      try {
+        s.kept_blocks.emplace(size, p);
+        s.kept += size;
+        return;
+      } catch (...) {  // no memory for the map node: unmap it instead
+      }
+    }
+  }
+  unmap_pages(p, size);
+}
+
+std::size_t recycled_bytes_kept() noexcept {
+  auto& s = store();
+  const std::lock_guard lock(s.m);
+  return s.kept;
+}
+
+void release_recycled_pages() noexcept {
+  auto& s = store();
+  const std::lock_guard lock(s.m);
+  for (const auto& [size, p] : s.kept_blocks) unmap_pages(p, size);
+  s.kept_blocks.clear();
+  s.kept = 0;
 }
 
 void advise_huge_pages(const void* data, std::size_t bytes) noexcept {

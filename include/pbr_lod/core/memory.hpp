@@ -39,6 +39,42 @@ struct mapped_allocator {
   }
 };
 
+/// Storage for a build's large temporary buffers, kept for the next build instead of returned:
+/// whole pages outside the malloc heap (map_pages()). A block freed through recycle_pages() is
+/// kept while the blocks kept total at most recycled_bytes_cap and handed out again by
+/// recycled_pages() for a request of its size up to a quarter less, with its pages still
+/// faulted in. Why: a build's temporaries freed to the malloc heap leave a free top that glibc
+/// trims when it passes its threshold, and the next build faults the same pages in again (a
+/// 67 k-triangle POP build: ≈ 1 300 faults, +10 %, after an unrelated 0.9 MB buffer was added;
+/// docs/pop.md, session 9). Thread-safe. Requests below recycled_min_bytes go to operator new.
+void* recycled_pages(std::size_t bytes);
+/// Gives back recycled_pages(bytes) storage (the same `bytes`). Never throws.
+void recycle_pages(void* p, std::size_t bytes) noexcept;
+inline constexpr std::size_t recycled_min_bytes = std::size_t{64} << 10;
+inline constexpr std::size_t recycled_bytes_cap = std::size_t{64} << 20;
+/// Bytes held in kept blocks now (for tests and the docs' measurements).
+std::size_t recycled_bytes_kept() noexcept;
+/// Unmaps every kept block (blocks lent out are kept when given back, as before).
+void release_recycled_pages() noexcept;
+
+/// Allocator over recycled_pages(): for the temporaries of a build that is repeated (a scene's
+/// meshes, a benchmark), never for what a builder returns.
+template <class T>
+struct recycling_allocator {
+  using value_type = T;
+  recycling_allocator() noexcept = default;
+  template <class U>
+  recycling_allocator(const recycling_allocator<U>&) noexcept {}  // NOLINT: rebinding is implicit
+  T* allocate(std::size_t n) { return static_cast<T*>(recycled_pages(n * sizeof(T))); }
+  void deallocate(T* p, std::size_t n) noexcept { recycle_pages(p, n * sizeof(T)); }
+  template <class U>
+  bool operator==(const recycling_allocator<U>&) const noexcept {
+    return true;
+  }
+};
+template <class T>
+using scratch_vector = std::vector<T, recycling_allocator<T>>;
+
 /// madvise(MADV_HUGEPAGE) on the 2 MB-aligned part of [data, data + bytes); a no-op where that
 /// is unavailable or the range holds no whole huge page. Never throws, never fails visibly.
 void advise_huge_pages(const void* data, std::size_t bytes) noexcept;
