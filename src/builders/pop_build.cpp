@@ -455,28 +455,38 @@ class edge_sorter {
 /// order. Returns CSR arrays (start, members).
 void group_faces(std::size_t nf, const std::vector<face_slots>& nbr, std::uint32_t max,
                  scratch_vector<std::uint32_t>& start, scratch_vector<std::uint32_t>& members) {
-  scratch_vector<char> taken(nf, 0);
-  start.clear();
-  members.clear();
-  reserve_huge(start, nf / 2 + 2);
-  reserve_huge(members, nf);
+  // Branch-free appends (a neighbour that is `none`, taken or over the limit is written past
+  // the end and not counted): which neighbours join is a coin toss the branches mispredicted.
+  // taken[nf] stands for `none` and is always set; members has one slot past nf for the
+  // uncounted writes.
+  scratch_vector<std::uint8_t> taken(nf + 1, 0);
+  taken[nf] = 1;
+  start.resize(nf + 1);
+  members.resize(nf + 1);
+  std::uint8_t* tk = taken.data();
+  std::uint32_t* st = start.data();
+  std::uint32_t* mb = members.data();
+  std::size_t groups = 0, n = 0;
   for (std::size_t f = 0; f < nf; ++f) {
-    if (taken[f]) continue;
-    const std::size_t g0 = members.size();
-    start.push_back(static_cast<std::uint32_t>(g0));
-    members.push_back(static_cast<std::uint32_t>(f));
-    taken[f] = 1;
-    for (std::size_t k = g0; k < members.size() && members.size() - g0 < max; ++k) {
-      const std::size_t m = members[k];
-      for (std::size_t j = 0; j < 3 && members.size() - g0 < max; ++j) {
-        const std::uint32_t h = nbr[m][j];
-        if (h == none || taken[h]) continue;
-        taken[h] = 1;
-        members.push_back(h);
+    if (tk[f]) continue;
+    const std::size_t g0 = n;
+    st[groups++] = static_cast<std::uint32_t>(g0);
+    mb[n++] = static_cast<std::uint32_t>(f);
+    tk[f] = 1;
+    for (std::size_t k = g0; k < n && n - g0 < max; ++k) {
+      const face_slots& nb = nbr[mb[k]];
+      for (std::size_t j = 0; j < 3; ++j) {
+        const std::uint32_t h = nb[j] == none ? static_cast<std::uint32_t>(nf) : nb[j];
+        const bool add = tk[h] == 0 && n - g0 < max;
+        mb[n] = h;
+        tk[h] = static_cast<std::uint8_t>(tk[h] | std::uint8_t{add});
+        n += add ? 1 : 0;
       }
     }
   }
-  start.push_back(static_cast<std::uint32_t>(members.size()));
+  st[groups++] = static_cast<std::uint32_t>(n);
+  start.resize(groups);
+  members.resize(nf);
 }
 
 }  // namespace
