@@ -156,6 +156,32 @@ unsigned cone_code(float angle) {
   while (k < 3 && cone_level(k) < angle) ++k;
   return k;
 }
+/// Quantised cones from cosines, without acos. The stored cone of a node is the smallest level
+/// k with acos(c) + 1e-6 ≤ level(k) for the cosine c of its widest face (leaf), or with
+/// acos(c_j) + level(code_j) + 1e-6 ≤ level(k) for every child j (inner node), as the angles
+/// would give (round_up() to float cannot cross a float level). acos is decreasing, so each
+/// test is c ≥ cos(level(k) − 1e-6) or c_j ≥ cos(level(k) − level(code_j) − 1e-6); a negative
+/// angle there means no cosine passes. The thresholds are raised by 1e-12, so a cosine within
+/// rounding of one gets the larger level (still a bounding cone), never a smaller one. Level 3
+/// (π) holds everything.
+struct cone_thresholds {
+  std::array<double, 3> face;
+  std::array<std::array<double, 4>, 3> child;  // [k][code of the child's cone]
+};
+const cone_thresholds& cone_table() {
+  static const cone_thresholds t = [] {
+    cone_thresholds c{};
+    const auto threshold = [](double angle) { return angle < 0 ? 2.0 : std::cos(angle) + 1e-12; };
+    for (unsigned k = 0; k < 3; ++k) {
+      c.face[k] = threshold(static_cast<double>(cone_level(k)) - 1e-6);
+      for (unsigned j = 0; j < 4; ++j)
+        c.child[k][j] = threshold(static_cast<double>(cone_level(k)) -
+                                  static_cast<double>(cone_level(j)) - 1e-6);
+    }
+    return c;
+  }();
+  return t;
+}
 /// RGB 565 (QSplat's 16-bit colour): encode keeps the top bits, decode replicates them, so
 /// encode(decode(x)) == x.
 std::uint16_t rgb565(rgb8 c) {
@@ -1144,6 +1170,32 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     const auto& fn = in.fn;
     d.node_normal_codes[i] = code;
     nd.normal = quant.decode(code);
+    if (qn) {  // the level straight from the cosines (cone_table())
+      const auto& table = cone_table();
+      unsigned k = 0;
+      if (nd.leaf) {
+        double min_cos = 2;
+        for (std::size_t j = 0; j < nd.count; ++j)
+          if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
+        while (k < 3 && min_cos < table.face[k]) ++k;
+      } else {
+        std::array<double, 4> cs;
+        std::array<unsigned, 4> cc;
+        for (std::size_t j = 0; j < nd.count; ++j) {
+          const auto& ch = d.nodes[nd.first + j];
+          cs[j] = clamped_cos(nd.normal, ch.normal);
+          cc[j] = cone_code(ch.cone_angle);
+        }
+        for (; k < 3; ++k) {
+          bool holds = true;
+          for (std::size_t j = 0; j < nd.count; ++j)
+            holds = holds && cs[j] >= table.child[k][cc[j]];
+          if (holds) break;
+        }
+      }
+      nd.cone_angle = cone_level(k);
+      return;
+    }
     double cone = 0;
     if (nd.leaf) {
       // The largest angle to a face normal is the acos of the smallest cosine (acos is
@@ -1180,10 +1232,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         }
       }
     }
-    // Quantised: cones and colours of a parent are computed from its children's quantised
-    // values, so a child's cone stays inside its parent's after rounding.
     nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
-    if (qn) nd.cone_angle = cone_level(cone_code(nd.cone_angle));
   };
   // Nodes [a, b) of one level (their children are done).
   const auto bottom_up = [&](std::size_t a, std::size_t b, counts& acc) {

@@ -1,9 +1,11 @@
 // Tests of the POP builder (Chen & Nguyen 2001). Each case says why its expectation holds.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <numbers>
 #include <random>
 #include <set>
 
@@ -441,6 +443,70 @@ TEST(PopBuild, OutputIsIndependentOfThreadCount) {
           EXPECT_EQ(t.stats().isolated_faces, one.stats().isolated_faces);
         }
       }
+}
+
+// Quantised cones come from cosine thresholds, not acos: each must be the smallest of the four
+// levels that holds, by the angles, its leaf's face normals or its children's cones (levels
+// {asin 1/16, asin 4/16, asin 9/16, π} rounded up to float, plus the build's 1e-6 of slack).
+// A threshold off by a level fails it both ways (too small: does not hold; too large: a
+// smaller level would).
+TEST(PopBuild, QuantisedConesAreTheSmallestLevelThatHolds) {
+  const auto up = [](double x) {
+    float f = static_cast<float>(x);
+    if (static_cast<double>(f) < x) f = std::nextafter(f, 4.0f);
+    return f;
+  };
+  const std::array<float, 4> level = {up(std::asin(1.0 / 16)), up(std::asin(4.0 / 16)),
+                                      up(std::asin(9.0 / 16)), std::numbers::pi_v<float>};
+  const auto& rm = real_meshes::get();
+  for (const triangle_mesh* m : {&rm.bunny, &rm.buddha}) {
+    const auto t = build_pop<with_normals>(*m, {.quantise_nodes = true});
+    std::array<std::size_t, 4> used{};
+    for (std::uint32_t i = 0; i < t.nodes().size(); ++i) {
+      const auto& nd = t.at(i);
+      const vec3d axis = nd.normal.cast<double>();
+      double need = 0;  // the angle the cone must reach, as the build measures it
+      bool unbounded = false;
+      if (t.is_leaf(i)) {
+        for (std::uint32_t f = nd.first; f < nd.first + nd.count; ++f) {
+          const auto& F = t.faces()[f];
+          const vec3d a = t.positions()[F[0]].cast<double>(),
+                      b = t.positions()[F[1]].cast<double>(),
+                      c = t.positions()[F[2]].cast<double>();
+          const vec3d n = (b - a).cross(c - a);
+          const double len = n.norm();
+          if (!(len > 0 && std::isfinite(len))) continue;
+          const vec3f fn = (n / len).cast<float>();
+          need = std::max(need, std::acos(std::clamp(axis.dot(fn.cast<double>()), -1.0, 1.0)));
+        }
+      } else {
+        for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+          const auto& ch = t.at(c);
+          unbounded = unbounded || ch.cone_angle >= std::numbers::pi_v<float>;
+          need =
+              std::max(need, std::acos(std::clamp(axis.dot(ch.normal.cast<double>()), -1.0, 1.0)) +
+                                 static_cast<double>(ch.cone_angle));
+        }
+      }
+      const auto k = static_cast<std::size_t>(std::find(level.begin(), level.end(), nd.cone_angle) -
+                                              level.begin());
+      ASSERT_LT(k, 4u) << "node " << i << ": cone " << nd.cone_angle << " is not a level";
+      ++used[k];
+      if (unbounded) {
+        EXPECT_EQ(k, 3u) << "node " << i;
+        continue;
+      }
+      if (k < 3) {
+        EXPECT_LE(need + 1e-6, static_cast<double>(level[k])) << "node " << i;
+      }
+      // Far from the boundary (the build's thresholds are conservative by 1e-12 in the cosine):
+      // the next smaller level must not hold.
+      if (k > 0) {
+        EXPECT_GT(need + 1e-6, static_cast<double>(level[k - 1]) - 1e-9) << "node " << i;
+      }
+    }
+    for (std::size_t k = 0; k < 4; ++k) EXPECT_GT(used[k], 0u) << "level " << k << " never used";
+  }
 }
 
 // The topology (§3.1, QSplat): every node's leaves, in order, split at their median along the
