@@ -1121,9 +1121,15 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         for (auto v : F) nsum += d.normals[v].cast<double>();
         if (colour) csum.add(face_colour[members[j]]);
         // Geometric normal (zero and `degenerate` when the cross product vanishes).
+        // The corners from registers, not from the array they are stored to (reading back a
+        // vector written as two halves stalled the store forwarding).
+        const vec3d a = d.positions[F[0]].cast<double>(), b = d.positions[F[1]].cast<double>(),
+                    c = d.positions[F[2]].cast<double>();
         vec3d* p = corner.data() + 3 * j;
-        for (std::size_t k = 0; k < 3; ++k) p[k] = d.positions[F[k]].cast<double>();
-        const vec3d e1 = p[1] - p[0], e2 = p[2] - p[0];
+        p[0] = a;
+        p[1] = b;
+        p[2] = c;
+        const vec3d e1 = b - a, e2 = c - a;
         const vec3d n = e1.cross(e2);
         const double n2 = n.squaredNorm();
         const double len = std::sqrt(n2);  // n.norm()
@@ -1132,7 +1138,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
         acc.degenerate += deg ? 1 : 0;
         // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
-        if (nt == 1 || !exact) triangle_circle(p[0], p[1], p[2], e1, e2, n, n2, cc[j], cr[j]);
+        if (nt == 1 || !exact) triangle_circle(a, b, c, e1, e2, n, n2, cc[j], cr[j]);
       }
       if (nt == 1) {
         x = cc[0];
