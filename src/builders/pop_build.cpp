@@ -973,17 +973,59 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // The top levels one at a time, each level's ranges as tasks on the pool, until there are
   // enough ranges to share out (8 per thread) or they are small; then each range's subtree as
   // one task. The ranges of a level are disjoint, so the order they are done in does not matter.
+  struct topo {
+    std::uint32_t lo, hi, first = 0, count = 0, parent = none;
+    std::uint16_t depth = 0;
+  };
+  scratch_vector<topo> tn;
+  std::vector<std::pair<std::size_t, std::size_t>> levels;  // node ranges by depth
+  // The breadth-first node list depends on the number of leaves alone (where each range
+  // splits), not on the order of `perm`: it is built beside the partition's first level, which
+  // leaves the other threads idle (below), or after the partition with one thread.
+  const auto build_topology = [&] {
+    reserve_huge(tn, 2 * n_leaves);
+    tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
+    for (std::size_t a = 0; a < tn.size();) {
+      const std::size_t b = tn.size();
+      levels.emplace_back(a, b);
+      for (std::size_t i = a; i < b; ++i) {
+        const std::uint32_t lo = tn[i].lo, hi = tn[i].hi;
+        if (hi - lo <= 1) continue;
+        const std::uint32_t m = mid_of(lo, hi);
+        std::array<std::uint32_t, 5> cut{};
+        std::uint32_t k = 0;
+        cut[k++] = lo;
+        if (m - lo >= 2) cut[k++] = mid_of(lo, m);
+        cut[k++] = m;
+        if (hi - m >= 2) cut[k++] = mid_of(m, hi);
+        cut[k] = hi;  // k parts: cut[0..k]
+        tn[i].first = static_cast<std::uint32_t>(tn.size());
+        tn[i].count = k;
+        const auto depth = static_cast<std::uint16_t>(tn[i].depth + 1);
+        for (std::uint32_t j = 0; j < k; ++j)
+          tn.push_back({cut[j], cut[j + 1], 0, 0, static_cast<std::uint32_t>(i), depth});
+      }
+      a = b;
+    }
+  };
+  bool topology_built = false;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges{
       {0, static_cast<std::uint32_t>(n_leaves)}};
   while (threads > 1 && ranges.size() < 8 * std::size_t{threads} && n_leaves >= 8192) {
     std::vector<std::pair<std::uint32_t, std::uint32_t>> next(2 * ranges.size());
     bool small = false;
-    parallel_tasks(ranges.size(), threads, [&](std::size_t t, unsigned) {
+    const bool with_topology = !topology_built;
+    parallel_tasks(ranges.size() + (with_topology ? 1 : 0), threads, [&](std::size_t t, unsigned) {
+      if (t == ranges.size()) {
+        build_topology();
+        return;
+      }
       const auto [lo, hi] = ranges[t];
       const std::uint32_t m = hi - lo >= 2 ? split(lo, hi) : hi;
       next[2 * t] = {lo, m};
       next[2 * t + 1] = {m, hi};
     });
+    topology_built = true;
     ranges.swap(next);
     for (const auto& [lo, hi] : ranges) small = small || hi - lo < 4096;
     if (small) break;
@@ -991,37 +1033,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   parallel_tasks(ranges.size(), threads, [&](std::size_t t, unsigned) {
     partition(partition, ranges[t].first, ranges[t].second);
   });
-
-  struct topo {
-    std::uint32_t lo, hi, first = 0, count = 0, parent = none;
-    std::uint16_t depth = 0;
-  };
-  scratch_vector<topo> tn;
-  reserve_huge(tn, 2 * n_leaves);
-  tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
-  std::vector<std::pair<std::size_t, std::size_t>> levels;
-  for (std::size_t a = 0; a < tn.size();) {
-    const std::size_t b = tn.size();
-    levels.emplace_back(a, b);
-    for (std::size_t i = a; i < b; ++i) {
-      const std::uint32_t lo = tn[i].lo, hi = tn[i].hi;
-      if (hi - lo <= 1) continue;
-      const std::uint32_t m = mid_of(lo, hi);
-      std::array<std::uint32_t, 5> cut{};
-      std::uint32_t k = 0;
-      cut[k++] = lo;
-      if (m - lo >= 2) cut[k++] = mid_of(lo, m);
-      cut[k++] = m;
-      if (hi - m >= 2) cut[k++] = mid_of(m, hi);
-      cut[k] = hi;  // k parts: cut[0..k]
-      tn[i].first = static_cast<std::uint32_t>(tn.size());
-      tn[i].count = k;
-      const auto depth = static_cast<std::uint16_t>(tn[i].depth + 1);
-      for (std::uint32_t j = 0; j < k; ++j)
-        tn.push_back({cut[j], cut[j + 1], 0, 0, static_cast<std::uint32_t>(i), depth});
-    }
-    a = b;
-  }
+  if (!topology_built) build_topology();
   if (levels.size() > 65535) throw InvalidArgument("build_pop: tree deeper than 65535 levels");
 
   // Faces in leaf order; leaves point at their range. Two parallel passes over fixed blocks of
