@@ -45,7 +45,7 @@ struct mapped_allocator {
 /// recycled_pages() for a request of its size up to a quarter less, with its pages still
 /// faulted in. Why: a build's temporaries freed to the malloc heap leave a free top that glibc
 /// trims when it passes its threshold, and the next build faults the same pages in again (a
-/// 67 k-triangle POP build: ≈ 1 300 faults, +10 %, after an unrelated 0.9 MB buffer was added;
+/// 67 k-triangle POP build: ≈ 1 300 faults, +12 %, after an unrelated 0.9 MB buffer was added;
 /// docs/pop.md, session 9). Thread-safe. Requests below recycled_min_bytes go to operator new.
 void* recycled_pages(std::size_t bytes);
 /// Gives back recycled_pages(bytes) storage (the same `bytes`). Never throws.
