@@ -13,6 +13,7 @@
 
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/scratch.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
@@ -507,6 +508,20 @@ TEST(PopBuild, QuantisedConesAreTheSmallestLevelThatHolds) {
     }
     for (std::size_t k = 0; k < 4; ++k) EXPECT_GT(used[k], 0u) << "level " << k << " never used";
   }
+}
+
+// A build's temporaries are kept for the next build, and release_scratch_memory() gives them
+// back; a build after the release still works (and keeps them again).
+TEST(PopBuild, ScratchMemoryIsKeptAndReleased) {
+  const auto& rm = real_meshes::get();
+  const auto first = build_pop<with_normals>(rm.buddha);
+  EXPECT_GT(scratch_memory_kept(), std::size_t{1} << 20);  // the edge sort's entries alone: 2.4 MB
+  EXPECT_LE(scratch_memory_kept(), std::size_t{64} << 20);
+  release_scratch_memory();
+  EXPECT_EQ(scratch_memory_kept(), 0u);
+  const auto again = build_pop<with_normals>(rm.buddha);
+  EXPECT_TRUE(again.nodes() == first.nodes());
+  EXPECT_GT(scratch_memory_kept(), 0u);
 }
 
 // The topology (§3.1, QSplat): every node's leaves, in order, split at their median along the
