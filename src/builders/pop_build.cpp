@@ -1188,26 +1188,29 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     const auto& fn = in.fn;
     d.node_normal_codes[i] = code;
     nd.normal = quant.decode(code);
+    // The cosines the cone is measured by: to the leaf's non-degenerate face normals (only the
+    // smallest matters: the widest face), or to each child's axis.
+    const std::size_t nc = nd.count;
+    double min_cos = 2;
+    std::array<double, 4> cs;
+    if (nd.leaf) {
+      for (std::size_t j = 0; j < nc; ++j)
+        if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
+    } else {
+      for (std::size_t j = 0; j < nc; ++j)
+        cs[j] = clamped_cos(nd.normal, d.nodes[nd.first + j].normal);
+    }
     if (qn) {  // the level straight from the cosines (cone_table())
       const auto& table = cone_table();
       unsigned k = 0;
       if (nd.leaf) {
-        double min_cos = 2;
-        for (std::size_t j = 0; j < nd.count; ++j)
-          if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
         while (k < 3 && min_cos < table.face[k]) ++k;
       } else {
-        std::array<double, 4> cs;
         std::array<unsigned, 4> cc;
-        for (std::size_t j = 0; j < nd.count; ++j) {
-          const auto& ch = d.nodes[nd.first + j];
-          cs[j] = clamped_cos(nd.normal, ch.normal);
-          cc[j] = cone_code(ch.cone_angle);
-        }
+        for (std::size_t j = 0; j < nc; ++j) cc[j] = cone_code(d.nodes[nd.first + j].cone_angle);
         for (; k < 3; ++k) {
           bool holds = true;
-          for (std::size_t j = 0; j < nd.count; ++j)
-            holds = holds && cs[j] >= table.child[k][cc[j]];
+          for (std::size_t j = 0; j < nc; ++j) holds = holds && cs[j] >= table.child[k][cc[j]];
           if (holds) break;
         }
       }
@@ -1218,22 +1221,15 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     if (nd.leaf) {
       // The largest angle to a face normal is the acos of the smallest cosine (acos is
       // monotone): one acos per leaf instead of one per triangle.
-      double min_cos = 2;
-      for (std::size_t j = 0; j < nd.count; ++j)
-        if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
       if (min_cos <= 1) cone = std::acos(min_cos);
     } else {
       // max over children of acos(cos to the child's axis) + the child's cone. Children with
       // the same cone (quantised cones have four levels) need one acos, of their smallest
       // cosine; a child with an unbounded cone (π) makes this one unbounded without any.
-      std::array<double, 4> cs;
       std::array<float, 4> ca;
-      const std::size_t nc = nd.count;
       bool unbounded = false;
       for (std::size_t j = 0; j < nc; ++j) {
-        const auto& ch = d.nodes[nd.first + j];
-        cs[j] = clamped_cos(nd.normal, ch.normal);
-        ca[j] = ch.cone_angle;
+        ca[j] = d.nodes[nd.first + j].cone_angle;
         unbounded = unbounded || ca[j] >= std::numbers::pi_v<float>;
       }
       if (unbounded) {
@@ -1243,10 +1239,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
           bool seen = false;
           for (std::size_t k = 0; k < j; ++k) seen = seen || ca[k] == ca[j];
           if (seen) continue;
-          double min_cos = cs[j];
+          double smallest = cs[j];
           for (std::size_t k = j + 1; k < nc; ++k)
-            if (ca[k] == ca[j]) min_cos = std::min(min_cos, cs[k]);
-          cone = std::max(cone, std::acos(min_cos) + static_cast<double>(ca[j]));
+            if (ca[k] == ca[j]) smallest = std::min(smallest, cs[k]);
+          cone = std::max(cone, std::acos(smallest) + static_cast<double>(ca[j]));
         }
       }
     }

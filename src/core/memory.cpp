@@ -43,9 +43,12 @@ struct recycled_store {
   std::multimap<std::size_t, void*> kept_blocks;
   std::unordered_map<void*, std::size_t> lent;
   std::size_t kept = 0;
-  ~recycled_store() {
+  void unmap_kept() noexcept {  // with m held, or at exit
     for (const auto& [bytes, p] : kept_blocks) unmap_pages(p, bytes);
+    kept_blocks.clear();
+    kept = 0;
   }
+  ~recycled_store() { unmap_kept(); }
 };
 recycled_store& store() {
   static recycled_store s;
@@ -123,9 +126,7 @@ std::size_t recycled_bytes_kept() noexcept {
 void release_recycled_pages() noexcept {
   auto& s = store();
   const std::lock_guard lock(s.m);
-  for (const auto& [size, p] : s.kept_blocks) unmap_pages(p, size);
-  s.kept_blocks.clear();
-  s.kept = 0;
+  s.unmap_kept();
 }
 
 void advise_huge_pages(const void* data, std::size_t bytes) noexcept {
