@@ -215,12 +215,27 @@ double clamped_cos(const vec3f& a, const vec3f& b) {
   return std::clamp(a.cast<double>().dot(b.cast<double>()), -1.0, 1.0);
 }
 
+/// A centre as stored (float), in double for measuring from it. Through an empty asm, so the
+/// compiler cannot see where the floats came from: GCC 12.2 (Debian 12's) at -O2 and above
+/// folds the SLP-vectorised pair (vector double)(vector float)x back to x, so that after
+/// `out = x.cast<float>()`, `out.cast<double>()` gave x's unrounded x and y (z, converted alone,
+/// was right). The radii were then measured from a point up to half a float ulp off the stored
+/// centre, and a stored sphere could miss a corner by that much (test
+/// PopBuild.FloatSpheresHoldExactly). Clang does not fold it.
+vec3d as_stored(const vec3f& c) {
+  vec3f s = c;
+#if defined(__GNUC__)
+  asm("" : "+m"(s));
+#endif
+  return s.cast<double>();
+}
+
 /// Sphere (double centre x, radius r) made safe to store in float: the float centre, and a
 /// radius rounded up so that it still holds every child sphere measured from that centre.
 void finalise(const vec3d& x, double r, const vec3d* c, const double* cr, std::size_t n,
               vec3f& out_c, float& out_r) {
   out_c = x.cast<float>();
-  const vec3d xc = out_c.cast<double>();
+  const vec3d xc = as_stored(out_c);
   double need = std::isfinite(r) ? r : 0.0;
   for (std::size_t i = 0; i < n; ++i) need = std::max(need, (c[i] - xc).norm() + cr[i]);
   out_r = round_up(need);
@@ -230,7 +245,7 @@ void finalise(const vec3d& x, double r, const vec3d* c, const double* cr, std::s
 void finalise_points(const vec3d& x, double r, const vec3d* c, std::size_t n, vec3f& out_c,
                      float& out_r) {
   out_c = x.cast<float>();
-  const vec3d xc = out_c.cast<double>();
+  const vec3d xc = as_stored(out_c);
   double far2 = 0;
   for (std::size_t i = 0; i < n; ++i) far2 = std::max(far2, (c[i] - xc).squaredNorm());
   out_r = round_up(std::max(std::isfinite(r) ? r : 0.0, std::sqrt(far2)));
