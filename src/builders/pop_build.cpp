@@ -20,6 +20,7 @@
 #include <span>
 #include <thread>
 
+#include "lanes.hpp"
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
@@ -480,6 +481,7 @@ class edge_sorter {
   struct entry {
     std::uint32_t other, slot, third;
   };
+
   bool bad(std::size_t f) const {
     const auto& F = faces_[f];
     return F[0] == F[1] || F[1] == F[2] || F[0] == F[2];
@@ -574,6 +576,32 @@ namespace {
   triangle_circle_sq(a, b, c, ab, ac, w, w2, centre, radius);
   radius = std::sqrt(radius);
 }
+
+/// triangle_circle_sq() for four triangles at once, one per lane: the same operations per lane,
+/// so the same bits (lanes.hpp), with the branches as selects (both centres are computed).
+[[gnu::always_inline]] inline void triangle_circle_sq4(const lanes::v3& a, const lanes::v3& b,
+                                                       const lanes::v3& c, const lanes::v3& ab,
+                                                       const lanes::v3& ac, const lanes::v3& w,
+                                                       lanes::d4 w2, lanes::v3& centre,
+                                                       lanes::d4& radius2) {
+  using namespace lanes;
+  const v3 bc = c - b;
+  const d4 lab = dot(ab, ab), lac = dot(ac, ac), lbc = dot(bc, bc);
+  const d4 half = splat(0.5);
+  const v3 longest = select((lab >= lac) & (lab >= lbc), half * (a + b),
+                            select(lac >= lbc, half * (a + c), half * (b + c)));
+  const m4 obtuse = (dot(ab, ac) < 0) | (dot(-ab, bc) < 0) | (dot(ac, bc) < 0);
+  const d4 scale = max(max(lab, lac), lbc);
+  const m4 round = ~obtuse & (w2 > splat(1e-24) * scale * scale);
+  const v3 t1 = cross(ac, w), t2 = cross(w, ab);
+  const d4 twice = 2 * w2;
+  const v3 circum = {a.x + (lab * t1.x + lac * t2.x) / twice,
+                     a.y + (lab * t1.y + lac * t2.y) / twice,
+                     a.z + (lab * t1.z + lac * t2.z) / twice};
+  centre = select(round & finite(circum), circum, longest);
+  const v3 da = a - centre, db = b - centre, dc = c - centre;
+  radius2 = max(max(dot(da, da), dot(db, db)), dot(dc, dc));
+}
 }  // namespace
 
 void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& centre,
@@ -581,6 +609,21 @@ void pop_triangle_circle(const vec3d& a, const vec3d& b, const vec3d& c, vec3d& 
   const vec3d ab = b - a, ac = c - a;
   const vec3d w = ab.cross(ac);
   triangle_circle(a, b, c, ab, ac, w, w.squaredNorm(), centre, radius);
+}
+
+void pop_triangle_circle4(const vec3d* a, const vec3d* b, const vec3d* c, vec3d* centre,
+                          double* radius) {
+  using namespace lanes;
+  const v3 A = load(a[0], a[1], a[2], a[3]), B = load(b[0], b[1], b[2], b[3]),
+           C = load(c[0], c[1], c[2], c[3]);
+  const v3 ab = B - A, ac = C - A, w = cross(ab, ac);
+  v3 x;
+  d4 r2;
+  triangle_circle_sq4(A, B, C, ab, ac, w, dot(w, w), x, r2);
+  for (int k = 0; k < 4; ++k) {
+    centre[k] = lane(x, k);
+    radius[k] = std::sqrt(r2[k]);
+  }
 }
 
 namespace {
@@ -623,33 +666,41 @@ bool paper_sphere(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
   // normal and no face radius are needed (two square roots and three divisions per face fewer
   // than with the unit normal and the signed height h = v·n/|n|, the same point up to rounding),
   // and the faces compare by squared distance: one root at the end.
-  double best2 = std::numeric_limits<double>::infinity();
-  for (std::size_t k = 0; k < 4; ++k) {
-    std::array<vec3d, 3> base;
-    for (std::size_t i = 0, m = 0; i < 4; ++i)
-      if (i != k) base[m++] = c[i];
-    vec3d bc;
-    double br2;
-    const vec3d e1 = base[1] - base[0], e2 = base[2] - base[0];
-    vec3d nrm = e1.cross(e2);  // the base's normal, and the circle's ab × ac
-    const double n2 = nrm.squaredNorm();
-    triangle_circle_sq(base[0], base[1], base[2], e1, e2, nrm, n2, bc, br2);
-    const vec3d to4 = c[k] - bc;
-    const double far = to4.squaredNorm() - br2;  // > 0: c_k lies outside the face's sphere
-    if (!(n2 > 0)) {  // collinear base: any direction across the line, towards the fourth centre
-      const vec3d line = e1.squaredNorm() > e2.squaredNorm() ? e1 : e2;
-      nrm = line.squaredNorm() > 0 ? vec3d(to4 - line * (to4.dot(line) / line.squaredNorm())) : to4;
-    }
-    const double h = to4.dot(nrm);
-    const double s = far > 0 && h != 0 ? far / (2 * h) : 0.0;
-    const vec3d x = bc + s * nrm;
-    double dist2 = 0;  // the largest squared distance: one root for the largest (monotone)
-    for (std::size_t i = 0; i < 4; ++i) dist2 = std::max(dist2, (c[i] - x).squaredNorm());
-    if (dist2 < best2) {  // false for NaN and ∞ (a near-flat face far off)
-      best2 = dist2;
-      centre = x;
-    }
+  // The four faces as four lanes (lanes.hpp): face k is the base of the other three centres,
+  // in ascending order, and c_k is its fourth.
+  using namespace lanes;
+  const v3 A = load(c[1], c[0], c[0], c[0]), B = load(c[2], c[2], c[1], c[1]),
+           C = load(c[3], c[3], c[3], c[2]), D = load(c[0], c[1], c[2], c[3]);
+  const v3 e1 = B - A, e2 = C - A;
+  const v3 nrm = cross(e1, e2);  // the base's normal, and the circle's ab × ac
+  const d4 n2 = dot(nrm, nrm);
+  v3 bc;
+  d4 br2;
+  triangle_circle_sq4(A, B, C, e1, e2, nrm, n2, bc, br2);
+  const v3 to4 = D - bc;
+  const d4 far = dot(to4, to4) - br2;  // > 0: c_k lies outside the face's sphere
+  // A collinear base: any direction across the line, towards the fourth centre.
+  const v3 line = select(dot(e1, e1) > dot(e2, e2), e1, e2);
+  const d4 line2 = dot(line, line);
+  const v3 across = select(line2 > 0, to4 - line * (dot(to4, line) / line2), to4);
+  const v3 axis = select(n2 > 0, nrm, across);
+  const d4 h = dot(to4, axis);
+  const d4 s = select((far > 0) & (h != 0), far / (2 * h), splat(0));
+  const v3 x = bc + s * axis;
+  // The largest squared distance: one root for the largest (monotone). A centre that is not
+  // finite (a near-flat face far off) gets ∞: it is never taken.
+  d4 dist2 = splat(0);
+  for (std::size_t i = 0; i < 4; ++i) {
+    const v3 d = load(c[i], c[i], c[i], c[i]) - x;
+    dist2 = max(dist2, dot(d, d));
   }
+  dist2 = select(finite(x), dist2, splat(std::numeric_limits<double>::infinity()));
+  double best2 = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k)
+    if (dist2[k] < best2) {  // false for NaN and ∞
+      best2 = dist2[k];
+      centre = lane(x, k);
+    }
   if (!(best2 < std::numeric_limits<double>::infinity())) {
     // No face gave a finite sphere (not seen): the centres' mean, where the callers' finalise()
     // measures the radius that holds every child.
@@ -1125,6 +1176,73 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     std::array<vec3f, 4> fn;  // a leaf's face normals; fdeg bit j: face j is degenerate
     std::uint8_t fdeg;
   };
+  // A leaf of four triangles (most leaves): geometry()'s loop over the triangles with the four
+  // as lanes (lanes.hpp; the same bits), the corners measured by lanes too.
+  const auto leaf4 = [&](const std::array<std::uint32_t, 3>* tri, vec3d& x, double& r, vec3d& nsum,
+                         rgb_sum& csum, const std::uint32_t* members, counts& acc, pending& out,
+                         pop_node& nd) {
+    using namespace lanes;
+    for (std::size_t j = 0; j < 4; ++j) {
+      for (auto v : tri[j]) nsum += d.normals[v].cast<double>();
+      if (colour) csum.add(face_colour[members[j]]);
+    }
+    const auto coord = [&](std::size_t m, int k) {
+      return make(static_cast<double>(d.positions[tri[0][m]][k]),
+                  static_cast<double>(d.positions[tri[1][m]][k]),
+                  static_cast<double>(d.positions[tri[2][m]][k]),
+                  static_cast<double>(d.positions[tri[3][m]][k]));
+    };
+    const v3 a = {coord(0, 0), coord(0, 1), coord(0, 2)},
+             b = {coord(1, 0), coord(1, 1), coord(1, 2)},
+             c = {coord(2, 0), coord(2, 1), coord(2, 2)};
+    // Geometric normals (zero and `degenerate` when the cross product vanishes).
+    const v3 e1 = b - a, e2 = c - a;
+    const v3 n = cross(e1, e2);
+    const d4 n2 = dot(n, n);
+    const d4 len = lanes::sqrt(n2);
+    const m4 fine = (len > 0) & finite(len);
+    const v3 unit = {n.x / len, n.y / len, n.z / len};
+    out.fdeg = 0;
+    for (int j = 0; j < 4; ++j) {
+      const bool deg = !fine[j];
+      out.fn[static_cast<std::size_t>(j)] =
+          deg ? vec3f::Zero()
+              : vec3f(static_cast<float>(unit.x[j]), static_cast<float>(unit.y[j]),
+                      static_cast<float>(unit.z[j]));
+      out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
+      acc.degenerate += deg ? 1 : 0;
+    }
+    if (exact) {  // smallest sphere of the leaf's corners
+      std::array<vec3d, 12> corner;
+      std::array<double, 12> zero{};
+      for (int j = 0; j < 4; ++j) {
+        corner[3 * static_cast<std::size_t>(j)] = lane(a, j);
+        corner[3 * static_cast<std::size_t>(j) + 1] = lane(b, j);
+        corner[3 * static_cast<std::size_t>(j) + 2] = lane(c, j);
+      }
+      min_sphere_of_spheres(corner.data(), zero.data(), 12, x, r);
+    } else {  // the paper's rules over the triangles' spheres
+      v3 cc4;
+      d4 cr2;
+      triangle_circle_sq4(a, b, c, e1, e2, n, n2, cc4, cr2);
+      std::array<vec3d, 4> cc;
+      std::array<double, 4> cr;
+      for (int j = 0; j < 4; ++j) {
+        cc[static_cast<std::size_t>(j)] = lane(cc4, j);
+        cr[static_cast<std::size_t>(j)] = std::sqrt(cr2[j]);
+      }
+      paper_sphere(cc.data(), cr.data(), 4, x, r);
+    }
+    // finalise_points() over the twelve corners: the largest squared distance from the stored
+    // centre (a maximum, so in any order), one root.
+    nd.centre = x.cast<float>();
+    const vec3d xc = as_stored(nd.centre);
+    const v3 o = {splat(xc.x()), splat(xc.y()), splat(xc.z())};
+    const v3 da = a - o, db = b - o, dc = c - o;
+    const d4 far4 = max(max(dot(da, da), dot(db, db)), dot(dc, dc));
+    const double far2 = std::max(std::max(far4[0], far4[1]), std::max(far4[2], far4[3]));
+    nd.radius = round_up(std::max(std::isfinite(r) ? r : 0.0, std::sqrt(far2)));
+  };
   const auto geometry = [&](std::size_t i, counts& acc, pending& out) {
     std::array<vec3d, 12> cc, corner;
     std::array<double, 12> cr;
@@ -1143,41 +1261,45 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
       const std::uint32_t* members = gfaces.data() + gstart[leaf_group[i]];
       for (std::size_t j = 0; j < nt; ++j) tri[j] = mesh.faces[members[j]];
-      for (std::size_t j = 0; j < nt; ++j) {
-        const auto& F = tri[j];
-        for (auto v : F) nsum += d.normals[v].cast<double>();
-        if (colour) csum.add(face_colour[members[j]]);
-        // Geometric normal (zero and `degenerate` when the cross product vanishes).
-        // The corners from registers, not from the array they are stored to (reading back a
-        // vector written as two halves stalled the store forwarding).
-        const vec3d a = d.positions[F[0]].cast<double>(), b = d.positions[F[1]].cast<double>(),
-                    c = d.positions[F[2]].cast<double>();
-        vec3d* p = corner.data() + 3 * j;
-        p[0] = a;
-        p[1] = b;
-        p[2] = c;
-        const vec3d e1 = b - a, e2 = c - a;
-        const vec3d n = e1.cross(e2);
-        const double n2 = n.squaredNorm();
-        const double len = std::sqrt(n2);  // n.norm()
-        const bool deg = !(len > 0 && std::isfinite(len));
-        fn[j] = deg ? vec3f::Zero() : vec3f((n / len).cast<float>());
-        out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
-        acc.degenerate += deg ? 1 : 0;
-        // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
-        if (nt == 1 || !exact) triangle_circle(a, b, c, e1, e2, n, n2, cc[j], cr[j]);
+      if (nt == 4) {
+        leaf4(tri, x, r, nsum, csum, members, acc, out, nd);
+      } else {
+        for (std::size_t j = 0; j < nt; ++j) {
+          const auto& F = tri[j];
+          for (auto v : F) nsum += d.normals[v].cast<double>();
+          if (colour) csum.add(face_colour[members[j]]);
+          // Geometric normal (zero and `degenerate` when the cross product vanishes).
+          // The corners from registers, not from the array they are stored to (reading back a
+          // vector written as two halves stalled the store forwarding).
+          const vec3d a = d.positions[F[0]].cast<double>(), b = d.positions[F[1]].cast<double>(),
+                      c = d.positions[F[2]].cast<double>();
+          vec3d* p = corner.data() + 3 * j;
+          p[0] = a;
+          p[1] = b;
+          p[2] = c;
+          const vec3d e1 = b - a, e2 = c - a;
+          const vec3d n = e1.cross(e2);
+          const double n2 = n.squaredNorm();
+          const double len = std::sqrt(n2);  // n.norm()
+          const bool deg = !(len > 0 && std::isfinite(len));
+          fn[j] = deg ? vec3f::Zero() : vec3f((n / len).cast<float>());
+          out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
+          acc.degenerate += deg ? 1 : 0;
+          // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
+          if (nt == 1 || !exact) triangle_circle(a, b, c, e1, e2, n, n2, cc[j], cr[j]);
+        }
+        if (nt == 1) {
+          x = cc[0];
+          r = cr[0];
+        } else if (exact) {  // smallest sphere of the leaf's corners
+          for (std::size_t k = 0; k < 3 * nt; ++k) cr[k] = 0;
+          min_sphere_of_spheres(corner.data(), cr.data(), 3 * nt, x, r);
+        } else {  // the paper's rules over the triangles' spheres
+          paper_sphere(cc.data(), cr.data(), nt, x, r);
+        }
+        // Every corner, measured from the stored centre.
+        finalise_points(x, r, corner.data(), 3 * nt, nd.centre, nd.radius);
       }
-      if (nt == 1) {
-        x = cc[0];
-        r = cr[0];
-      } else if (exact) {  // smallest sphere of the leaf's corners
-        for (std::size_t k = 0; k < 3 * nt; ++k) cr[k] = 0;
-        min_sphere_of_spheres(corner.data(), cr.data(), 3 * nt, x, r);
-      } else {  // the paper's rules over the triangles' spheres
-        paper_sphere(cc.data(), cr.data(), nt, x, r);
-      }
-      // Every corner, measured from the stored centre.
-      finalise_points(x, r, corner.data(), 3 * nt, nd.centre, nd.radius);
       if (!(nsum.squaredNorm() > 0))
         for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
     } else {

@@ -170,6 +170,50 @@ TEST(PopSpheres, DegenerateTrianglesGiveFiniteSpheres) {
   }
 }
 
+// Leaves of four triangles take their circles four at a time, in lanes (src/builders/lanes.hpp):
+// the same operations per lane as the one-triangle code, so the same bits, in every branch of
+// the rule (acute, right, obtuse, each edge the longest, degenerate, far off, tiny, huge).
+TEST(PopSpheres, FourLaneCirclesAreBitIdentical) {
+  std::mt19937 rng(11);  // random triangles, and the special ones mixed into random lanes
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<std::array<vec3d, 3>> special = {
+      {vec3d(0, 0, 0), vec3d(1, 0, 0), vec3d(0.5, std::sqrt(3.0) / 2, 0)},
+      {vec3d(0, 0, 0), vec3d(2, 0, 0), vec3d(0, 1, 0)},
+      {vec3d(0, 0, 0), vec3d(4, 0, 0), vec3d(1, 0.3, 0)},
+      {vec3d(1, 0.3, 0), vec3d(0, 0, 0), vec3d(4, 0, 0)},
+      {vec3d(4, 0, 0), vec3d(1, 0.3, 0), vec3d(0, 0, 0)},
+      {vec3d(0, 0, 0), vec3d(1, 0, 0), vec3d(3, 0, 0)},
+      {vec3d(0, 0, 0), vec3d(0, 0, 0), vec3d(1, 1, 1)},
+      {vec3d(2, 2, 2), vec3d(2, 2, 2), vec3d(2, 2, 2)},
+      {vec3d(0, 0, 0), vec3d(1, 1e-9, 0), vec3d(2, 0, 0)},
+      {vec3d(0, 0, 0), vec3d(1e-9, 0, 0), vec3d(0.5e-9, 1e3, 0)},
+      {vec3d(1e7, 1e7, 0), vec3d(1e7 + 1e-3, 1e7, 0), vec3d(1e7, 1e7 + 1e-3, 0)},
+      {vec3d(1e-30, 0, 0), vec3d(0, 1e-30, 0), vec3d(0, 0, 1e-30)},
+      {vec3d(1e30, 0, 0), vec3d(0, 1e30, 0), vec3d(0, 0, 1e30)}};
+  for (int round = 0; round < 2000; ++round) {
+    std::array<vec3d, 4> a, b, c, x;
+    std::array<double, 4> r;
+    for (int k = 0; k < 4; ++k) {
+      if (rng() % 3 == 0) {
+        const auto& t = special[rng() % special.size()];
+        a[k] = t[0], b[k] = t[1], c[k] = t[2];
+      } else {
+        a[k] = vec3d(u(rng), u(rng), u(rng));
+        b[k] = vec3d(u(rng), u(rng), u(rng));
+        c[k] = vec3d(u(rng), u(rng), u(rng));
+      }
+    }
+    detail::pop_triangle_circle4(a.data(), b.data(), c.data(), x.data(), r.data());
+    for (std::size_t k = 0; k < 4; ++k) {
+      vec3d x1;
+      double r1;
+      detail::pop_triangle_circle(a[k], b[k], c[k], x1, r1);
+      ASSERT_EQ(x1, x[k]) << "round " << round << " lane " << k;
+      ASSERT_EQ(r1, r[k]) << "round " << round << " lane " << k;
+    }
+  }
+}
+
 // ---- §3.1 inner-node rules ------------------------------------------------------------------
 
 // Every rule must bound all children; the exact sphere is the smallest, so the paper's is never
