@@ -428,8 +428,22 @@ class edge_sorter {
     for (std::size_t v = lo; v < hi; ++v) {
       entry* b = e_.data() + offset_[v];
       entry* end = e_.data() + offset_[v + 1];
-      if (end - b <= 32) {  // a vertex's few edges: insertion sort (std::sort's call and setup
-                            // cost more than the sorting)
+      const auto n = static_cast<std::size_t>(end - b);
+      if (n <= rank_sort_max) {
+        // Most buckets (a vertex is the smaller end of about three edges: six entries): each
+        // entry's place is the number of smaller keys (keys are unique: slots are), counted
+        // without a branch; the insertion sort's branches were coin tosses.
+        std::array<std::uint64_t, rank_sort_max> k;
+        std::array<entry, rank_sort_max> sorted;
+        for (std::size_t i = 0; i < n; ++i) k[i] = key(b[i]);
+        for (std::size_t i = 0; i < n; ++i) {
+          std::size_t place = 0;
+          for (std::size_t j = 0; j < n; ++j) place += k[j] < k[i] ? 1 : 0;
+          sorted[place] = b[i];
+        }
+        std::copy_n(sorted.begin(), n, b);
+      } else if (n <= 32) {  // a vertex's few edges: insertion sort (std::sort's call and setup
+                             // cost more than the sorting)
         for (entry* x = b + 1; x < end; ++x) {
           const entry t = *x;
           const std::uint64_t kt = key(t);
@@ -481,6 +495,7 @@ class edge_sorter {
   struct entry {
     std::uint32_t other, slot, third;
   };
+  static constexpr std::size_t rank_sort_max = 16;
 
   bool bad(std::size_t f) const {
     const auto& F = faces_[f];
