@@ -167,9 +167,11 @@ float cone_level(unsigned k) {
       std::numbers::pi_v<float>};
   return levels[k];
 }
+/// The smallest level k with angle ≤ level(k), or 3: the levels grow, so k is the number of
+/// levels below the angle, counted without a branch.
 unsigned cone_code(float angle) {
   unsigned k = 0;
-  while (k < 3 && cone_level(k) < angle) ++k;
+  for (unsigned i = 0; i < 3; ++i) k += cone_level(i) < angle ? 1u : 0u;
   return k;
 }
 /// Quantised cones from cosines, without acos. The stored cone of a node is the smallest level
@@ -1368,17 +1370,20 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         cs[j] = clamped_cos(nd.normal, d.nodes[nd.first + j].normal);
     }
     if (qn) {  // the level straight from the cosines (cone_table())
+      // The thresholds fall as the level grows (face[k]; child[k][c] is 2 while the level is
+      // below the child's, then falls), so the levels that fail come first: the smallest level
+      // that holds is the number that fail, counted without a branch on the cosines.
       const auto& table = cone_table();
       unsigned k = 0;
       if (nd.leaf) {
-        while (k < 3 && min_cos < table.face[k]) ++k;
+        for (unsigned level = 0; level < 3; ++level) k += min_cos < table.face[level] ? 1u : 0u;
       } else {
         std::array<unsigned, 4> cc;
         for (std::size_t j = 0; j < nc; ++j) cc[j] = cone_code(d.nodes[nd.first + j].cone_angle);
-        for (; k < 3; ++k) {
+        for (unsigned level = 0; level < 3; ++level) {
           bool holds = true;
-          for (std::size_t j = 0; j < nc; ++j) holds = holds && cs[j] >= table.child[k][cc[j]];
-          if (holds) break;
+          for (std::size_t j = 0; j < nc; ++j) holds = holds & (cs[j] >= table.child[level][cc[j]]);
+          k += holds ? 0u : 1u;
         }
       }
       nd.cone_angle = cone_level(k);
