@@ -134,29 +134,31 @@ std::uint16_t quantise_sphere(const vec3f& pc, float pr, const vec3f& c, float r
   // The smallest radius level j with pr·level(j) ≥ need: levels grow with j, so the two walks
   // below end there from any first guess (13·need/pr, by a multiplication instead of a division).
   const double guess_scale = 13.0 / static_cast<double>(pr);
-  // Try m: bit k of m picks axis k's candidate. The code, or none (0xFFFF: no field is 15).
+  // Try m: bit k of m picks axis k's candidate. The code, or `none_held` (no code has 15 in a
+  // field).
+  constexpr std::uint16_t none_held = 0xFFFF;
   const auto attempt = [&](unsigned m) -> std::uint16_t {
     const unsigned sx = m & 1u, sy = (m >> 1) & 1u, sz = (m >> 2) & 1u;
     const double need =
         std::sqrt(to_child[0][sx] + to_child[1][sy] + to_child[2][sz]) + static_cast<double>(r);
     const double room =
         static_cast<double>(pr) - std::sqrt(to_parent[0][sx] + to_parent[1][sy] + to_parent[2][sz]);
-    if (need > room) return 0xFFFF;  // no level is both ≥ need and ≤ room
+    if (need > room) return none_held;  // no level is both ≥ need and ≤ room
     const double g = need * guess_scale;
     unsigned j = g >= 12.0 ? 12u : g > 0.0 ? static_cast<unsigned>(g) : 0u;
     while (j < 12 && static_cast<double>(pr * radius_level(j)) < need) ++j;
     while (j > 0 && static_cast<double>(pr * radius_level(j - 1)) >= need) --j;
     const double rq = static_cast<double>(pr * radius_level(j));
-    if (rq < need || rq > room) return 0xFFFF;
+    if (rq < need || rq > room) return none_held;
     return static_cast<std::uint16_t>(cand[0][sx] | cand[1][sy] << 4 | cand[2][sz] << 8 | j << 12);
   };
   // The nearest code first, before the other candidates are set up: it holds 82 % of the
   // Buddha's nodes.
   distances(0);
-  if (const std::uint16_t code = attempt(0); code != 0xFFFF) return code;
+  if (const std::uint16_t code = attempt(0); code != none_held) return code;
   distances(1);
   for (unsigned m = 1; m < 8; ++m)
-    if (const std::uint16_t code = attempt(m); code != 0xFFFF) return code;
+    if (const std::uint16_t code = attempt(m); code != none_held) return code;
   return sphere_code_parent;
 }
 /// 2-bit normal cones (QSplat): half-angles asin(1/16), asin(4/16), asin(9/16), π (no culling);
