@@ -40,6 +40,21 @@ void BM_Encode(benchmark::State& state) {
 }
 BENCHMARK(BM_Encode)->Arg(9)->Arg(12)->Arg(13)->Arg(16)->Arg(24);
 
+// The same normals through encode(span, span), which loads the candidate cells of a run of
+// normals before searching any (same codes).
+void BM_EncodeMany(benchmark::State& state) {
+  const pbr_lod::normal_quantizer nq(static_cast<int>(state.range(0)));
+  const auto normals = random_normals(1 << 16);
+  std::vector<std::uint32_t> codes(normals.size());
+  for (auto _ : state) {
+    nq.encode(normals, codes);
+    benchmark::DoNotOptimize(codes.data());
+    benchmark::ClobberMemory();
+  }
+  rate(state, normals.size(), "normals/s");
+}
+BENCHMARK(BM_EncodeMany)->Arg(9)->Arg(12)->Arg(13)->Arg(16)->Arg(24);
+
 // Each encode's input depends on the previous code (a perturbation of 1e-30 that changes no
 // code): the latency a builder sees when an encode's result feeds the next step, as in a
 // bottom-up pass (BM_Encode measures throughput, where independent encodes overlap).

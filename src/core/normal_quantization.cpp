@@ -273,7 +273,24 @@ void normal_quantizer::throw_invalid_code(std::uint32_t code) const {
   if (frac > 1 - margin && j0 < row) test(j0 + 1);
 }
 
-std::uint32_t normal_quantizer::encode(const vec3f& n) const {
+// The candidate-grid cell of n: its four candidates, or no_cell (no grid, or n is zero or not
+// finite). Split from encode_in() so that encode() over many normals can load the cells of a
+// run of them first: a cell is a likely cache miss (q = 16: 512 kB of cells).
+[[gnu::always_inline]] inline std::uint64_t normal_quantizer::cell_of(const vec3f& n) const {
+  const double x = n.x(), y = n.y(), z = n.z();
+  const double len2 = x * x + y * y + z * z;
+  if (cells_.empty() || !(len2 > 0) || !std::isfinite(len2)) return no_cell;
+  // The cell of the octahedral coordinates (fx, fy)/(fx + fy + fz) ∈ [0, 1] (the sum is at least
+  // the largest |component| of a nonzero float vector, so the scale is finite).
+  const double fx = std::abs(x), fy = std::abs(y), fz = std::abs(z);
+  const double scale = double(grid_) / (fx + fy + fz);
+  const auto iu = std::min(static_cast<std::uint32_t>(fx * scale), grid_ - 1);
+  const auto iv = std::min(static_cast<std::uint32_t>(fy * scale), grid_ - 1);
+  return cells_[std::size_t(iu) * grid_ + iv];
+}
+
+[[gnu::always_inline]] inline std::uint32_t normal_quantizer::encode_in(const vec3f& n,
+                                                                        std::uint64_t cell) const {
   const double x = n.x(), y = n.y(), z = n.z();
   const double len2 = x * x + y * y + z * z;
   if (!(len2 > 0) || !std::isfinite(len2)) return 0;  // NaN, Inf or zero: as +z
@@ -284,25 +301,17 @@ std::uint32_t normal_quantizer::encode(const vec3f& n) const {
   // a direction of another octant into this one never moves it away from n).
   const double fx = std::abs(x), fy = std::abs(y), fz = std::abs(z);
   const double ax = fx * inv, ay = fy * inv, az = fz * inv;
-  if (!cells_.empty()) {
-    // The cell of the octahedral coordinates (fx, fy)/(fx + fy + fz) ∈ [0, 1] (the sum is at
-    // least the largest |component| of a nonzero float vector, so the scale is finite).
-    const double scale = double(grid_) / (fx + fy + fz);
-    const auto iu = std::min(static_cast<std::uint32_t>(fx * scale), grid_ - 1);
-    const auto iv = std::min(static_cast<std::uint32_t>(fy * scale), grid_ - 1);
-    const std::uint64_t cell = cells_[std::size_t(iu) * grid_ + iv];
-    if ((cell & 0xFFFF) != 0xFFFF) {
-      double best_dot = -std::numeric_limits<double>::infinity();
-      std::uint32_t best = 0;
-      for (int k = 0; k < 4; ++k) {  // ascending index, repeats at the end: ties keep the first
-        const auto t = static_cast<std::uint32_t>(cell >> (16 * k)) & 0xFFFFu;
-        const vec3f& d = dirs_[t];
-        const double dot = ax * double(d.x()) + ay * double(d.y()) + az * double(d.z());
-        best = dot > best_dot ? t : best;
-        best_dot = std::max(dot, best_dot);
-      }
-      return (octant << (bits_ - 3)) | best;
+  if ((cell & 0xFFFF) != 0xFFFF) {
+    double best_dot = -std::numeric_limits<double>::infinity();
+    std::uint32_t best = 0;
+    for (int k = 0; k < 4; ++k) {  // ascending index, repeats at the end: ties keep the first
+      const auto t = static_cast<std::uint32_t>(cell >> (16 * k)) & 0xFFFFu;
+      const vec3f& d = dirs_[t];
+      const double dot = ax * double(d.x()) + ay * double(d.y()) + az * double(d.z());
+      best = dot > best_dot ? t : best;
+      best_dot = std::max(dot, best_dot);
     }
+    return (octant << (bits_ - 3)) | best;
   }
   const double rho2 = ax * ax + ay * ay;
   const double sin_theta = std::sqrt(rho2);
@@ -349,6 +358,23 @@ std::uint32_t normal_quantizer::encode(const vec3f& n) const {
     search_row(r, ax, ay, az, phi_cells, best_dot, best);
   }
   return (octant << (bits_ - 3)) | best;
+}
+
+std::uint32_t normal_quantizer::encode(const vec3f& n) const {
+  return encode_in(n, cell_of(n));
+}
+
+void normal_quantizer::encode(std::span<const vec3f> in, std::span<std::uint32_t> out) const {
+  if (in.size() != out.size())
+    throw InvalidArgument("normal_quantizer::encode: " + std::to_string(in.size()) +
+                          " normals but room for " + std::to_string(out.size()) + " codes");
+  constexpr std::size_t run = 32;
+  std::array<std::uint64_t, run> cell;
+  for (std::size_t lo = 0; lo < in.size(); lo += run) {
+    const std::size_t m = std::min(run, in.size() - lo);
+    for (std::size_t k = 0; k < m; ++k) cell[k] = cell_of(in[lo + k]);
+    for (std::size_t k = 0; k < m; ++k) out[lo + k] = encode_in(in[lo + k], cell[k]);
+  }
 }
 
 }  // namespace pbr_lod

@@ -9,6 +9,7 @@
 #include <memory>
 #include <numbers>
 #include <random>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -335,6 +336,35 @@ error_stats measure(const normal_quantizer& nq, const std::vector<vec3f>& normal
   }
   s.mean /= double(normals.size());
   return s;
+}
+
+// encode(span, span) loads the cells of a run of normals before it searches any: the codes must
+// be encode()'s, one by one, for every table (with a candidate grid, q ≤ 16, and without), for
+// lengths that end inside a run, and for the inputs that skip the grid (zero, NaN, ±Inf) mixed
+// in among the others.
+TEST(NormalQuantizer, EncodeManyGivesEncodesCodes) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  auto normals = random_normals(1000, 11);
+  for (std::size_t i = 0; i < normals.size(); i += 7) normals[i] *= 1e-30f;  // tiny, not unit
+  for (std::size_t i = 3; i < normals.size(); i += 97) normals[i] = vec3f::Zero();
+  for (std::size_t i = 5; i < normals.size(); i += 89) normals[i] = vec3f(nan, 0, 1);
+  for (std::size_t i = 9; i < normals.size(); i += 83) normals[i] = vec3f(-inf, 0, 0);
+  normals[1] = vec3f(-0.0f, -0.0f, -1);
+  normals[2] = vec3f(1e-45f, 0, 0);
+  for (const int q : {6, 12, 16, 17, 20}) {
+    const normal_quantizer nq(q);
+    for (const std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{31}, std::size_t{32},
+                                std::size_t{33}, normals.size()}) {
+      std::vector<std::uint32_t> codes(n, 0xDEADBEEF);
+      nq.encode(std::span(normals.data(), n), codes);
+      for (std::size_t i = 0; i < n; ++i)
+        ASSERT_EQ(codes[i], nq.encode(normals[i])) << "q = " << q << ", run of " << n << ", normal "
+                                                   << i << " = " << normals[i].transpose();
+    }
+    std::vector<std::uint32_t> small(3);
+    EXPECT_THROW(nq.encode(std::span(normals.data(), 4), small), InvalidArgument) << "q = " << q;
+  }
 }
 
 // Worst and mean angular error over 10⁶ random unit normals. The worst must stay under the
