@@ -908,9 +908,19 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       }
       d.vertex_q[i] = q;
       d.positions[i] = dequantise(q, d.q_min, d.q_step);
-      d.vertex_normal_codes[i] =
-          quant.encode(estimate ? unit_or_zero(normal_sum[i]) : mesh.vertices.normals[i]);
-      d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
+    }
+    // The normals in runs (the encoder then overlaps its table loads).
+    constexpr std::size_t run = 256;
+    std::array<vec3f, run> unit;
+    for (std::size_t a = lo; a < hi; a += run) {
+      const std::size_t m = std::min(run, hi - a);
+      std::span<const vec3f> in(mesh.vertices.normals.data() + a, estimate ? 0 : m);
+      if (estimate) {
+        for (std::size_t k = 0; k < m; ++k) unit[k] = unit_or_zero(normal_sum[a + k]);
+        in = std::span<const vec3f>(unit.data(), m);
+      }
+      quant.encode(in, std::span(d.vertex_normal_codes.data() + a, m));
+      for (std::size_t i = a; i < a + m; ++i) d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
     }
   };
   // One piece of either kind, if one is ready: true when it did one.
@@ -1206,7 +1216,6 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // (bench_core: BM_Encode, independent encodes, against BM_EncodeLatency, a chain of them).
   constexpr std::size_t block = 32;
   struct pending {
-    vec3f nsum;
     std::array<vec3f, 4> fn;  // a leaf's face normals; fdeg bit j: face j is degenerate
     std::uint8_t fdeg;
   };
@@ -1277,7 +1286,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     const double far2 = std::max(std::max(far4[0], far4[1]), std::max(far4[2], far4[3]));
     nd.radius = round_up(std::max(std::isfinite(r) ? r : 0.0, std::sqrt(far2)));
   };
-  const auto geometry = [&](std::size_t i, counts& acc, pending& out) {
+  const auto geometry = [&](std::size_t i, counts& acc, pending& out, vec3f& nsum_out) {
     std::array<vec3d, 12> cc, corner;
     std::array<double, 12> cr;
     auto& fn = out.fn;
@@ -1294,7 +1303,6 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       const std::size_t nt = nd.count;
       std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
       const std::uint32_t* members = gfaces.data() + gstart[leaf_group[i]];
-      for (std::size_t j = 0; j < nt; ++j) tri[j] = mesh.faces[members[j]];
       if (nt == 4) {
         leaf4(tri, x, r, nsum, csum, members, acc, out, nd);
       } else {
@@ -1350,7 +1358,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
         acc.contained += paper_sphere(cc.data(), cr.data(), m, x, r) ? 1 : 0;
       finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
     }
-    out.nsum = nsum.cast<float>();
+    nsum_out = nsum.cast<float>();
     if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
   };
   // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
@@ -1422,14 +1430,23 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     }
     nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
   };
+  const auto gather = [&](std::size_t i) {
+    const auto& nd = d.nodes[i];
+    if (!nd.leaf) return;
+    std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
+    const std::uint32_t* members = gfaces.data() + gstart[leaf_group[i]];
+    for (std::size_t j = 0; j < nd.count; ++j) tri[j] = mesh.faces[members[j]];
+  };
   // Nodes [a, b) of one level (their children are done).
   const auto bottom_up = [&](std::size_t a, std::size_t b, counts& acc) {
     std::array<pending, block> p;
+    std::array<vec3f, block> nsum;
     std::array<std::uint32_t, block> code;
     for (std::size_t lo = a; lo < b; lo += block) {
       const std::size_t n = std::min(block, b - lo);
-      for (std::size_t k = 0; k < n; ++k) geometry(lo + k, acc, p[k]);
-      for (std::size_t k = 0; k < n; ++k) code[k] = quant.encode(p[k].nsum);
+      for (std::size_t k = 0; k < n; ++k) gather(lo + k);
+      for (std::size_t k = 0; k < n; ++k) geometry(lo + k, acc, p[k], nsum[k]);
+      quant.encode(std::span(nsum.data(), n), std::span(code.data(), n));
       for (std::size_t k = 0; k < n; ++k) orient(lo + k, code[k], p[k]);
     }
   };
