@@ -1155,8 +1155,10 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   d.faces.swap(nbr);
   std::vector<face_slots>().swap(nbr);
   if (d.faces.size() != nf) d.faces.resize(nf);
-  scratch_vector<std::uint32_t> leaf_group;
-  resize_fresh(leaf_group, nn, threads);
+  // A leaf's group's members start at gfaces[leaf_members[i]] (one dependent load fewer than
+  // through the group's index in the bottom-up pass, where each is a likely cache miss).
+  scratch_vector<std::uint32_t> leaf_members;
+  resize_fresh(leaf_members, nn, threads);
   {
     const std::size_t blocks = std::max<std::size_t>(1, std::min<std::size_t>(threads, nn / 4096));
     std::vector<std::uint32_t> block_faces(blocks + 1, 0);
@@ -1180,13 +1182,13 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
           nd.depth = tn[i].depth;
           if (tn[i].count == 0) {
             const std::uint32_t g = group_of(i);
-            leaf_group[i] = g;
+            leaf_members[i] = gstart[g];
             nd.leaf = 1;
             nd.first = next;
             nd.count = static_cast<std::uint8_t>(gstart[g + 1] - gstart[g]);
             next += nd.count;  // the faces themselves are copied by the bottom-up pass
           } else {
-            leaf_group[i] = none;
+            leaf_members[i] = none;
             nd.first = tn[i].first;
             nd.count = static_cast<std::uint8_t>(tn[i].count);
           }
@@ -1302,7 +1304,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       // The leaf's triangles, its group's faces, are at d.faces[first, first + count) (gather()).
       const std::size_t nt = nd.count;
       std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
-      const std::uint32_t* members = gfaces.data() + gstart[leaf_group[i]];
+      const std::uint32_t* members = gfaces.data() + leaf_members[i];
       if (nt == 4) {
         leaf4(tri, x, r, nsum, csum, members, acc, out, nd);
       } else {
@@ -1438,7 +1440,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     const auto& nd = d.nodes[i];
     if (!nd.leaf) return;
     std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
-    const std::uint32_t* members = gfaces.data() + gstart[leaf_group[i]];
+    const std::uint32_t* members = gfaces.data() + leaf_members[i];
     for (std::size_t j = 0; j < nd.count; ++j) tri[j] = mesh.faces[members[j]];
   };
   // Nodes [a, b) of one level (their children are done).
