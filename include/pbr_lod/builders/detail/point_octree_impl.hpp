@@ -13,6 +13,7 @@
 #include <memory>
 #include <numbers>
 #include <numeric>
+#include <span>
 #include <thread>
 #include <utility>
 
@@ -644,16 +645,31 @@ void quantize_samples(point_set<A>& pts, const normal_quantizer& q,
                       std::vector<typename point_octree<A>::orientation_code>& codes,
                       unsigned threads) {
   resize_fresh(codes, pts.size(), threads);
+  // In runs, each run's normals and axes through encode(span, span), which overlaps the
+  // encoder's table loads (the same codes as one encode() each).
+  constexpr std::size_t run = 128;
   parallel_for(pts.size(), threads, [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t i = lo; i < hi; ++i) {
-      const float a = pts.axis_u[i].norm(), b = pts.axis_v[i].norm();
-      vec3f e1 = a > 0 ? vec3f(pts.axis_u[i] / a) : any_orthogonal(pts.normals[i]);
-      codes[i] = {q.encode(pts.normals[i]), q.encode(e1), a, b};
-      vec3f n, e2;
-      axes_from_codes(q, codes[i].normal, codes[i].axis, n, e1, e2);
-      pts.normals[i] = n;
-      pts.axis_u[i] = e1 * a;
-      pts.axis_v[i] = e2 * b;
+    std::array<vec3f, run> major;
+    std::array<std::uint32_t, run> normal_code, axis_code;
+    for (std::size_t r = lo; r < hi; r += run) {
+      const std::size_t m = std::min(run, hi - r);
+      for (std::size_t k = 0; k < m; ++k) {
+        const std::size_t i = r + k;
+        const float a = pts.axis_u[i].norm();
+        major[k] = a > 0 ? vec3f(pts.axis_u[i] / a) : any_orthogonal(pts.normals[i]);
+      }
+      q.encode(std::span<const vec3f>(pts.normals.data() + r, m), std::span(normal_code.data(), m));
+      q.encode(std::span<const vec3f>(major.data(), m), std::span(axis_code.data(), m));
+      for (std::size_t k = 0; k < m; ++k) {
+        const std::size_t i = r + k;
+        const float a = pts.axis_u[i].norm(), b = pts.axis_v[i].norm();
+        codes[i] = {normal_code[k], axis_code[k], a, b};
+        vec3f n, e1, e2;
+        axes_from_codes(q, codes[i].normal, codes[i].axis, n, e1, e2);
+        pts.normals[i] = n;
+        pts.axis_u[i] = e1 * a;
+        pts.axis_v[i] = e2 * b;
+      }
     }
   });
 }
