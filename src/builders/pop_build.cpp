@@ -914,10 +914,12 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     std::array<vec3f, run> unit;
     for (std::size_t a = lo; a < hi; a += run) {
       const std::size_t m = std::min(run, hi - a);
-      std::span<const vec3f> in(mesh.vertices.normals.data() + a, estimate ? 0 : m);
-      if (estimate) {
+      std::span<const vec3f> in;
+      if (estimate) {  // the mesh has no normals (no offset into its empty array)
         for (std::size_t k = 0; k < m; ++k) unit[k] = unit_or_zero(normal_sum[a + k]);
         in = std::span<const vec3f>(unit.data(), m);
+      } else {
+        in = std::span<const vec3f>(mesh.vertices.normals.data() + a, m);
       }
       quant.encode(in, std::span(d.vertex_normal_codes.data() + a, m));
       for (std::size_t i = a; i < a + m; ++i) d.normals[i] = quant.decode(d.vertex_normal_codes[i]);

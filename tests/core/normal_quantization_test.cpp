@@ -342,7 +342,7 @@ error_stats measure(const normal_quantizer& nq, const std::vector<vec3f>& normal
 // be encode()'s, one by one, for every table (with a candidate grid, q ≤ 16, and without), for
 // lengths that end inside a run, and for the inputs that skip the grid (zero, NaN, ±Inf) mixed
 // in among the others.
-TEST(NormalQuantizer, EncodeManyGivesEncodesCodes) {
+TEST(NormalQuantizer, EncodeOverASpanGivesTheSameCodes) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
   auto normals = random_normals(1000, 11);

@@ -650,19 +650,21 @@ void quantize_samples(point_set<A>& pts, const normal_quantizer& q,
   constexpr std::size_t run = 128;
   parallel_for(pts.size(), threads, [&](std::size_t lo, std::size_t hi) {
     std::array<vec3f, run> major;
+    std::array<float, run> major_length;
     std::array<std::uint32_t, run> normal_code, axis_code;
     for (std::size_t r = lo; r < hi; r += run) {
       const std::size_t m = std::min(run, hi - r);
       for (std::size_t k = 0; k < m; ++k) {
         const std::size_t i = r + k;
         const float a = pts.axis_u[i].norm();
+        major_length[k] = a;
         major[k] = a > 0 ? vec3f(pts.axis_u[i] / a) : any_orthogonal(pts.normals[i]);
       }
       q.encode(std::span<const vec3f>(pts.normals.data() + r, m), std::span(normal_code.data(), m));
       q.encode(std::span<const vec3f>(major.data(), m), std::span(axis_code.data(), m));
       for (std::size_t k = 0; k < m; ++k) {
         const std::size_t i = r + k;
-        const float a = pts.axis_u[i].norm(), b = pts.axis_v[i].norm();
+        const float a = major_length[k], b = pts.axis_v[i].norm();
         codes[i] = {normal_code[k], axis_code[k], a, b};
         vec3f n, e1, e2;
         axes_from_codes(q, codes[i].normal, codes[i].axis, n, e1, e2);
