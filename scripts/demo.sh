@@ -6,8 +6,14 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 bash scripts/install-deps.sh
 jobs="${JOBS:-$(nproc)}"
-cmake -S . -B build/release -DCMAKE_BUILD_TYPE=Release -DPBR_LOD_BUILD_TESTS=OFF \
-  -DPBR_LOD_BUILD_BENCHMARKS=OFF
+# The same build tree and generator as test.sh (Ninja; ccache when installed), so running one
+# script after the other reuses the build.
+launcher=()
+if [ "${PBR_LOD_CCACHE:-1}" != 0 ] && command -v ccache > /dev/null; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  export CCACHE_BASEDIR="$root" CCACHE_NOHASHDIR=1
+fi
+cmake -S . -B build/release -G Ninja -DCMAKE_BUILD_TYPE=Release "${launcher[@]}"
 cmake --build build/release -j "$jobs" --target pbrlod
 mkdir -p out
 ./build/release/examples/pbrlod demo -o out/demo

@@ -3,7 +3,7 @@
 # calls apt-get when a package is missing. Uses sudo when not run as root.
 set -euo pipefail
 packages=(
-  build-essential cmake pkg-config git
+  build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcgal-dev libflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
 )

@@ -2,6 +2,8 @@
 
 #include <random>
 #include <set>
+#include <utility>
+#include <vector>
 
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -177,6 +179,38 @@ TEST(Sinks, BufferSinkReplays) {
   counting_sink<tree_n::attrs> c;
   buf.replay(c);
   EXPECT_EQ(c.points, st.points);
+}
+
+// Replay sends the primitives in the order they were received, interleaved kinds included: the
+// rasteriser keeps the first of two fragments at equal depth, so a replay that grouped points
+// before triangles would change which one wins. Primitives put into the arrays directly (no
+// recorded order) still replay, after the recorded ones.
+TEST(Sinks, BufferSinkReplaysInterleavedKindsInOrder) {
+  using seq = std::vector<std::pair<char, int>>;  // (kind, id) in the order received
+  struct order_sink {
+    seq got;
+    void point(const point_prim<positions_only>& p) { got.emplace_back('p', int(p.size_px)); }
+    void splat(const splat_prim<positions_only>& s) { got.emplace_back('s', int(s.centre.x())); }
+    void triangle(const triangle_prim<positions_only>& t) {
+      got.emplace_back('t', int(t.p[0].x()));
+    }
+  };
+  buffer_sink<positions_only> buf;
+  const vec3f o = vec3f::Zero();
+  const auto pt = [&](float id) { buf.point({o, id}); };
+  const auto sp = [&](float id) { buf.splat({vec3f(id, 0, 0), o, o}); };
+  const auto tr = [&](float id) { buf.triangle({{vec3f(id, 0, 0), o, o}}); };
+  pt(1), pt(2), tr(3), sp(4), pt(5), tr(6), tr(7), sp(8), pt(9);
+  buf.points.push_back({o, 0});  // no recorded order: replayed last
+  order_sink rec;
+  buf.replay(rec);
+  const seq want{{'p', 1}, {'p', 2}, {'t', 3}, {'s', 4}, {'p', 5},
+                 {'t', 6}, {'t', 7}, {'s', 8}, {'p', 9}, {'p', 0}};
+  EXPECT_EQ(rec.got, want);
+  buf.clear();
+  order_sink empty;
+  buf.replay(empty);
+  EXPECT_TRUE(empty.got.empty());
 }
 
 }  // namespace

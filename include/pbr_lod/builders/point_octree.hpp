@@ -302,3 +302,28 @@ struct point_octree_policy : default_policy {
 }  // namespace pbr_lod
 
 #include "pbr_lod/builders/detail/point_octree_impl.hpp"
+
+namespace pbr_lod {
+// The builder and the file code are compiled once, in src/builders/point_octree_instances.cpp,
+// for every input attribute set a point set can have (any mix of normal, colour, ellipse); a
+// program that builds or loads point-octrees does not compile the builder again in each file.
+#define PBR_LOD_POINT_OCTREE_BUILD(EXTERN, NORMAL, COLOUR, ELLIPSE)                         \
+  EXTERN template point_octree<point_octree_attributes(                                     \
+      attributes{.normal = NORMAL, .colour = COLOUR, .ellipse = ELLIPSE})>                  \
+  build_point_octree<attributes{.normal = NORMAL, .colour = COLOUR, .ellipse = ELLIPSE}>(   \
+      const point_set<attributes{.normal = NORMAL, .colour = COLOUR, .ellipse = ELLIPSE}>&, \
+      const point_octree_options&);
+#define PBR_LOD_POINT_OCTREE_CLASS(EXTERN, COLOUR) \
+  EXTERN template class point_octree<point_octree_attributes(attributes{.colour = COLOUR})>;
+
+PBR_LOD_POINT_OCTREE_CLASS(extern, false)
+PBR_LOD_POINT_OCTREE_CLASS(extern, true)
+PBR_LOD_POINT_OCTREE_BUILD(extern, false, false, false)
+PBR_LOD_POINT_OCTREE_BUILD(extern, true, false, false)
+PBR_LOD_POINT_OCTREE_BUILD(extern, false, true, false)
+PBR_LOD_POINT_OCTREE_BUILD(extern, true, true, false)
+PBR_LOD_POINT_OCTREE_BUILD(extern, false, false, true)
+PBR_LOD_POINT_OCTREE_BUILD(extern, true, false, true)
+PBR_LOD_POINT_OCTREE_BUILD(extern, false, true, true)
+PBR_LOD_POINT_OCTREE_BUILD(extern, true, true, true)
+}  // namespace pbr_lod

@@ -295,40 +295,69 @@ template <effects Allowed, effects Fixed, int I, class F>
   }
 }
 
-template <attributes A, effects E, class DrawFn>
-[[nodiscard]] image render_with(const view& v, const render_options& opt, DrawFn& draw) {
+template <attributes A, effects E>
+[[nodiscard]] image render_prims(const view& v, const render_options& opt,
+                                 const buffer_sink<A>& prims) {
   if constexpr (E.shadows) {
-    // Buffer once, so the light pass and the camera pass see the same primitives and the
-    // caller's draw runs once.
-    buffer_sink<A> prims;
-    draw(prims);
     const shadow_map sm = build_shadow_map(prims, v, opt);
     rasterizer<A, E> r(v, opt, &sm);
     prims.replay(r);
     return r.finish();
   } else {
     rasterizer<A, E> r(v, opt);
-    draw(r);
+    prims.replay(r);
     return r.finish();
   }
 }
 
 }  // namespace detail
 
-/// Renders one frame: `draw(sink)` emits the frame's primitives into the sink it is given
-/// (a rasterizer<A, E>&, or with shadows a buffer_sink<A>&; write it as a generic lambda
-/// `[&](auto& sink) { ... }`). It is called exactly once.
+/// Renders one frame of buffered primitives (in the order they were buffered).
 ///
 /// `Compiled` is the set of effects compiled in. The run-time request `opt.fx` is intersected
 /// with it and with what A supports (applicable_effects), then dispatched once to the
 /// rasterizer instantiated for exactly that set. Hence rendering with an effect switched off at
 /// run time gives the same bytes as rendering with it compiled out.
-template <attributes A, effects Compiled = all_effects, class DrawFn>
-[[nodiscard]] image render(const view& v, const render_options& opt, DrawFn&& draw) {
+///
+/// For the attribute sets of point sets (any mix of normal, colour, ellipse) and the full
+/// effect set this is compiled once in the library (extern templates below): a program that
+/// renders does not instantiate the rasteriser's effect combinations again in each file.
+template <attributes A, effects Compiled = all_effects>
+[[nodiscard]] image render_buffered(const view& v, const render_options& opt,
+                                    const buffer_sink<A>& prims) {
   constexpr effects allowed = applicable_effects(Compiled, A);
   const effects run = opt.fx & allowed;
-  auto dispatch = [&]<effects E>() { return detail::render_with<A, E>(v, opt, draw); };
+  auto dispatch = [&]<effects E>() { return detail::render_prims<A, E>(v, opt, prims); };
   return detail::dispatch_effects<allowed, no_effects, 0>(run, dispatch);
 }
+
+/// Renders one frame: `draw(sink)` emits the frame's primitives into the buffer_sink<A>& it is
+/// given (write it as a generic lambda `[&](auto& sink) { ... }`); it is called exactly once.
+/// The primitives are then drawn by render_buffered<A, Compiled>.
+///
+/// Why a buffer and not the rasteriser itself as the sink: shadows need the frame's primitives
+/// twice anyway, and with one sink type the caller's traversal is compiled once, not once per
+/// effect combination (32 of them), which is what made every file that renders slow to build.
+template <attributes A, effects Compiled = all_effects, class DrawFn>
+[[nodiscard]] image render(const view& v, const render_options& opt, DrawFn&& draw) {
+  buffer_sink<A> prims;
+  draw(prims);
+  return render_buffered<A, Compiled>(v, opt, prims);
+}
+
+// Compiled once, in src/raster/render_instances_*.cpp.
+#define PBR_LOD_RENDER_BUFFERED(EXTERN, NORMAL, COLOUR, ELLIPSE)                        \
+  EXTERN template image render_buffered<                                                \
+      attributes{.normal = NORMAL, .colour = COLOUR, .ellipse = ELLIPSE}, all_effects>( \
+      const view&, const render_options&,                                               \
+      const buffer_sink<attributes{.normal = NORMAL, .colour = COLOUR, .ellipse = ELLIPSE}>&);
+PBR_LOD_RENDER_BUFFERED(extern, false, false, false)
+PBR_LOD_RENDER_BUFFERED(extern, true, false, false)
+PBR_LOD_RENDER_BUFFERED(extern, false, true, false)
+PBR_LOD_RENDER_BUFFERED(extern, true, true, false)
+PBR_LOD_RENDER_BUFFERED(extern, false, false, true)
+PBR_LOD_RENDER_BUFFERED(extern, true, false, true)
+PBR_LOD_RENDER_BUFFERED(extern, false, true, true)
+PBR_LOD_RENDER_BUFFERED(extern, true, true, true)
 
 }  // namespace pbr_lod

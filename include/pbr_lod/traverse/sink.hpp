@@ -4,6 +4,7 @@
 // (raster/rasterizer.hpp) is one; a host renderer wraps its vertex buffers in another.
 #pragma once
 
+#include <algorithm>
 #include <concepts>
 #include <cstddef>
 #include <vector>
@@ -34,27 +35,75 @@ struct counting_sink {
   [[nodiscard]] std::size_t total() const { return points + splats + triangles; }
 };
 
-/// Collects primitives in arrays a host renderer copies into its vertex buffers.
+/// Collects primitives in arrays a host renderer copies into its vertex buffers, and remembers
+/// the order they came in, so replay() sends exactly the sequence the traversal emitted (a depth
+/// test that keeps the first of two equal depths then gives the same image as drawing directly).
 template <attributes A>
 struct buffer_sink {
   std::vector<point_prim<A>> points;
   std::vector<splat_prim<A>> splats;
   std::vector<triangle_prim<A>> triangles;
-  void point(const point_prim<A>& p) { points.push_back(p); }
-  void splat(const splat_prim<A>& s) { splats.push_back(s); }
-  void triangle(const triangle_prim<A>& t) { triangles.push_back(t); }
+
+  void point(const point_prim<A>& p) {
+    points.push_back(p);
+    note(kind::point);
+  }
+  void splat(const splat_prim<A>& s) {
+    splats.push_back(s);
+    note(kind::splat);
+  }
+  void triangle(const triangle_prim<A>& t) {
+    triangles.push_back(t);
+    note(kind::triangle);
+  }
   void clear() {
     points.clear();
     splats.clear();
     triangles.clear();
+    runs_.clear();
   }
-  /// Replays the buffered primitives into another sink (e.g. the rasteriser).
+  /// Replays the buffered primitives into another sink (e.g. the rasteriser), in the order they
+  /// were received.
   template <Sink<A> S>
   void replay(S& s) const {
-    for (const auto& p : points) s.point(p);
-    for (const auto& q : splats) s.splat(q);
-    for (const auto& t : triangles) s.triangle(t);
+    std::size_t ip = 0, is = 0, it = 0;
+    for (const run& r : runs_) {
+      switch (r.what) {
+        case kind::point:
+          for (const std::size_t e = std::min(ip + r.count, points.size()); ip < e; ++ip)
+            s.point(points[ip]);
+          break;
+        case kind::splat:
+          for (const std::size_t e = std::min(is + r.count, splats.size()); is < e; ++is)
+            s.splat(splats[is]);
+          break;
+        case kind::triangle:
+          for (const std::size_t e = std::min(it + r.count, triangles.size()); it < e; ++it)
+            s.triangle(triangles[it]);
+          break;
+      }
+    }
+    // Primitives a caller put into the arrays directly have no recorded order: kind by kind.
+    for (; ip < points.size(); ++ip) s.point(points[ip]);
+    for (; is < splats.size(); ++is) s.splat(splats[is]);
+    for (; it < triangles.size(); ++it) s.triangle(triangles[it]);
   }
+
+ private:
+  // The order as runs of one kind: a traversal emits long runs (a node's splats, a leaf's
+  // triangles), so this costs a few bytes a frame, not a byte a primitive.
+  enum class kind : unsigned char { point, splat, triangle };
+  struct run {
+    kind what;
+    std::size_t count;
+  };
+  void note(kind k) {
+    if (runs_.empty() || runs_.back().what != k)
+      runs_.push_back({k, 1});
+    else
+      ++runs_.back().count;
+  }
+  std::vector<run> runs_;
 };
 
 static_assert(Sink<counting_sink<positions_only>, positions_only>);

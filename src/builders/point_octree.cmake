@@ -1,0 +1,4 @@
+# Point-octree (Pajarola 2003): header-only builder, compiled once here for every input
+# attribute set (extern templates in builders/point_octree.hpp).
+target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/point_octree_instances_1.cpp
+               ${CMAKE_CURRENT_LIST_DIR}/point_octree_instances_2.cpp)
