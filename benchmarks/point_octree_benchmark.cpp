@@ -107,12 +107,13 @@ void bm_tolerance(benchmark::State& state) {
   const traverse_options o{.tolerance_px = tol,
                            .backface_cull = true,
                            .cull_volume = traverse_options::volume::view_cone};
-  static const image full = render<tree::attrs>(v, ro, [&](auto& s) {
+  static const image full = render_direct<tree::attrs>(v, ro, [&](auto& s) {
     traverse(t, v, {.tolerance_px = 0, .backface_cull = true}, s, point_octree_policy{});
   });
   image img;
   for (auto _ : state) {
-    img = render<tree::attrs>(v, ro, [&](auto& s) { traverse(t, v, o, s, point_octree_policy{}); });
+    img = render_direct<tree::attrs>(v, ro,
+                                     [&](auto& s) { traverse(t, v, o, s, point_octree_policy{}); });
     benchmark::DoNotOptimize(img.colour.data());
   }
   counting_sink<tree::attrs> c;

@@ -191,8 +191,10 @@ void bm_quantised(benchmark::State& state) {
   traverse_stats sq, sf;
   image iq, iff;
   for (auto _ : state) {
-    iq = render<with_normals>(v, ro, [&](auto& s) { sq = traverse(q, v, o, s, pop_policy{}); });
-    iff = render<with_normals>(v, ro, [&](auto& s) { sf = traverse(f, v, o, s, pop_policy{}); });
+    iq = render_direct<with_normals>(v, ro,
+                                     [&](auto& s) { sq = traverse(q, v, o, s, pop_policy{}); });
+    iff = render_direct<with_normals>(v, ro,
+                                      [&](auto& s) { sf = traverse(f, v, o, s, pop_policy{}); });
   }
   state.counters["radius_ratio_mean"] = sum / static_cast<double>(q.nodes().size());
   state.counters["radius_ratio_worst"] = worst;
@@ -249,7 +251,7 @@ void bm_threshold(benchmark::State& state) {
   traverse_stats st;
   image img;
   for (auto _ : state) {
-    img = render<with_normals>(v, ro, [&](auto& s) { st = traverse(t, v, o, s, pol); });
+    img = render_direct<with_normals>(v, ro, [&](auto& s) { st = traverse(t, v, o, s, pol); });
     benchmark::DoNotOptimize(img.colour.data());
   }
   const image_error err = compare_images(refs.at(which), img);

@@ -1,7 +1,9 @@
 // Throughput of the CPU reference rasteriser (raster/rasterizer.hpp): one-pixel points, square
 // splats, small elliptical splats and triangles per second, and the cost of each effect on a
-// fixed scene. Every benchmark renders whole frames through render(), so the figures include
-// the per-frame work (clearing 512² buffers, converting depth) that a user pays.
+// fixed scene. Every benchmark renders whole frames through render_direct() (the rasteriser as
+// the traversal's sink), so the figures include the per-frame work (clearing 512² buffers,
+// converting depth) that a user pays; points_1px/*_buffered go through render(), which buffers
+// the frame first (the difference is what the buffer costs).
 //
 // Scenes: a unit sphere seen from 3 radii (camera::orbit, 512×512, fovy 40°) covers ~190k
 // pixels; primitives are emitted in a spatially coherent order (latitude bands), as a traversal
@@ -59,13 +61,31 @@ void BM_points_1px(benchmark::State& state) {
   render_options opt;
   opt.fx = effects{.colour = A.colour};
   for (auto _ : state) {
-    image img = render<A>(v, opt, [&](auto& sink) {
+    image img = render_direct<A>(v, opt, [&](auto& sink) {
       for (const auto& p : prims) sink.point(p);
     });
     benchmark::DoNotOptimize(img.colour.data());
   }
   set_rate(state, n, "points_per_s");
 }
+template <attributes A>
+void BM_points_1px_buffered(benchmark::State& state) {
+  const std::size_t n = 1'000'000;
+  const std::vector<vec3f> pos = sphere_points(n);
+  std::vector<point_prim<A>> prims(n);
+  for (std::size_t i = 0; i < n; ++i) prims[i] = {pos[i], 1};
+  const view v = bench_view();
+  for (auto _ : state) {
+    image img = render<A>(v, render_options{}, [&](auto& sink) {
+      for (const auto& p : prims) sink.point(p);
+    });
+    benchmark::DoNotOptimize(img.colour.data());
+  }
+  set_rate(state, n, "points_per_s");
+}
+BENCHMARK(BM_points_1px_buffered<positions_only>)
+    ->Name("points_1px/positions_buffered")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_points_1px<positions_only, false>)
     ->Name("points_1px/positions")
     ->Unit(benchmark::kMillisecond);
@@ -86,7 +106,7 @@ void BM_square_splats(benchmark::State& state) {
   for (std::size_t i = 0; i < n; ++i) prims[i] = {pos[i], size};
   const view v = bench_view();
   for (auto _ : state) {
-    image img = render<positions_only>(v, render_options{}, [&](auto& sink) {
+    image img = render_direct<positions_only>(v, render_options{}, [&](auto& sink) {
       for (const auto& p : prims) sink.point(p);
     });
     benchmark::DoNotOptimize(img.colour.data());
@@ -130,7 +150,7 @@ void BM_elliptical_splats(benchmark::State& state) {
   const auto prims = sphere_splats(n, float(state.range(0)), float(state.range(1)));
   const view v = bench_view();
   for (auto _ : state) {
-    image img = render<with_normals>(v, render_options{}, [&](auto& sink) {
+    image img = render_direct<with_normals>(v, render_options{}, [&](auto& sink) {
       for (const auto& s : prims) sink.splat(s);
     });
     benchmark::DoNotOptimize(img.colour.data());
@@ -171,7 +191,7 @@ void BM_triangles(benchmark::State& state) {
   const auto prims = sphere_triangles(int(state.range(0)), 2 * int(state.range(0)));
   const view v = bench_view();
   for (auto _ : state) {
-    image img = render<with_normals>(v, render_options{}, [&](auto& sink) {
+    image img = render_direct<with_normals>(v, render_options{}, [&](auto& sink) {
       for (const auto& t : prims) sink.triangle(t);
     });
     benchmark::DoNotOptimize(img.colour.data());
@@ -245,7 +265,7 @@ void BM_effects(benchmark::State& state, effects fx) {
   opt.fx = fx;
   opt.sun.direction = vec3f(0.3f, 1, 0.2f);
   for (auto _ : state) {
-    image img = render<kFx>(v, opt, scene);
+    image img = render_direct<kFx>(v, opt, scene);
     benchmark::DoNotOptimize(img.colour.data());
   }
   set_rate(state, scene.tris.size() + scene.splats.size() + scene.points.size(),

@@ -310,6 +310,19 @@ template <attributes A, effects E>
   }
 }
 
+template <attributes A, effects E, class DrawFn>
+[[nodiscard]] image render_streamed(const view& v, const render_options& opt, DrawFn& draw) {
+  if constexpr (E.shadows) {
+    buffer_sink<A> prims;  // the light pass and the camera pass see the same primitives
+    draw(prims);
+    return render_prims<A, E>(v, opt, prims);
+  } else {
+    rasterizer<A, E> r(v, opt);
+    draw(r);
+    return r.finish();
+  }
+}
+
 }  // namespace detail
 
 /// Renders one frame of buffered primitives (in the order they were buffered).
@@ -343,6 +356,18 @@ template <attributes A, effects Compiled = all_effects, class DrawFn>
   buffer_sink<A> prims;
   draw(prims);
   return render_buffered<A, Compiled>(v, opt, prims);
+}
+
+/// render() without the buffer: `draw(sink)` writes straight into the rasteriser<A, E>& (with
+/// shadows, a buffer_sink<A>&) it is given. The same image as render(); no copy of the frame,
+/// but the caller's draw is compiled once per effect combination in the calling file. For
+/// measuring the rasteriser itself, and for frames too large to buffer.
+template <attributes A, effects Compiled = all_effects, class DrawFn>
+[[nodiscard]] image render_direct(const view& v, const render_options& opt, DrawFn&& draw) {
+  constexpr effects allowed = applicable_effects(Compiled, A);
+  const effects run = opt.fx & allowed;
+  auto dispatch = [&]<effects E>() { return detail::render_streamed<A, E>(v, opt, draw); };
+  return detail::dispatch_effects<allowed, no_effects, 0>(run, dispatch);
 }
 
 // Compiled once, in src/raster/render_instances_*.cpp.
