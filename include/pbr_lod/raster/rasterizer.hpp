@@ -351,11 +351,30 @@ template <attributes A, effects Compiled = all_effects>
 /// Why a buffer and not the rasteriser itself as the sink: shadows need the frame's primitives
 /// twice anyway, and with one sink type the caller's traversal is compiled once, not once per
 /// effect combination (32 of them), which is what made every file that renders slow to build.
+///
+/// The buffer keeps its capacity from frame to frame on each thread (one per attribute set,
+/// holding up to the largest frame drawn): a fresh buffer per frame paid for growing and
+/// page-faulting it every time, which tripled the cost of a frame of one-pixel points. A draw
+/// that itself calls render() gets a buffer of its own.
 template <attributes A, effects Compiled = all_effects, class DrawFn>
 [[nodiscard]] image render(const view& v, const render_options& opt, DrawFn&& draw) {
-  buffer_sink<A> prims;
-  draw(prims);
-  return render_buffered<A, Compiled>(v, opt, prims);
+  thread_local buffer_sink<A> kept;
+  thread_local bool busy = false;
+  if (busy) {
+    buffer_sink<A> prims;
+    draw(prims);
+    return render_buffered<A, Compiled>(v, opt, prims);
+  }
+  struct release {
+    ~release() {
+      kept.clear();
+      busy = false;
+    }
+  } const guard;
+  busy = true;
+  kept.clear();
+  draw(kept);
+  return render_buffered<A, Compiled>(v, opt, kept);
 }
 
 /// render() without the buffer: `draw(sink)` writes straight into the rasteriser<A, E>& (with
