@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <queue>
 #include <thread>
 #include <vector>
 
@@ -284,10 +285,6 @@ struct builder {
     for (std::size_t g = 0; g < n; ++g) d.positions[g] = local[d.source[g]].cast<float>();
     for (const auto& r : results)
       for (std::size_t k = 0; k < r.own.size(); ++k) d.normals[global[r.own[k]]] = r.normal[k];
-    for (std::size_t g = 0; g < n; ++g) {
-      const std::uint32_t i = d.source[g];
-      if (rep[i] != i) d.normals[g] = d.normals[global[rep[i]]];
-    }
     // Levels.
     d.levels.assign(leaf_nodes.size() * levels, {});
     d.triangles.clear();
@@ -347,6 +344,79 @@ struct builder {
         }
         L.mean_umbrella = with ? static_cast<float>(sum / static_cast<double>(with)) : 0.0f;
       }
+    }
+    orient(d, levels);
+    for (std::size_t g = 0; g < n; ++g) {
+      const std::uint32_t i = d.source[g];
+      if (rep[i] != i) d.normals[g] = d.normals[global[rep[i]]];
+    }
+  }
+
+  /// The pole vector gives a normal's line, not its side (the farthest Voronoi vertex may be
+  /// inside or outside). Sides are made consistent: with the input's normals when it has them,
+  /// else by Hoppe et al.'s propagation (1992) over the level-0 umbrella edges, most parallel
+  /// neighbours first, each connected part seeded by its sample farthest from the centre with
+  /// the normal pointing away from it. Then each triangle is wound counter-clockwise about its
+  /// vertices' normals (the rasteriser shades a triangle seen from its back as such).
+  void orient(pmr_data& d, std::uint32_t levels) const {
+    const std::size_t n = d.positions.size();
+    if (n >= std::numeric_limits<std::uint32_t>::max()) return;  // validated; bounds n for GCC
+    if (!cloud.normals.empty()) {
+      for (std::size_t g = 0; g < n; ++g)
+        if (d.normals[g].dot(cloud.normals[d.source[g]]) < 0) d.normals[g] = -d.normals[g];
+    } else {
+      std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+      for (std::size_t l = 0; l < d.leaf_list.size(); ++l) {
+        const pmr_level& L = d.levels[l * levels];
+        for (std::uint32_t t = L.first_tri; t < L.first_tri + L.tris; ++t) {
+          const auto& T = d.triangles[t];
+          for (int k = 0; k < 3; ++k) {
+            edges.emplace_back(T[k], T[(k + 1) % 3]);
+            edges.emplace_back(T[(k + 1) % 3], T[k]);
+          }
+        }
+      }
+      std::sort(edges.begin(), edges.end());
+      edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+      std::vector<std::uint32_t> start(n + 1, 0);
+      for (const auto& e : edges) ++start[e.first + 1];
+      for (std::size_t g = 0; g < n; ++g) start[g + 1] += start[g];
+      std::vector<std::uint32_t> seeds(n);
+      std::iota(seeds.begin(), seeds.end(), 0u);
+      std::vector<float> dist(n);
+      for (std::size_t g = 0; g < n; ++g) dist[g] = d.positions[g].squaredNorm();
+      std::sort(seeds.begin(), seeds.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return dist[a] != dist[b] ? dist[a] > dist[b] : a < b;
+      });
+      std::vector<unsigned char> done(n, 0);
+      using item =
+          std::pair<float, std::pair<std::uint32_t, std::uint32_t>>;  // (|dot|, (to, from))
+      std::priority_queue<item> q;
+      for (const std::uint32_t s : seeds) {
+        if (done[s]) continue;
+        if (d.normals[s].dot(d.positions[s]) < 0) d.normals[s] = -d.normals[s];
+        done[s] = 1;
+        q.push({2.0f, {s, s}});
+        while (!q.empty()) {
+          const auto [w, e] = q.top();
+          q.pop();
+          const auto [to, from] = e;
+          if (to != from) {
+            if (done[to]) continue;
+            done[to] = 1;
+            if (d.normals[to].dot(d.normals[from]) < 0) d.normals[to] = -d.normals[to];
+          }
+          for (std::uint32_t k = start[to]; k < start[to + 1]; ++k) {
+            const std::uint32_t m = edges[k].second;
+            if (!done[m]) q.push({std::abs(d.normals[m].dot(d.normals[to])), {m, to}});
+          }
+        }
+      }
+    }
+    for (auto& T : d.triangles) {
+      const vec3f g =
+          (d.positions[T[1]] - d.positions[T[0]]).cross(d.positions[T[2]] - d.positions[T[0]]);
+      if (g.dot(d.normals[T[0]] + d.normals[T[1]] + d.normals[T[2]]) < 0) std::swap(T[1], T[2]);
     }
   }
 

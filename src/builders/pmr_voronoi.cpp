@@ -324,36 +324,67 @@ pmr_cell_output pmr_process_cell(const pmr_cell_input& in) {
   }
   record_umbrellas(vor, in, out.umbrellas[0]);
 
-  // Iterative deletion per threshold: always the sample of smallest r/h next (ties by index, so
-  // the result is deterministic); its neighbours' cells grow, so their ratios are recomputed.
+  // Iterative deletion per threshold: the sample of smallest known r/h next (ties by index, so
+  // the result is deterministic). A removal makes its neighbours' cells grow, so their ratios
+  // are stale: they are marked and recomputed when they come up (lazily — most neighbours of a
+  // removed sample are removed themselves before their ratio would matter), and those whose
+  // stale ratio was already ≥ ρ are recomputed once the queue runs dry, since a grown cell can
+  // lower r/h (a farther pole). The loop ends when every sample has a fresh ratio ≥ ρ.
   using entry = std::pair<double, std::uint32_t>;
   std::priority_queue<entry, std::vector<entry>, std::greater<>> heap;
-  std::vector<std::uint32_t> nbrs;
+  std::vector<std::uint32_t> nbrs, pending;
+  std::vector<unsigned char> stale(n, 0);
   bool frozen = false;  // the triangulation would lose its third dimension: stop deleting
   for (std::size_t li = 0; li < in.rho.size(); ++li) {
     const double rho = in.rho[li];
     for (std::uint32_t i = 0; i < n; ++i)
       if (vor.alive(i) && ratio[i] < rho) heap.emplace(ratio[i], i);
-    while (!heap.empty() && !frozen) {
-      const auto [q, i] = heap.top();
-      heap.pop();
-      if (!vor.alive(i) || q != ratio[i]) continue;  // removed, or a stale entry
-      if (vor.size() <= 5) {
-        frozen = true;
-        break;
+    while (!frozen) {
+      while (!heap.empty()) {
+        const auto [q, i] = heap.top();
+        heap.pop();
+        if (!vor.alive(i) || q != ratio[i]) continue;  // removed, or a superseded entry
+        if (stale[i]) {
+          stale[i] = 0;
+          ratio[i] = vor.shape(i, nullptr, nullptr).ratio();
+          if (ratio[i] < rho) heap.emplace(ratio[i], i);
+          continue;
+        }
+        if (vor.size() <= 5) {
+          frozen = true;
+          break;
+        }
+        vor.remove(i, nbrs);
+        if (vor.dimension() < 3) {
+          // The rest is coplanar: put the sample back (the triangulation is as before), stop.
+          vor.reinsert(i);
+          frozen = true;
+          break;
+        }
+        ++out.removals;
+        for (const std::uint32_t k : nbrs) {
+          if (stale[k]) continue;
+          stale[k] = 1;
+          if (!(ratio[k] < rho)) pending.push_back(k);  // else its entry is still queued
+        }
       }
-      vor.remove(i, nbrs);
-      if (vor.dimension() < 3) {
-        // The rest is coplanar: put the sample back (the triangulation is as before) and stop.
-        vor.reinsert(i);
-        frozen = true;
-        break;
-      }
-      ++out.removals;
-      for (const std::uint32_t k : nbrs) {
+      bool more = false;
+      for (const std::uint32_t k : pending) {
+        if (!vor.alive(k) || !stale[k]) continue;
+        stale[k] = 0;
         ratio[k] = vor.shape(k, nullptr, nullptr).ratio();
-        if (ratio[k] < rho) heap.emplace(ratio[k], k);
+        if (ratio[k] < rho) {
+          heap.emplace(ratio[k], k);
+          more = true;
+        }
       }
+      pending.clear();
+      if (!more) break;
+    }
+    if (frozen) {
+      // Whatever is still stale keeps its last ratio: no more deletions happen anyway.
+      std::fill(stale.begin(), stale.end(), 0);
+      pending.clear();
     }
     heap = {};
     for (std::uint32_t i = 0; i < in.own; ++i)

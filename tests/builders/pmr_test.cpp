@@ -107,7 +107,7 @@ void expect_valid(const pmr_hierarchy& h, std::size_t n) {
 
 // ---- poles and heights against the analytic medial axis
 
-TEST(PmrCell, PolesOfTwoConcentricSpheresAreTheirMedialAxis) {
+TEST(pmr_cell, PolesOfTwoConcentricSpheresAreTheirMedialAxis) {
   // Samples of the spheres |x| = 1 and |x| = 2. The medial axis of the shell between them is the
   // sphere |x| = 1.5; inside the small sphere it is the centre. A point of the inner sphere has
   // its farthest Voronoi vertex at the centre (distance 1, against 0.5 to the middle sphere), so
@@ -136,7 +136,7 @@ TEST(PmrCell, PolesOfTwoConcentricSpheresAreTheirMedialAxis) {
   EXPECT_GE(outer_ok, 3000 * 95 / 100);
 }
 
-TEST(PmrCell, PlaneHasFarPolesAndSmallRatio) {
+TEST(pmr_cell, PlaneHasFarPolesAndSmallRatio) {
   // A plane's medial axis is at infinity: on a dense, slightly noisy sample (noise 1e-3 of the
   // spacing) the cells are long needles along the normal, h ≫ spacing and r ≈ spacing, so the
   // normal is ±z and r/h is tiny (≈ 2·noise/spacing) away from the sample's border.
@@ -155,7 +155,7 @@ TEST(PmrCell, PlaneHasFarPolesAndSmallRatio) {
   EXPECT_LT(median(ratio), 0.05);
 }
 
-TEST(PmrCell, RatioIsSmallWhenDenseAndLargeWhenSparse) {
+TEST(pmr_cell, RatioIsSmallWhenDenseAndLargeWhenSparse) {
   // On a sphere of radius 1, h ≈ 1 and r ≈ the sample spacing ∝ 1/√n: 40 samples give r/h
   // near 0.5, 4000 samples ten times less.
   const auto dense = analyse(sphere_points(4000, 1, vec3d::Zero(), 4, 1e-3));
@@ -170,7 +170,7 @@ TEST(PmrCell, RatioIsSmallWhenDenseAndLargeWhenSparse) {
   EXPECT_GT(median(rs), 5 * median(rd));
 }
 
-TEST(PmrCell, DeletionRemovesDenseSamplesAndKeepsRatiosAboveThreshold) {
+TEST(pmr_cell, DeletionRemovesDenseSamplesAndKeepsRatiosAboveThreshold) {
   // After deleting at threshold ρ no remaining sample has r/h < ρ (the loop runs until none
   // does), so a dense sphere loses most samples at ρ = 0.5 and a brute-force recomputation of the
   // survivors' ratios (a fresh triangulation of them alone) finds none below ρ.
@@ -196,7 +196,7 @@ pmr_options small_leaves(std::uint32_t leaf = 800) {
   return o;
 }
 
-TEST(PmrBuild, LevelsNestAndDecimate) {
+TEST(pmr_build, LevelsNestAndDecimate) {
   // Level i of a leaf is a prefix of its samples (P_0 ⊇ P_1 ⊇ …), each sample's level count is
   // consistent with the prefixes, and the dense wavy surface loses most samples by ρ = 1.
   const point_cloud in = make_wavy_surface(6000, 7);
@@ -211,7 +211,7 @@ TEST(PmrBuild, LevelsNestAndDecimate) {
   EXPECT_GT(h.stats().removals, in.size() / 2);
 }
 
-TEST(PmrBuild, UmbrellasAgreeWithTheSurfaceAndCoverIt) {
+TEST(pmr_build, UmbrellasAgreeWithTheSurfaceAndCoverIt) {
   // A dense sample of a smooth closed surface (the sphere, normals known): its level-0 umbrella
   // triangles lie flat on the surface (Dey et al.'s result the paper cites), so their normals are
   // within a few degrees of the true normal, and together they cover the sphere without holes:
@@ -265,7 +265,7 @@ struct triangle_sink {
   }
 };
 
-TEST(PmrBuild, SharedTriangleIsEmittedOnce) {
+TEST(pmr_build, SharedTriangleIsEmittedOnce) {
   // A triangle in the umbrellas of its three vertices is stored once per leaf and level and
   // drawn once (RENDER-NODE lines 9–11): with every sample drawn as its umbrella (pixel size 0),
   // the sink receives exactly the level's distinct triangles, though the umbrellas list about
@@ -292,7 +292,7 @@ TEST(PmrBuild, SharedTriangleIsEmittedOnce) {
   EXPECT_TRUE(s.seen.empty());
 }
 
-TEST(PmrBuild, TraversalPicksCoarserLevelsFarAway) {
+TEST(pmr_build, TraversalPicksCoarserLevelsFarAway) {
   // §3: the level whose average umbrella radius is closest to factor × pixel size; the pixel
   // grows with distance, so a far view picks coarser levels (and draws fewer primitives) than a
   // near one, and a larger factor coarser ones than a smaller factor.
@@ -325,7 +325,7 @@ TEST(PmrBuild, TraversalPicksCoarserLevelsFarAway) {
 
 // ---- degenerate input stays finite and valid
 
-TEST(PmrDegenerate, Ladder) {
+TEST(pmr_degenerate, Ladder) {
   // CGAL's test ladder: 1 point, a repeated point, 2 points, collinear, coplanar, cospherical,
   // duplicates of everything, the corners of a cube (all on the hull). Each builds a valid
   // hierarchy with finite unit normals; degenerate triangulations keep every sample at every
@@ -368,7 +368,7 @@ TEST(PmrDegenerate, Ladder) {
   EXPECT_LE(hd.points_at_level(1), 300u);
 }
 
-TEST(PmrDegenerate, FarFromTheOriginMatchesNearTheOrigin) {
+TEST(pmr_degenerate, FarFromTheOriginMatchesNearTheOrigin) {
   // The same sphere 10⁷ units from the origin (double origin, float offsets, as a georeferenced
   // scan is read) and at the origin: the builder subtracts a double origin before CGAL and
   // floats, so the normals agree and the levels (nearly) too.
@@ -396,7 +396,7 @@ TEST(PmrDegenerate, FarFromTheOriginMatchesNearTheOrigin) {
               0.05 * static_cast<double>(a.points_at_level(top)) + 2);
 }
 
-TEST(PmrDegenerate, BadInputAndOptionsAreErrors) {
+TEST(pmr_degenerate, BadInputAndOptionsAreErrors) {
   EXPECT_THROW((void)build_pmr(point_cloud{}), InvalidArgument);
   point_cloud nan = cloud_of({vec3d(0, 0, 0), vec3d(1, 1, 1)});
   nan.positions[1].x() = std::numeric_limits<float>::quiet_NaN();
@@ -414,7 +414,7 @@ TEST(PmrDegenerate, BadInputAndOptionsAreErrors) {
 
 // ---- the file
 
-TEST(PmrFile, RoundTripIsExactAndDeterministic) {
+TEST(pmr_file, RoundTripIsExactAndDeterministic) {
   // load(save(h)) == h, and the bytes depend on the input and options only: one thread and two
   // give the same file.
   const point_cloud in = make_wavy_surface(4000, 15);
@@ -440,7 +440,7 @@ TEST(PmrFile, RoundTripIsExactAndDeterministic) {
   std::filesystem::remove(p2);
 }
 
-TEST(PmrFile, TruncatedOrCorruptedFilesAreErrors) {
+TEST(pmr_file, TruncatedOrCorruptedFilesAreErrors) {
   // Every prefix length tried and every corrupted byte tried gives a FormatError (never a crash
   // or an out-of-bounds read: this runs under ASan in CI).
   const auto h = build_pmr(make_wavy_surface(1500, 16), small_leaves(400));
@@ -477,7 +477,7 @@ TEST(PmrFile, TruncatedOrCorruptedFilesAreErrors) {
 
 // ---- a real scan
 
-TEST(PmrRealData, BunnyBuildsAndDecimates) {
+TEST(pmr_real_data, BunnyBuildsAndDecimates) {
   // The Stanford bunny at 1/4 resolution (8,171 points): several leaves, every sample stored,
   // the coarsest level a small fraction of the scan.
   const triangle_mesh m = read_mesh(test::data_file("bun_zipper_res2.ply"));
