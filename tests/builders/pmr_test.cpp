@@ -199,8 +199,8 @@ pmr_options small_leaves(std::uint32_t leaf = 800) {
 TEST(pmr_build, LevelsNestAndDecimate) {
   // Level i of a leaf is a prefix of its samples (P_0 ⊇ P_1 ⊇ …), each sample's level count is
   // consistent with the prefixes, and the dense wavy surface loses most samples by ρ = 1.
-  const point_cloud in = make_wavy_surface(6000, 7);
-  const auto h = build_pmr(in, small_leaves());
+  const point_cloud in = make_wavy_surface(3000, 7);
+  const auto h = build_pmr(in, small_leaves(400));
   expect_valid(h, in.size());
   EXPECT_GT(h.leaf_count(), 4u);
   for (std::uint32_t i = 1; i < h.levels(); ++i)
@@ -296,8 +296,8 @@ TEST(pmr_build, TraversalPicksCoarserLevelsFarAway) {
   // §3: the level whose average umbrella radius is closest to factor × pixel size; the pixel
   // grows with distance, so a far view picks coarser levels (and draws fewer primitives) than a
   // near one, and a larger factor coarser ones than a smaller factor.
-  const point_cloud in = make_wavy_surface(6000, 10);
-  const auto h = build_pmr(in, small_leaves());
+  const point_cloud in = make_wavy_surface(3000, 10);
+  const auto h = build_pmr(in, small_leaves(400));
   const auto draw = [&](double dist, float factor, double& mean_level) {
     camera cam = camera::orbit(h.origin(), 1.5, 30, 20, dist, 1);
     cam.vp = {256, 256};
@@ -417,7 +417,7 @@ TEST(pmr_degenerate, BadInputAndOptionsAreErrors) {
 TEST(pmr_file, RoundTripIsExactAndDeterministic) {
   // load(save(h)) == h, and the bytes depend on the input and options only: one thread and two
   // give the same file.
-  const point_cloud in = make_wavy_surface(4000, 15);
+  const point_cloud in = make_wavy_surface(2500, 15);
   auto o1 = small_leaves();
   o1.threads = 1;
   const auto h1 = build_pmr(in, o1);
@@ -478,10 +478,10 @@ TEST(pmr_file, TruncatedOrCorruptedFilesAreErrors) {
 // ---- a real scan
 
 TEST(pmr_real_data, BunnyBuildsAndDecimates) {
-  // The Stanford bunny at 1/4 resolution (8,171 points): several leaves, every sample stored,
+  // The Stanford bunny at 1/16 resolution (1,889 points): several leaves, every sample stored,
   // the coarsest level a small fraction of the scan.
-  const triangle_mesh m = read_mesh(test::data_file("bun_zipper_res2.ply"));
-  const auto h = build_pmr(m.vertices, small_leaves(3000));
+  const triangle_mesh m = read_mesh(test::data_file("bun_zipper_res3.ply"));
+  const auto h = build_pmr(m.vertices, small_leaves(500));
   expect_valid(h, m.vertices.size());
   EXPECT_GT(h.leaf_count(), 2u);
   EXPECT_LT(h.points_at_level(h.levels() - 1), m.vertices.size() / 2);
