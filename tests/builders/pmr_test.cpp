@@ -323,6 +323,50 @@ TEST(pmr_build, TraversalPicksCoarserLevelsFarAway) {
   EXPECT_GT(near_n, far_n);
 }
 
+TEST(pmr_build, LevelChoiceIsTheClosestAverageUmbrellaRadius) {
+  // §3 Selecting hierarchy, against a brute-force argmin over the stored averages: the level
+  // whose average umbrella radius is closest to factor × pixel size (the factor ramped by §4:
+  // unchanged up to 2 units, 1 from 4 units on, linear between).
+  EXPECT_EQ(pmr_ramped_factor(5, 1), 5);
+  EXPECT_EQ(pmr_ramped_factor(5, 2), 5);
+  EXPECT_EQ(pmr_ramped_factor(5, 3), 3);
+  EXPECT_EQ(pmr_ramped_factor(5, 4), 1);
+  EXPECT_EQ(pmr_ramped_factor(5, 9), 1);
+  const auto h = build_pmr(make_wavy_surface(2000, 18), small_leaves(500));
+  for (std::uint32_t l = 0; l < h.leaf_count(); ++l) {
+    const float u0 = h.level(l, 0).mean_umbrella;
+    for (const float factor : {1.0f, 3.0f, 5.0f})
+      for (const float px : {0.1f * u0, 0.5f * u0, 1.5f * u0, 3.0f * u0, 8.0f * u0}) {
+        const float target = pmr_ramped_factor(factor, px / u0) * px;
+        std::uint32_t best = 0;
+        for (std::uint32_t i = 1; i < h.levels(); ++i)
+          if (h.level(l, i).mean_umbrella > 0 &&
+              std::abs(h.level(l, i).mean_umbrella - target) <
+                  std::abs(h.level(l, best).mean_umbrella - target))
+            best = i;
+        EXPECT_EQ(h.choose_level(l, px, factor), best) << "leaf " << l << " px " << px;
+      }
+  }
+}
+
+TEST(pmr_build, FrustumCullsLeavesBehindTheEye) {
+  // The common traversal culls by the nodes' bounding spheres: looking away from the model
+  // draws nothing, looking at it draws every leaf.
+  const auto h = build_pmr(make_wavy_surface(2000, 19), small_leaves(500));
+  camera cam;
+  cam.eye = h.origin() + vec3d(0, 0, 5);
+  cam.vp = {128, 128};
+  counting_sink<pmr_hierarchy::attrs> away, at;
+  cam.target = h.origin() + vec3d(0, 0, 10);
+  const auto st_away = traverse(h, view(cam, h.origin()), {}, away, pmr_policy{});
+  cam.target = h.origin();
+  const auto st_at = traverse(h, view(cam, h.origin()), {}, at, pmr_policy{});
+  EXPECT_EQ(away.total(), 0u);
+  EXPECT_EQ(st_away.emitted_leaves, 0u);
+  EXPECT_EQ(st_at.emitted_leaves, h.leaf_count());
+  EXPECT_GT(at.total(), 0u);
+}
+
 // ---- degenerate input stays finite and valid
 
 TEST(pmr_degenerate, Ladder) {
