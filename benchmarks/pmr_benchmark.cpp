@@ -67,6 +67,7 @@ void bm_build(benchmark::State& state) {
   const point_cloud& c = input(which);
   pmr_options o;
   o.max_leaf_points = static_cast<std::uint32_t>(state.range(1));
+  o.neighbour_margin = static_cast<float>(state.range(2)) / 100;
   for (auto _ : state) {
     const double cpu0 = cpu_seconds();
     const pmr_hierarchy h = build_pmr(c, o);
@@ -84,8 +85,9 @@ void bm_build(benchmark::State& state) {
   state.SetLabel(input_name(which));
 }
 BENCHMARK(bm_build)
-    ->ArgsProduct({{0, 1, 2}, {10000}})
-    ->Args({3, 10000})
+    ->ArgsProduct({{0, 1, 2}, {10000}, {10}})
+    ->Args({3, 10000, 10})
+    ->Args({3, 10000, 25})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
