@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <queue>
 #include <utility>
@@ -143,7 +144,7 @@ class leaf_voronoi {
         // Each triangle once: from the cell with the lower address (both hold v). A hull
         // triangle is visited from its finite cell only.
         if (c_inf) continue;
-        if (!nb_inf && &*nb < &*c) continue;
+        if (!nb_inf && std::less<const void*>{}(&*nb, &*c)) continue;
         const vec3d c1 = to_vec(c->circumcenter());
         const double s1 = n.dot(c1 - p);
         vec3d x;

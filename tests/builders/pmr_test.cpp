@@ -323,6 +323,41 @@ TEST(pmr_build, TraversalPicksCoarserLevelsFarAway) {
   EXPECT_GT(near_n, far_n);
 }
 
+TEST(pmr_build, UmbrellaRadiiAndAveragesMatchBruteForce) {
+  // §2 Records: a sample's umbrella radius is the largest distance from it to a vertex of its
+  // umbrella triangles, and each leaf level stores the average over its samples with an
+  // umbrella; both recomputed here from the stored triangles (float storage: 1e-5 relative).
+  const auto h = build_pmr(make_wavy_surface(2000, 20), small_leaves(500));
+  std::size_t checked = 0;
+  for (std::uint32_t l = 0; l < h.leaf_count(); ++l)
+    for (std::uint32_t i = 0; i < h.levels(); ++i) {
+      const auto& L = h.level(l, i);
+      double sum = 0;
+      std::size_t with = 0;
+      for (std::uint32_t k = 0; k < L.points; ++k) {
+        const auto& u = h.umbrellas()[L.first_entry + k];
+        const vec3f p = h.positions()[h.leaf(l).first_point + k];
+        double r = 0;
+        for (std::uint32_t j = u.first; j < u.first + u.count; ++j) {
+          const auto& T = h.triangles()[L.first_tri + h.umbrella_index()[j]];
+          EXPECT_TRUE(std::find(T.begin(), T.end(), h.leaf(l).first_point + k) != T.end())
+              << "every triangle of an umbrella contains its sample";
+          for (const auto g : T)
+            r = std::max(r, static_cast<double>((h.positions()[g] - p).norm()));
+        }
+        EXPECT_NEAR(u.radius, r, 1e-5 * r + 1e-7);
+        if (u.count) {
+          sum += u.radius;
+          ++with;
+          ++checked;
+        }
+      }
+      EXPECT_NEAR(L.mean_umbrella, with ? sum / static_cast<double>(with) : 0.0,
+                  1e-5 * L.mean_umbrella + 1e-7);
+    }
+  EXPECT_GT(checked, 2000u);
+}
+
 TEST(pmr_build, LevelChoiceIsTheClosestAverageUmbrellaRadius) {
   // §3 Selecting hierarchy, against a brute-force argmin over the stored averages: the level
   // whose average umbrella radius is closest to factor × pixel size (the factor ramped by §4:
