@@ -33,7 +33,7 @@ const std::vector<method_entry>& methods() {
       rho_grid_method(),
       pop_method(),
       {"pca-octree", "Kalaiah & Varshney 2003", ""},
-      {"pmr", "Dey & Hudson 2002", ""},
+      pmr_method(),
   };
   return m;
 }

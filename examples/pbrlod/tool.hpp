@@ -67,6 +67,12 @@ class json {
     out_ += v.text();
     return *this;
   }
+  /// A value already written as JSON text (an array, say).
+  json& raw(const std::string& k, const std::string& v) {
+    key(k);
+    out_ += v;
+    return *this;
+  }
   [[nodiscard]] std::string text() const { return "{" + out_ + "}"; }
 
  private:
@@ -216,6 +222,7 @@ const std::vector<method_entry>& methods();
 method_entry point_octree_method();
 method_entry rho_grid_method();
 method_entry pop_method();
+method_entry pmr_method();
 
 /// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,
 /// ellipses: eight instantiations), so a builder is compiled for exactly what the scene has.

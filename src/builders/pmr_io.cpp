@@ -1,0 +1,362 @@
+// pbr_lod — PMR (Dey & Hudson, IEEE Vis 2002) §2 Records and §3 (the file is mapped with
+// mmap): the versioned file "PBRLODPM" v1.
+//
+// Layout (little-endian): magic "PBRLODPM", u32 version, u32 flags (0); f64×3 origin, input min,
+// input max; u32 max_leaf_points, f32 neighbour_margin; u32 thresholds, f32 each; u64 × 6 build
+// counts (input points, duplicates, triangulated, removals, flat leaves, hull points); u32
+// counts of samples, nodes, leaves, triangles, umbrellas, umbrella indices; then the arrays in
+// that order of pmr_data (positions, normals, source, nodes, leaves, levels, triangles,
+// umbrellas, umbrella indices); u64 FNV-1a of everything before. No timings: the same input and
+// options give the same bytes.
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/error.hpp"
+
+namespace pbr_lod::detail {
+
+bool operator==(const pmr_data& a, const pmr_data& b) {
+  return a.origin == b.origin && a.input_min == b.input_min && a.input_max == b.input_max &&
+         a.max_leaf_points == b.max_leaf_points && a.neighbour_margin == b.neighbour_margin &&
+         a.rho == b.rho && a.positions == b.positions && a.normals == b.normals &&
+         a.source == b.source && a.nodes == b.nodes && a.leaf_list == b.leaf_list &&
+         a.levels == b.levels && a.triangles == b.triangles && a.umbrellas == b.umbrellas &&
+         a.umbrella_index == b.umbrella_index && a.stats.input_points == b.stats.input_points &&
+         a.stats.duplicates == b.stats.duplicates &&
+         a.stats.triangulated_points == b.stats.triangulated_points &&
+         a.stats.removals == b.stats.removals && a.stats.flat_leaves == b.stats.flat_leaves &&
+         a.stats.hull_points == b.stats.hull_points;
+}
+
+namespace {
+
+constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'M'};
+constexpr std::uint32_t version = 1;
+constexpr std::size_t node_bytes = 4 * 8 + 4 * 4, leaf_bytes = 12, level_bytes = 20, tri_bytes = 12,
+                      umbrella_bytes = 12;
+
+std::vector<unsigned char> encode(const pmr_data& d) {
+  byte_writer w;
+  for (const char c : magic) w.put(c);
+  w.put(version);
+  w.put(std::uint32_t{0});
+  for (const vec3d* v : {&d.origin, &d.input_min, &d.input_max})
+    for (int k = 0; k < 3; ++k) w.put((*v)[k]);
+  w.put(d.max_leaf_points);
+  w.put(d.neighbour_margin);
+  w.put(static_cast<std::uint32_t>(d.rho.size()));
+  for (const float r : d.rho) w.put(r);
+  for (const std::size_t s : {d.stats.input_points, d.stats.duplicates, d.stats.triangulated_points,
+                              d.stats.removals, d.stats.flat_leaves, d.stats.hull_points})
+    w.put(static_cast<std::uint64_t>(s));
+  for (const std::size_t s : {d.positions.size(), d.nodes.size(), d.leaf_list.size(),
+                              d.triangles.size(), d.umbrellas.size(), d.umbrella_index.size()})
+    w.put(static_cast<std::uint32_t>(s));
+  for (const auto& p : d.positions) w.put_vec(p);
+  for (const auto& n : d.normals) w.put_vec(n);
+  for (const auto s : d.source) w.put(s);
+  for (const auto& n : d.nodes) {
+    w.put_vec(n.cell_min);
+    w.put(n.cell_size);
+    w.put_vec(n.centre);
+    w.put(n.radius);
+    w.put(n.first);
+    w.put(n.count);
+    w.put(n.leaf);
+    w.put(n.depth);
+  }
+  for (const auto& l : d.leaf_list) {
+    w.put(l.first_point);
+    w.put(l.point_count);
+    w.put(l.node);
+  }
+  for (const auto& l : d.levels) {
+    w.put(l.points);
+    w.put(l.mean_umbrella);
+    w.put(l.first_tri);
+    w.put(l.tris);
+    w.put(l.first_entry);
+  }
+  for (const auto& t : d.triangles)
+    for (const auto i : t) w.put(i);
+  for (const auto& u : d.umbrellas) {
+    w.put(u.first);
+    w.put(u.count);
+    w.put(u.radius);
+  }
+  for (const auto i : d.umbrella_index) w.put(i);
+  w.put(fnv1a(w.bytes.data(), w.bytes.size()));
+  return std::move(w.bytes);
+}
+
+/// Bounds-checked little-endian reads from the mapped file; every failure names the element.
+class reader {
+ public:
+  reader(const unsigned char* p, std::size_t n, const std::string& path)
+      : p_(p), n_(n), path_(path) {}
+  template <class T>
+  T get(const char* what) {
+    if (n_ - pos_ < sizeof(T)) fail(std::string("truncated while reading ") + what);
+    T v;
+    std::memcpy(&v, p_ + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return v;
+  }
+  float finite(const char* what, std::size_t i) {
+    const float f = get<float>(what);
+    if (!std::isfinite(f))
+      fail(std::string(what) + " of element " + std::to_string(i) + " is not finite");
+    return f;
+  }
+  float non_negative(const char* what, std::size_t i) {
+    const float f = finite(what, i);
+    if (!(f >= 0)) fail(std::string(what) + " of element " + std::to_string(i) + " is negative");
+    return f;
+  }
+  vec3f vec(const char* what, std::size_t i) {
+    const float x = finite(what, i), y = finite(what, i), z = finite(what, i);
+    return {x, y, z};
+  }
+  /// The bytes `count` elements of `size` bytes need must still be in the file (checked before
+  /// anything is allocated, so a hostile count cannot exhaust memory).
+  void need(std::uint64_t count, std::size_t size, const char* what) const {
+    if (count > (n_ - pos_) / size)
+      fail(std::string("truncated: ") + std::to_string(count) + " " + what + " need " +
+           std::to_string(count * size) + " bytes, " + std::to_string(n_ - pos_) + " remain");
+  }
+  [[noreturn]] void fail(const std::string& msg) const {
+    throw FormatError(path_ + ": " + msg + " (at byte " + std::to_string(pos_) + ")");
+  }
+  [[nodiscard]] std::size_t pos() const { return pos_; }
+  [[nodiscard]] std::size_t size() const { return n_; }
+
+ private:
+  const unsigned char* p_;
+  std::size_t n_;
+  std::size_t pos_ = 0;
+  const std::string& path_;
+};
+
+/// A read-only private mapping of a whole file, unmapped on destruction.
+class mapping {
+ public:
+  explicit mapping(const std::string& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
+    struct stat st {};
+    if (::fstat(fd, &st) != 0) {
+      ::close(fd);
+      throw IoError(path + ": cannot stat");
+    }
+    size_ = static_cast<std::size_t>(st.st_size);
+    if (size_ > 0) {
+      void* m = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
+      if (m == MAP_FAILED) {
+        ::close(fd);
+        throw IoError(path + ": cannot map: " + std::strerror(errno));
+      }
+      data_ = static_cast<const unsigned char*>(m);
+    }
+    ::close(fd);
+  }
+  ~mapping() {
+    if (data_) ::munmap(const_cast<unsigned char*>(data_), size_);
+  }
+  mapping(const mapping&) = delete;
+  mapping& operator=(const mapping&) = delete;
+  [[nodiscard]] const unsigned char* data() const { return data_; }
+  [[nodiscard]] std::size_t size() const { return size_; }
+
+ private:
+  const unsigned char* data_ = nullptr;
+  std::size_t size_ = 0;
+};
+
+pmr_data decode(reader& r, const unsigned char* bytes) {
+  pmr_data d;
+  char m[8];
+  for (char& c : m) c = r.get<char>("magic");
+  if (std::memcmp(m, magic, 8) != 0) r.fail("not a PMR hierarchy file (magic is not PBRLODPM)");
+  const auto ver = r.get<std::uint32_t>("version");
+  if (ver != version)
+    r.fail("version " + std::to_string(ver) + " is not supported (expected " +
+           std::to_string(version) + ")");
+  if (r.get<std::uint32_t>("flags") != 0) r.fail("unknown flags");
+  for (vec3d* v : {&d.origin, &d.input_min, &d.input_max})
+    for (int k = 0; k < 3; ++k) {
+      (*v)[k] = r.get<double>("origin/bounds");
+      if (!std::isfinite((*v)[k])) r.fail("origin or input bounds not finite");
+    }
+  d.max_leaf_points = r.get<std::uint32_t>("max_leaf_points");
+  d.neighbour_margin = r.non_negative("neighbour_margin", 0);
+  const auto nrho = r.get<std::uint32_t>("threshold count");
+  if (nrho > 31) r.fail("threshold count " + std::to_string(nrho) + " exceeds 31");
+  for (std::uint32_t i = 0; i < nrho; ++i) {
+    d.rho.push_back(r.finite("rho", i));
+    if (!(d.rho[i] > 0) || (i > 0 && !(d.rho[i] > d.rho[i - 1])))
+      r.fail("rho[" + std::to_string(i) + "] is not positive and increasing");
+  }
+  const std::uint32_t levels = nrho + 1;
+  std::size_t* counts[] = {&d.stats.input_points,        &d.stats.duplicates,
+                           &d.stats.triangulated_points, &d.stats.removals,
+                           &d.stats.flat_leaves,         &d.stats.hull_points};
+  for (std::size_t* c : counts) *c = static_cast<std::size_t>(r.get<std::uint64_t>("build counts"));
+  const auto npts = r.get<std::uint32_t>("sample count");
+  const auto nnodes = r.get<std::uint32_t>("node count");
+  const auto nleaves = r.get<std::uint32_t>("leaf count");
+  const auto ntris = r.get<std::uint32_t>("triangle count");
+  const auto numb = r.get<std::uint32_t>("umbrella count");
+  const auto nidx = r.get<std::uint32_t>("umbrella index count");
+  if (d.stats.input_points != npts) r.fail("sample count differs from the input count");
+  if (npts == 0 || nnodes == 0 || nleaves == 0) r.fail("empty hierarchy");
+
+  r.need(npts, 28, "samples");
+  d.positions.resize(npts);
+  d.normals.resize(npts);
+  d.source.resize(npts);
+  for (std::uint32_t i = 0; i < npts; ++i) d.positions[i] = r.vec("position", i);
+  for (std::uint32_t i = 0; i < npts; ++i) d.normals[i] = r.vec("normal", i);
+  std::vector<unsigned char> seen(npts, 0);
+  for (std::uint32_t i = 0; i < npts; ++i) {
+    d.source[i] = r.get<std::uint32_t>("source index");
+    if (d.source[i] >= npts || seen[d.source[i]]++)
+      r.fail("source index of sample " + std::to_string(i) + " out of range or repeated");
+  }
+
+  r.need(nnodes, node_bytes, "nodes");
+  d.nodes.resize(nnodes);
+  for (std::uint32_t k = 0; k < nnodes; ++k) {
+    auto& n = d.nodes[k];
+    n.cell_min = r.vec("node cell", k);
+    n.cell_size = r.non_negative("node cell size", k);
+    n.centre = r.vec("node centre", k);
+    n.radius = r.non_negative("node radius", k);
+    n.first = r.get<std::uint32_t>("node first");
+    n.count = r.get<std::uint32_t>("node count");
+    n.leaf = r.get<std::uint32_t>("node leaf flag");
+    n.depth = r.get<std::uint32_t>("node depth");
+  }
+  // The tree: breadth-first, every inner node's children contiguous right after the previous
+  // inner node's, so [1, nodes) is partitioned exactly once (a tree, no cycles).
+  std::uint64_t next = 1;
+  std::vector<unsigned char> leaf_used(nleaves, 0);
+  for (std::uint32_t k = 0; k < nnodes; ++k) {
+    const auto& n = d.nodes[k];
+    if (n.leaf > 1) r.fail("node " + std::to_string(k) + ": leaf flag is not 0 or 1");
+    if (n.leaf) {
+      if (n.count != 0 || n.first >= nleaves || leaf_used[n.first]++)
+        r.fail("node " + std::to_string(k) + ": leaf index out of range or repeated");
+      continue;
+    }
+    if (n.count < 1 || n.count > 8 || n.first != next || n.first <= k)
+      r.fail("node " + std::to_string(k) + ": children out of order or range");
+    next += n.count;
+  }
+  if (next != nnodes) r.fail("nodes not reachable from the root");
+
+  r.need(nleaves, leaf_bytes, "leaves");
+  d.leaf_list.resize(nleaves);
+  std::uint64_t expect = 0;
+  for (std::uint32_t l = 0; l < nleaves; ++l) {
+    auto& L = d.leaf_list[l];
+    L.first_point = r.get<std::uint32_t>("leaf first sample");
+    L.point_count = r.get<std::uint32_t>("leaf sample count");
+    L.node = r.get<std::uint32_t>("leaf node");
+    if (L.first_point != expect || L.point_count == 0 ||
+        static_cast<std::uint64_t>(L.first_point) + L.point_count > npts)
+      r.fail("leaf " + std::to_string(l) + ": samples out of range or not contiguous");
+    expect += L.point_count;
+    if (L.node >= nnodes || !d.nodes[L.node].leaf || d.nodes[L.node].first != l)
+      r.fail("leaf " + std::to_string(l) + ": node does not point back to it");
+  }
+  if (expect != npts) r.fail("leaves do not cover every sample");
+
+  const std::uint64_t nlev = static_cast<std::uint64_t>(nleaves) * levels;
+  r.need(nlev, level_bytes, "levels");
+  d.levels.resize(nlev);
+  for (std::uint64_t k = 0; k < nlev; ++k) {
+    auto& L = d.levels[k];
+    L.points = r.get<std::uint32_t>("level sample count");
+    L.mean_umbrella = r.non_negative("level mean umbrella radius", k);
+    L.first_tri = r.get<std::uint32_t>("level first triangle");
+    L.tris = r.get<std::uint32_t>("level triangle count");
+    L.first_entry = r.get<std::uint32_t>("level first umbrella");
+    const auto& leaf = d.leaf_list[k / levels];
+    const std::uint32_t prev = k % levels ? d.levels[k - 1].points : leaf.point_count;
+    if (L.points > prev || (k % levels == 0 && L.points != leaf.point_count))
+      r.fail("level " + std::to_string(k) + ": samples do not nest");
+    if (static_cast<std::uint64_t>(L.first_tri) + L.tris > ntris ||
+        static_cast<std::uint64_t>(L.first_entry) + L.points > numb)
+      r.fail("level " + std::to_string(k) + ": triangle or umbrella range out of range");
+  }
+
+  r.need(ntris, tri_bytes, "triangles");
+  d.triangles.resize(ntris);
+  for (std::uint32_t t = 0; t < ntris; ++t)
+    for (auto& i : d.triangles[t]) {
+      i = r.get<std::uint32_t>("triangle vertex");
+      if (i >= npts) r.fail("triangle " + std::to_string(t) + ": vertex out of range");
+    }
+  r.need(numb, umbrella_bytes, "umbrellas");
+  d.umbrellas.resize(numb);
+  for (std::uint32_t u = 0; u < numb; ++u) {
+    auto& U = d.umbrellas[u];
+    U.first = r.get<std::uint32_t>("umbrella first");
+    U.count = r.get<std::uint32_t>("umbrella count");
+    U.radius = r.non_negative("umbrella radius", u);
+    if (static_cast<std::uint64_t>(U.first) + U.count > nidx)
+      r.fail("umbrella " + std::to_string(u) + ": index range out of range");
+  }
+  r.need(nidx, 4, "umbrella indices");
+  d.umbrella_index.resize(nidx);
+  for (auto& i : d.umbrella_index) i = r.get<std::uint32_t>("umbrella index");
+  // Each umbrella's indices must name triangles of its own level.
+  for (const auto& L : d.levels)
+    for (std::uint32_t k = 0; k < L.points; ++k) {
+      const auto& U = d.umbrellas[L.first_entry + k];
+      for (std::uint32_t j = U.first; j < U.first + U.count; ++j)
+        if (d.umbrella_index[j] >= L.tris)
+          r.fail("umbrella index " + std::to_string(j) + " beyond its level's triangles");
+    }
+  const std::size_t body = r.pos();
+  const auto sum = r.get<std::uint64_t>("checksum");
+  if (sum != fnv1a(bytes, body)) r.fail("checksum mismatch (the file is corrupted)");
+  if (r.pos() != r.size()) r.fail("trailing bytes after the checksum");
+  return d;
+}
+
+}  // namespace
+
+std::size_t pmr_file_bytes(const pmr_data& d) {
+  const std::size_t header = 8 + 4 + 4 + 9 * 8 + 4 + 4 + 4 + 4 * d.rho.size() + 6 * 8 + 6 * 4;
+  return header + d.positions.size() * 28 + d.nodes.size() * node_bytes +
+         d.leaf_list.size() * leaf_bytes + d.levels.size() * level_bytes +
+         d.triangles.size() * tri_bytes + d.umbrellas.size() * umbrella_bytes +
+         d.umbrella_index.size() * 4 + 8;
+}
+
+void save_pmr_data(const pmr_data& d, const std::string& path) {
+  const auto bytes = encode(d);
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) throw IoError(path + ": cannot open for writing");
+  f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  if (!f) throw IoError(path + ": write failed");
+}
+
+pmr_data load_pmr_data(const std::string& path) {
+  const mapping m(path);
+  reader r(m.data(), m.size(), path);
+  return decode(r, m.data());
+}
+
+}  // namespace pbr_lod::detail
