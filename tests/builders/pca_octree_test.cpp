@@ -1,0 +1,607 @@
+// Tests of the hierarchical PCA octree (Kalaiah & Varshney 2003). Each case says why its
+// expectation holds. Random input is seeded (std::mt19937 with a fixed seed): the statistics are
+// then fixed numbers, and the tolerances are several standard errors wide.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <random>
+
+#include "pbr_lod/builders/pca_octree.hpp"
+#include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
+#include "support/data.hpp"
+
+namespace pbr_lod {
+namespace {
+
+using tree_n = pca_octree<with_normals>;
+using tree_nc = pca_octree<with_normals_colours>;
+constexpr double deg = 180 / std::numbers::pi;
+
+double angle_deg(const vec3d& a, const vec3d& b) {
+  return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * deg;
+}
+double axis_deg(const vec3d& a, const vec3d& b) {
+  return std::min(angle_deg(a, b), angle_deg(a, -b));
+}
+
+mat3d random_rotation(std::mt19937& rng) {
+  std::normal_distribution<double> g;
+  return Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized().toRotationMatrix();
+}
+
+point_set<with_normals_colours> demo_points(std::size_t n, std::uint64_t seed = 7) {
+  return point_set<with_normals_colours>::from(sample_surface(make_demo_scene(16), n, seed));
+}
+
+void expect_orthonormal(const mat3d& f, const std::string& what, double tol = 1e-9) {
+  ASSERT_TRUE(all_finite(f)) << what;
+  EXPECT_LT((f.transpose() * f - mat3d::Identity()).cwiseAbs().maxCoeff(), tol) << what;
+  EXPECT_NEAR(f.determinant(), 1.0, tol) << what << ": right-handed";
+}
+
+template <class T>
+void expect_finite_tree(const T& t, const std::string& what) {
+  ASSERT_FALSE(t.empty()) << what;
+  for (std::uint32_t i = 0; i < t.nodes().size(); ++i) {
+    const auto& nd = t.at(i);
+    ASSERT_TRUE(all_finite(nd.mean) && all_finite(nd.frame) && all_finite(nd.sigma) &&
+                all_finite(nd.normal_frame) && all_finite(nd.normal_sigma) &&
+                std::isfinite(nd.radius) && std::isfinite(nd.cone_angle) &&
+                std::isfinite(nd.lambda))
+        << what << " node " << i;
+    EXPECT_GE(nd.sigma.minCoeff(), 1e-15f) << what << " node " << i << ": the §3 floor";
+    // Float frames: orthonormal to float precision.
+    expect_orthonormal(nd.frame.template cast<double>(), what, 1e-5);
+    expect_orthonormal(nd.normal_frame.template cast<double>(), what, 1e-5);
+  }
+}
+
+/// One generated point set per node drawn; the traversal with the paper's policy.
+template <class T>
+buffer_sink<T::attrs> draw(const T& t, const camera& cam, std::uint64_t seed,
+                           traverse_stats* st = nullptr) {
+  buffer_sink<T::attrs> sink;
+  pca_octree_policy policy;
+  policy.render.seed = seed;
+  const view v(cam, t.origin());
+  const auto s = traverse(t, v, traverse_options{}, sink, policy);
+  if (st) *st = s;
+  return sink;
+}
+
+template <class T>
+image render_image(const T& t, const camera& cam, std::uint64_t seed) {
+  const view v(cam, t.origin());
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = false};
+  rasterizer<T::attrs, effects{.shading = true, .colour = false}> r(v, ro);
+  pca_octree_policy policy;
+  policy.render.seed = seed;
+  traverse(t, v, traverse_options{}, r, policy);
+  return r.finish();
+}
+
+camera camera_for(const vec3d& centre, double radius) {
+  return camera::orbit(centre, radius, 30, 20, 3, 1, viewport{160, 120});
+}
+
+// ---- §3: the statistics ---------------------------------------------------------------------
+
+// Points drawn from a known trivariate Gaussian: the sample mean is within a few σ/√n of μ,
+// the sample standard deviations within a few % (standard error σ/√(2n) ≈ 0.5 % at n = 20000),
+// and the principal axes within a degree (their σ are well separated: 0.5, 0.2, 0.05).
+TEST(PcaOctree, PositionPcaRecoversGaussian) {
+  std::mt19937 rng(42);
+  const mat3d R = random_rotation(rng);
+  const vec3d mu(1, -2, 3), sigma(0.5, 0.2, 0.05);
+  std::normal_distribution<double> g;
+  std::vector<vec3d> p(20000);
+  for (auto& q : p) q = mu + R * vec3d(sigma.x() * g(rng), sigma.y() * g(rng), sigma.z() * g(rng));
+  const auto r = detail::pca_positions(p.data(), p.size(), R.col(2));
+  EXPECT_EQ(r.zero_variances, 0);
+  EXPECT_LT((r.mean - mu).norm(), 4 * 0.5 / std::sqrt(20000.0));
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(r.sigma[k] / sigma[k], 1.0, 0.03) << "sigma " << k;
+    EXPECT_LT(axis_deg(r.frame.col(k), R.col(k)), 1.0) << "axis " << k;
+  }
+  expect_orthonormal(r.frame, "gaussian frame");
+  EXPECT_GE(r.frame.col(2).dot(R.col(2)), 0) << "f³ turned towards the mean normal";
+}
+
+// Normals drawn as Gaussian points of the tangent plane at a known mean direction, wrapped onto
+// the sphere (the inverse of the §3 unwrap): the normal PCA recovers σ_n, the mean normal and
+// the ellipse's major axis. (The Euclidean mean of the wrapped normals is the centre direction
+// by symmetry.)
+TEST(PcaOctree, NormalPcaRecoversGaussianOnTheSphere) {
+  std::mt19937 rng(43);
+  const mat3d F = random_rotation(rng);
+  const vec2d sigma(0.2, 0.05);
+  std::normal_distribution<double> g;
+  std::vector<vec3f> n(20000);
+  for (auto& m : n)
+    m = detail::wrap_normal(F, vec2d(sigma.x() * g(rng), sigma.y() * g(rng))).cast<float>();
+  const auto r = detail::pca_normals(n.data(), n.size(), vec3d::UnitZ());
+  EXPECT_LT(angle_deg(r.frame.col(2), F.col(2)), 0.5);
+  EXPECT_LT(axis_deg(r.frame.col(0), F.col(0)), 1.5);
+  EXPECT_NEAR(r.sigma.x() / sigma.x(), 1.0, 0.03);
+  EXPECT_NEAR(r.sigma.y() / sigma.y(), 1.0, 0.03);
+  expect_orthonormal(r.frame, "normal frame");
+}
+
+// The same through the builder: a single leaf (leaf_size above the count) without quantisation
+// holds the position, normal and colour statistics of all its points. Colours are rounded to
+// 8 bits, which adds 1/(12·255²) to each variance — negligible against σ_c² here.
+TEST(PcaOctree, RootOfOneLeafHoldsTheStatistics) {
+  std::mt19937 rng(44);
+  const mat3d R = random_rotation(rng), C = random_rotation(rng);
+  const vec3d sp(2, 1, 0.1), sc(0.1, 0.05, 0.03), mc(0.5, 0.4, 0.6);
+  std::normal_distribution<double> g;
+  point_set<with_normals_colours> s;
+  s.origin = vec3d(100, 200, 300);
+  const std::size_t n = 20000;
+  s.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    s.positions[i] = (R * vec3d(sp.x() * g(rng), sp.y() * g(rng), sp.z() * g(rng))).cast<float>();
+    s.normals[i] = detail::wrap_normal(R, vec2d(0.1 * g(rng), 0.02 * g(rng))).cast<float>();
+    const vec3d c = mc + C * vec3d(sc.x() * g(rng), sc.y() * g(rng), sc.z() * g(rng));
+    const auto b = [](double v) {
+      return static_cast<std::uint8_t>(std::lround(std::clamp(v, 0.0, 1.0) * 255));
+    };
+    s.colours[i] = {b(c.x()), b(c.y()), b(c.z())};
+  }
+  const auto t = build_pca_octree(s, {.leaf_size = 1u << 20, .quantise = false});
+  ASSERT_EQ(t.nodes().size(), 1u);
+  const auto& nd = t.at(0);
+  const vec3d mean_world = t.origin() + nd.mean.cast<double>();
+  EXPECT_LT((mean_world - s.origin).norm(), 4 * 2 / std::sqrt(double(n)));
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(nd.sigma[k] / sp[k], 1.0, 0.03);
+    EXPECT_LT(axis_deg(nd.frame.col(k).cast<double>(), R.col(k)), 1.0);
+    EXPECT_NEAR(t.colour(0).sigma[k] / sc[k], 1.0, 0.04);
+    EXPECT_LT(axis_deg(t.colour(0).frame.col(k).cast<double>(), C.col(k)), 3.0);
+  }
+  EXPECT_LT((t.colour(0).mean.cast<double>() - mc).norm(), 0.01);
+  EXPECT_NEAR(nd.normal_sigma.x() / 0.1, 1.0, 0.03);
+  EXPECT_NEAR(nd.normal_sigma.y() / 0.02, 1.0, 0.03);
+  EXPECT_LT(angle_deg(nd.normal_frame.col(2).cast<double>(), R.col(2)), 0.5);
+}
+
+// §3's degenerate rules, one case each: the frame is always finite, orthonormal and
+// right-handed, σ never below the floor, and the directions are those the rules name.
+TEST(PcaOctree, DegenerateCasesGiveOrthonormalFrames) {
+  const vec3d n = vec3d(1, 2, 2).normalized();
+  // one point / duplicates: three zero variances → z = the normal
+  for (int count : {1, 50}) {
+    std::vector<vec3d> p(static_cast<std::size_t>(count), vec3d(3, -1, 2));
+    const auto r = detail::pca_positions(p.data(), p.size(), n);
+    EXPECT_EQ(r.zero_variances, 3);
+    expect_orthonormal(r.frame, "point");
+    EXPECT_LT(angle_deg(r.frame.col(2), n), 1e-6);
+    EXPECT_EQ(r.sigma, vec3d::Constant(1e-15));
+  }
+  // collinear (including two points): the principal direction kept, z = the normal made
+  // orthogonal to it
+  const vec3d dir = vec3d(1, -1, 0.5).normalized();
+  for (int count : {2, 40}) {
+    std::vector<vec3d> p;
+    for (int i = 0; i < count; ++i) p.push_back(vec3d(1, 2, 3) + dir * (0.1 * i));
+    const auto r = detail::pca_positions(p.data(), p.size(), n);
+    EXPECT_EQ(r.zero_variances, 2);
+    expect_orthonormal(r.frame, "line");
+    EXPECT_LT(axis_deg(r.frame.col(0), dir), 1e-6);
+    const vec3d z = (n - dir * dir.dot(n)).normalized();
+    EXPECT_LT(angle_deg(r.frame.col(2), z), 1e-6);
+    EXPECT_GT(r.sigma.x(), 0.01);
+    EXPECT_EQ(r.sigma.y(), 1e-15);
+  }
+  // a line along the normal itself: z falls back to any direction orthogonal to the line
+  {
+    std::vector<vec3d> p;
+    for (int i = 0; i < 10; ++i) p.push_back(n * i);
+    const auto r = detail::pca_positions(p.data(), p.size(), n);
+    EXPECT_EQ(r.zero_variances, 2);
+    expect_orthonormal(r.frame, "line along the normal");
+    EXPECT_LT(axis_deg(r.frame.col(0), n), 1e-6);
+  }
+  // coplanar: one zero variance, f³ the plane's normal, turned towards the mean normal
+  {
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const vec3d a = vec3d(1, 0, 1).normalized(), b = vec3d(0, 1, 0), pn = a.cross(b);
+    std::vector<vec3d> p;
+    for (int i = 0; i < 200; ++i) p.push_back(vec3d(5, 5, 5) + a * u(rng) + b * 0.5 * u(rng));
+    const auto r = detail::pca_positions(p.data(), p.size(), -pn);
+    EXPECT_EQ(r.zero_variances, 1);
+    expect_orthonormal(r.frame, "plane");
+    EXPECT_LT(angle_deg(r.frame.col(2), -pn), 1e-6);
+    EXPECT_EQ(r.sigma.z(), 1e-15);
+  }
+  // the normals cancel out (both sides of a sheet): the fallback direction is used
+  {
+    std::vector<vec3f> nn{vec3f::UnitX(), -vec3f::UnitX()};
+    const auto r = detail::pca_normals(nn.data(), nn.size(), vec3d::UnitY());
+    expect_orthonormal(r.frame, "cancelling normals");
+    EXPECT_LT(angle_deg(r.frame.col(2), vec3d::UnitY()), 1e-9);
+    EXPECT_TRUE(all_finite(r.sigma));
+  }
+}
+
+// The unwrap of §3 is the sphere's log map at the pole: |uv| is the angle from the pole (arc
+// length along the longitude), and wrapping it back gives the normal again.
+TEST(PcaOctree, UnwrapRoundTrips) {
+  std::mt19937 rng(9);
+  std::normal_distribution<double> g;
+  for (int i = 0; i < 2000; ++i) {
+    const mat3d F = random_rotation(rng);
+    const vec3d n = vec3d(g(rng), g(rng), g(rng)).normalized();
+    const vec2d uv = detail::unwrap_normal(F, n);
+    EXPECT_NEAR(uv.norm(), std::acos(std::clamp(n.dot(F.col(2)), -1.0, 1.0)), 1e-9);
+    EXPECT_LT((detail::wrap_normal(F, uv) - n).norm(), 1e-9) << i;
+  }
+  const mat3d I = mat3d::Identity();
+  EXPECT_EQ(detail::unwrap_normal(I, vec3d::UnitZ()), vec2d::Zero());
+  EXPECT_LT((detail::wrap_normal(I, vec2d::Zero()) - vec3d::UnitZ()).norm(), 1e-15);
+}
+
+// ---- §3.1: quantisation ---------------------------------------------------------------------
+
+// The quantised tree has the same octree as the float one (quantisation does not change the
+// structure), so node by node: μ_p within half a step of 10 bits of its cell, f_p³ and the mean
+// normal within the 16-bit normal table's stated bound, f_p¹ and f_n¹ within twice that plus
+// half an 8-bit step of π, μ_c within half a 5-bit step, and each σ the codebook entry nearest
+// to the node's own (brute force over the codebook).
+TEST(PcaOctree, QuantisedNodesDecodeWithinTheirStatedError) {
+  const auto pts = demo_points(6000);
+  pca_octree_options o{.position_codebook = 64, .normal_codebook = 64, .colour_codebook = 16};
+  const auto q = build_pca_octree(pts, o);
+  o.quantise = false;
+  const auto f = build_pca_octree(pts, o);
+  ASSERT_EQ(q.nodes().size(), f.nodes().size());
+  EXPECT_EQ(q.record_bytes(), 17u);
+  const double e16 = normal_quantizer(16).max_error_degrees();
+  const double angle_step = 180.0 / 256 / 2;
+  const auto& d = q.data();
+  for (std::uint32_t i = 0; i < q.nodes().size(); ++i) {
+    const auto &a = f.at(i), &b = q.at(i);
+    ASSERT_EQ(a.first, b.first);
+    ASSERT_EQ(a.mask, b.mask);
+    const double step = a.cell_size / 1024 / 2;
+    EXPECT_LE((a.mean - b.mean).cwiseAbs().maxCoeff(), step * (1 + 1e-4) + 1e-6 * a.cell_size) << i;
+    EXPECT_LE(axis_deg(a.frame.col(2).cast<double>(), b.frame.col(2).cast<double>()), e16) << i;
+    EXPECT_LE(angle_deg(a.normal_frame.col(2).cast<double>(), b.normal_frame.col(2).cast<double>()),
+              e16)
+        << i;
+    // f¹ is only defined up to rotation when σ¹ = σ²: test where the ellipse has an axis.
+    if (a.sigma.x() > 1.01f * a.sigma.y()) {
+      EXPECT_LE(axis_deg(a.frame.col(0).cast<double>(), b.frame.col(0).cast<double>()),
+                2 * e16 + angle_step + 1e-3)
+          << i;
+    }
+    if (a.normal_sigma.x() > 1.01f * a.normal_sigma.y()) {
+      EXPECT_LE(
+          axis_deg(a.normal_frame.col(0).cast<double>(), b.normal_frame.col(0).cast<double>()),
+          2 * e16 + angle_step + 1e-3)
+          << i;
+    }
+    EXPECT_LE((f.colour(i).mean - q.colour(i).mean).cwiseAbs().maxCoeff(), 0.5f / 31 + 1e-6f);
+    // σ_p: the decoded class is a nearest codebook entry of the node's feature.
+    vec3f feat;
+    for (int k = 0; k < 3; ++k)
+      feat[k] = static_cast<float>(
+          std::log2(std::max(static_cast<double>(a.sigma[k]) / a.cell_size, 0x1p-60)));
+    float best = std::numeric_limits<float>::infinity();
+    for (const auto& c : d.codebook_p) best = std::min(best, (c - feat).squaredNorm());
+    const std::uint32_t idx = d.records[i][0] | (d.records[i][1] & 0xFu) << 8;
+    EXPECT_NEAR((d.codebook_p[idx] - feat).squaredNorm(), best, 1e-5f * (1 + best)) << i;
+  }
+  EXPECT_LE(q.codebook_size_p(), 64u);
+  EXPECT_GE(q.codebook_size_p(), 2u);
+}
+
+// Without colour the records are 13 bytes and there is no colour codebook; the file holds
+// exactly header + codebooks + (1 + 13) bytes per node + checksum.
+TEST(PcaOctree, NoColourMeansNoColourBits) {
+  auto cloud = sample_surface(make_demo_scene(16), 3000, 3);
+  cloud.colours.clear();
+  const auto t = build_pca_octree(point_set<with_normals>::from(cloud));
+  EXPECT_EQ(t.record_bytes(), 13u);
+  EXPECT_EQ(t.codebook_size_c(), 0u);
+  EXPECT_EQ(t.file_bytes(),
+            120 + 12 * t.codebook_size_p() + 8 * t.codebook_size_n() + t.nodes().size() * 14 + 8);
+}
+
+// ---- storage --------------------------------------------------------------------------------
+
+std::vector<char> read_bytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+}
+void write_bytes(const std::string& path, const std::vector<char>& b) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f.write(b.data(), static_cast<std::streamsize>(b.size()));
+}
+std::string temp(const std::string& name) {
+  return (std::filesystem::temp_directory_path() / ("pbr_lod_pca_" + name)).string();
+}
+
+// save → load gives an equal hierarchy (every decoded value, code and codebook entry), and
+// saving it again gives the same bytes: quantised with and without colour, and float records.
+TEST(PcaOctree, SaveLoadRoundTripsBitExactly) {
+  const auto pts = demo_points(4000);
+  for (bool quantise : {true, false}) {
+    const auto t = build_pca_octree(pts, {.quantise = quantise});
+    const std::string p = temp(quantise ? "q.lod" : "f.lod");
+    t.save(p);
+    EXPECT_EQ(std::filesystem::file_size(p), t.file_bytes());
+    const auto u = tree_nc::load(p);
+    EXPECT_TRUE(u == t) << quantise;
+    EXPECT_FALSE(u.stats().has_timings);
+    EXPECT_EQ(u.stats().input_points, pts.size());
+    const std::string p2 = temp("again.lod");
+    u.save(p2);
+    EXPECT_EQ(read_bytes(p), read_bytes(p2));
+    EXPECT_THROW((void)tree_n::load(p), FormatError) << "colour file as a colourless tree";
+  }
+  auto cloud = sample_surface(make_demo_scene(16), 3000, 3);
+  cloud.colours.clear();
+  const auto t = build_pca_octree(point_set<with_normals>::from(cloud));
+  const std::string p = temp("n.lod");
+  t.save(p);
+  EXPECT_TRUE(tree_n::load(p) == t);
+}
+
+// The same input and options give the same bytes whatever the thread count (no timings in the
+// file, parallel steps combine in a fixed order).
+TEST(PcaOctree, FileBytesDoNotDependOnThreads) {
+  const auto pts = demo_points(5000);
+  build_pca_octree(pts, {.threads = 1}).save(temp("t1.lod"));
+  build_pca_octree(pts, {.threads = 3}).save(temp("t3.lod"));
+  EXPECT_EQ(read_bytes(temp("t1.lod")), read_bytes(temp("t3.lod")));
+}
+
+// Corrupt files give a FormatError naming the file and what is wrong, never a crash.
+TEST(PcaOctree, LoadRejectsCorruptFiles) {
+  const auto t = build_pca_octree(demo_points(2000));
+  const std::string p = temp("good.lod"), bad = temp("bad.lod");
+  t.save(p);
+  const auto good = read_bytes(p);
+  const auto expect_error = [&](std::vector<char> b, const std::string& needle) {
+    write_bytes(bad, b);
+    try {
+      (void)tree_nc::load(bad);
+      ADD_FAILURE() << "no error for " << needle;
+    } catch (const FormatError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(bad), std::string::npos) << m;
+      EXPECT_NE(m.find(needle), std::string::npos) << m;
+    }
+  };
+  auto b = good;
+  b[0] = 'X';
+  expect_error(b, "bad magic");
+  b = good;
+  b[8] = 9;
+  expect_error(b, "version 9");
+  b = good;
+  b.resize(b.size() - 5);
+  expect_error(b, "do not match the file size");
+  b = good;
+  b[b.size() / 2] ^= 0x40;
+  expect_error(b, "checksum");
+  b.resize(10);
+  expect_error(b, "truncated");
+  EXPECT_THROW((void)tree_nc::load(temp("missing.lod")), IoError);
+}
+
+// ---- hard inputs ----------------------------------------------------------------------------
+
+TEST(PcaOctree, EmptyAndNonFiniteInputAreClearErrors) {
+  point_set<with_normals> empty;
+  try {
+    (void)build_pca_octree(empty);
+    ADD_FAILURE();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("no points"), std::string::npos) << e.what();
+  }
+  point_set<positions_only> nan;
+  nan.positions = {vec3f(0, 0, 0), vec3f(1, 0, 0), vec3f(0, 1, 0),
+                   vec3f(std::numeric_limits<float>::quiet_NaN(), 0, 0)};
+  try {
+    (void)build_pca_octree(nan);
+    ADD_FAILURE();
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("position 3"), std::string::npos) << e.what();
+  }
+  point_set<with_normals> zero_normal;
+  zero_normal.positions = {vec3f(0, 0, 0)};
+  zero_normal.normals = {vec3f::Zero()};
+  EXPECT_THROW((void)build_pca_octree(zero_normal), InvalidArgument);
+  EXPECT_THROW((void)build_pca_octree(demo_points(100), {.position_codebook = 5000}),
+               InvalidArgument);
+}
+
+// The CGAL-style ladder: 1 point, a repeated point, 2 points, a line, a plane — each builds a
+// finite hierarchy that draws finite points.
+TEST(PcaOctree, DegenerateInputsBuildFiniteHierarchies) {
+  std::vector<std::pair<std::string, std::vector<vec3f>>> cases;
+  cases.push_back({"one point", {vec3f(1, 2, 3)}});
+  cases.push_back({"duplicates", std::vector<vec3f>(100, vec3f(1, 2, 3))});
+  cases.push_back({"two points", {vec3f(0, 0, 0), vec3f(1, 1, 1)}});
+  std::vector<vec3f> line, plane;
+  for (int i = 0; i < 200; ++i) line.push_back(vec3f(0.01f * i, 0.02f * i, -0.005f * i));
+  for (int i = 0; i < 30; ++i)
+    for (int j = 0; j < 30; ++j) plane.push_back(vec3f(0.1f * i, 0.05f * j, 0.1f * i + 0.02f * j));
+  cases.push_back({"collinear", line});
+  cases.push_back({"coplanar", plane});
+  for (const auto& [name, pts] : cases) {
+    point_set<with_normals> s;
+    s.positions = pts;
+    s.normals.assign(pts.size(), vec3f(0, 0, 1));
+    const auto t = build_pca_octree(s, {.leaf_size = 4});
+    expect_finite_tree(t, name);
+    const auto sink = draw(
+        t, camera_for(t.origin() + t.at(0).mean.cast<double>(), std::max(1.0f, t.at(0).radius)), 1);
+    EXPECT_GT(sink.points.size(), 0u) << name;
+    for (const auto& p : sink.points)
+      ASSERT_TRUE(all_finite(p.position) && all_finite(p.normal)) << name;
+  }
+  // positions only: normals come from the k-NN estimation, which handles the same ladder
+  point_set<positions_only> s;
+  s.positions = plane;
+  const auto t = build_pca_octree(s);
+  EXPECT_TRUE(t.stats().estimated_normals);
+  expect_finite_tree(t, "estimated normals");
+}
+
+// A cloud 10⁷ units from the origin builds and draws like the same cloud at the origin: the
+// hierarchy keeps a double origin and the camera is placed relative to the data in both cases,
+// so the images agree except for pixels where float rounding moves a point across an edge.
+TEST(PcaOctree, FarCloudRendersLikeTheOneAtTheOrigin) {
+  const auto near_pts = demo_points(6000);
+  auto far_pts = near_pts;
+  const vec3d offset(1e7, -2e7, 3e7);
+  far_pts.origin += offset;
+  const auto tn = build_pca_octree(near_pts);
+  const auto tf = build_pca_octree(far_pts);
+  expect_finite_tree(tf, "far");
+  ASSERT_EQ(tn.nodes().size(), tf.nodes().size());
+  EXPECT_LT((tf.origin() - tn.origin() - offset).norm(), 1e-6);
+  const vec3d c = tn.origin() + tn.at(0).mean.cast<double>();
+  const double r = tn.at(0).radius / 2;
+  const image a = render_image(tn, camera_for(c, r), 3);
+  const image b = render_image(tf, camera_for(c + offset, r), 3);
+  const auto err = compare_images(a, b);
+  EXPECT_GT(a.covered_count(), 2000u);
+  EXPECT_GT(err.psnr, 30.0);
+  EXPECT_LT(std::abs(double(a.covered_count()) - double(b.covered_count())),
+            0.02 * double(a.covered_count()));
+}
+
+// ---- §4: randomised rendering ---------------------------------------------------------------
+
+// The same seed gives the same image; another seed a different one (the points are random).
+TEST(PcaOctree, SameSeedSameImageOtherSeedDifferent) {
+  const auto t = build_pca_octree(demo_points(5000));
+  const vec3d c = t.origin() + t.at(0).mean.cast<double>();
+  const camera cam = camera_for(c, t.at(0).radius / 2);
+  const image a = render_image(t, cam, 11), b = render_image(t, cam, 11),
+              other = render_image(t, cam, 12);
+  EXPECT_TRUE(a == b);
+  EXPECT_FALSE(a == other);
+  EXPECT_GT(a.covered_count(), 1000u);
+}
+
+// The generator of §4 with λ = 1: every point lies in the γ-truncated ellipsoid, and the
+// points' covariance is F·diag(v·σ²)·Fᵀ with v = E[τ² | τ ≤ γ]/3, τ the radius of a 2-D
+// Gaussian (the paper's generator): E[τ² | τ ≤ γ] = 2 − γ²e^{−γ²/2}/(1 − e^{−γ²/2}).
+TEST(PcaOctree, GeneratorFollowsThePaper) {
+  std::mt19937 rng(46);
+  const mat3d R = random_rotation(rng);
+  std::normal_distribution<double> g;
+  point_set<with_normals> s;
+  s.resize(3000);
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    s.positions[i] = (R * vec3d(1.0 * g(rng), 0.5 * g(rng), 0.1 * g(rng))).cast<float>();
+    s.normals[i] = detail::wrap_normal(R, vec2d(0.3 * g(rng), 0.1 * g(rng))).cast<float>();
+  }
+  const auto t = build_pca_octree(s, {.leaf_size = 1u << 20, .curvature_c = 0, .quantise = false});
+  const auto& nd = t.at(0);
+  ASSERT_EQ(nd.lambda, 1.0f);
+  const std::uint32_t n = 200000;
+  std::vector<detail::pca_sample> out(n);
+  detail::pca_generate(t.data(), 0, 5, 0, n, out.data());
+  const double gam = 3.5, e = std::exp(-gam * gam / 2);
+  const double v = (2 - gam * gam * e / (1 - e)) / 3;
+  mat3d cov = mat3d::Zero();
+  double max_theta = 0;
+  for (const auto& p : out) {
+    const vec3d l = nd.frame.cast<double>().transpose() * (p.position - nd.mean).cast<double>();
+    const vec3d u = l.cwiseQuotient(nd.sigma.cast<double>());
+    ASSERT_LE(u.norm(), gam * (1 + 1e-5)) << "outside the γ-ellipsoid";
+    cov += l * l.transpose();
+    max_theta = std::max(
+        max_theta, angle_deg(p.normal.cast<double>(), nd.normal_frame.col(2).cast<double>()) / deg);
+  }
+  cov /= n;
+  for (int k = 0; k < 3; ++k)
+    EXPECT_NEAR(cov(k, k) / (v * nd.sigma[k] * nd.sigma[k]), 1.0, 0.02) << k;
+  EXPECT_LT(std::abs(cov(0, 1)), 0.02 * nd.sigma[0] * nd.sigma[1]);
+  EXPECT_LE(max_theta, gam * nd.normal_sigma.x() * (1 + 1e-4));
+  EXPECT_LE(max_theta * deg, nd.cone_angle * deg + 1e-3) << "the cone holds the normals";
+  // Point k depends only on (seed, node, k): a later chunk equals the tail of one long call.
+  std::vector<detail::pca_sample> tail(10);
+  detail::pca_generate(t.data(), 0, 5, n - 10, 10, tail.data());
+  for (int k = 0; k < 10; ++k) EXPECT_EQ(tail[k].position, out[n - 10 + k].position);
+}
+
+// §4's count a·ln a + c·a against a hand computation: a flat node seen face-on from distance z
+// projects to an ellipse of semi-axes f·γ·σ¹/z and f·γ·σ²/z pixels.
+TEST(PcaOctree, RequiredPointsFollowTheAreaFormula) {
+  point_set<with_normals> s;
+  std::mt19937 rng(47);
+  std::normal_distribution<double> g;
+  s.resize(4000);
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    s.positions[i] = vec3f(float(0.2 * g(rng)), float(0.1 * g(rng)), 0);
+    s.normals[i] = vec3f::UnitZ();
+  }
+  const auto t = build_pca_octree(s, {.leaf_size = 1u << 20, .curvature_c = 0, .quantise = false});
+  const auto& nd = t.at(0);
+  camera cam;
+  cam.eye = t.origin() + nd.mean.cast<double>() + vec3d(0, 0, 10);
+  cam.target = t.origin() + nd.mean.cast<double>();
+  cam.vp = {200, 200};
+  cam.z_far = 100;
+  const view v(cam, t.origin());
+  const double f = v.focal_px, z = 10;
+  const double a = std::numbers::pi * (f * 3.5 * nd.sigma.x() / z) * (f * 3.5 * nd.sigma.y() / z);
+  const double expected = a * std::log(a) + 0.2 * a;
+  EXPECT_NEAR(detail::pca_required_points(t.data(), 0, v, 1, 0.2f) / expected, 1.0, 1e-3);
+  // Points of 2 pixels cover 4 pixels each: the count is that of a quarter of the area.
+  const double a2 = a / 4;
+  EXPECT_NEAR(detail::pca_required_points(t.data(), 0, v, 2, 0.2f) / (a2 * std::log(a2) + 0.2 * a2),
+              1.0, 1e-3);
+}
+
+// The hierarchy's bounds hold what it generates: every point a traversal emits lies in its
+// node's bounding sphere, hence in every ancestor's (children's spheres are inside their
+// parent's by construction — checked too).
+TEST(PcaOctree, BoundsHoldTheGeneratedPoints) {
+  const auto t = build_pca_octree(demo_points(4000));
+  for (std::uint32_t i = 0; i < t.nodes().size(); ++i)
+    for (auto c : t.children(i)) {
+      EXPECT_TRUE(t.bounding_sphere(i).contains(t.bounding_sphere(c), 1e-4f)) << i << " " << c;
+      EXPECT_EQ(t.at(c).depth, t.at(i).depth + 1);
+      EXPECT_GT(c, i);
+    }
+  for (std::uint32_t i = 0; i < t.nodes().size(); i += 7) {
+    std::vector<detail::pca_sample> out(500);
+    detail::pca_generate(t.data(), i, 1, 0, 500, out.data());
+    for (const auto& p : out) ASSERT_TRUE(t.bounding_sphere(i).contains(p.position, 1e-4f)) << i;
+  }
+}
+
+// A real scan without normals: the bunny builds (normals from k-NN), saves, loads and renders.
+TEST(PcaOctree, BunnyBuildsAndRenders) {
+  const auto cloud = read_points(test::data_file("bun_zipper.ply"));
+  const auto t = build_pca_octree(point_set<positions_only>::from(cloud));
+  EXPECT_TRUE(t.stats().estimated_normals);
+  EXPECT_EQ(t.stats().input_points, 35947u);
+  expect_finite_tree(t, "bunny");
+  const std::string p = temp("bunny.lod");
+  t.save(p);
+  EXPECT_TRUE(tree_n::load(p) == t);
+  const vec3d c = t.origin() + t.at(0).mean.cast<double>();
+  const image img = render_image(t, camera_for(c, t.at(0).radius / 2), 1);
+  EXPECT_GT(img.covered_count(), 3000u);
+}
+
+}  // namespace
+}  // namespace pbr_lod
