@@ -292,7 +292,10 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   const vec3d centre_rel = 0.5 * (lo + hi);
   d.origin = in.origin + centre_rel;
   std::vector<vec3d> pos(n);
-  for (std::size_t i = 0; i < n; ++i) pos[i] = in.positions[i].cast<double>() - centre_rel;
+  for (std::size_t i = 0; i < n; ++i) {
+    pos[i] = in.positions[i].cast<double>() - centre_rel;
+    d.input_radius = std::max(d.input_radius, pos[i].norm());
+  }
   // The root cell: a cube about the box, enlarged by a hair so that no point lies on its far
   // faces after rounding.
   double size = (hi - lo).maxCoeff();
@@ -456,11 +459,12 @@ void pca_derive_bounds(pca_data& d) {
 
 bool operator==(const pca_data& a, const pca_data& b) {
   return a.origin == b.origin && a.cube_min == b.cube_min && a.cube_size == b.cube_size &&
-         a.nodes == b.nodes && a.colours == b.colours && a.leaf_size == b.leaf_size &&
-         a.max_depth == b.max_depth && a.gamma == b.gamma && a.curvature_c == b.curvature_c &&
-         a.lambda_max == b.lambda_max && a.lambda_norm == b.lambda_norm &&
-         a.quantised == b.quantised && a.codebook_p == b.codebook_p &&
-         a.codebook_n == b.codebook_n && a.codebook_c == b.codebook_c && a.records == b.records &&
+         a.input_radius == b.input_radius && a.nodes == b.nodes && a.colours == b.colours &&
+         a.leaf_size == b.leaf_size && a.max_depth == b.max_depth && a.gamma == b.gamma &&
+         a.curvature_c == b.curvature_c && a.lambda_max == b.lambda_max &&
+         a.lambda_norm == b.lambda_norm && a.quantised == b.quantised &&
+         a.codebook_p == b.codebook_p && a.codebook_n == b.codebook_n &&
+         a.codebook_c == b.codebook_c && a.records == b.records &&
          a.colour_records == b.colour_records;
 }
 

@@ -9,7 +9,7 @@
 //            | u32 leaf_size | u32 max_depth | f32 γ | f32 curvature c | f32 λ_max
 //            | u64 input points | u64 nodes | u32 codebook sizes p, n, c (0 when not quantised;
 //            c is 0 without colour) | f64 origin[3] | f64 root cube min[3] (relative to origin)
-//            | f64 root cube edge
+//            | f64 root cube edge | f64 input radius (origin = centre of the input's box)
 //   codebooks f32[3] × p (log₂ σ_p / cell edge) | f32[2] × n (σ_n, radians) | f32[3] × c (σ_c)
 //   tree     u8 child mask per node, breadth first (first child and depth follow from them)
 //   records  quantised: 13 bytes per node [+ u32 colour record] (layout: pca_octree_internal.hpp)
@@ -33,7 +33,7 @@ namespace pbr_lod::detail {
 namespace {
 constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'G'};
 constexpr std::uint32_t version = 1;
-constexpr std::size_t header_bytes = 8 + 4 * 2 + 4 * 2 + 4 * 3 + 8 * 2 + 4 * 3 + 8 * 7;
+constexpr std::size_t header_bytes = 8 + 4 * 2 + 4 * 2 + 4 * 3 + 8 * 2 + 4 * 3 + 8 * 8;
 constexpr std::size_t float_node_floats = 26, float_colour_floats = 15;
 
 std::size_t record_bytes(bool quantised, bool colour) {
@@ -71,6 +71,7 @@ void save_pca_data(const pca_data& d, const std::string& path) {
   for (int k = 0; k < 3; ++k) w.put(d.origin[k]);
   for (int k = 0; k < 3; ++k) w.put(d.cube_min[k]);
   w.put(d.cube_size);
+  w.put(d.input_radius);
   for (const auto& v : d.codebook_p) w.put_vec(v);
   for (const auto& v : d.codebook_n) {
     w.put(v.x());
@@ -178,6 +179,8 @@ pca_data load_pca_data(const std::string& path, bool colour) {
   for (int k = 0; k < 3; ++k) d.origin[k] = r.get<double>("origin");
   for (int k = 0; k < 3; ++k) d.cube_min[k] = r.get<double>("root cube");
   d.cube_size = r.get<double>("root cube edge");
+  d.input_radius = r.get<double>("input radius");
+  if (!std::isfinite(d.input_radius) || d.input_radius < 0) bad("input radius is not finite");
   if (!all_finite(d.origin)) bad("origin is not finite");
   if (!all_finite(d.cube_min) || !std::isfinite(d.cube_size) || !(d.cube_size > 0))
     bad("root cube is not finite or has no extent");

@@ -97,7 +97,7 @@ camera camera_for(const vec3d& centre, double radius) {
 // Points drawn from a known trivariate Gaussian: the sample mean is within a few σ/√n of μ,
 // the sample standard deviations within a few % (standard error σ/√(2n) ≈ 0.5 % at n = 20000),
 // and the principal axes within a degree (their σ are well separated: 0.5, 0.2, 0.05).
-TEST(PcaOctree, PositionPcaRecoversGaussian) {
+TEST(pca_octree, PositionPcaRecoversGaussian) {
   std::mt19937 rng(42);
   const mat3d R = random_rotation(rng);
   const vec3d mu(1, -2, 3), sigma(0.5, 0.2, 0.05);
@@ -119,7 +119,7 @@ TEST(PcaOctree, PositionPcaRecoversGaussian) {
 // the sphere (the inverse of the §3 unwrap): the normal PCA recovers σ_n, the mean normal and
 // the ellipse's major axis. (The Euclidean mean of the wrapped normals is the centre direction
 // by symmetry.)
-TEST(PcaOctree, NormalPcaRecoversGaussianOnTheSphere) {
+TEST(pca_octree, NormalPcaRecoversGaussianOnTheSphere) {
   std::mt19937 rng(43);
   const mat3d F = random_rotation(rng);
   const vec2d sigma(0.2, 0.05);
@@ -138,7 +138,7 @@ TEST(PcaOctree, NormalPcaRecoversGaussianOnTheSphere) {
 // The same through the builder: a single leaf (leaf_size above the count) without quantisation
 // holds the position, normal and colour statistics of all its points. Colours are rounded to
 // 8 bits, which adds 1/(12·255²) to each variance — negligible against σ_c² here.
-TEST(PcaOctree, RootOfOneLeafHoldsTheStatistics) {
+TEST(pca_octree, RootOfOneLeafHoldsTheStatistics) {
   std::mt19937 rng(44);
   const mat3d R = random_rotation(rng), C = random_rotation(rng);
   const vec3d sp(2, 1, 0.1), sc(0.1, 0.05, 0.03), mc(0.5, 0.4, 0.6);
@@ -175,7 +175,7 @@ TEST(PcaOctree, RootOfOneLeafHoldsTheStatistics) {
 
 // §3's degenerate rules, one case each: the frame is always finite, orthonormal and
 // right-handed, σ never below the floor, and the directions are those the rules name.
-TEST(PcaOctree, DegenerateCasesGiveOrthonormalFrames) {
+TEST(pca_octree, DegenerateCasesGiveOrthonormalFrames) {
   const vec3d n = vec3d(1, 2, 2).normalized();
   // one point / duplicates: three zero variances → z = the normal
   for (int count : {1, 50}) {
@@ -235,7 +235,7 @@ TEST(PcaOctree, DegenerateCasesGiveOrthonormalFrames) {
 
 // The unwrap of §3 is the sphere's log map at the pole: |uv| is the angle from the pole (arc
 // length along the longitude), and wrapping it back gives the normal again.
-TEST(PcaOctree, UnwrapRoundTrips) {
+TEST(pca_octree, UnwrapRoundTrips) {
   std::mt19937 rng(9);
   std::normal_distribution<double> g;
   for (int i = 0; i < 2000; ++i) {
@@ -257,7 +257,7 @@ TEST(PcaOctree, UnwrapRoundTrips) {
 // normal within the 16-bit normal table's stated bound, f_p¹ and f_n¹ within twice that plus
 // half an 8-bit step of π, μ_c within half a 5-bit step, and each σ the codebook entry nearest
 // to the node's own (brute force over the codebook).
-TEST(PcaOctree, QuantisedNodesDecodeWithinTheirStatedError) {
+TEST(pca_octree, QuantisedNodesDecodeWithinTheirStatedError) {
   const auto pts = demo_points(6000);
   pca_octree_options o{.position_codebook = 64, .normal_codebook = 64, .colour_codebook = 16};
   const auto q = build_pca_octree(pts, o);
@@ -307,14 +307,14 @@ TEST(PcaOctree, QuantisedNodesDecodeWithinTheirStatedError) {
 
 // Without colour the records are 13 bytes and there is no colour codebook; the file holds
 // exactly header + codebooks + (1 + 13) bytes per node + checksum.
-TEST(PcaOctree, NoColourMeansNoColourBits) {
+TEST(pca_octree, NoColourMeansNoColourBits) {
   auto cloud = sample_surface(make_demo_scene(16), 3000, 3);
   cloud.colours.clear();
   const auto t = build_pca_octree(point_set<with_normals>::from(cloud));
   EXPECT_EQ(t.record_bytes(), 13u);
   EXPECT_EQ(t.codebook_size_c(), 0u);
   EXPECT_EQ(t.file_bytes(),
-            120 + 12 * t.codebook_size_p() + 8 * t.codebook_size_n() + t.nodes().size() * 14 + 8);
+            128 + 12 * t.codebook_size_p() + 8 * t.codebook_size_n() + t.nodes().size() * 14 + 8);
 }
 
 // ---- storage --------------------------------------------------------------------------------
@@ -333,7 +333,7 @@ std::string temp(const std::string& name) {
 
 // save → load gives an equal hierarchy (every decoded value, code and codebook entry), and
 // saving it again gives the same bytes: quantised with and without colour, and float records.
-TEST(PcaOctree, SaveLoadRoundTripsBitExactly) {
+TEST(pca_octree, SaveLoadRoundTripsBitExactly) {
   const auto pts = demo_points(4000);
   for (bool quantise : {true, false}) {
     const auto t = build_pca_octree(pts, {.quantise = quantise});
@@ -359,7 +359,7 @@ TEST(PcaOctree, SaveLoadRoundTripsBitExactly) {
 
 // The same input and options give the same bytes whatever the thread count (no timings in the
 // file, parallel steps combine in a fixed order).
-TEST(PcaOctree, FileBytesDoNotDependOnThreads) {
+TEST(pca_octree, FileBytesDoNotDependOnThreads) {
   const auto pts = demo_points(5000);
   build_pca_octree(pts, {.threads = 1}).save(temp("t1.lod"));
   build_pca_octree(pts, {.threads = 3}).save(temp("t3.lod"));
@@ -367,7 +367,7 @@ TEST(PcaOctree, FileBytesDoNotDependOnThreads) {
 }
 
 // Corrupt files give a FormatError naming the file and what is wrong, never a crash.
-TEST(PcaOctree, LoadRejectsCorruptFiles) {
+TEST(pca_octree, LoadRejectsCorruptFiles) {
   const auto t = build_pca_octree(demo_points(2000));
   const std::string p = temp("good.lod"), bad = temp("bad.lod");
   t.save(p);
@@ -402,7 +402,7 @@ TEST(PcaOctree, LoadRejectsCorruptFiles) {
 
 // ---- hard inputs ----------------------------------------------------------------------------
 
-TEST(PcaOctree, EmptyAndNonFiniteInputAreClearErrors) {
+TEST(pca_octree, EmptyAndNonFiniteInputAreClearErrors) {
   point_set<with_normals> empty;
   try {
     (void)build_pca_octree(empty);
@@ -429,7 +429,7 @@ TEST(PcaOctree, EmptyAndNonFiniteInputAreClearErrors) {
 
 // The CGAL-style ladder: 1 point, a repeated point, 2 points, a line, a plane — each builds a
 // finite hierarchy that draws finite points.
-TEST(PcaOctree, DegenerateInputsBuildFiniteHierarchies) {
+TEST(pca_octree, DegenerateInputsBuildFiniteHierarchies) {
   std::vector<std::pair<std::string, std::vector<vec3f>>> cases;
   cases.push_back({"one point", {vec3f(1, 2, 3)}});
   cases.push_back({"duplicates", std::vector<vec3f>(100, vec3f(1, 2, 3))});
@@ -463,7 +463,7 @@ TEST(PcaOctree, DegenerateInputsBuildFiniteHierarchies) {
 // A cloud 10⁷ units from the origin builds and draws like the same cloud at the origin: the
 // hierarchy keeps a double origin and the camera is placed relative to the data in both cases,
 // so the images agree except for pixels where float rounding moves a point across an edge.
-TEST(PcaOctree, FarCloudRendersLikeTheOneAtTheOrigin) {
+TEST(pca_octree, FarCloudRendersLikeTheOneAtTheOrigin) {
   const auto near_pts = demo_points(6000);
   auto far_pts = near_pts;
   const vec3d offset(1e7, -2e7, 3e7);
@@ -487,7 +487,7 @@ TEST(PcaOctree, FarCloudRendersLikeTheOneAtTheOrigin) {
 // ---- §4: randomised rendering ---------------------------------------------------------------
 
 // The same seed gives the same image; another seed a different one (the points are random).
-TEST(PcaOctree, SameSeedSameImageOtherSeedDifferent) {
+TEST(pca_octree, SameSeedSameImageOtherSeedDifferent) {
   const auto t = build_pca_octree(demo_points(5000));
   const vec3d c = t.origin() + t.at(0).mean.cast<double>();
   const camera cam = camera_for(c, t.at(0).radius / 2);
@@ -501,7 +501,7 @@ TEST(PcaOctree, SameSeedSameImageOtherSeedDifferent) {
 // The generator of §4 with λ = 1: every point lies in the γ-truncated ellipsoid, and the
 // points' covariance is F·diag(v·σ²)·Fᵀ with v = E[τ² | τ ≤ γ]/3, τ the radius of a 2-D
 // Gaussian (the paper's generator): E[τ² | τ ≤ γ] = 2 − γ²e^{−γ²/2}/(1 − e^{−γ²/2}).
-TEST(PcaOctree, GeneratorFollowsThePaper) {
+TEST(pca_octree, GeneratorFollowsThePaper) {
   std::mt19937 rng(46);
   const mat3d R = random_rotation(rng);
   std::normal_distribution<double> g;
@@ -543,7 +543,7 @@ TEST(PcaOctree, GeneratorFollowsThePaper) {
 
 // §4's count a·ln a + c·a against a hand computation: a flat node seen face-on from distance z
 // projects to an ellipse of semi-axes f·γ·σ¹/z and f·γ·σ²/z pixels.
-TEST(PcaOctree, RequiredPointsFollowTheAreaFormula) {
+TEST(pca_octree, RequiredPointsFollowTheAreaFormula) {
   point_set<with_normals> s;
   std::mt19937 rng(47);
   std::normal_distribution<double> g;
@@ -573,7 +573,7 @@ TEST(PcaOctree, RequiredPointsFollowTheAreaFormula) {
 // The hierarchy's bounds hold what it generates: every point a traversal emits lies in its
 // node's bounding sphere, hence in every ancestor's (children's spheres are inside their
 // parent's by construction — checked too).
-TEST(PcaOctree, BoundsHoldTheGeneratedPoints) {
+TEST(pca_octree, BoundsHoldTheGeneratedPoints) {
   const auto t = build_pca_octree(demo_points(4000));
   for (std::uint32_t i = 0; i < t.nodes().size(); ++i)
     for (auto c : t.children(i)) {
@@ -589,7 +589,7 @@ TEST(PcaOctree, BoundsHoldTheGeneratedPoints) {
 }
 
 // A real scan without normals: the bunny builds (normals from k-NN), saves, loads and renders.
-TEST(PcaOctree, BunnyBuildsAndRenders) {
+TEST(pca_octree, BunnyBuildsAndRenders) {
   const auto cloud = read_points(test::data_file("bun_zipper.ply"));
   const auto t = build_pca_octree(point_set<positions_only>::from(cloud));
   EXPECT_TRUE(t.stats().estimated_normals);

@@ -162,6 +162,9 @@ struct pca_data {
   vec3d origin = vec3d::Zero();
   vec3d cube_min = vec3d::Zero();  ///< root cell, relative to origin
   double cube_size = 0;
+  /// The input's bounds: origin is the centre of its box, this the distance from there to its
+  /// farthest point (so that a --view frames the input and the hierarchy alike).
+  double input_radius = 0;
   std::vector<pca_node> nodes;
   std::vector<pca_colour> colours;  ///< per node, or empty
   // options the file records
@@ -330,6 +333,8 @@ class pca_octree {
   /// The root's octree cell (relative to origin()).
   [[nodiscard]] vec3d cube_min() const { return d_.cube_min; }
   [[nodiscard]] double cube_size() const { return d_.cube_size; }
+  /// Distance from origin() (the centre of the input's box) to the input's farthest point.
+  [[nodiscard]] double input_radius() const { return d_.input_radius; }
   [[nodiscard]] std::size_t codebook_size_p() const { return d_.codebook_p.size(); }
   [[nodiscard]] std::size_t codebook_size_n() const { return d_.codebook_n.size(); }
   [[nodiscard]] std::size_t codebook_size_c() const { return d_.codebook_c.size(); }
