@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <numbers>
 #include <random>
 
@@ -586,6 +587,78 @@ TEST(pca_octree, BoundsHoldTheGeneratedPoints) {
     detail::pca_generate(t.data(), i, 1, 0, 500, out.data());
     for (const auto& p : out) ASSERT_TRUE(t.bounding_sphere(i).contains(p.position, 1e-4f)) << i;
   }
+}
+
+// ---- Fig. 6: the cut kept across frames -----------------------------------------------------
+
+/// pca_octree_policy that also records which nodes it draws.
+struct recording_policy : pca_octree_policy {
+  std::vector<std::uint32_t>* drawn;
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
+            const traverse_options& o, S& sink) const {
+    drawn->push_back(n);
+    pca_octree_policy::emit(h, n, v, size, o, sink);
+  }
+};
+
+// Over a camera path that circles, approaches and backs away, the split/merge cut draws exactly
+// the fresh traversal's nodes in the same order (so the same image, byte for byte, with and
+// without the cache bank) while evaluating fewer nodes; after every frame the active list is an
+// antichain that covers the tree (every root-to-leaf path meets it exactly once).
+TEST(pca_octree, SplitMergeCutMatchesFreshTraversal) {
+  const auto t = build_pca_octree(demo_points(8000), {.leaf_size = 4});
+  const vec3d c = t.origin() + t.at(0).mean.cast<double>();
+  const double r = t.at(0).radius / 2;
+  pca_octree_cut<with_normals_colours> cut(t), uncached(t, false);
+  std::size_t fresh_visits = 0, cut_visits = 0, merges = 0, splits = 0, cached = 0;
+  for (int f = 0; f < 24; ++f) {
+    const double dist = f < 12 ? 4.0 - 0.25 * f : 1.0 + 0.25 * (f - 12);
+    camera cam = camera::orbit(c, r, 15.0 * f, 10, dist, 1, viewport{96, 72});
+    const view v(cam, t.origin());
+    const traverse_options o{.backface_cull = true};
+    render_options ro;
+    ro.fx = effects{.shading = true, .colour = false};
+    using R = rasterizer<with_normals_colours, effects{.shading = true, .colour = false}>;
+    R a(v, ro), b(v, ro), u(v, ro);
+    std::vector<std::uint32_t> fresh_drawn;
+    recording_policy rec;
+    rec.drawn = &fresh_drawn;
+    const auto sf = traverse(t, v, o, a, rec);
+    const auto sc = cut.frame(v, o, b);
+    (void)uncached.frame(v, o, u);
+    ASSERT_EQ(cut.drawn(), fresh_drawn) << "frame " << f;
+    ASSERT_EQ(sc.points, sf.points) << "frame " << f;
+    const image ia = a.finish(), ib = b.finish(), iu = u.finish();
+    ASSERT_TRUE(ia == ib) << "frame " << f;
+    ASSERT_TRUE(ia == iu) << "frame " << f;
+    if (f > 0) {
+      fresh_visits += sf.visited;
+      cut_visits += sc.visited;
+    }
+    merges += cut.last_frame().merges;
+    splits += cut.last_frame().splits;
+    cached += cut.last_frame().points_cached;
+    // antichain covering the tree
+    std::vector<int> on(t.nodes().size(), 0);
+    for (auto n : cut.cut()) on[n] = 1;
+    std::vector<int> above(t.nodes().size(), 0);  // cut nodes on the path from the root
+    for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
+      above[n] += on[n];
+      ASSERT_LE(above[n], 1) << "frame " << f << ": two cut nodes on one path";
+      for (auto ch : t.children(n)) above[ch] = above[n];
+      if (t.is_leaf(n)) {
+        ASSERT_EQ(above[n], 1) << "frame " << f << ": leaf " << n << " uncovered";
+      }
+    }
+  }
+  std::cout << "visits over frames 1..23: fresh " << fresh_visits << ", cut " << cut_visits
+            << "; splits " << splits << ", merges " << merges << ", points from the bank " << cached
+            << "\n";
+  EXPECT_LT(cut_visits, fresh_visits);
+  EXPECT_GT(merges, 0u);
+  EXPECT_GT(splits, 0u);
+  EXPECT_GT(cached, 0u) << "coherent frames reuse the bank";
 }
 
 // A real scan without normals: the bunny builds (normals from k-NN), saves, loads and renders.

@@ -306,6 +306,14 @@ class pca_octree {
     if (!(p < static_cast<float>(o.max_points))) return o.max_points;
     return std::max<std::uint32_t>(1, static_cast<std::uint32_t>(std::ceil(p)));
   }
+  /// The split test's count (Fig. 6 DoSplit): a·ln a + c·a for the area a of the node's
+  /// projected bounding sphere (exact silhouette, in units of point_px²); monotone down the tree.
+  [[nodiscard]] float split_measure(node_id n, const view& v, const pca_render_options& o) const {
+    const float r = projected_radius_exact(v, bounding_sphere(n));
+    if (!std::isfinite(r)) return std::numeric_limits<float>::infinity();
+    const float a = std::numbers::pi_v<float> * r * r / (o.point_px * o.point_px);
+    return a > 1 ? a * std::log(a) + o.c * a : 1.0f;
+  }
   /// Sends points [0, count) of node n's random stream to the sink, as squares of o.point_px.
   template <class S>
   void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink) const {
@@ -387,15 +395,17 @@ pca_octree<pca_octree_attributes(In)> build_pca_octree(const point_set<In>& poin
   return t;
 }
 
-/// §4 as a policy of the common traversal: screen_size() returns the number of points the
-/// node needs (a·ln a + c·a), refine() splits while that exceeds split_points (a leaf never
-/// splits), emit() draws that many generated points.
+/// §4 as a policy of the common traversal. The split test (Fig. 6 DoSplit: more than
+/// split_points points) is taken on the node's bounding sphere — the paper's "enclosing-sphere
+/// shortcut" — because a parent's sphere holds its children's: a node that must split has
+/// ancestors that all must, so the cut is well defined and pca_octree_cut can keep it across
+/// frames. A drawn node gets the count of its own projected ellipsoid (a·ln a + c·a).
 struct pca_octree_policy : default_policy {
   pca_render_options render{};
   template <class H>
   [[nodiscard]] float screen_size(const H& h, const typename H::node_id& n, const sphere&,
                                   const view& v, const traverse_options&) const {
-    return static_cast<float>(h.required_points(n, v, render));
+    return h.split_measure(n, v, render);
   }
   template <class H>
   [[nodiscard]] bool refine(const H& h, const typename H::node_id& n, float points,
@@ -403,10 +413,257 @@ struct pca_octree_policy : default_policy {
     return !h.is_leaf(n) && points > render.split_points;
   }
   template <class H, class S>
-  void emit(const H& h, const typename H::node_id& n, const view&, float points,
-            const traverse_options&, S& sink) const {
-    h.emit_points(n, static_cast<std::uint32_t>(points), render, sink);
+  void emit(const H& h, const typename H::node_id& n, const view& v, float, const traverse_options&,
+            S& sink) const {
+    h.emit_points(n, h.required_points(n, v, render), render, sink);
   }
+};
+
+/// Fig. 6: the view-dependent cut kept across frames — the traversal of pca_octree_policy
+/// specialised for coherence. An active list (doubly linked, in depth-first order) holds the
+/// cut: the nodes drawn and the nodes culled. Each frame walks it once:
+///   * a node whose parent need not split any more (culled, or few enough points) sends the
+///     parent a merge request; the parent counts them with a time stamp (a stale stamp resets
+///     the count to one) and, when every child has asked, replaces its children in the list
+///     (merge) and is examined in turn;
+///   * otherwise a node that must split is replaced by its children in place (split) and the
+///     walk continues with the first child;
+///   * otherwise it is drawn (or stays culled: frustum, or normal cone — the cone's width covers
+///     the widest normal-ellipse intercept, γ·σ_n¹, of the subtree).
+/// The parent test stands for the paper's "screen-space size below 8 pixels": with it, the cut
+/// after a frame is exactly the fresh traversal's (the split test is monotone, see
+/// pca_octree_policy), so the frame draws the same points, in the same order, while evaluating
+/// only the list's nodes and their parents. Generated points live in a cache bank of 16-point
+/// blocks: a node keeps the blocks it filled while it stays in the cut and generates only the
+/// points it lacks; split frees the parent's blocks, merge the children's. The stream is
+/// counter-based, so cached and fresh points are the same. traverse_stats::visited counts the
+/// nodes evaluated this frame. One thread; the hierarchy must outlive the cut.
+template <attributes A>
+class pca_octree_cut {
+ public:
+  using node_id = std::uint32_t;
+  static constexpr node_id none = std::numeric_limits<node_id>::max();
+  static constexpr std::uint32_t block_points = 16;
+
+  explicit pca_octree_cut(const pca_octree<A>& t, bool use_cache = true)
+      : t_(&t), cache_(use_cache) {
+    const std::size_t n = t.nodes().size();
+    parent_.assign(n, none);
+    rank_.assign(n, 0);
+    prev_.assign(n, none);
+    next_.assign(n, none);
+    stamp_.assign(n, 0);
+    state_.assign(n, 0);
+    merge_stamp_.assign(n, 0);
+    merge_count_.assign(n, 0);
+    blocks_.resize(n);
+    filled_.assign(n, 0);
+    if (n == 0) return;
+    // Ranks of the plain traversal's order (pre-order, children pushed in order, popped
+    // reversed) so that a frame emits as traverse() does.
+    std::vector<node_id> stack{t.root()};
+    node_id next = 0;
+    while (!stack.empty()) {
+      const node_id m = stack.back();
+      stack.pop_back();
+      rank_[m] = next++;
+      for (const node_id c : t.children(m)) {
+        parent_[c] = m;
+        stack.push_back(c);
+      }
+    }
+  }
+
+  struct frame_stats {
+    std::size_t splits = 0, merges = 0;
+    std::size_t points_cached = 0;     ///< points drawn from the bank
+    std::size_t points_generated = 0;  ///< points generated into the bank (or on the fly)
+  };
+
+  /// Draws one frame; the first frame (or after reset()) starts from the root.
+  template <Sink<A> S>
+  traverse_stats frame(const view& v, const traverse_options& o, S& sink,
+                       const pca_octree_policy& p = {}) {
+    st_ = {};
+    fs_ = {};
+    drawn_.clear();
+    if (t_->empty()) return st_;
+    if (++frame_ == 0) {
+      std::fill(stamp_.begin(), stamp_.end(), 0u);
+      std::fill(merge_stamp_.begin(), merge_stamp_.end(), 0u);
+      frame_ = 1;
+    }
+    if (head_ == none) head_ = t_->root();
+    node_id n = head_;
+    while (n != none) {
+      const node_id q = parent_[n];
+      if (q != none && state(q, v, o, p) != refine) {  // merge request to the parent
+        if (merge_stamp_[q] != frame_) {
+          merge_stamp_[q] = frame_;
+          merge_count_[q] = 1;
+        } else {
+          ++merge_count_[q];
+        }
+        if (merge_count_[q] == t_->at(q).count) {
+          merge(q);
+          n = q;
+          continue;
+        }
+        n = next_[n];
+        continue;
+      }
+      const int s = state(n, v, o, p);
+      if (s == refine) {
+        n = split(n);
+        continue;
+      }
+      if (s == culled_frustum) ++st_.culled_frustum;
+      if (s == culled_backface) ++st_.culled_backface;
+      if (s == draw) drawn_.push_back(n);
+      n = next_[n];
+    }
+    std::sort(drawn_.begin(), drawn_.end(),
+              [&](node_id a, node_id b) { return rank_[a] < rank_[b]; });
+    detail::counting_forwarder<A, S> out{sink};
+    for (const node_id d : drawn_) {
+      ++(t_->is_leaf(d) ? st_.emitted_leaves : st_.emitted_nodes);
+      const std::uint32_t count = t_->required_points(d, v, p.render);
+      if (cache_)
+        emit_cached(d, count, p.render, out);
+      else {
+        fs_.points_generated += count;
+        t_->emit_points(d, count, p.render, out);
+      }
+    }
+    st_.points = out.points;
+    return st_;
+  }
+
+  /// Forgets the cut and the bank: the next frame starts from the root.
+  void reset() {
+    for (node_id n = head_; n != none; n = next_[n]) release(n);
+    head_ = none;
+  }
+  /// The active list (the cut: drawn and culled nodes), in list order.
+  [[nodiscard]] std::vector<node_id> cut() const {
+    std::vector<node_id> c;
+    for (node_id n = head_; n != none; n = next_[n]) c.push_back(n);
+    return c;
+  }
+  /// The nodes drawn in the last frame, in the order drawn (the plain traversal's).
+  [[nodiscard]] const std::vector<node_id>& drawn() const { return drawn_; }
+  [[nodiscard]] const frame_stats& last_frame() const { return fs_; }
+  /// Blocks of the bank in use.
+  [[nodiscard]] std::size_t blocks_in_use() const {
+    return bank_.size() / block_points - free_.size();
+  }
+
+ private:
+  enum : int { culled_frustum, culled_backface, refine, draw };
+
+  int state(node_id n, const view& v, const traverse_options& o, const pca_octree_policy& p) {
+    if (stamp_[n] == frame_) return state_[n];
+    stamp_[n] = frame_;
+    ++st_.visited;
+    const sphere s = t_->bounding_sphere(n);
+    int r = draw;
+    if (o.frustum_cull &&
+        (o.cull_volume == traverse_options::volume::view_cone ? outside_view_cone(v, s)
+                                                              : frustum_test(v, s, 0x3f) < 0))
+      r = culled_frustum;
+    else if (o.backface_cull && back_facing(s, t_->normal_cone(n), v.eye))
+      r = culled_backface;
+    else if (p.refine(*t_, n, p.screen_size(*t_, n, s, v, o), o))
+      r = refine;
+    state_[n] = static_cast<std::uint8_t>(r);
+    return r;
+  }
+  /// Replaces n in the list by its children; returns the first child.
+  node_id split(node_id n) {
+    ++fs_.splits;
+    release(n);
+    const auto& nd = t_->at(n);
+    node_id before = prev_[n];
+    const node_id after = next_[n];
+    for (node_id c = nd.first; c < nd.first + nd.count; ++c) {
+      link(before, c);
+      before = c;
+    }
+    link(before, after);
+    return nd.first;
+  }
+  /// Replaces q's children (contiguous in the list) by q.
+  void merge(node_id q) {
+    ++fs_.merges;
+    const auto& nd = t_->at(q);
+    const node_id first = nd.first, last = nd.first + nd.count - 1;
+    const node_id before = prev_[first], after = next_[last];
+    for (node_id c = first; c <= last; ++c) release(c);
+    link(before, q);
+    link(q, after);
+  }
+  void link(node_id a, node_id b) {
+    if (a == none)
+      head_ = b;
+    else
+      next_[a] = b;
+    if (b != none) prev_[b] = a;
+  }
+  void release(node_id n) {
+    for (const std::uint32_t b : blocks_[n]) free_.push_back(b);
+    blocks_[n].clear();
+    filled_[n] = 0;
+  }
+  template <class S>
+  void emit_cached(node_id n, std::uint32_t count, const pca_render_options& r, S& sink) {
+    auto& bl = blocks_[n];
+    if (filled_[n] < count) {
+      while (bl.size() * block_points < count) {
+        if (free_.empty()) {
+          free_.push_back(static_cast<std::uint32_t>(bank_.size() / block_points));
+          bank_.resize(bank_.size() + block_points);
+        }
+        bl.push_back(free_.back());
+        free_.pop_back();
+      }
+      for (std::uint32_t first = filled_[n]; first < count;) {
+        const std::uint32_t k = std::min(block_points - first % block_points, count - first);
+        detail::pca_generate(
+            t_->data(), n, r.seed, first, k,
+            &bank_[bl[first / block_points] * block_points + first % block_points]);
+        first += k;
+      }
+      fs_.points_generated += count - filled_[n];
+      fs_.points_cached += filled_[n];
+      filled_[n] = count;
+    } else {
+      fs_.points_cached += count;
+    }
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const detail::pca_sample& g = bank_[bl[i / block_points] * block_points + i % block_points];
+      point_prim<A> pt{g.position, r.point_px};
+      pt.normal = g.normal;
+      if constexpr (A.colour) pt.colour = g.colour;
+      sink.point(pt);
+    }
+  }
+
+  const pca_octree<A>* t_;
+  bool cache_;
+  std::vector<node_id> parent_, rank_, prev_, next_;
+  node_id head_ = none;
+  std::vector<std::uint32_t> stamp_, merge_stamp_;
+  std::vector<std::uint8_t> state_, merge_count_;
+  std::uint32_t frame_ = 0;
+  std::vector<node_id> drawn_;
+  traverse_stats st_;
+  frame_stats fs_;
+  // the cache bank: blocks of 16 generated points, per node the blocks it holds and how many
+  // of its points are filled
+  std::vector<detail::pca_sample> bank_;
+  std::vector<std::uint32_t> free_;
+  std::vector<std::vector<std::uint32_t>> blocks_;
+  std::vector<std::uint32_t> filled_;
 };
 
 }  // namespace pbr_lod
