@@ -4,6 +4,7 @@
 # (extern template in builders/pca_octree.hpp). FLANN (through core/knn) and the normal tables
 # stay behind this wall.
 target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/pca_octree_build.cpp
+               ${CMAKE_CURRENT_LIST_DIR}/pca_octree_stats.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pca_octree_quantise.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pca_octree_io.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pca_octree_render.cpp)
