@@ -25,8 +25,8 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
   o.position_codebook = static_cast<std::uint32_t>(m.integer("codebook_p", 1024, 1, 4096));
   o.normal_codebook = static_cast<std::uint32_t>(m.integer("codebook_n", 1024, 1, 4096));
   o.colour_codebook = static_cast<std::uint32_t>(m.integer("codebook_c", 64, 1, 64));
-  o.kmeans_iterations = static_cast<std::uint32_t>(m.integer("kmeans_iterations", 12, 0, 1000));
-  o.kmeans_sample = static_cast<std::uint32_t>(m.integer("kmeans_sample", 1 << 16, 1, 1 << 30));
+  o.kmeans_iterations = static_cast<std::uint32_t>(m.integer("kmeans_iterations", 8, 0, 1000));
+  o.kmeans_sample = static_cast<std::uint32_t>(m.integer("kmeans_sample", 1 << 14, 1, 1 << 30));
   o.kmeans_seed = static_cast<std::uint64_t>(m.integer("kmeans_seed", 1, 0, 1L << 62));
   o.knn = static_cast<int>(m.integer("knn", 16, 3, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));

@@ -142,8 +142,14 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   d.cube_min = vec3d::Constant(-0.5 * size);
 
   // ---- §3: top-down octree, breadth first; children contiguous, in octant order.
-  std::vector<std::uint32_t> perm(n), tmp(n);
-  for (std::size_t i = 0; i < n; ++i) perm[i] = static_cast<std::uint32_t>(i);
+  // The points are reordered in place with their normals and colours (a stable counting sort
+  // per node), so every node's points are contiguous: each pass streams through memory.
+  const bool colour = !in.colours.empty();
+  std::vector<rgb8> cols(in.colours.begin(), in.colours.end());
+  std::vector<vec3d> pos_tmp(n);
+  std::vector<vec3f> nrm_tmp(n);
+  std::vector<rgb8> col_tmp(cols.size());
+  std::vector<std::uint8_t> oct(n);
   std::vector<build_node> ranges{{0, static_cast<std::uint32_t>(n)}};
   std::vector<vec3d> cell_min{d.cube_min};
   d.nodes.emplace_back();
@@ -153,26 +159,35 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
     pca_node& nd = d.nodes[i];
     st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
     if (count <= o.leaf_size || nd.depth >= o.max_depth) continue;
-    vec3d plo = pos[perm[r.begin]], phi = plo;
+    vec3d plo = pos[r.begin], phi = plo;
     for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      plo = plo.cwiseMin(pos[perm[k]]);
-      phi = phi.cwiseMax(pos[perm[k]]);
+      plo = plo.cwiseMin(pos[k]);
+      phi = phi.cwiseMax(pos[k]);
     }
     if (plo == phi) continue;  // all points identical: no split separates them
     const double half = d.cube_size / std::ldexp(1.0, nd.depth + 1);
     const vec3d mid = cell_min[i] + vec3d::Constant(half);
-    const auto octant = [&](std::uint32_t p) {
-      const vec3d& q = pos[p];
-      return (q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) |
-             (q.z() >= mid.z() ? 4u : 0u);
-    };
     std::array<std::uint32_t, 9> start{};
-    for (std::uint32_t k = r.begin; k < r.end; ++k) ++start[octant(perm[k]) + 1];
+    for (std::uint32_t k = r.begin; k < r.end; ++k) {
+      const vec3d& q = pos[k];
+      oct[k] =
+          static_cast<std::uint8_t>((q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) |
+                                    (q.z() >= mid.z() ? 4u : 0u));
+      ++start[oct[k] + 1u];
+    }
     for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
     std::array<std::uint32_t, 8> at{};
     for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
-    for (std::uint32_t k = r.begin; k < r.end; ++k) tmp[at[octant(perm[k])]++] = perm[k];
-    std::copy(tmp.begin() + r.begin, tmp.begin() + r.end, perm.begin() + r.begin);
+    for (std::uint32_t k = r.begin; k < r.end; ++k) {
+      const std::uint32_t to = at[oct[k]]++;
+      pos_tmp[to] = pos[k];
+      nrm_tmp[to] = normals[k];
+      if (colour) col_tmp[to] = cols[k];
+    }
+    std::copy(pos_tmp.begin() + r.begin, pos_tmp.begin() + r.end, pos.begin() + r.begin);
+    std::copy(nrm_tmp.begin() + r.begin, nrm_tmp.begin() + r.end, normals.begin() + r.begin);
+    if (colour)
+      std::copy(col_tmp.begin() + r.begin, col_tmp.begin() + r.end, cols.begin() + r.begin);
     const auto first = static_cast<std::uint32_t>(d.nodes.size());
     std::uint8_t mask = 0, kids = 0;
     const std::uint8_t depth = static_cast<std::uint8_t>(nd.depth + 1);
@@ -198,33 +213,25 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   check_progress(o, 0.35);
 
   // ---- §3: independent PCA of each node's positions, normals and colours.
-  const bool colour = !in.colours.empty();
   if (colour) d.colours.resize(d.nodes.size());
   const std::size_t pieces = std::min<std::size_t>(d.nodes.size(), 64 * threads);
   parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
-    std::vector<vec3d> p;
-    std::vector<vec3f> nn;
     const auto [lo_n, hi_n] = piece_range(d.nodes.size(), pieces, t);
     for (std::size_t i = lo_n; i < hi_n; ++i) {
       const build_node r = ranges[i];
       const std::size_t m = r.end - r.begin;
-      p.resize(m);
-      nn.resize(m);
-      for (std::size_t k = 0; k < m; ++k) {
-        p[k] = pos[perm[r.begin + k]];
-        nn[k] = normals[perm[r.begin + k]];
-      }
       // The normals first: their mean is what the degenerate position rules align z with.
       // If they cancel out, the first sample's normal stands in (deterministic).
-      const pca_normal_result pn = pca_normals(nn.data(), m, nn[0].cast<double>());
-      const pca_position_result pp = pca_positions(p.data(), m, pn.frame.col(2));
+      const pca_normal_result pn =
+          pca_normals(normals.data() + r.begin, m, normals[r.begin].cast<double>());
+      const pca_position_result pp = pca_positions(pos.data() + r.begin, m, pn.frame.col(2));
       pca_node& nd = d.nodes[i];
       nd.mean = pp.mean.cast<float>();
       nd.frame = pp.frame.cast<float>();
       nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
       nd.normal_frame = pn.frame.cast<float>();
       nd.normal_sigma = pn.sigma.cast<float>();
-      if (colour) d.colours[i] = pca_colours(in.colours.data(), perm.data() + r.begin, m);
+      if (colour) d.colours[i] = pca_colours(cols.data() + r.begin, m);
     }
   });
   pca_derive_cells(d);

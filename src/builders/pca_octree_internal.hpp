@@ -10,8 +10,8 @@ namespace pbr_lod::detail {
 /// Number of threads for `requested` (0 = hardware concurrency).
 unsigned pca_threads(unsigned requested);
 
-/// §3 colour PCA of the colours c[idx[0..n)] in [0, 1] (pca_octree_stats.cpp).
-pca_colour pca_colours(const rgb8* c, const std::uint32_t* idx, std::size_t n);
+/// §3 colour PCA of the colours c[0..n) (RGB / 255; pca_octree_stats.cpp).
+pca_colour pca_colours(const rgb8* c, std::size_t n);
 
 /// Cells of every node from the root cube and the child masks (top-down). Before decoding:
 /// μ_p is quantised relative to the node's cell.

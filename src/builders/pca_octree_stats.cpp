@@ -152,11 +152,11 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
 }
 
 /// §3: colour PCA of (r, g, b) in [0, 1]; no floor on σ_c (the paper finds none necessary).
-pca_colour pca_colours(const rgb8* c, const std::uint32_t* idx, std::size_t n) {
+pca_colour pca_colours(const rgb8* c, std::size_t n) {
   pca_colour r;
   vec3d mean = vec3d::Zero();
   const auto get = [&](std::size_t i) -> vec3d {
-    const rgb8 k = c[idx[i]];
+    const rgb8 k = c[i];
     return vec3d(k.r, k.g, k.b) / 255.0;
   };
   for (std::size_t i = 0; i < n; ++i) mean += get(i);
