@@ -172,12 +172,13 @@ struct recording_policy : pca_octree_policy {
 TEST(pca_octree, SplitMergeCutMatchesFreshTraversal) {
   const auto t = build_pca_octree(demo_points(8000), {.leaf_size = 4});
   const vec3d c = t.origin() + t.at(0).mean.cast<double>();
-  const double r = t.at(0).radius / 2;
+  const double r = t.at(0).radius;
   pca_octree_cut<with_normals_colours> cut(t), uncached(t, false);
   std::size_t fresh_visits = 0, cut_visits = 0, merges = 0, splits = 0, cached = 0;
-  for (int f = 0; f < 24; ++f) {
-    const double dist = f < 12 ? 4.0 - 0.25 * f : 1.0 + 0.25 * (f - 12);
-    camera cam = camera::orbit(c, r, 15.0 * f, 10, dist, 1, viewport{96, 72});
+  // 16 frames: a quarter turn per 4 frames while the eye moves from 4 to 1.2 radii and back.
+  for (int f = 0; f < 16; ++f) {
+    const double dist = f < 8 ? 4.0 - 0.35 * f : 1.2 + 0.35 * (f - 8);
+    camera cam = camera::orbit(c, r, 22.5 * f, 10, dist, 1, viewport{96, 72});
     const view v(cam, t.origin());
     const traverse_options o{.backface_cull = true};
     render_options ro;
@@ -215,7 +216,7 @@ TEST(pca_octree, SplitMergeCutMatchesFreshTraversal) {
       }
     }
   }
-  std::cout << "visits over frames 1..23: fresh " << fresh_visits << ", cut " << cut_visits
+  std::cout << "visits over frames 1..15: fresh " << fresh_visits << ", cut " << cut_visits
             << "; splits " << splits << ", merges " << merges << ", points from the bank " << cached
             << "\n";
   EXPECT_LT(cut_visits, fresh_visits);
