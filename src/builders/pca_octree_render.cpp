@@ -61,7 +61,14 @@ float pca_required_points(const pca_data& d, std::uint32_t n, const view& v, flo
   const pca_node& nd = d.nodes[n];
   const vec3f e = v.to_eye(nd.mean);
   const vec3f axes = d.gamma * nd.lambda * nd.sigma;
-  if (!(e.z() > axes.x())) return std::numeric_limits<float>::infinity();  // reaches the eye
+  const float c_ln = c;
+  const auto count = [c_ln](float a) {
+    return a > 1 ? std::max(1.0f, a * std::log(a) + c_ln * a) : 1.0f;
+  };
+  // A node reaching the eye plane has no bounded projection: it can cover at most the screen.
+  if (!(e.z() > axes.x()))
+    return count(static_cast<float>(v.width) * static_cast<float>(v.height) /
+                 (point_px * point_px));
   // Weak perspective about the centre: the screen ellipse of the ellipsoid {μ + F·diag(a)·u,
   // |u| ≤ 1} has the singular values of J·F·diag(a) as its semi-axes, J the 2×3 projection.
   const float s = v.focal_px / e.z();
@@ -77,8 +84,7 @@ float pca_required_points(const pca_data& d, std::uint32_t n, const view& v, flo
   const float half = 0.5f * point_px;
   const float a = std::numbers::pi_v<float> * std::max(major, half) * std::max(minor, half) /
                   (point_px * point_px);
-  if (!(a > 1)) return 1;
-  return std::max(1.0f, a * std::log(a) + c * a);
+  return count(a);
 }
 
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,

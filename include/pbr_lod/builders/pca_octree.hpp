@@ -226,7 +226,7 @@ struct pca_normal_result {
 
 /// Required number of points (§4) for node n seen in view v: a·ln a + c·a with a the area, in
 /// units of point_px² pixels, of the node's projected ellipsoid (semi-axes γ·λ·σ_p), at least
-/// 1; +inf when the node reaches the eye plane.
+/// 1; a node reaching the eye plane counts the whole viewport as its area.
 [[nodiscard]] float pca_required_points(const pca_data& d, std::uint32_t n, const view& v,
                                         float point_px, float c);
 struct pca_sample {
@@ -262,7 +262,8 @@ struct pca_render_options {
   float point_px = 1;
   /// Refine a node needing more than this many points (§4: 40).
   float split_points = 40;
-  /// Upper bound on the points of one node (a node reaching the eye plane needs +inf).
+  /// Upper bound on the points of one node (a node reaching the eye plane counts the whole
+  /// viewport as its area, which at 512² is already 1.7 M points).
   std::uint32_t max_points = 1u << 20;
 };
 
