@@ -263,7 +263,7 @@ struct pca_render_options {
   /// Refine a node needing more than this many points (§4: 40).
   float split_points = 40;
   /// Upper bound on the points of one node (a node reaching the eye plane counts the whole
-  /// viewport as its area, which at 512² is already 1.7 M points).
+  /// viewport as its area: at 512² that is 3.3 M points, so this cap applies).
   std::uint32_t max_points = 1u << 20;
 };
 
