@@ -32,7 +32,7 @@ const std::vector<method_entry>& methods() {
       point_octree_method(),
       rho_grid_method(),
       pop_method(),
-      {"pca-octree", "Kalaiah & Varshney 2003", ""},
+      pca_octree_method(),
       pmr_method(),
   };
   return m;
@@ -86,9 +86,9 @@ image render_input(const loaded_input& in, const camera& cam, const render_optio
 }
 
 int cmd_render(const std::string& input, const view_args& va, float tolerance,
-               const std::string& output, bool as_json) {
+               const std::string& output, bool as_json, std::uint64_t seed) {
   if (is_hierarchy_file(input))
-    return lod_method(input).render({input, output, va, tolerance, as_json});
+    return lod_method(input).render({input, output, va, tolerance, as_json, seed});
   progress prog(as_json);
   prog.step("reading " + input);
   const auto in = load(input);
@@ -339,6 +339,9 @@ int main(int argc, char** argv) {
   render->add_option("-o,--output", render_output, "PNG to write")->capture_default_str();
   render->add_option("--tolerance", tolerance, "screen-space tolerance in pixels")
       ->capture_default_str();
+  std::uint64_t seed = 1;
+  render->add_option("--seed", seed, "random stream of methods that generate points (pca-octree)")
+      ->capture_default_str();
   add_view_options(render, va);
   render->add_flag("--json", as_json, "print one JSON object");
 
@@ -362,7 +365,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   try {
     if (*build) return cmd_build(method, build_input, build_output, params, as_json);
-    if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json);
+    if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json, seed);
     if (*stats) return cmd_stats(stats_input, as_json);
     if (*compare) return cmd_compare(cmp_a, cmp_b, as_json);
     if (*demo) return cmd_demo(demo_input, demo_dir, as_json);

@@ -207,6 +207,8 @@ struct render_request {
   view_args view;
   float tolerance = 1;
   bool as_json = false;
+  /// --seed: the random stream of methods that generate points (pca-octree); others ignore it.
+  std::uint64_t seed = 1;
 };
 /// One builder as the tool sees it. A method without build is listed but not available.
 struct method_entry {
@@ -223,6 +225,7 @@ method_entry point_octree_method();
 method_entry rho_grid_method();
 method_entry pop_method();
 method_entry pmr_method();
+method_entry pca_octree_method();
 
 /// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,
 /// ellipses: eight instantiations), so a builder is compiled for exactly what the scene has.

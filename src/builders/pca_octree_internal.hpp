@@ -1,0 +1,55 @@
+// pbr_lod — what the PCA octree's translation units share (not installed).
+#pragma once
+
+#include <cstdint>
+
+#include "pbr_lod/builders/pca_octree.hpp"
+
+namespace pbr_lod::detail {
+
+/// Number of threads for `requested` (0 = hardware concurrency).
+unsigned pca_threads(unsigned requested);
+
+/// §3 colour PCA of the colours c[0..n) (RGB / 255; pca_octree_stats.cpp).
+pca_colour pca_colours(const rgb8* c, std::size_t n);
+
+/// Cells of every node from the root cube and the child masks (top-down). Before decoding:
+/// μ_p is quantised relative to the node's cell.
+void pca_derive_cells(pca_data& d);
+/// λ, bounding-sphere radii and normal-cone angles (bottom-up), from the decoded statistics.
+void pca_derive_bounds(pca_data& d);
+
+/// §3.1: k-means classification of σ_p, σ_n, σ_c, encoding of every node into its record and
+/// decoding back into d.nodes / d.colours (so the hierarchy holds what the file holds). Fills
+/// the quantisation-error stats and kmeans_seconds.
+void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads);
+
+/// Reads/writes `bits` bits of `v` at bit position `pos` of a little-endian byte record.
+template <std::size_t N>
+void put_bits(std::array<std::uint8_t, N>& r, unsigned pos, std::uint32_t v, unsigned bits) {
+  for (unsigned i = 0; i < bits; ++i, ++pos)
+    if ((v >> i) & 1u) r[pos >> 3] = static_cast<std::uint8_t>(r[pos >> 3] | (1u << (pos & 7)));
+}
+template <std::size_t N>
+std::uint32_t get_bits(const std::array<std::uint8_t, N>& r, unsigned pos, unsigned bits) {
+  std::uint32_t v = 0;
+  for (unsigned i = 0; i < bits; ++i, ++pos) v |= ((r[pos >> 3] >> (pos & 7)) & 1u) << i;
+  return v;
+}
+
+// The record layouts (§3.1, Fig. 5), bit offsets in a little-endian record.
+//   13-byte node record: σ_p index 12 | σ_n index 12 | μ_p 32 (x, y, z: 10 bits for the world
+//   axis least aligned with f_p³, 11 for the others) | f_p³ normal code 16 | f_p¹ angle about
+//   f_p³ 8 | mean normal (f_n³) code 16 | f_n¹ angle 8.
+//   4-byte colour record: σ_c index 6 | μ_c RGB 565 16 | f_c³ code 7 | f_c¹ angle 3.
+struct pca_layout {
+  static constexpr unsigned sp = 0, sn = 12, mu = 24, fp_axis = 56, fp_angle = 72, fn_axis = 80,
+                            fn_angle = 96;
+  static constexpr unsigned sc = 0, muc = 6, fc_axis = 22, fc_angle = 29;
+  static constexpr int axis_bits = 16, angle_bits = 8, colour_axis_bits = 7, colour_angle_bits = 3;
+};
+
+/// The bits each axis of μ_p gets, from the decoded f_p³ (10 for the axis least aligned).
+std::array<unsigned, 3> pca_mean_bits(const vec3f& f3);
+
+}  // namespace pbr_lod::detail

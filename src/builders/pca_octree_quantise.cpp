@@ -1,0 +1,327 @@
+// pbr_lod — the PCA octree's classification and quantisation.
+//
+// This work is based on:
+//   A. Kalaiah, A. Varshney. Statistical Point Geometry. SGP 2003.
+// What this file implements:
+//   §3.1, Fig. 5  k-means over the nodes' σ_p, σ_n and σ_c (kmeans(): k-means++ seeding on a
+//                 seeded sample, Lloyd iterations with exact nearest-centre search through
+//                 core/knn, then every node's nearest entry), 12/12/6-bit indices; μ_p in 32 bits
+//                 (10-11-11 over the node's octree cell), f_p and f_n as an axis (16-bit normal
+//                 code, core/normal_quantization) and a rotation about it (8 bits), μ_c 5-6-5,
+//                 f_c as a 7-bit axis and a 3-bit rotation: 13 bytes a node, 17 with colour
+//                 (pca_quantise(), encode_node(), pca_decode_node()).
+// Deviations (docs/pca-octree.md): σ_p is classified as log₂(σ_p / cell edge), so that one
+// codebook serves every octree level with a bounded relative error (the paper clusters raw
+// σ_p); the 10-bit axis of μ_p is the world axis least aligned with f_p³ (our cells are cubes,
+// so "the direction of minimum width" is read as the direction where an error shows least).
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+
+#include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/parallel.hpp"
+#include "pca_octree_internal.hpp"
+
+namespace pbr_lod::detail {
+
+namespace {
+
+std::uint64_t splitmix(std::uint64_t& s) {
+  std::uint64_t z = (s += 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+double uniform01(std::uint64_t& s) {
+  return static_cast<double>(splitmix(s) >> 11) * 0x1p-53;
+}
+
+const normal_quantizer& axis_quantizer() {
+  static const auto q = normal_quantizer::shared(pca_layout::axis_bits);
+  return *q;
+}
+const normal_quantizer& colour_axis_quantizer() {
+  static const auto q = normal_quantizer::shared(pca_layout::colour_axis_bits);
+  return *q;
+}
+
+/// The angle of x about axis z (unit) against the canonical tangent pair of z, in [0, π): the
+/// sign of x does not matter (the Gaussians are symmetric).
+std::uint32_t encode_angle(const vec3f& z, const vec3f& x, int bits) {
+  const vec3f t1 = any_orthogonal(z), t2 = z.cross(t1);
+  double a = std::atan2(static_cast<double>(x.dot(t2)), static_cast<double>(x.dot(t1)));
+  if (a < 0) a += std::numbers::pi;
+  if (a >= std::numbers::pi) a -= std::numbers::pi;
+  const double steps = std::ldexp(1.0, bits);
+  return static_cast<std::uint32_t>(std::lround(a / std::numbers::pi * steps)) &
+         static_cast<std::uint32_t>(steps - 1);
+}
+/// The frame [x, z×x, z] from a decoded axis z and an angle code.
+mat3f decode_frame(const vec3f& z, std::uint32_t code, int bits) {
+  const vec3f t1 = any_orthogonal(z), t2 = z.cross(t1);
+  const float a =
+      static_cast<float>(static_cast<double>(code) * std::numbers::pi / std::ldexp(1.0, bits));
+  const vec3f x = (std::cos(a) * t1 + std::sin(a) * t2).normalized();
+  mat3f f;
+  f.col(0) = x;
+  f.col(1) = z.cross(x);
+  f.col(2) = z;
+  return f;
+}
+
+/// §3.1 classification: k-means of x into at most k entries (fewer when x has fewer distinct
+/// values). Writes every point's entry to assign. Deterministic for a given seed, whatever the
+/// thread count: assignments are computed per point in parallel, sums sequentially.
+std::vector<vec3f> kmeans(const std::vector<vec3f>& x, std::uint32_t k, const pca_octree_options& o,
+                          std::uint64_t stream, unsigned threads,
+                          std::vector<std::uint32_t>& assign) {
+  const std::size_t n = x.size();
+  std::uint64_t rng = o.kmeans_seed * 0x2545F4914F6CDD1Dull + stream;
+  // A seeded sample (partial Fisher–Yates), in index order.
+  std::vector<std::uint32_t> pick(n);
+  std::iota(pick.begin(), pick.end(), 0u);
+  const std::size_t s = std::min<std::size_t>(n, o.kmeans_sample);
+  if (s < n) {
+    for (std::size_t i = 0; i < s; ++i) {
+      const std::size_t j =
+          i + static_cast<std::size_t>(uniform01(rng) * static_cast<double>(n - i));
+      std::swap(pick[i], pick[std::min(j, n - 1)]);
+    }
+    pick.resize(s);
+    std::sort(pick.begin(), pick.end());
+  }
+  std::vector<vec3f> xs(s);
+  for (std::size_t i = 0; i < s; ++i) xs[i] = x[pick[i]];
+
+  // k-means++ seeding (Arthur & Vassilvitskii 2007): each new centre drawn with probability
+  // proportional to the squared distance to the nearest chosen one.
+  std::vector<vec3f> centres;
+  centres.reserve(k);
+  std::vector<double> d2(s, std::numeric_limits<double>::infinity());
+  std::size_t next =
+      std::min(s - 1, static_cast<std::size_t>(uniform01(rng) * static_cast<double>(s)));
+  while (true) {
+    const vec3f c = xs[next];
+    centres.push_back(c);
+    parallel_chunks(s, threads, 4096, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i)
+        d2[i] = std::min(d2[i], (xs[i] - c).cast<double>().squaredNorm());
+    });
+    if (centres.size() >= k) break;
+    double total = 0;
+    for (const double v : d2) total += v;
+    if (!(total > 0)) break;  // every sample is a centre already
+    const double r = uniform01(rng) * total;
+    double acc = 0;
+    next = s;
+    for (std::size_t i = 0; i < s; ++i) {
+      acc += d2[i];
+      if (acc > r && d2[i] > 0) {
+        next = i;
+        break;
+      }
+    }
+    if (next == s)  // rounding at the end of the scan: the last sample not yet a centre
+      for (std::size_t i = s; i-- > 0;)
+        if (d2[i] > 0) {
+          next = i;
+          break;
+        }
+  }
+
+  // Lloyd iterations on the sample.
+  const auto nearest = [&](const std::vector<vec3f>& pts, std::vector<std::uint32_t>& out) {
+    const knn_index index(centres);
+    out.resize(pts.size());
+    parallel_chunks(pts.size(), threads, 2048, [&](std::size_t lo, std::size_t hi) {
+      std::vector<std::uint32_t> idx;
+      std::vector<float> dist;
+      for (std::size_t i = lo; i < hi; ++i) {
+        index.query(pts[i], 1, idx, dist);
+        out[i] = idx.empty() ? 0 : idx[0];
+      }
+    });
+  };
+  std::vector<std::uint32_t> a, prev;
+  for (std::uint32_t it = 0; it < o.kmeans_iterations; ++it) {
+    nearest(xs, a);
+    if (a == prev) break;
+    std::vector<vec3d> sum(centres.size(), vec3d::Zero());
+    std::vector<std::size_t> cnt(centres.size(), 0);
+    for (std::size_t i = 0; i < s; ++i) {
+      sum[a[i]] += xs[i].cast<double>();
+      ++cnt[a[i]];
+    }
+    for (std::size_t c = 0; c < centres.size(); ++c)
+      if (cnt[c] > 0) centres[c] = (sum[c] / static_cast<double>(cnt[c])).cast<float>();
+    prev.swap(a);
+  }
+  nearest(x, assign);
+  return centres;
+}
+
+double angle_deg(const vec3f& a, const vec3f& b) {
+  return std::acos(std::clamp(static_cast<double>(a.normalized().dot(b.normalized())), -1.0, 1.0)) *
+         180 / std::numbers::pi;
+}
+/// Angle between two axes whose sign does not matter.
+double axis_angle_deg(const vec3f& a, const vec3f& b) {
+  return std::min(angle_deg(a, b), angle_deg(a, -b));
+}
+
+}  // namespace
+
+std::array<unsigned, 3> pca_mean_bits(const vec3f& f3) {
+  Eigen::Index least = 0;
+  f3.cwiseAbs().minCoeff(&least);
+  std::array<unsigned, 3> b{11, 11, 11};
+  b[static_cast<std::size_t>(least)] = 10;
+  return b;
+}
+
+void pca_decode_node(const pca_data& d, std::uint32_t i, pca_node& nd, pca_colour* colour) {
+  const auto& r = d.records[i];
+  using L = pca_layout;
+  const normal_quantizer& q = axis_quantizer();
+  const vec3f f3 = q.decode(get_bits(r, L::fp_axis, L::axis_bits));
+  nd.frame = decode_frame(f3, get_bits(r, L::fp_angle, L::angle_bits), L::angle_bits);
+  const vec3f z = q.decode(get_bits(r, L::fn_axis, L::axis_bits));
+  nd.normal_frame = decode_frame(z, get_bits(r, L::fn_angle, L::angle_bits), L::angle_bits);
+  // σ_p from its class: cell edge · 2^feature, floored (§3).
+  const vec3f& fp = d.codebook_p[get_bits(r, L::sp, 12)];
+  for (int k = 0; k < 3; ++k)
+    nd.sigma[k] =
+        static_cast<float>(std::max(nd.cell_size * std::exp2(static_cast<double>(fp[k])), 1e-15));
+  nd.normal_sigma = d.codebook_n[get_bits(r, L::sn, 12)].cwiseMax(0.0f);
+  // μ_p over the cell, the 10-bit axis from the decoded f_p³.
+  const auto bits = pca_mean_bits(f3);
+  unsigned pos = L::mu;
+  for (int k = 0; k < 3; ++k) {
+    const unsigned b = bits[static_cast<std::size_t>(k)];
+    const std::uint32_t v = get_bits(r, pos, b);
+    pos += b;
+    nd.mean[k] = static_cast<float>(nd.cell_min[k] + (static_cast<double>(v) + 0.5) * nd.cell_size /
+                                                         std::ldexp(1.0, b));
+  }
+  if (colour == nullptr) return;
+  const std::uint32_t c = d.colour_records[i];
+  const auto field = [&](unsigned at, unsigned bits_) { return (c >> at) & ((1u << bits_) - 1); };
+  colour->sigma = d.codebook_c[field(L::sc, 6)].cwiseMax(0.0f);
+  const std::uint32_t m = field(L::muc, 16);
+  colour->mean =
+      vec3f(static_cast<float>(m >> 11) / 31.0f, static_cast<float>((m >> 5) & 63u) / 63.0f,
+            static_cast<float>(m & 31u) / 31.0f);
+  const vec3f cz = colour_axis_quantizer().decode(field(L::fc_axis, L::colour_axis_bits));
+  colour->frame = decode_frame(cz, field(L::fc_angle, L::colour_angle_bits), L::colour_angle_bits);
+}
+
+namespace {
+
+void encode_node(pca_data& d, std::uint32_t i, std::uint32_t sp, std::uint32_t sn) {
+  using L = pca_layout;
+  const pca_node& nd = d.nodes[i];
+  std::array<std::uint8_t, 13> r{};
+  const normal_quantizer& q = axis_quantizer();
+  put_bits(r, L::sp, sp, 12);
+  put_bits(r, L::sn, sn, 12);
+  const std::uint32_t c3 = q.encode(nd.frame.col(2));
+  const vec3f f3 = q.decode(c3);
+  put_bits(r, L::fp_axis, c3, L::axis_bits);
+  put_bits(r, L::fp_angle, encode_angle(f3, nd.frame.col(0), L::angle_bits), L::angle_bits);
+  const std::uint32_t cz = q.encode(nd.normal_frame.col(2));
+  put_bits(r, L::fn_axis, cz, L::axis_bits);
+  put_bits(r, L::fn_angle, encode_angle(q.decode(cz), nd.normal_frame.col(0), L::angle_bits),
+           L::angle_bits);
+  const auto bits = pca_mean_bits(f3);
+  unsigned pos = L::mu;
+  for (int k = 0; k < 3; ++k) {
+    const unsigned b = bits[static_cast<std::size_t>(k)];
+    const double steps = std::ldexp(1.0, b);
+    const double t = (static_cast<double>(nd.mean[k]) - nd.cell_min[k]) / nd.cell_size * steps;
+    const auto v = static_cast<std::uint32_t>(std::clamp(std::floor(t), 0.0, steps - 1));
+    put_bits(r, pos, v, b);
+    pos += b;
+  }
+  d.records[i] = r;
+}
+
+std::uint32_t encode_colour(const pca_colour& c, std::uint32_t sc) {
+  using L = pca_layout;
+  const auto level = [](float v, int max) {
+    return static_cast<std::uint32_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * max));
+  };
+  const std::uint32_t m =
+      level(c.mean.x(), 31) << 11 | level(c.mean.y(), 63) << 5 | level(c.mean.z(), 31);
+  const normal_quantizer& q = colour_axis_quantizer();
+  const std::uint32_t axis = q.encode(c.frame.col(2));
+  const std::uint32_t angle = encode_angle(q.decode(axis), c.frame.col(0), L::colour_angle_bits);
+  return sc << L::sc | m << L::muc | axis << L::fc_axis | angle << L::fc_angle;
+}
+
+}  // namespace
+
+void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::size_t n = d.nodes.size();
+  const bool colour = !d.colours.empty();
+  // Features: σ_p relative to the cell edge, in log₂; σ_n in radians; σ_c in [0, 1].
+  std::vector<vec3f> fp(n), fn(n), fc;
+  for (std::size_t i = 0; i < n; ++i) {
+    const pca_node& nd = d.nodes[i];
+    for (int k = 0; k < 3; ++k)
+      fp[i][k] = static_cast<float>(
+          std::log2(std::max(static_cast<double>(nd.sigma[k]) / nd.cell_size, 0x1p-60)));
+    fn[i] = vec3f(nd.normal_sigma.x(), nd.normal_sigma.y(), 0);
+  }
+  std::vector<std::uint32_t> ap, an, ac;
+  d.codebook_p = kmeans(fp, o.position_codebook, o, 1, threads, ap);
+  const auto cn = kmeans(fn, o.normal_codebook, o, 2, threads, an);
+  d.codebook_n.resize(cn.size());
+  for (std::size_t c = 0; c < cn.size(); ++c) d.codebook_n[c] = cn[c].head<2>();
+  if (colour) {
+    fc.resize(n);
+    for (std::size_t i = 0; i < n; ++i) fc[i] = d.colours[i].sigma;
+    d.codebook_c = kmeans(fc, o.colour_codebook, o, 3, threads, ac);
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  d.stats.kmeans_seconds = std::chrono::duration<double>(t1 - t0).count();
+
+  // Encode, then decode into the nodes (what load() will reproduce bit for bit).
+  d.records.assign(n, {});
+  if (colour) d.colour_records.assign(n, 0);
+  const std::vector<pca_node> before = d.nodes;
+  parallel_chunks(n, threads, 4096, [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t i = lo; i < hi; ++i) {
+      const auto id = static_cast<std::uint32_t>(i);
+      encode_node(d, id, ap[i], an[i]);
+      if (colour) d.colour_records[i] = encode_colour(d.colours[i], ac[i]);
+      pca_decode_node(d, id, d.nodes[i], colour ? &d.colours[i] : nullptr);
+    }
+  });
+  // What quantisation cost.
+  auto& st = d.stats;
+  double sp_err = 0, sn_err = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const pca_node &a = before[i], &b = d.nodes[i];
+    st.max_mean_error_cell =
+        std::max(st.max_mean_error_cell,
+                 static_cast<double>((a.mean - b.mean).cwiseAbs().maxCoeff()) / a.cell_size);
+    for (int k = 0; k < 3; ++k)
+      st.max_axis_error_deg =
+          std::max(st.max_axis_error_deg, axis_angle_deg(a.frame.col(k), b.frame.col(k)));
+    st.max_normal_axis_error_deg = std::max(
+        st.max_normal_axis_error_deg, angle_deg(a.normal_frame.col(2), b.normal_frame.col(2)));
+    sp_err += static_cast<double>((a.sigma - b.sigma).cwiseAbs().maxCoeff() / a.sigma.x());
+    sn_err += static_cast<double>((a.normal_sigma - b.normal_sigma).cwiseAbs().maxCoeff());
+  }
+  st.mean_sigma_p_error = sp_err / static_cast<double>(n);
+  st.mean_sigma_n_error_deg = sn_err / static_cast<double>(n) * 180 / std::numbers::pi;
+  st.quantise_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+}
+
+}  // namespace pbr_lod::detail

@@ -1,0 +1,181 @@
+// pbr_lod — the hierarchical PCA octree: the per-node statistics.
+//
+// This work is based on:
+//   A. Kalaiah, A. Varshney. Statistical Point Geometry. SGP 2003.
+// What this file implements:
+//   §3    the PCA of a node's positions with the degenerate rules (pca_positions), of its
+//         normals on the unit sphere through the unwrap at the pole (pca_normals, unwrap_normal,
+//         wrap_normal) and of its colours (pca_colours). A file of its own: Eigen's eigen-
+//         solvers are most of the compile time of the builder.
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+
+#include "pca_octree_internal.hpp"
+
+namespace pbr_lod::detail {
+
+namespace {
+/// §3: "we set a minimum value for σ_p^i (of the order 10⁻¹⁵)".
+constexpr double sigma_floor = 1e-15;
+
+/// Makes [f1 f2 f3] right-handed with f3·toward ≥ 0 and a canonical sign for f1 (its largest
+/// component positive), so that the frame is a deterministic function of the data.
+mat3d canonical_frame(vec3d f1, vec3d f3, const vec3d& toward) {
+  if (f3.dot(toward) < 0) f3 = -f3;
+  f1 -= f3 * f3.dot(f1);
+  f1.normalize();
+  Eigen::Index i = 0;
+  f1.cwiseAbs().maxCoeff(&i);
+  if (f1[i] < 0) f1 = -f1;
+  mat3d f;
+  f.col(0) = f1;
+  f.col(1) = f3.cross(f1);
+  f.col(2) = f3;
+  return f;
+}
+
+/// any_orthogonal() in double (the float one would leave 1e-8 of non-orthogonality).
+vec3d any_orthogonal_d(const vec3d& n) {
+  const vec3d a = n.cwiseAbs();
+  const vec3d axis = (a.x() <= a.y() && a.x() <= a.z()) ? vec3d::UnitX()
+                     : (a.y() <= a.z())                 ? vec3d::UnitY()
+                                                        : vec3d::UnitZ();
+  return n.cross(axis).normalized();
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// §3: position PCA with the degenerate rules.
+// ---------------------------------------------------------------------------------------------
+pca_position_result pca_positions(const vec3d* p, std::size_t n, const vec3d& mean_normal) {
+  pca_position_result r;
+  if (n == 0) return r;
+  vec3d mean = vec3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) mean += p[i];
+  mean /= static_cast<double>(n);
+  mat3d cov = mat3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    const vec3d d = p[i] - mean;
+    cov.noalias() += d * d.transpose();
+  }
+  cov /= static_cast<double>(n);
+  r.mean = mean;
+  const vec3d normal = (all_finite(mean_normal) && mean_normal.norm() > 0.5)
+                           ? mean_normal.normalized()
+                           : vec3d::UnitZ();
+  Eigen::SelfAdjointEigenSolver<mat3d> es(cov);
+  // Eigen sorts ascending: column 2 is the principal direction.
+  const vec3d ev = es.eigenvalues().cwiseMax(0.0);
+  vec3d sigma(std::sqrt(ev[2]), std::sqrt(ev[1]), std::sqrt(ev[0]));
+  // "Zero" variance: below the floor, or below what float coordinates of this magnitude and
+  // double rounding of the sums can resolve (a collinear float cloud is collinear only to
+  // within its rounding).
+  const double tol = sigma_floor + 1e-6 * std::max(sigma[0], mean.cwiseAbs().maxCoeff());
+  int zeros = 0;
+  for (int i = 0; i < 3; ++i) zeros += sigma[i] <= tol ? 1 : 0;
+  r.zero_variances = zeros;
+  if (!all_finite(es.eigenvectors()) || !all_finite(sigma)) zeros = 3;
+  switch (zeros) {
+    case 0:
+    case 1:  // a plane: f³ is its normal
+      r.frame = canonical_frame(es.eigenvectors().col(2), es.eigenvectors().col(0), normal);
+      break;
+    case 2: {  // a line: keep the principal direction, z along the mean normal
+      const vec3d f1 = es.eigenvectors().col(2).normalized();
+      vec3d z = normal - f1 * f1.dot(normal);
+      if (!(z.norm() > 1e-6)) z = any_orthogonal_d(f1);
+      r.frame = canonical_frame(f1, z.normalized(), normal);
+      sigma[1] = sigma[2] = 0;
+      break;
+    }
+    default:  // a point: z along the normal, any tangent pair
+      r.frame = canonical_frame(any_orthogonal_d(normal), normal, normal);
+      sigma.setZero();
+  }
+  r.sigma = sigma.cwiseMax(sigma_floor);
+  return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// §3: normals on the unit sphere.
+// ---------------------------------------------------------------------------------------------
+vec2d unwrap_normal(const mat3d& frame, const vec3d& n) {
+  const vec3d l = frame.transpose() * n;
+  const double r = std::hypot(l.x(), l.y());
+  const double theta = std::atan2(r, l.z());
+  if (!(r > 0)) return {theta, 0.0};  // the pole (θ = 0) or its antipode (θ = π: any azimuth)
+  return {theta * l.x() / r, theta * l.y() / r};
+}
+
+vec3d wrap_normal(const mat3d& frame, const vec2d& uv) {
+  const double theta = uv.norm();
+  if (!(theta > 0)) return frame.col(2);
+  const double s = std::sin(theta) / theta;
+  return (frame * vec3d(uv.x() * s, uv.y() * s, std::cos(theta))).normalized();
+}
+
+pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fallback) {
+  pca_normal_result r;
+  vec3d sum = vec3d::Zero();
+  for (std::size_t i = 0; i < count; ++i) sum += n[i].cast<double>();
+  // The normals cancel out (a thin sheet seen from both sides): no mean direction exists, use
+  // the caller's.
+  vec3d z = sum.norm() > 1e-9 * static_cast<double>(count) ? vec3d(sum.normalized()) : fallback;
+  if (!(z.norm() > 0.5)) z = vec3d::UnitZ();
+  z.normalize();
+  mat3d f;
+  f.col(0) = any_orthogonal_d(z);
+  f.col(1) = z.cross(f.col(0));
+  f.col(2) = z;
+  // Second moments of the unwrapped normals about the pole (the generator of §4 is centred
+  // there).
+  Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
+  for (std::size_t i = 0; i < count; ++i) {
+    const vec2d uv = unwrap_normal(f, n[i].cast<double>());
+    m.noalias() += uv * uv.transpose();
+  }
+  if (count > 0) m /= static_cast<double>(count);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(m);
+  const vec2d ev = es.eigenvalues().cwiseMax(0.0);
+  vec2d axis = es.eigenvectors().col(1);
+  if (!all_finite(axis) || !(axis.norm() > 0.5) || !(ev[1] > 0)) axis = vec2d::UnitX();
+  axis.normalize();
+  if (axis.x() < 0 || (axis.x() == 0 && axis.y() < 0)) axis = -axis;
+  r.frame.col(0) = (f.col(0) * axis.x() + f.col(1) * axis.y()).normalized();
+  r.frame.col(1) = z.cross(r.frame.col(0));
+  r.frame.col(2) = z;
+  r.sigma = vec2d(std::sqrt(ev[1]), std::sqrt(ev[0]));
+  if (!all_finite(r.sigma)) r.sigma.setZero();
+  return r;
+}
+
+/// §3: colour PCA of (r, g, b) in [0, 1]; no floor on σ_c (the paper finds none necessary).
+pca_colour pca_colours(const rgb8* c, std::size_t n) {
+  pca_colour r;
+  vec3d mean = vec3d::Zero();
+  const auto get = [&](std::size_t i) -> vec3d {
+    const rgb8 k = c[i];
+    return vec3d(k.r, k.g, k.b) / 255.0;
+  };
+  for (std::size_t i = 0; i < n; ++i) mean += get(i);
+  mean /= static_cast<double>(n);
+  mat3d cov = mat3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    const vec3d d = get(i) - mean;
+    cov.noalias() += d * d.transpose();
+  }
+  cov /= static_cast<double>(n);
+  Eigen::SelfAdjointEigenSolver<mat3d> es(cov);
+  const vec3d ev = es.eigenvalues().cwiseMax(0.0);
+  mat3d f = mat3d::Identity();
+  if (all_finite(es.eigenvectors()))
+    f = canonical_frame(es.eigenvectors().col(2), es.eigenvectors().col(0), vec3d(1, 1, 1));
+  r.mean = mean.cast<float>();
+  r.frame = f.cast<float>();
+  r.sigma = vec3d(std::sqrt(ev[2]), std::sqrt(ev[1]), std::sqrt(ev[0])).cast<float>();
+  return r;
+}
+
+}  // namespace pbr_lod::detail

@@ -1,0 +1,245 @@
+// Tests of the PCA octree's randomised rendering (Kalaiah & Varshney 2003 §4), of the Fig. 6 cut
+// kept across frames, far data and a real scan. Each case says why its expectation holds.
+#include <iostream>
+
+#include "builders/pca_octree_test_util.hpp"
+#include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
+#include "support/data.hpp"
+
+namespace pbr_lod {
+namespace pca_test {
+namespace {
+
+template <class T>
+image render_image(const T& t, const camera& cam, std::uint64_t seed) {
+  const view v(cam, t.origin());
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = false};
+  rasterizer<T::attrs, effects{.shading = true, .colour = false}> r(v, ro);
+  pca_octree_policy policy;
+  policy.render.seed = seed;
+  traverse(t, v, traverse_options{}, r, policy);
+  return r.finish();
+}
+
+// A cloud 10⁷ units from the origin builds and draws like the same cloud at the origin: the
+// hierarchy keeps a double origin and the camera is placed relative to the data in both cases,
+// so the images agree except for pixels where float rounding moves a point across an edge.
+TEST(pca_octree, FarCloudRendersLikeTheOneAtTheOrigin) {
+  const auto near_pts = demo_points(6000);
+  auto far_pts = near_pts;
+  const vec3d offset(1e7, -2e7, 3e7);
+  far_pts.origin += offset;
+  const auto tn = build_pca_octree(near_pts);
+  const auto tf = build_pca_octree(far_pts);
+  expect_finite_tree(tf, "far");
+  ASSERT_EQ(tn.nodes().size(), tf.nodes().size());
+  EXPECT_LT((tf.origin() - tn.origin() - offset).norm(), 1e-6);
+  const vec3d c = tn.origin() + tn.at(0).mean.cast<double>();
+  const double r = tn.at(0).radius / 2;
+  const image a = render_image(tn, camera_for(c, r), 3);
+  const image b = render_image(tf, camera_for(c + offset, r), 3);
+  const auto err = compare_images(a, b);
+  EXPECT_GT(a.covered_count(), 2000u);
+  EXPECT_GT(err.psnr, 30.0);
+  EXPECT_LT(std::abs(double(a.covered_count()) - double(b.covered_count())),
+            0.02 * double(a.covered_count()));
+}
+
+// ---- §4: randomised rendering ---------------------------------------------------------------
+
+// The same seed gives the same image; another seed a different one (the points are random).
+TEST(pca_octree, SameSeedSameImageOtherSeedDifferent) {
+  const auto t = build_pca_octree(demo_points(5000));
+  const vec3d c = t.origin() + t.at(0).mean.cast<double>();
+  const camera cam = camera_for(c, t.at(0).radius / 2);
+  const image a = render_image(t, cam, 11), b = render_image(t, cam, 11),
+              other = render_image(t, cam, 12);
+  EXPECT_TRUE(a == b);
+  EXPECT_FALSE(a == other);
+  EXPECT_GT(a.covered_count(), 1000u);
+}
+
+// The generator of §4 with λ = 1: every point lies in the γ-truncated ellipsoid, and the
+// points' covariance is F·diag(v·σ²)·Fᵀ with v = E[τ² | τ ≤ γ]/3, τ the radius of a 2-D
+// Gaussian (the paper's generator): E[τ² | τ ≤ γ] = 2 − γ²e^{−γ²/2}/(1 − e^{−γ²/2}).
+TEST(pca_octree, GeneratorFollowsThePaper) {
+  std::mt19937 rng(46);
+  const mat3d R = random_rotation(rng);
+  std::normal_distribution<double> g;
+  point_set<with_normals> s;
+  s.resize(3000);
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    s.positions[i] = (R * vec3d(1.0 * g(rng), 0.5 * g(rng), 0.1 * g(rng))).cast<float>();
+    s.normals[i] = detail::wrap_normal(R, vec2d(0.3 * g(rng), 0.1 * g(rng))).cast<float>();
+  }
+  const auto t = build_pca_octree(s, {.leaf_size = 1u << 20, .curvature_c = 0, .quantise = false});
+  const auto& nd = t.at(0);
+  ASSERT_EQ(nd.lambda, 1.0f);
+  const std::uint32_t n = 200000;
+  std::vector<detail::pca_sample> out(n);
+  detail::pca_generate(t.data(), 0, 5, 0, n, out.data());
+  const double gam = 3.5, e = std::exp(-gam * gam / 2);
+  const double v = (2 - gam * gam * e / (1 - e)) / 3;
+  mat3d cov = mat3d::Zero();
+  double max_theta = 0;
+  for (const auto& p : out) {
+    const vec3d l = nd.frame.cast<double>().transpose() * (p.position - nd.mean).cast<double>();
+    const vec3d u = l.cwiseQuotient(nd.sigma.cast<double>());
+    ASSERT_LE(u.norm(), gam * (1 + 1e-5)) << "outside the γ-ellipsoid";
+    cov += l * l.transpose();
+    max_theta = std::max(
+        max_theta, angle_deg(p.normal.cast<double>(), nd.normal_frame.col(2).cast<double>()) / deg);
+  }
+  cov /= n;
+  for (int k = 0; k < 3; ++k)
+    EXPECT_NEAR(cov(k, k) / (v * nd.sigma[k] * nd.sigma[k]), 1.0, 0.02) << k;
+  EXPECT_LT(std::abs(cov(0, 1)), 0.02 * nd.sigma[0] * nd.sigma[1]);
+  EXPECT_LE(max_theta, gam * nd.normal_sigma.x() * (1 + 1e-4));
+  EXPECT_LE(max_theta * deg, nd.cone_angle * deg + 1e-3) << "the cone holds the normals";
+  // Point k depends only on (seed, node, k): a later chunk equals the tail of one long call.
+  std::vector<detail::pca_sample> tail(10);
+  detail::pca_generate(t.data(), 0, 5, n - 10, 10, tail.data());
+  for (int k = 0; k < 10; ++k) EXPECT_EQ(tail[k].position, out[n - 10 + k].position);
+}
+
+// §4's count a·ln a + c·a against a hand computation: a flat node seen face-on from distance z
+// projects to an ellipse of semi-axes f·γ·σ¹/z and f·γ·σ²/z pixels.
+TEST(pca_octree, RequiredPointsFollowTheAreaFormula) {
+  point_set<with_normals> s;
+  std::mt19937 rng(47);
+  std::normal_distribution<double> g;
+  s.resize(4000);
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    s.positions[i] = vec3f(float(0.2 * g(rng)), float(0.1 * g(rng)), 0);
+    s.normals[i] = vec3f::UnitZ();
+  }
+  const auto t = build_pca_octree(s, {.leaf_size = 1u << 20, .curvature_c = 0, .quantise = false});
+  const auto& nd = t.at(0);
+  camera cam;
+  cam.eye = t.origin() + nd.mean.cast<double>() + vec3d(0, 0, 10);
+  cam.target = t.origin() + nd.mean.cast<double>();
+  cam.vp = {200, 200};
+  cam.z_far = 100;
+  const view v(cam, t.origin());
+  const double f = v.focal_px, z = 10;
+  const double a = std::numbers::pi * (f * 3.5 * nd.sigma.x() / z) * (f * 3.5 * nd.sigma.y() / z);
+  const double expected = a * std::log(a) + 0.2 * a;
+  EXPECT_NEAR(detail::pca_required_points(t.data(), 0, v, 1, 0.2f) / expected, 1.0, 1e-3);
+  // Points of 2 pixels cover 4 pixels each: the count is that of a quarter of the area.
+  const double a2 = a / 4;
+  EXPECT_NEAR(detail::pca_required_points(t.data(), 0, v, 2, 0.2f) / (a2 * std::log(a2) + 0.2 * a2),
+              1.0, 1e-3);
+}
+
+// The hierarchy's bounds hold what it generates: every point a traversal emits lies in its
+// node's bounding sphere, hence in every ancestor's (children's spheres are inside their
+// parent's by construction — checked too).
+TEST(pca_octree, BoundsHoldTheGeneratedPoints) {
+  const auto t = build_pca_octree(demo_points(4000));
+  for (std::uint32_t i = 0; i < t.nodes().size(); ++i)
+    for (auto c : t.children(i)) {
+      EXPECT_TRUE(t.bounding_sphere(i).contains(t.bounding_sphere(c), 1e-4f)) << i << " " << c;
+      EXPECT_EQ(t.at(c).depth, t.at(i).depth + 1);
+      EXPECT_GT(c, i);
+    }
+  for (std::uint32_t i = 0; i < t.nodes().size(); i += 7) {
+    std::vector<detail::pca_sample> out(500);
+    detail::pca_generate(t.data(), i, 1, 0, 500, out.data());
+    for (const auto& p : out) ASSERT_TRUE(t.bounding_sphere(i).contains(p.position, 1e-4f)) << i;
+  }
+}
+
+// ---- Fig. 6: the cut kept across frames -----------------------------------------------------
+
+/// pca_octree_policy that also records which nodes it draws.
+struct recording_policy : pca_octree_policy {
+  std::vector<std::uint32_t>* drawn;
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
+            const traverse_options& o, S& sink) const {
+    drawn->push_back(n);
+    pca_octree_policy::emit(h, n, v, size, o, sink);
+  }
+};
+
+// Over a camera path that circles, approaches and backs away, the split/merge cut draws exactly
+// the fresh traversal's nodes in the same order (so the same image, byte for byte, with and
+// without the cache bank) while evaluating fewer nodes; after every frame the active list is an
+// antichain that covers the tree (every root-to-leaf path meets it exactly once).
+TEST(pca_octree, SplitMergeCutMatchesFreshTraversal) {
+  const auto t = build_pca_octree(demo_points(8000), {.leaf_size = 4});
+  const vec3d c = t.origin() + t.at(0).mean.cast<double>();
+  const double r = t.at(0).radius;
+  pca_octree_cut<with_normals_colours> cut(t), uncached(t, false);
+  std::size_t fresh_visits = 0, cut_visits = 0, merges = 0, splits = 0, cached = 0;
+  // 16 frames: a quarter turn per 4 frames while the eye moves from 4 to 1.2 radii and back.
+  for (int f = 0; f < 16; ++f) {
+    const double dist = f < 8 ? 4.0 - 0.35 * f : 1.2 + 0.35 * (f - 8);
+    camera cam = camera::orbit(c, r, 22.5 * f, 10, dist, 1, viewport{96, 72});
+    const view v(cam, t.origin());
+    const traverse_options o{.backface_cull = true};
+    render_options ro;
+    ro.fx = effects{.shading = true, .colour = false};
+    using R = rasterizer<with_normals_colours, effects{.shading = true, .colour = false}>;
+    R a(v, ro), b(v, ro), u(v, ro);
+    std::vector<std::uint32_t> fresh_drawn;
+    recording_policy rec;
+    rec.drawn = &fresh_drawn;
+    const auto sf = traverse(t, v, o, a, rec);
+    const auto sc = cut.frame(v, o, b);
+    (void)uncached.frame(v, o, u);
+    ASSERT_EQ(cut.drawn(), fresh_drawn) << "frame " << f;
+    ASSERT_EQ(sc.points, sf.points) << "frame " << f;
+    const image ia = a.finish(), ib = b.finish(), iu = u.finish();
+    ASSERT_TRUE(ia == ib) << "frame " << f;
+    ASSERT_TRUE(ia == iu) << "frame " << f;
+    if (f > 0) {
+      fresh_visits += sf.visited;
+      cut_visits += sc.visited;
+    }
+    merges += cut.last_frame().merges;
+    splits += cut.last_frame().splits;
+    cached += cut.last_frame().points_cached;
+    // antichain covering the tree
+    std::vector<int> on(t.nodes().size(), 0);
+    for (auto n : cut.cut()) on[n] = 1;
+    std::vector<int> above(t.nodes().size(), 0);  // cut nodes on the path from the root
+    for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
+      above[n] += on[n];
+      ASSERT_LE(above[n], 1) << "frame " << f << ": two cut nodes on one path";
+      for (auto ch : t.children(n)) above[ch] = above[n];
+      if (t.is_leaf(n)) {
+        ASSERT_EQ(above[n], 1) << "frame " << f << ": leaf " << n << " uncovered";
+      }
+    }
+  }
+  std::cout << "visits over frames 1..15: fresh " << fresh_visits << ", cut " << cut_visits
+            << "; splits " << splits << ", merges " << merges << ", points from the bank " << cached
+            << "\n";
+  EXPECT_LT(cut_visits, fresh_visits);
+  EXPECT_GT(merges, 0u);
+  EXPECT_GT(splits, 0u);
+  EXPECT_GT(cached, 0u) << "coherent frames reuse the bank";
+}
+
+// A real scan without normals: the bunny builds (normals from k-NN), saves, loads and renders.
+TEST(pca_octree, BunnyBuildsAndRenders) {
+  const auto cloud = read_points(test::data_file("bun_zipper.ply"));
+  const auto t = build_pca_octree(point_set<positions_only>::from(cloud));
+  EXPECT_TRUE(t.stats().estimated_normals);
+  EXPECT_EQ(t.stats().input_points, 35947u);
+  expect_finite_tree(t, "bunny");
+  const std::string p = temp("bunny.lod");
+  t.save(p);
+  EXPECT_TRUE(tree_n::load(p) == t);
+  const vec3d c = t.origin() + t.at(0).mean.cast<double>();
+  const image img = render_image(t, camera_for(c, t.at(0).radius / 2), 1);
+  EXPECT_GT(img.covered_count(), 3000u);
+}
+
+}  // namespace
+}  // namespace pca_test
+}  // namespace pbr_lod
