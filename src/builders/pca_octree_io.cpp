@@ -126,11 +126,7 @@ mat3f get_frame(byte_reader& r, const std::string& path, const char* what, std::
 }  // namespace
 
 pca_data load_pca_data(const std::string& path, bool colour) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw IoError(path + ": cannot open");
-  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
-                                         std::istreambuf_iterator<char>());
-  if (f.bad()) throw IoError(path + ": read error");
+  const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
   for (char c : magic)
     if (r.get<char>("magic") != c)

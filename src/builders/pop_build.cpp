@@ -1665,11 +1665,7 @@ void save_pop_data(const pop_data& d, const std::string& path) {
 }
 
 pop_data load_pop_data(const std::string& path, bool colour) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw IoError(path + ": cannot open");
-  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
-                                         std::istreambuf_iterator<char>());
-  if (f.bad()) throw IoError(path + ": read error");
+  const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
   for (char c : pop_magic)
     if (r.get<char>("magic") != c)

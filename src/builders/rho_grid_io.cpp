@@ -355,24 +355,13 @@ void rho_grid<Rho>::save(const std::string& path, rho_grid_layout layout) const 
   if (!f) throw IoError(path + ": write failed");
 }
 
-namespace {
-std::vector<unsigned char> read_all(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw IoError(path + ": cannot open");
-  std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
-                                   std::istreambuf_iterator<char>());
-  if (f.bad()) throw IoError(path + ": read error");
-  return bytes;
-}
-}  // namespace
-
 template <int Rho>
 rho_grid<Rho> rho_grid<Rho>::load(const std::string& path) {
-  return parse(read_all(path), path);
+  return parse(detail::load_file_bytes(path), path);
 }
 
 int rho_grid_file_rho(const std::string& path) {
-  const auto bytes = read_all(path);
+  const auto bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};
   for (char c : magic)
     if (r.get<char>("magic") != c) throw FormatError(path + ": not a pbr_lod rho-grid (bad magic)");

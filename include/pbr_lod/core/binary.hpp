@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -35,6 +37,17 @@ struct byte_writer {
       put(c);
   }
 };
+
+/// The whole file at `path`; throws IoError when it cannot be opened or read. Every hierarchy
+/// file's load() starts here, then validates what it reads through a byte_reader.
+inline std::vector<unsigned char> load_file_bytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError(path + ": cannot open");
+  std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
+                                   std::istreambuf_iterator<char>());
+  if (f.bad()) throw IoError(path + ": read error");
+  return bytes;
+}
 
 struct byte_reader {
   const std::vector<unsigned char>& bytes;

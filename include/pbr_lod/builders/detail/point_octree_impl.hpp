@@ -924,11 +924,7 @@ struct point_octree_io {
   }
 
   static tree load(const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw IoError(path + ": cannot open");
-    std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
-                                     std::istreambuf_iterator<char>());
-    if (f.bad()) throw IoError(path + ": read error");
+    const std::vector<unsigned char> bytes = load_file_bytes(path);
     byte_reader r{bytes, 0, path};
     for (char c : point_octree_magic)
       if (r.get<char>("magic") != c)
