@@ -1,14 +1,11 @@
-// Quantised normals (Pajarola 2003 §5): encode / decode throughput per q.
-// k-NN estimation (§4 end): normals (PCA only, and PCA + CGAL MST orientation) and splat
-// ellipses on make_wavy_surface. Counter: points/s (normals/s for the quantiser).
+// Quantised normals (Pajarola 2003 §5): encode / decode throughput per q. Counter: normals/s.
+// The k-NN estimation has its own binary (estimation_benchmark.cpp).
 #include <benchmark/benchmark.h>
 
 #include <random>
 #include <vector>
 
-#include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
-#include "pbr_lod/core/synthetic.hpp"
 
 namespace {
 
@@ -22,7 +19,7 @@ std::vector<vec3f> random_normals(std::size_t n) {
   return out;
 }
 
-void rate(benchmark::State& state, std::size_t per_iteration, const char* name = "points/s") {
+void rate(benchmark::State& state, std::size_t per_iteration, const char* name) {
   state.counters[name] = benchmark::Counter(
       static_cast<double>(per_iteration) * static_cast<double>(state.iterations()),
       benchmark::Counter::kIsRate);
@@ -86,69 +83,6 @@ void BM_Decode(benchmark::State& state) {
   rate(state, codes.size(), "normals/s");
 }
 BENCHMARK(BM_Decode)->Arg(9)->Arg(12)->Arg(13)->Arg(16)->Arg(24);
-
-const pbr_lod::point_cloud& surface(std::size_t n) {
-  static std::size_t cached_n = 0;
-  static pbr_lod::point_cloud cloud;
-  if (cached_n != n) {
-    cloud = pbr_lod::make_wavy_surface(n, 1);
-    cached_n = n;
-  }
-  return cloud;
-}
-
-// range(0) = points, range(1) = 1 to orient with CGAL's MST, 0 for PCA only.
-void BM_EstimateNormals(benchmark::State& state) {
-  const auto& cloud = surface(static_cast<std::size_t>(state.range(0)));
-  for (auto _ : state) {
-    auto n = pbr_lod::estimate_normals(cloud.positions, 16, state.range(1) != 0);
-    benchmark::DoNotOptimize(n.data());
-  }
-  rate(state, cloud.size());
-}
-BENCHMARK(BM_EstimateNormals)
-    ->Args({1'000'000, 0})
-    ->Args({1'000'000, 1})
-    ->Unit(benchmark::kSecond)
-    ->UseRealTime()  // multi-threaded: the main thread's CPU time would overstate the rate
-    ->Iterations(1);
-
-void BM_EstimateSplatEllipses(benchmark::State& state) {
-  const auto& cloud = surface(static_cast<std::size_t>(state.range(0)));
-  for (auto _ : state) {
-    auto e = pbr_lod::estimate_splat_ellipses(cloud.positions, cloud.normals, 16);
-    benchmark::DoNotOptimize(e.u.data());
-  }
-  rate(state, cloud.size());
-}
-BENCHMARK(BM_EstimateSplatEllipses)
-    ->Arg(1'000'000)
-    ->Unit(benchmark::kSecond)
-    ->UseRealTime()
-    ->Iterations(1);
-
-// Both steps: arg 1 = 0 as two calls (two k-NN searches), 1 in one pass over one k-NN search
-// (estimate_normals_and_ellipses, what the point-octree builder runs).
-void BM_NormalsAndEllipses(benchmark::State& state) {
-  const auto& cloud = surface(static_cast<std::size_t>(state.range(0)));
-  for (auto _ : state) {
-    if (state.range(1) == 0) {
-      const auto n = pbr_lod::estimate_normals(cloud.positions, 16, true);
-      auto e = pbr_lod::estimate_splat_ellipses(cloud.positions, n, 16);
-      benchmark::DoNotOptimize(e.u.data());
-    } else {
-      auto both = pbr_lod::estimate_normals_and_ellipses(cloud.positions, 16, 16, true);
-      benchmark::DoNotOptimize(both.axes.u.data());
-    }
-  }
-  rate(state, cloud.size());
-}
-BENCHMARK(BM_NormalsAndEllipses)
-    ->Args({1'000'000, 0})
-    ->Args({1'000'000, 1})
-    ->Unit(benchmark::kSecond)
-    ->UseRealTime()
-    ->Iterations(1);
 
 }  // namespace
 

@@ -4,7 +4,7 @@
 set -euo pipefail
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
-  libeigen3-dev libcgal-dev libflann-dev liblz4-dev libopenmesh-dev liblzf-dev
+  libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
 )
 missing=()

@@ -18,6 +18,7 @@ point_octree_options octree_options(const std::vector<std::string>& items, bool 
   o.knn = static_cast<int>(m.integer("knn", 16, 3, 256));
   o.knn_ellipses = static_cast<int>(m.integer("knn_ellipses", 12, 3, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
+  if (const auto vp = m.point("viewpoint")) o.viewpoint = vec3d((*vp)[0], (*vp)[1], (*vp)[2]);
   const auto cov = m.choice("covariance", "stable", {"stable", "generic_double", "generic_float"});
   o.covariance = cov == "stable"           ? covariance_method::stable
                  : cov == "generic_double" ? covariance_method::generic_double
@@ -26,7 +27,8 @@ point_octree_options octree_options(const std::vector<std::string>& items, bool 
                     ? ellipse_axis_rule::sqrt_eigenvalue
                     : ellipse_axis_rule::eigenvalue;
   m.finish("point-octree",
-           "leaf_size, max_depth, normal_bits, knn, knn_ellipses, threads, covariance, axes");
+           "leaf_size, max_depth, normal_bits, knn, knn_ellipses, viewpoint, threads, covariance, "
+           "axes");
   o.progress = progress_callback("point-octree", on_terminal);
   return o;
 }

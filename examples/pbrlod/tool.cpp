@@ -2,6 +2,7 @@
 #include "tool.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -156,6 +157,29 @@ std::string params::choice(const std::string& key, const std::string& fallback,
     std::string all;
     for (const auto& c : choices) all += (all.empty() ? "" : ", ") + c;
     throw InvalidArgument("--param " + key + "=" + v + ": expected one of " + all);
+  }
+  m_.erase(it);
+  return v;
+}
+
+std::optional<std::array<double, 3>> params::point(const std::string& key) {
+  const auto it = m_.find(key);
+  if (it == m_.end()) return std::nullopt;
+  std::array<double, 3> v{};
+  std::size_t at = 0;
+  for (std::size_t c = 0; c < 3; ++c) {
+    const std::size_t end = c < 2 ? it->second.find(',', at) : it->second.size();
+    try {
+      if (end == std::string::npos) throw std::invalid_argument(key);
+      const std::string part = it->second.substr(at, end - at);
+      std::size_t used = 0;
+      v[c] = std::stod(part, &used);
+      if (used != part.size() || !std::isfinite(v[c])) throw std::invalid_argument(key);
+    } catch (const std::exception&) {
+      throw InvalidArgument("--param " + key + "=" + it->second +
+                            ": expected three finite numbers x,y,z");
+    }
+    at = end + 1;
   }
   m_.erase(it);
   return v;

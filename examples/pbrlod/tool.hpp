@@ -4,12 +4,14 @@
 
 #include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -186,6 +188,8 @@ class params {
   std::string choice(const std::string& key, const std::string& fallback,
                      const std::vector<std::string>& choices);
   bool flag(const std::string& key, bool fallback);
+  /// "x,y,z" (three finite numbers), or nullopt when the key is absent.
+  std::optional<std::array<double, 3>> point(const std::string& key);
   /// Throws InvalidArgument naming the first parameter no getter asked for.
   void finish(const std::string& method, const std::string& expected) const;
 

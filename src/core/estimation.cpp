@@ -1,12 +1,12 @@
 // pbr_lod — k-NN normals (Hoppe et al. 1992, §3; PCA + MST orientation) and splat ellipses
 // (Pajarola 2003, end of §4: the bounding-ellipse rule of Fig. 5/6a applied to the k nearest
-// neighbours of each input sample). The only translation unit that includes CGAL: it is built
-// as its own object library (src/core/estimation.cmake) so CGAL's -frounding-math stays here.
+// neighbours of each input sample). Its own object library (src/core/estimation.cmake) for the
+// TBB and Boost usage requirements.
+//
+// Every call works on a copy of the positions sorted along a Morton curve (knn.hpp): the k-NN
+// queries, the PCA gathers, the MST's edge lists and the ellipse fits then touch neighbours that
+// sit next to each other in memory. Results are scattered back to the caller's order at the end.
 #include "pbr_lod/core/estimation.hpp"
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <boost/pending/disjoint_sets.hpp>
 
@@ -16,17 +16,21 @@
 #include <cstdint>
 #include <limits>
 #include <string>
+#include <thread>
 #include <tuple>
+#include <utility>
 
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
 
 namespace {
 
-// Points per TBB task: a k-NN query is a few µs, so 1024 points amortise the scheduling.
-constexpr std::size_t grain = 1024;
+// Points per piece of parallel work (a k-NN query is about a µs): long enough to amortise the
+// hand-out, many pieces per thread so that a slow core does not hold the others up.
+constexpr std::size_t grain = 2048;
 
 void check_positions(std::span<const vec3f> positions, const char* who) {
   for (std::size_t i = 0; i < positions.size(); ++i)
@@ -35,12 +39,34 @@ void check_positions(std::span<const vec3f> positions, const char* who) {
                             " is not finite");
 }
 
-/// Runs body(begin, end) over [0, n) in parallel. Each index is written by exactly one call,
-/// so results do not depend on how TBB splits the range.
+/// Runs body(begin, end) over [0, n) on up to `threads` threads. Each index is written by
+/// exactly one call, so results do not depend on how the range is split.
 template <class Body>
-void parallel_over(std::size_t n, const Body& body) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
-                    [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+void parallel_over(std::size_t n, unsigned threads, const Body& body) {
+  detail::parallel_pieces(n, threads, 4 * std::size_t(threads), grain, body);
+}
+
+unsigned resolve_threads(unsigned threads) {
+  return threads ? threads : std::max(1u, std::thread::hardware_concurrency());
+}
+
+/// The positions sorted along a Morton curve, and the permutation back.
+struct sorted_points {
+  std::vector<std::uint32_t> order;  // order[r] = caller's index of the point of rank r
+  std::vector<vec3f> pos;            // pos[r] = positions[order[r]]
+};
+
+sorted_points sort_points(std::span<const vec3f> positions) {
+  sorted_points s{morton_order(positions), std::vector<vec3f>(positions.size())};
+  for (std::size_t r = 0; r < positions.size(); ++r) s.pos[r] = positions[s.order[r]];
+  return s;
+}
+
+/// out[order[r]] = in[r].
+std::vector<vec3f> unsort(const std::vector<vec3f>& in, const std::vector<std::uint32_t>& order) {
+  std::vector<vec3f> out(in.size());
+  for (std::size_t r = 0; r < in.size(); ++r) out[order[r]] = in[r];
+  return out;
 }
 
 /// A unit vector orthogonal to unit n, in double (math.hpp's any_orthogonal is float).
@@ -71,8 +97,16 @@ vec3d pca_normal(std::span<const vec3f> pts, std::span<const std::uint32_t> idx)
     const vec3d d = pts[j].cast<double>() - mean;
     cov.noalias() += d * d.transpose();
   }
-  const Eigen::SelfAdjointEigenSolver<mat3d> es(cov);  // eigenvalues ascending
-  const vec3d lambda = es.eigenvalues();
+  // The closed-form 3×3 solver is about 3× faster than the iterative one and as accurate for
+  // the smallest eigenvector while it is well separated from the middle one (a surface); near
+  // ties (a line, a blob, a single position) take the iterative solver.
+  Eigen::SelfAdjointEigenSolver<mat3d> es;
+  es.computeDirect(cov);
+  vec3d lambda = es.eigenvalues();  // ascending
+  if (!all_finite(lambda) || !(lambda[1] - lambda[0] > 1e-3 * lambda[2])) {
+    es.compute(cov);
+    lambda = es.eigenvalues();
+  }
   if (es.info() != Eigen::Success || !(lambda[2] > 0) || !all_finite(lambda))
     return vec3d::UnitZ();  // one position (duplicates, single point)
   vec3d n = lambda[1] <= 1e-12 * lambda[2] ? orthogonal(es.eigenvectors().col(2).normalized())
@@ -82,83 +116,101 @@ vec3d pca_normal(std::span<const vec3f> pts, std::span<const std::uint32_t> idx)
 }
 
 /// The k nearest neighbours of every position (itself included), k per row, from one FLANN index
-/// queried in parallel. Rows of points with fewer than k neighbours (n < k) are padded with the
-/// point itself.
+/// queried in parallel in the order of the (Morton-sorted) positions, each query writing into
+/// its row. k ≤ #P, so every row is full.
 std::vector<std::uint32_t> knn_table(std::span<const vec3f> positions, const knn_index& index,
-                                     int k) {
+                                     int k, unsigned threads) {
   const std::size_t n = positions.size(), kk = static_cast<std::size_t>(k);
   std::vector<std::uint32_t> table(n * kk);
-  parallel_over(n, [&](std::size_t begin, std::size_t end) {
-    std::vector<std::uint32_t> idx;
-    std::vector<float> d2;
-    for (std::size_t i = begin; i < end; ++i) {
-      index.query(positions[i], k, idx, d2);
-      for (std::size_t j = 0; j < kk; ++j)
-        table[i * kk + j] = j < idx.size() ? idx[j] : static_cast<std::uint32_t>(i);
-    }
+  parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
+    std::vector<float> d2(kk);
+    for (std::size_t i = begin; i < end; ++i)
+      index.query(positions[i], kk, &table[i * kk], d2.data());
   });
   return table;
 }
 
-/// Makes the signs of `normals` consistent (Hoppe et al. 1992, §3.3): a minimum spanning forest
-/// of the k-NN ("Riemannian") graph with edge cost 1 − |nᵢ·nⱼ| (Kruskal: a parallel sort of the
-/// edges, then Boost's union-find); in every connected component the sample with the largest z gets
-/// a normal with z ≥ 0 and the sign is propagated along the tree, flipping a child whose normal
-/// points against its parent's. This is CGAL::mst_orient_normals' rule, but on the k-NN table the
-/// PCA pass already computed (CGAL re-searched every neighbourhood with its own sequential k-d
-/// tree: 85 % of the time of estimate_normals; Boost's own kruskal_minimum_spanning_tree, tried
-/// first, spent 40 % of the bunny's estimation in its edge heap), and every component is oriented
-/// where CGAL orients only the top sample's.
-void mst_orient(std::span<const vec3f> pts, std::vector<vec3f>& normals,
-                const std::vector<std::uint32_t>& table, int stride_k, int k) {
-  const std::size_t n = pts.size(), stride = static_cast<std::size_t>(stride_k),
-                    kk = static_cast<std::size_t>(k);
-  // The undirected k-NN graph: edge {i, t} once (from the smaller index, or from i when t's row
-  // does not list i), in parallel per row, then concatenated in row order.
-  struct edge {
-    float cost;
-    std::uint32_t a, b;
-  };
+/// Cost classes of the MST's edges: 1 − |nᵢ·nⱼ| ≈ θ²/2 for an angle θ between the normals, so
+/// √cost is about proportional to θ and 256 classes of √cost are 0.35° wide.
+constexpr std::size_t cost_classes = 256;
+
+std::size_t cost_class(const vec3f& a, const vec3f& b) {
+  const float cost = std::max(0.0f, 1.0f - std::abs(a.dot(b)));
+  return std::min(cost_classes - 1, static_cast<std::size_t>(std::sqrt(cost) * cost_classes));
+}
+
+/// Edges of the undirected k-NN graph, each {i, t} once (from the smaller index, or from i when
+/// t's row does not list i), ordered by cost class, then by row and slot (a stable counting
+/// sort). Within a class the edges keep the Morton order of their rows, so Kruskal's union-find
+/// walks memory in order instead of jumping across the whole cloud with every edge.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> sorted_edges(
+    const std::vector<vec3f>& normals, const std::vector<std::uint32_t>& table, std::size_t stride,
+    std::size_t kk, unsigned threads) {
+  const std::size_t n = normals.size();
   const auto lists = [&](std::uint32_t t, std::uint32_t i) {
     const auto row = std::span(table).subspan(t * stride, kk);
     return std::find(row.begin(), row.end(), i) != row.end();
   };
-  std::vector<std::uint32_t> count(n + 1, 0);
-  parallel_over(n, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i)
+  const auto keep = [&](std::size_t i, std::uint32_t t) {
+    return t != i && (i < t || !lists(t, static_cast<std::uint32_t>(i)));
+  };
+  // Per piece of rows a histogram of classes; a piece's edges of class c go after those of the
+  // earlier classes and of class c in the earlier pieces.
+  const std::size_t pieces = detail::piece_count(n, threads, 4 * std::size_t(threads), grain);
+  std::vector<std::size_t> count(pieces * cost_classes, 0);
+  detail::parallel_tasks(pieces, threads, [&](std::size_t p, unsigned) {
+    const auto [lo, hi] = detail::piece_range(n, pieces, p);
+    for (std::size_t i = lo; i < hi; ++i)
       for (std::size_t j = 0; j < kk; ++j) {
         const std::uint32_t t = table[i * stride + j];
-        count[i + 1] += t != i && (i < t || !lists(t, static_cast<std::uint32_t>(i)));
+        if (keep(i, t)) ++count[p * cost_classes + cost_class(normals[i], normals[t])];
       }
   });
-  for (std::size_t i = 0; i < n; ++i) count[i + 1] += count[i];
-  std::vector<edge> edges(count[n]);
-  parallel_over(n, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      std::size_t at = count[i];
-      for (std::size_t j = 0; j < kk; ++j) {
-        const std::uint32_t t = table[i * stride + j];
-        if (t != i && (i < t || !lists(t, static_cast<std::uint32_t>(i))))
-          edges[at++] = {1.0f - std::abs(normals[i].dot(normals[t])), static_cast<std::uint32_t>(i),
-                         t};
-      }
+  std::size_t total = 0;
+  for (std::size_t c = 0; c < cost_classes; ++c)
+    for (std::size_t p = 0; p < pieces; ++p) {
+      const std::size_t k = count[p * cost_classes + c];
+      count[p * cost_classes + c] = total;
+      total += k;
     }
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> edges(total);
+  detail::parallel_tasks(pieces, threads, [&](std::size_t p, unsigned) {
+    const auto [lo, hi] = detail::piece_range(n, pieces, p);
+    std::size_t* at = &count[p * cost_classes];
+    for (std::size_t i = lo; i < hi; ++i)
+      for (std::size_t j = 0; j < kk; ++j) {
+        const std::uint32_t t = table[i * stride + j];
+        if (keep(i, t))
+          edges[at[cost_class(normals[i], normals[t])]++] = {static_cast<std::uint32_t>(i), t};
+      }
   });
-  // Kruskal: edges by cost (ties by index, so the forest is deterministic), joined with Boost's
-  // union-find (path compression, union by rank).
-  tbb::parallel_sort(edges.begin(), edges.end(), [](const edge& x, const edge& y) {
-    return std::tie(x.cost, x.a, x.b) < std::tie(y.cost, y.a, y.b);
-  });
+  return edges;
+}
+
+/// Makes the signs of `normals` consistent (Hoppe et al. 1992, §3.3): a spanning forest of the
+/// k-NN ("Riemannian") graph of minimum cost 1 − |nᵢ·nⱼ| up to 0.35° classes (Kruskal over
+/// sorted_edges with Boost's union-find); in every connected component the sample with the
+/// largest z gets a normal with z ≥ 0 and the sign is propagated along the tree, flipping a child
+/// whose normal points against its parent's. This is CGAL::mst_orient_normals' rule, but on the
+/// k-NN table the PCA pass already computed (CGAL re-searches every neighbourhood with its own
+/// sequential k-d tree), with classes of cost instead of exact costs (an edge is only a path for
+/// the sign; docs/estimation.md measures the flips), and every component is oriented where CGAL
+/// orients only the top sample's.
+void mst_orient(std::span<const vec3f> pts, std::vector<vec3f>& normals,
+                const std::vector<std::uint32_t>& table, int stride_k, int k, unsigned threads) {
+  const std::size_t n = pts.size(), stride = static_cast<std::size_t>(stride_k),
+                    kk = static_cast<std::size_t>(k);
+  auto edges = sorted_edges(normals, table, stride, kk, threads);
   std::vector<std::uint32_t> rank(n), parent(n);
   boost::disjoint_sets<std::uint32_t*, std::uint32_t*> sets(rank.data(), parent.data());
   for (std::uint32_t i = 0; i < n; ++i) sets.make_set(i);
   std::vector<std::pair<std::uint32_t, std::uint32_t>> tree;
   tree.reserve(n);
-  for (const auto& e : edges) {
-    const std::uint32_t ra = sets.find_set(e.a), rb = sets.find_set(e.b);
+  for (const auto& [a, b] : edges) {
+    const std::uint32_t ra = sets.find_set(a), rb = sets.find_set(b);
     if (ra == rb) continue;
     sets.link(ra, rb);
-    tree.emplace_back(e.a, e.b);
+    tree.emplace_back(a, b);
     if (tree.size() + 1 == n) break;
   }
   edges = {};
@@ -218,6 +270,16 @@ void mst_orient(std::span<const vec3f> pts, std::vector<vec3f>& normals,
   }
 }
 
+/// Flips every normal that faces away from the sensor: n·(viewpoint − p) ≥ 0 afterwards
+/// (a normal perpendicular to the line of sight keeps its sign).
+void orient_towards(std::span<const vec3f> positions, std::vector<vec3f>& normals,
+                    const vec3f& viewpoint, unsigned threads) {
+  parallel_over(positions.size(), threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      if (normals[i].dot(viewpoint - positions[i]) < 0) normals[i] = -normals[i];
+  });
+}
+
 int clamp_k(int k, std::size_t n) {
   return static_cast<int>(std::min<std::size_t>(std::size_t(k), n));
 }
@@ -226,22 +288,69 @@ int clamp_k(int k, std::size_t n) {
 /// the MST orientation over the same neighbourhoods.
 std::vector<vec3f> normals_from(std::span<const vec3f> positions,
                                 const std::vector<std::uint32_t>& table, int stride_k, int kk,
-                                bool orient) {
+                                const estimation_options& opt, unsigned threads) {
   const std::size_t n = positions.size(), stride = static_cast<std::size_t>(stride_k),
                     kz = static_cast<std::size_t>(kk);
   std::vector<vec3f> normals(n);
-  parallel_over(n, [&](std::size_t begin, std::size_t end) {
+  parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i)
       normals[i] = pca_normal(positions, std::span(table).subspan(i * stride, kz)).cast<float>();
   });
-  if (orient && n >= 2) mst_orient(positions, normals, table, stride_k, kk);
+  if (opt.orientation == normal_orientation::mst && n >= 2)
+    mst_orient(positions, normals, table, stride_k, kk, threads);
+  if (opt.orientation == normal_orientation::viewpoint)
+    orient_towards(positions, normals, opt.viewpoint, threads);
   return normals;
+}
+
+/// The size bound of ellipse_rule::local_spacing: local_spacing_reach × ρᵢ, the distance to the
+/// farthest of the kk neighbours, but at most local_spacing_outlier_factor × the median ρⱼ of
+/// those neighbours — an isolated sample (an outlier) has neighbours whose own neighbourhoods are
+/// small. A median of 0 (the neighbours are duplicates) bounds nothing.
+std::vector<float> spacing_caps(std::span<const vec3f> positions,
+                                const std::vector<std::uint32_t>& table, std::size_t stride,
+                                std::size_t kk, unsigned threads) {
+  const std::size_t n = positions.size();
+  std::vector<float> rho(n), cap(n);
+  parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i)
+      rho[i] = (positions[table[i * stride + kk - 1]] - positions[i]).norm();
+  });
+  parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
+    std::vector<float> around(kk);
+    for (std::size_t i = begin; i < end; ++i) {
+      for (std::size_t j = 0; j < kk; ++j) around[j] = rho[table[i * stride + j]];
+      const auto mid = around.begin() + static_cast<std::ptrdiff_t>(kk / 2);
+      std::nth_element(around.begin(), mid, around.end());
+      const auto reach = static_cast<float>(local_spacing_reach * rho[i]);
+      cap[i] = *mid > 0 ? std::min(reach, static_cast<float>(local_spacing_outlier_factor) * *mid)
+                        : reach;
+    }
+  });
+  return cap;
+}
+
+/// Semi-axis lengths (major, minor) of the ellipse along e1, e2 (unit, in the tangent frame)
+/// centred at the origin that holds every offset of xy, with the major at most `cap` (the minor
+/// grown to keep the neighbours inside, at least splat_min_axis_ratio·major, at most the major).
+/// With cap = local_spacing_reach·ρ every neighbour (|q| ≤ ρ) stays inside: the minor needed is
+/// at most ρ/√(1 − 1/reach²) ≈ 1.34ρ < cap.
+std::pair<double, double> capped_axes(double major, double minor, double cap,
+                                      const std::vector<vec2d>& xy, const vec2d& e1,
+                                      const vec2d& e2) {
+  if (!(major > cap)) return {major, minor};
+  double need = 0;
+  for (const auto& q : xy) {
+    const double x = q.dot(e1) / cap, y = std::abs(q.dot(e2));
+    if (x * x < 1) need = std::max(need, y / std::sqrt(1 - x * x));
+  }
+  return {cap, std::clamp(need * (1 + 1e-5), splat_min_axis_ratio * cap, cap)};
 }
 
 /// Splat ellipses from the first kk neighbours of each row of `table` (rows of `stride`).
 splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f> normals,
                          const knn_index& index, const std::vector<std::uint32_t>& table,
-                         int stride_k, int kk) {
+                         int stride_k, int kk, ellipse_rule rule, unsigned threads) {
   const std::size_t n = positions.size(), stride = static_cast<std::size_t>(stride_k),
                     kz = static_cast<std::size_t>(kk);
   splat_axes out;
@@ -259,8 +368,14 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
   constexpr double ratio2 = splat_min_axis_ratio * splat_min_axis_ratio;
   constexpr double cover_margin = 1 + 1e-5;
   constexpr int max_fallback_k = 4096;
+  const bool bounded = rule == ellipse_rule::local_spacing;
+  const std::vector<float> caps =
+      bounded ? spacing_caps(positions, table, stride, kz, threads) : std::vector<float>{};
+  // The disk of a sample whose neighbourhood is no surface reaches its 8th nearest neighbour's
+  // distance × 0.8, the splat of the full-detail reference render (raster/reference.hpp).
+  const std::size_t disk_neighbour = std::min<std::size_t>(8, kz - 1);
 
-  parallel_over(n, [&](std::size_t begin, std::size_t end) {
+  parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
     std::vector<std::uint32_t> more;
     std::vector<float> d2;
     std::vector<vec2d> xy;
@@ -273,7 +388,8 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
       // neighbourhood mean: at a boundary the neighbours lie on one side and must still be
       // covered). No division by the count: only the eigenvalue ratio and f·√λ matter.
       xy.clear();
-      double a = 0, b = 0, c = 0, extent2 = 0;
+      double a = 0, b = 0, c = 0, extent2 = 0, z1 = 0, z2 = 0;
+      vec3d sum = vec3d::Zero();
       for (const auto j : idx) {
         const vec3d d = positions[j].cast<double>() - p;
         const vec2d q(d.dot(t1), d.dot(t2));
@@ -282,6 +398,10 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
         b += q.x() * q.y();
         c += q.y() * q.y();
         extent2 += d.squaredNorm();
+        const double z = d.dot(nrm);
+        z1 += z;
+        z2 += z * z;
+        sum += d;
       }
       const double h = 0.5 * (a - c), r = std::hypot(h, b);
       const double l1 = 0.5 * (a + c) + r;
@@ -304,6 +424,23 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
         out.v[i] = (radius * t2).cast<float>();
         continue;
       }
+      if (bounded && kz >= 3) {
+        // Thickness: the neighbourhood's variance along the normal over its total variance
+        // (Pauly's surface variation λ₀/(λ₀+λ₁+λ₂) for the PCA normal): 0 on a plane, 1/3 for
+        // an isotropic blob. Above the threshold the tangent plane means nothing (a tree
+        // crown, a corner): a disk at the reference's spacing, not a plane-fitted ellipse.
+        const double m = double(kz);
+        const double along = z2 - z1 * z1 / m, total = extent2 - sum.squaredNorm() / m;
+        if (total > 0 && along > local_spacing_max_thickness * total) {
+          const double radius = std::min<double>(
+              caps[i], 0.8 * (positions[idx[disk_neighbour]] - positions[i]).norm());
+          if (radius > 0) {
+            out.u[i] = (radius * t1).cast<float>();
+            out.v[i] = (radius * t2).cast<float>();
+            continue;
+          }
+        }
+      }
       const double l2 = std::max(0.5 * (a + c) - r, ratio2 * l1);
       // Major axis at angle ψ = ½·atan2(2b, a − c) in the (t1, t2) frame (r > 0 here unless
       // the moments are isotropic, where any direction is an eigenvector: ψ = 0).
@@ -316,8 +453,10 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
       }
       const double f = std::sqrt(f2) * cover_margin;
       const vec3d axis1 = e1.x() * t1 + e1.y() * t2, axis2 = e2.x() * t1 + e2.y() * t2;
-      out.u[i] = (f * std::sqrt(l1) * axis1).cast<float>();
-      out.v[i] = (f * std::sqrt(l2) * axis2).cast<float>();
+      auto [major, minor] = std::pair(f * std::sqrt(l1), f * std::sqrt(l2));
+      if (bounded) std::tie(major, minor) = capped_axes(major, minor, caps[i], xy, e1, e2);
+      out.u[i] = (major * axis1).cast<float>();
+      out.v[i] = (minor * axis2).cast<float>();
     }
   });
   return out;
@@ -333,44 +472,80 @@ void check_normals(std::span<const vec3f> positions, std::span<const vec3f> norm
                             " is zero or not finite");
 }
 
+void check_options(const estimation_options& opt) {
+  if (opt.k_normals < 3)
+    throw InvalidArgument("estimate_normals: k = " + std::to_string(opt.k_normals) + " < 3");
+  if (opt.k_ellipses < 2)
+    throw InvalidArgument("estimate_splat_ellipses: k = " + std::to_string(opt.k_ellipses) +
+                          " < 2");
+  if (opt.orientation == normal_orientation::viewpoint && !all_finite(opt.viewpoint))
+    throw InvalidArgument("estimate_normals: the viewpoint is not finite");
+}
+
 }  // namespace
 
-std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k, bool orient) {
-  if (k < 3) throw InvalidArgument("estimate_normals: k = " + std::to_string(k) + " < 3");
+std::vector<vec3f> estimate_normals(std::span<const vec3f> positions,
+                                    const estimation_options& opt) {
+  check_options(opt);
   check_positions(positions, "estimate_normals");
   if (positions.empty()) return {};
-  const knn_index index(positions);
-  const int kk = clamp_k(k, positions.size());
-  return normals_from(positions, knn_table(positions, index, kk), kk, kk, orient);
+  const unsigned threads = resolve_threads(opt.threads);
+  const sorted_points s = sort_points(positions);
+  const knn_index index(s.pos);
+  const int kk = clamp_k(opt.k_normals, positions.size());
+  const auto table = knn_table(s.pos, index, kk, threads);
+  return unsort(normals_from(s.pos, table, kk, kk, opt, threads), s.order);
+}
+
+std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k, bool orient,
+                                    unsigned threads) {
+  return estimate_normals(
+      positions, {.k_normals = k,
+                  .orientation = orient ? normal_orientation::mst : normal_orientation::none,
+                  .threads = threads});
 }
 
 splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<const vec3f> normals,
-                                   int k) {
+                                   int k, unsigned threads, ellipse_rule rule) {
   if (k < 2) throw InvalidArgument("estimate_splat_ellipses: k = " + std::to_string(k) + " < 2");
   check_normals(positions, normals);
   check_positions(positions, "estimate_splat_ellipses");
   if (positions.empty()) return {};
-  const knn_index index(positions);
+  threads = resolve_threads(threads);
+  const sorted_points s = sort_points(positions);
+  std::vector<vec3f> sorted_normals(positions.size());
+  for (std::size_t r = 0; r < positions.size(); ++r) sorted_normals[r] = normals[s.order[r]];
+  const knn_index index(s.pos);
   const int kk = clamp_k(k, positions.size());
-  return ellipses_from(positions, normals, index, knn_table(positions, index, kk), kk, kk);
+  const auto table = knn_table(s.pos, index, kk, threads);
+  splat_axes e = ellipses_from(s.pos, sorted_normals, index, table, kk, kk, rule, threads);
+  return {unsort(e.u, s.order), unsort(e.v, s.order)};
+}
+
+estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
+                                               const estimation_options& opt) {
+  check_options(opt);
+  check_positions(positions, "estimate_normals");
+  if (positions.empty()) return {};
+  const unsigned threads = resolve_threads(opt.threads);
+  const sorted_points s = sort_points(positions);
+  const knn_index index(s.pos);
+  const int kn = clamp_k(opt.k_normals, positions.size()),
+            ke = clamp_k(opt.k_ellipses, positions.size());
+  const int stride = std::max(kn, ke);
+  const auto table = knn_table(s.pos, index, stride, threads);
+  const std::vector<vec3f> normals = normals_from(s.pos, table, stride, kn, opt, threads);
+  splat_axes e = ellipses_from(s.pos, normals, index, table, stride, ke, opt.ellipses, threads);
+  return {unsort(normals, s.order), {unsort(e.u, s.order), unsort(e.v, s.order)}};
 }
 
 estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions, int k_normals,
-                                               int k_ellipses, bool orient) {
-  if (k_normals < 3)
-    throw InvalidArgument("estimate_normals: k = " + std::to_string(k_normals) + " < 3");
-  if (k_ellipses < 2)
-    throw InvalidArgument("estimate_splat_ellipses: k = " + std::to_string(k_ellipses) + " < 2");
-  check_positions(positions, "estimate_normals");
-  if (positions.empty()) return {};
-  const knn_index index(positions);
-  const int kn = clamp_k(k_normals, positions.size()), ke = clamp_k(k_ellipses, positions.size());
-  const int stride = std::max(kn, ke);
-  const auto table = knn_table(positions, index, stride);
-  estimated_splats out;
-  out.normals = normals_from(positions, table, stride, kn, orient);
-  out.axes = ellipses_from(positions, out.normals, index, table, stride, ke);
-  return out;
+                                               int k_ellipses, bool orient, unsigned threads) {
+  return estimate_normals_and_ellipses(
+      positions, {.k_normals = k_normals,
+                  .k_ellipses = k_ellipses,
+                  .orientation = orient ? normal_orientation::mst : normal_orientation::none,
+                  .threads = threads});
 }
 
 }  // namespace pbr_lod

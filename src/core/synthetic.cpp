@@ -209,4 +209,85 @@ point_cloud make_wavy_surface(std::size_t n, std::uint64_t seed) {
   return out;
 }
 
+namespace {
+
+struct lidar_box {
+  float x0, y0, x1, y1, height;
+  [[nodiscard]] bool contains(float x, float y) const {
+    return x >= x0 && x <= x1 && y >= y0 && y <= y1;
+  }
+};
+
+struct lidar_tree {
+  float x, y, radius, base, top;
+};
+
+float lidar_ground(float x, float y) {
+  return 2.0f * std::sin(x / 15.0f) * std::cos(y / 20.0f) + 0.02f * x;
+}
+
+}  // namespace
+
+point_cloud make_lidar_tile(std::size_t n, std::uint64_t seed, bool outliers) {
+  point_cloud out;
+  out.origin = vec3d(500000, 4100000, 0);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> unit(0, 1);
+  constexpr float side = 100;
+  // Scan lines along x, 4× sparser across (y) than along: n ≈ (side/d_a)·(side/d_c), d_c = 4·d_a.
+  const float along = side / std::sqrt(4.0f * static_cast<float>(std::max<std::size_t>(n, 16)));
+  const float across = 4 * along;
+  std::vector<lidar_box> boxes;
+  for (int b = 0; b < 6; ++b) {
+    const float x = 5 + 80 * unit(rng), y = 5 + 80 * unit(rng);
+    boxes.push_back({x, y, x + 8 + 10 * unit(rng), y + 8 + 10 * unit(rng), 5 + 10 * unit(rng)});
+  }
+  std::vector<lidar_tree> trees;
+  for (int t = 0; t < 25; ++t) {
+    const float x = 100 * unit(rng), y = 100 * unit(rng);
+    bool in_box = false;
+    for (const auto& b : boxes) in_box = in_box || b.contains(x, y);
+    if (in_box) continue;
+    const float base = 2 + 3 * unit(rng);
+    trees.push_back({x, y, 2.5f + 3 * unit(rng), base, base + 4 + 6 * unit(rng)});
+  }
+  out.positions.reserve(n + n / 8);
+  for (float y = 0; y < side; y += across)
+    for (float x = 0; x < side; x += along) {
+      const float px = x + 0.2f * along * (unit(rng) - 0.5f), py = y + 0.1f * across * unit(rng);
+      float z = lidar_ground(px, py) + 0.03f * (unit(rng) - 0.5f);
+      for (const auto& b : boxes)
+        if (b.contains(px, py)) z = lidar_ground(b.x0, b.y0) + b.height;
+      for (const auto& t : trees) {
+        const float r2 = (px - t.x) * (px - t.x) + (py - t.y) * (py - t.y);
+        if (r2 < t.radius * t.radius && unit(rng) < 0.75f) {
+          // A return from anywhere inside the crown's vertical extent at this (x, y).
+          const float h = std::sqrt(1 - r2 / (t.radius * t.radius));
+          const float mid = 0.5f * (t.base + t.top), half = 0.5f * (t.top - t.base) * h;
+          z = lidar_ground(t.x, t.y) + mid + half * (2 * unit(rng) - 1);
+        }
+      }
+      out.positions.emplace_back(px, py, z);
+    }
+  // A few returns on the walls (an airborne scanner sees them at a grazing angle).
+  for (const auto& b : boxes) {
+    const float z0 = lidar_ground(b.x0, b.y0);
+    for (float s = 0; s < 2 * (b.x1 - b.x0 + b.y1 - b.y0); s += 4 * across) {
+      const float h = b.height * unit(rng);
+      const float w = b.x1 - b.x0, d = b.y1 - b.y0;
+      const vec3f p = s < w           ? vec3f(b.x0 + s, b.y0, z0 + h)
+                      : s < w + d     ? vec3f(b.x1, b.y0 + s - w, z0 + h)
+                      : s < 2 * w + d ? vec3f(b.x1 - (s - w - d), b.y1, z0 + h)
+                                      : vec3f(b.x0, b.y1 - (s - 2 * w - d), z0 + h);
+      out.positions.push_back(p);
+    }
+  }
+  const std::size_t isolated = outliers ? out.positions.size() / 2000 : 0;
+  for (std::size_t i = 0; i < isolated; ++i) {
+    const float x = side * unit(rng), y = side * unit(rng);
+    out.positions.emplace_back(x, y, lidar_ground(x, y) + 20 + 40 * unit(rng));
+  }
+  return out;
+}
+
 }  // namespace pbr_lod

@@ -201,6 +201,52 @@ TEST(EstimateNormals, Deterministic) {
   EXPECT_EQ(ea.v, eb.v);
 }
 
+// The thread count changes who computes what, never the result: 1, 2 and 3 threads give the
+// same bytes for normals (MST and viewpoint orientation) and ellipses.
+TEST(EstimateNormals, IndependentOfThreadCount) {
+  const auto cloud = make_wavy_surface(40000, 9);
+  for (const auto orient : {normal_orientation::mst, normal_orientation::viewpoint}) {
+    estimation_options opt{.orientation = orient, .viewpoint = vec3f(0, 5, 0), .threads = 1};
+    const auto one = estimate_normals_and_ellipses(cloud.positions, opt);
+    for (const unsigned t : {2u, 3u}) {
+      opt.threads = t;
+      const auto more = estimate_normals_and_ellipses(cloud.positions, opt);
+      EXPECT_EQ(one.normals, more.normals) << t;
+      EXPECT_EQ(one.axes.u, more.axes.u) << t;
+      EXPECT_EQ(one.axes.v, more.axes.v) << t;
+    }
+  }
+}
+
+// Towards a viewpoint: from the centre of a sphere every normal points inwards, from far above
+// every normal of the upper half points up; the lines themselves are the PCA ones (the same as
+// without orientation, up to sign).
+TEST(EstimateNormals, OrientedTowardsTheViewpoint) {
+  const vec3d centre(3, -1, 2);
+  auto world = sphere_sample(20000, 1.5, 11);
+  for (auto& p : world) p += centre;
+  const auto pts = to_float(world, vec3d::Zero());
+  const auto plain = estimate_normals(pts, 16, false);
+  estimation_options opt{.orientation = normal_orientation::viewpoint};
+  opt.viewpoint = centre.cast<float>();
+  const auto inward = estimate_normals(pts, opt);
+  opt.viewpoint = centre.cast<float>() + vec3f(0, 0, 1000);
+  const auto up = estimate_normals(pts, opt);
+  std::size_t in = 0, upper = 0, up_ok = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    ASSERT_TRUE(inward[i] == plain[i] || inward[i] == -plain[i]);
+    in += inward[i].cast<double>().dot(centre - world[i]) > 0;
+    if (world[i].z() > centre.z() + 0.1) {
+      ++upper;
+      up_ok += up[i].z() > 0;
+    }
+  }
+  EXPECT_EQ(in, pts.size());
+  EXPECT_EQ(up_ok, upper);
+  opt.viewpoint = vec3f(std::numeric_limits<float>::quiet_NaN(), 0, 0);
+  EXPECT_THROW((void)estimate_normals(pts, opt), InvalidArgument);
+}
+
 // Two spheres far apart: the k-NN graph has two components and each is oriented from its own
 // top sample, so both come out outward (CGAL's mst_orient_normals oriented only the component
 // of the global top sample and left the other with canonical, mixed signs).
@@ -428,6 +474,85 @@ TEST(SplatEllipses, DegenerateLadder) {
     expect_axes_valid(e, n);
     for (const auto& u : e.u) EXPECT_NEAR(u.norm(), 0.25f, 1e-6f);
   }
+}
+
+/// Per sample, the distance to the farthest of its k nearest (itself included), from the k-NN
+/// graph (tested against brute force in knn_test.cpp).
+std::vector<float> neighbourhood_radius(const std::vector<vec3f>& pts, int k) {
+  const knn_graph g = nearest_neighbour_graph(pts, k);
+  std::vector<float> rho(pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i) rho[i] = std::sqrt(g.dist2[i * g.k + g.k - 1]);
+  return rho;
+}
+
+// ellipse_rule::local_spacing on an airborne LiDAR tile (scan lines, roofs, walls, tree crowns,
+// isolated returns): no semi-axis is longer than local_spacing_reach (1.5) × the sample's
+// neighbourhood radius ρ and the minor never exceeds the major. Pajarola's rule alone on the same
+// input does reach beyond, so the bound is the rule's doing.
+TEST(SplatEllipses, LocalSpacingBoundsEveryAxis) {
+  const point_cloud tile = make_lidar_tile(60000, 3);
+  const auto& pts = tile.positions;
+  const std::vector<float> rho = neighbourhood_radius(pts, 12);
+  estimation_options opt{.k_ellipses = 12};
+  const auto local = estimate_normals_and_ellipses(pts, opt);
+  opt.ellipses = ellipse_rule::neighbours;
+  const auto plain = estimate_normals_and_ellipses(pts, opt);
+  EXPECT_EQ(local.normals, plain.normals);
+  std::size_t plain_over = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const float a = local.axes.u[i].norm(), b = local.axes.v[i].norm();
+    ASSERT_LE(a, float(local_spacing_reach) * rho[i] * (1 + 1e-5f)) << i;
+    ASSERT_LE(b, a * (1 + 1e-5f)) << i;
+    ASSERT_GT(b, 0.0f) << i;
+    plain_over += plain.axes.u[i].norm() > float(local_spacing_reach) * rho[i] * 1.01f;
+  }
+  std::printf("neighbours rule: %zu of %zu majors beyond 1.5 rho\n", plain_over, pts.size());
+  EXPECT_GT(plain_over, 0u);
+}
+
+// A sample 60 spacings above a plane grid: Pajarola's rule stretches its splat over the 11 grid
+// samples it reaches (major ≈ 60); the local rule holds it to local_spacing_outlier_factor (8) ×
+// the median neighbourhood radius of those grid samples (ρ = √5 on the unit grid with k = 12).
+TEST(SplatEllipses, IsolatedSampleBorrowsItsNeighboursSpacing) {
+  std::vector<vec3f> pts;
+  for (int j = 0; j < 41; ++j)
+    for (int i = 0; i < 41; ++i) pts.emplace_back(float(i), float(j), 0.0f);
+  pts.emplace_back(20.3f, 20.4f, 60.0f);
+  const auto normals = estimate_normals(pts, 12);
+  const auto local = estimate_splat_ellipses(pts, normals, 12);
+  const auto plain = estimate_splat_ellipses(pts, normals, 12, 0, ellipse_rule::neighbours);
+  const std::size_t top = pts.size() - 1;
+  EXPECT_GT(plain.u[top].norm(), 40.0f);
+  EXPECT_LE(local.u[top].norm(), float(local_spacing_outlier_factor) * std::sqrt(5.0f) * 1.0001f);
+  // Grid samples away from the edges and from the lone sample: both rules agree.
+  const std::size_t mid = 10 * 41 + 10;
+  EXPECT_EQ(local.u[mid], plain.u[mid]);
+  EXPECT_EQ(local.v[mid], plain.v[mid]);
+}
+
+// An isotropic Gaussian blob is no surface (thickness ≈ 1/3 > 0.1): the local rule gives every
+// sample a disk (equal axes) no wider than 0.8 × its 8th neighbour's distance; Pajarola's rule
+// fits ellipses in arbitrary tangent planes, elongated for most samples.
+TEST(SplatEllipses, BlobGetsDisks) {
+  std::mt19937 rng(17);
+  std::normal_distribution<float> g;
+  std::vector<vec3f> pts(3000);
+  for (auto& p : pts) p = vec3f(g(rng), g(rng), g(rng));
+  const auto normals = estimate_normals(pts, 16);
+  const auto local = estimate_splat_ellipses(pts, normals, 12);
+  const auto plain = estimate_splat_ellipses(pts, normals, 12, 0, ellipse_rule::neighbours);
+  const std::vector<float> d8 = knn_spacing(pts, 8);
+  std::size_t disks = 0, round_plain = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const float a = local.u[i].norm(), b = local.v[i].norm();
+    if (std::abs(a - b) <= 1e-5f * a) {
+      ++disks;
+      EXPECT_LE(a, 0.8f * d8[i] * (1 + 1e-5f)) << i;
+    }
+    round_plain += plain.v[i].norm() > 0.9f * plain.u[i].norm();
+  }
+  EXPECT_GT(disks, pts.size() * 95 / 100);
+  EXPECT_LT(round_plain, pts.size() / 4);
 }
 
 TEST(SplatEllipses, InvalidArguments) {

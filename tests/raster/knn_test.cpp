@@ -44,6 +44,59 @@ TEST(Knn, MatchesBruteForce) {
   }
 }
 
+// The batch over all points equals a brute-force k-NN of each point (distances; indices where
+// there is no tie, which random points have with probability ~0), whatever the thread count.
+TEST(Knn, GraphMatchesBruteForce) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::vector<vec3f> pts(3000);
+  for (auto& p : pts) p = vec3f(u(rng), u(rng), u(rng) * 0.1f);
+  const knn_graph g = nearest_neighbour_graph(pts, 9, 1);
+  ASSERT_EQ(g.k, 9u);
+  ASSERT_EQ(g.size(), pts.size());
+  for (std::size_t i = 0; i < pts.size(); i += 7) {
+    std::vector<std::uint32_t> order(pts.size());
+    std::iota(order.begin(), order.end(), 0u);
+    std::partial_sort(
+        order.begin(), order.begin() + 9, order.end(), [&](std::uint32_t a, std::uint32_t b) {
+          const float da = (pts[a] - pts[i]).squaredNorm(), db = (pts[b] - pts[i]).squaredNorm();
+          return da < db || (da == db && a < b);
+        });
+    for (std::size_t j = 0; j < 9; ++j) {
+      EXPECT_EQ(g.neighbours(i)[j], order[j]) << i << " " << j;
+      EXPECT_FLOAT_EQ(g.dist2[i * 9 + j], (pts[order[j]] - pts[i]).squaredNorm());
+    }
+  }
+  for (const unsigned t : {2u, 3u}) {
+    const knn_graph h = nearest_neighbour_graph(pts, 9, t);
+    EXPECT_EQ(h.index, g.index);
+    EXPECT_EQ(h.dist2, g.dist2);
+  }
+  // Fewer points than k: every row lists all of them.
+  const knn_graph small = nearest_neighbour_graph(std::span(pts).first(4), 9);
+  EXPECT_EQ(small.k, 4u);
+  EXPECT_TRUE(nearest_neighbour_graph({}, 3).index.empty());
+  EXPECT_THROW((void)nearest_neighbour_graph(pts, 0), InvalidArgument);
+}
+
+// The Morton order of the 8 corners of a cube is the Z-order x, then y, then z (bit 0 of the
+// code is x): (0,0,0), (1,0,0), (0,1,0), (1,1,0), (0,0,1), ... whatever order they come in.
+TEST(Knn, MortonOrderIsZOrder) {
+  std::vector<vec3f> corners;
+  for (int i = 7; i >= 0; --i)
+    corners.emplace_back(float(i & 1), float((i >> 1) & 1), float(i >> 2));
+  const auto order = morton_order(corners);
+  ASSERT_EQ(order.size(), 8u);
+  for (std::size_t r = 0; r < 8; ++r) {
+    const vec3f& p = corners[order[r]];
+    EXPECT_EQ(int(p.x()) | int(p.y()) << 1 | int(p.z()) << 2, int(r));
+  }
+  // Equal keys keep the input order (stable), and a non-finite point goes last.
+  const std::vector<vec3f> dup = {vec3f(1, 1, 1), vec3f(std::nanf(""), 0, 0), vec3f(0, 0, 0),
+                                  vec3f(1, 1, 1)};
+  EXPECT_EQ(morton_order(dup), (std::vector<std::uint32_t>{2, 0, 3, 1}));
+}
+
 // On a unit grid the 4 nearest neighbours of an interior point are at distance 1 (ties): they
 // come out ordered by index, and the same on every query.
 TEST(Knn, TiesAreOrderedByIndex) {

@@ -40,18 +40,23 @@ inline void add_circular_splats(point_cloud& c, double total_area) {
   if (c.colours.empty()) c.colours.assign(c.size(), rgb8{200, 200, 200});
 }
 
-/// Per node, the relative difference of two same-shaped trees' ellipse axes,
-/// max(|Δu|, |Δv|) / |u| with each axis compared up to sign.
+/// Per node, the relative difference of two same-shaped trees' ellipses, ‖E_a − E_b‖ / |u_a|²
+/// with E = u·uᵀ + v·vᵀ (Frobenius norm).
 template <class T>
 std::vector<double> ellipse_drifts(const T& a, const T& b) {
+  // Compared as shapes, E = u·uᵀ + v·vᵀ (the ellipse's second-moment tensor in the tangent
+  // plane): independent of the axes' signs, and of their directions where the ellipse is nearly
+  // a circle and any rotation of the axes describes the same disk.
+  const auto shape = [](const auto& n) {
+    const vec3d u = n.axis_u.template cast<double>(), v = n.axis_v.template cast<double>();
+    return mat3d(u * u.transpose() + v * v.transpose());
+  };
   std::vector<double> rel;
   rel.reserve(a.nodes().size());
   for (std::size_t i = 0; i < a.nodes().size(); ++i) {
     const auto &x = a.nodes()[i], &y = b.nodes()[i];
-    const double s = std::max<double>(x.axis_u.norm(), 1e-30);
-    const double du = std::min((x.axis_u - y.axis_u).norm(), (x.axis_u + y.axis_u).norm());
-    const double dv = std::min((x.axis_v - y.axis_v).norm(), (x.axis_v + y.axis_v).norm());
-    rel.push_back(std::max(du, dv) / s);
+    const double s = std::max<double>(x.axis_u.squaredNorm(), 1e-30);
+    rel.push_back((shape(x) - shape(y)).norm() / s);
   }
   return rel;
 }

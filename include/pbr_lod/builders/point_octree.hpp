@@ -33,6 +33,7 @@
 #include <cstdint>
 #include <functional>
 #include <numbers>
+#include <optional>
 #include <ranges>
 #include <string>
 #include <thread>
@@ -81,7 +82,11 @@ struct point_octree_options {
   /// randomly sampled plane (8 leaves 0.15 % uncovered; docs/normal-quantization.md), while 16
   /// inflates every splat, and through the conservative bounding of Fig. 6b every node above.
   int knn_ellipses = 12;
-  /// Threads for the build (0 = hardware concurrency).
+  /// Where the scanner stood, in world coordinates: estimated normals are turned to face it (one
+  /// parallel pass) instead of being made consistent over the k-NN graph (core/estimation.hpp).
+  std::optional<vec3d> viewpoint = std::nullopt;
+  /// Threads for the build, the normal and ellipse estimation included (0 = hardware
+  /// concurrency).
   unsigned threads = 0;
   /// Called with the fraction done (0..1); return false to cancel (build() then throws
   /// pbr_lod::Cancelled and nothing is returned). May be called from the calling thread only.

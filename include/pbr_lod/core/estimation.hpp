@@ -9,9 +9,11 @@
 //   k-NN covariance, orientation propagated along a minimum spanning tree of the Riemannian graph
 //   (CGAL::mst_orient_normals, Point_set_processing_3).
 //
-// Neighbourhoods come from knn_index (FLANN, exact). CGAL and FLANN appear only in the .cpp
-// files. Both functions run in parallel over the points (oneTBB) and are deterministic: each
-// point's result depends only on the input, never on the scheduling.
+// Neighbourhoods come from knn_index (FLANN, exact), one batch of queries per call in Morton
+// order; FLANN and Boost appear only in the .cpp files. Every function runs on up to `threads`
+// threads of the library's pool (0: all cores) and is deterministic: each point's result depends
+// only on the input, never on the scheduling or the thread count. docs/estimation.md has the
+// measured speed and accuracy.
 //
 // Coordinates: pass positions relative to a nearby origin (point_cloud / point_set store them
 // that way). The covariance is accumulated in double and centred on the neighbourhood mean, so
@@ -25,6 +27,48 @@
 #include "pbr_lod/core/math.hpp"
 
 namespace pbr_lod {
+
+/// How estimated normals get their signs.
+enum class normal_orientation {
+  none,       ///< the canonical sign (largest-magnitude component positive)
+  mst,        ///< consistent over the k-NN graph (Hoppe et al. 1992, minimum spanning forest)
+  viewpoint,  ///< towards a sensor position: n·(viewpoint − p) ≥ 0 (one parallel pass)
+};
+
+/// How large an estimated splat ellipse may grow.
+enum class ellipse_rule {
+  /// Pajarola's rule alone: the ellipse bounds all k neighbours, however far they are.
+  neighbours,
+  /// The same ellipse, bounded by the local point spacing (robust on real scans; default):
+  ///  * the major semi-axis is at most local_spacing_reach × ρᵢ, ρᵢ the distance to the
+  ///    farthest of the k neighbours, and at most local_spacing_outlier_factor × the median ρⱼ
+  ///    of those neighbours (an isolated sample borrows its neighbours' spacing); the minor is
+  ///    then grown just enough to keep the neighbours inside (at most the major), so no splat
+  ///    is a spike, and every neighbour stays covered unless the outlier bound applies;
+  ///  * a neighbourhood thicker than local_spacing_max_thickness (its variance along the normal
+  ///    over its total variance: 0 on a plane, 1/3 for an isotropic blob — vegetation, corners)
+  ///    is no surface: a disk of radius 0.8 × the distance to the 8th nearest neighbour, the
+  ///    splat of the full-detail reference render, bounded as above.
+  local_spacing,
+};
+
+/// ellipse_rule::local_spacing: how far beyond its own neighbourhood radius a splat may reach.
+inline constexpr double local_spacing_reach = 1.5;
+/// ellipse_rule::local_spacing: how far beyond its neighbours' median spacing a splat may reach.
+inline constexpr double local_spacing_outlier_factor = 8.0;
+/// ellipse_rule::local_spacing: the thickness above which a neighbourhood is not a surface.
+inline constexpr double local_spacing_max_thickness = 0.1;
+
+/// Parameters of the estimation, shared by every entry point below.
+struct estimation_options {
+  int k_normals = 16;   ///< neighbourhood of the PCA normal (≥ 3)
+  int k_ellipses = 16;  ///< neighbourhood the splat ellipse bounds (≥ 2)
+  normal_orientation orientation = normal_orientation::mst;
+  vec3f viewpoint = vec3f::Zero();  ///< sensor position, in the positions' frame (relative to
+                                    ///< the cloud's origin), for normal_orientation::viewpoint
+  ellipse_rule ellipses = ellipse_rule::local_spacing;
+  unsigned threads = 0;  ///< 0: all cores
+};
 
 /// Unit normals, one per position (P #P by 3 positions).
 ///
@@ -43,9 +87,17 @@ namespace pbr_lod {
 /// weight 1 − |nᵢ·nⱼ|). On a closed surface this is outward. The neighbourhoods of the PCA pass
 /// are reused; the k-NN queries and the edge sort run in parallel.
 ///
-/// Throws InvalidArgument when k < 3 or a position is not finite. Empty input → empty output.
+/// With normal_orientation::viewpoint the PCA normals are instead flipped to face
+/// opt.viewpoint, each on its own (a scan that knows where its sensor was needs no graph).
+///
+/// Throws InvalidArgument when k < 3, a position is not finite or the viewpoint is not finite.
+/// Empty input → empty output. Uses opt.k_normals, opt.orientation, opt.viewpoint, opt.threads.
+[[nodiscard]] std::vector<vec3f> estimate_normals(std::span<const vec3f> positions,
+                                                  const estimation_options& opt);
+
+/// estimate_normals with k_normals = k and orientation mst (orient) or none.
 [[nodiscard]] std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k = 16,
-                                                  bool orient = true);
+                                                  bool orient = true, unsigned threads = 0);
 
 /// Semi-axis vectors of per-point splat ellipses: u[i] the major, v[i] the minor semi-axis
 /// (direction × length), both orthogonal to the normal and to each other. The layout of
@@ -78,7 +130,9 @@ inline constexpr double splat_min_axis_ratio = 0.1;
 /// Throws InvalidArgument when k < 2, the spans differ in length, a position is not finite or
 /// a normal is zero or not finite. Empty input → empty output.
 [[nodiscard]] splat_axes estimate_splat_ellipses(std::span<const vec3f> positions,
-                                                 std::span<const vec3f> normals, int k = 16);
+                                                 std::span<const vec3f> normals, int k = 16,
+                                                 unsigned threads = 0,
+                                                 ellipse_rule rule = ellipse_rule::local_spacing);
 
 /// Oriented normals and splat ellipses of a bare point set in one pass over one k-NN index:
 /// the same results as estimate_normals(positions, k_normals, orient) followed by
@@ -89,8 +143,11 @@ struct estimated_splats {
   splat_axes axes;
 };
 [[nodiscard]] estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
+                                                             const estimation_options& opt);
+[[nodiscard]] estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
                                                              int k_normals = 16,
                                                              int k_ellipses = 16,
-                                                             bool orient = true);
+                                                             bool orient = true,
+                                                             unsigned threads = 0);
 
 }  // namespace pbr_lod

@@ -28,4 +28,15 @@ namespace pbr_lod {
 /// scale tests and build-throughput benchmarks (millions of points without a file).
 [[nodiscard]] point_cloud make_wavy_surface(std::size_t n, std::uint64_t seed = 1);
 
+/// About n returns of an airborne LiDAR strip over a 100 m × 100 m tile, positions only (as a
+/// LAS tile arrives), in UTM-like coordinates (origin (500000, 4100000, 0), z up): rolling
+/// terrain scanned in lines 4× sparser across the track than along it, flat roofs of boxy
+/// buildings with a few returns on their walls, tree crowns that scatter returns through their
+/// volume (no surface), and 0.05 % isolated returns high above (birds, noise). The hard case of
+/// normal and splat estimation: very uneven density, 2.5-D, neighbourhoods that are not surfaces.
+/// outliers = false leaves the isolated returns out (coverage measurements need a reference
+/// render that they do not dominate).
+[[nodiscard]] point_cloud make_lidar_tile(std::size_t n, std::uint64_t seed = 1,
+                                          bool outliers = true);
+
 }  // namespace pbr_lod

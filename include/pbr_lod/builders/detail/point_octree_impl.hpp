@@ -731,6 +731,12 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   };
   copy(work.positions, points.positions);
   if constexpr (In.colour) copy(work.colours, points.colours);
+  estimation_options est_opt{
+      .k_normals = opt.knn, .k_ellipses = opt.knn_ellipses, .threads = threads};
+  if (opt.viewpoint) {
+    est_opt.orientation = normal_orientation::viewpoint;
+    est_opt.viewpoint = vec3d(*opt.viewpoint - points.origin).template cast<float>();
+  }
   if constexpr (In.normal) {
     copy(work.normals, points.normals);
     parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
@@ -742,20 +748,20 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
     });
   } else if constexpr (!In.ellipse) {
     // Neither: both from one k-NN search.
-    auto est = estimate_normals_and_ellipses(work.positions, opt.knn, opt.knn_ellipses, true);
+    auto est = estimate_normals_and_ellipses(work.positions, est_opt);
     work.normals = std::move(est.normals);
     work.axis_u = std::move(est.axes.u);
     work.axis_v = std::move(est.axes.v);
     st.estimated_normals = st.estimated_ellipses = true;
   } else {
-    work.normals = estimate_normals(work.positions, opt.knn, true);
+    work.normals = estimate_normals(work.positions, est_opt);
     st.estimated_normals = true;
   }
   if constexpr (In.ellipse) {
     copy(work.axis_u, points.axis_u);
     copy(work.axis_v, points.axis_v);
   } else if constexpr (In.normal) {
-    auto axes = estimate_splat_ellipses(work.positions, work.normals, opt.knn_ellipses);
+    auto axes = estimate_splat_ellipses(work.positions, work.normals, opt.knn_ellipses, threads);
     work.axis_u = std::move(axes.u);
     work.axis_v = std::move(axes.v);
     st.estimated_ellipses = true;
