@@ -15,9 +15,12 @@
 #include <string>
 #include <vector>
 
+#include <cmath>
 #include "estimation_inputs.hpp"
 #include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/reference.hpp"
 
 namespace pbr_lod::bench {
 namespace {
@@ -62,8 +65,115 @@ BENCHMARK_CAPTURE(bm_estimate, buddha, std::string("buddha"))->Apply([](auto* b)
 BENCHMARK_CAPTURE(bm_estimate, wavy_1M, std::string("wavy1000000"))->Apply([](auto* b) {
   estimate_args(b, true);
 });
+BENCHMARK_CAPTURE(bm_estimate, lidar_500k, std::string("lidar500000"))->Apply([](auto* b) {
+  estimate_args(b, true);
+});
 BENCHMARK_CAPTURE(bm_estimate, wavy_10M, std::string("wavy10000000"))
     ->Apply([](auto* b) { estimate_args(b, true); }) -> Iterations(1);
+
+/// A 640×480 orbit view of the input's bounding sphere (up_axis 2 for the LiDAR tile).
+camera view_of(const std::vector<vec3f>& pts, double azimuth, int up_axis) {
+  vec3f lo = pts.front(), hi = lo;
+  for (const auto& p : pts) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return camera::orbit((0.5f * (lo + hi)).cast<double>(), 0.5 * double((hi - lo).norm()), azimuth,
+                       up_axis == 2 ? 45 : 20, 2.6, up_axis, {640, 480});
+}
+
+// Image error of the estimated normals: the scan rendered (shaded, full detail) with its
+// estimated normals and ellipses against the same scan with its true normals and ellipses fitted
+// to those, PSNR averaged over three views. range(0): 0 MST orientation, 2 none (the lines
+// alone: what the sign costs on top).
+void bm_normals_image_error(benchmark::State& state, const std::string& name) {
+  const estimation_input& in = estimation_inputs::get(name);
+  point_cloud truth, est;
+  truth.positions = est.positions = in.positions;
+  truth.normals = in.true_normals;
+  for (auto& n : truth.normals)
+    if (n.squaredNorm() == 0) n = vec3f::UnitZ();  // vertices no face uses
+  const auto axes = estimate_splat_ellipses(truth.positions, truth.normals, 12);
+  truth.axis_u = axes.u;
+  truth.axis_v = axes.v;
+  estimation_options opt{.k_ellipses = 12};
+  if (state.range(0) == 2) opt.orientation = normal_orientation::none;
+  for (auto _ : state) {
+    auto e = estimate_normals_and_ellipses(est.positions, opt);
+    est.normals = std::move(e.normals);
+    est.axis_u = std::move(e.axes.u);
+    est.axis_v = std::move(e.axes.v);
+  }
+  double psnr = 0;
+  for (const double az : {30.0, 150.0, 270.0}) {
+    const camera cam = view_of(in.positions, az, 1);
+    psnr += compare_images(render_reference(truth, cam, {}), render_reference(est, cam, {})).psnr;
+  }
+  state.counters["psnr_dB"] = psnr / 3;
+  rate(state, in.positions.size());
+}
+BENCHMARK_CAPTURE(bm_normals_image_error, bunny, std::string("bunny"))
+    ->Arg(0)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+BENCHMARK_CAPTURE(bm_normals_image_error, buddha, std::string("buddha"))
+    ->Arg(0)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+
+// Coverage of the estimated splats on the LiDAR tile without its isolated returns (they would
+// dominate the reference: its squares grow with the k-NN spacing), three views: the share of
+// the full-detail reference's pixels left uncovered (holes_%) and of pixels covered outside it
+// (spill_%), for range(0) = 0 ellipse_rule::neighbours, 1 local_spacing. Also the largest major
+// semi-axis over the distance to the 8th neighbour, and the spikes (major > 5 × minor and
+// > 2 × that distance).
+void bm_lidar_coverage(benchmark::State& state, const std::string& name) {
+  const estimation_input& in = estimation_inputs::get(name);
+  point_cloud ref, est;
+  ref.positions = est.positions = in.positions;
+  estimation_options opt{.k_ellipses = 12};
+  opt.ellipses = state.range(0) == 0 ? ellipse_rule::neighbours : ellipse_rule::local_spacing;
+  for (auto _ : state) {
+    auto e = estimate_normals_and_ellipses(est.positions, opt);
+    est.normals = std::move(e.normals);
+    est.axis_u = std::move(e.axes.u);
+    est.axis_v = std::move(e.axes.v);
+  }
+  double holes = 0, spill = 0;
+  for (const double az : {30.0, 120.0, 200.0}) {
+    const camera cam = view_of(in.positions, az, 2);
+    const image a = render_reference(ref, cam, {}), b = render_reference(est, cam, {});
+    std::size_t covered = 0, h = 0, s = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      const bool x = std::isfinite(a.depth[i]), y = std::isfinite(b.depth[i]);
+      covered += x;
+      h += x && !y;
+      s += y && !x;
+    }
+    holes += 100.0 * double(h) / double(covered) / 3;
+    spill += 100.0 * double(s) / double(covered) / 3;
+  }
+  const std::vector<float> d8 = knn_spacing(in.positions, 8);
+  double worst = 0;
+  std::size_t spikes = 0;
+  for (std::size_t i = 0; i < d8.size(); ++i) {
+    const double a = est.axis_u[i].norm(), b = est.axis_v[i].norm();
+    worst = std::max(worst, a / d8[i]);
+    spikes += a > 5 * b && a > 2 * d8[i];
+  }
+  state.counters["holes_%"] = holes;
+  state.counters["spill_%"] = spill;
+  state.counters["max_major_per_d8"] = worst;
+  state.counters["spikes"] = static_cast<double>(spikes);
+  rate(state, in.positions.size());
+}
+BENCHMARK_CAPTURE(bm_lidar_coverage, lidar_500k, std::string("lidar500000clean"))
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
 
 // The k-NN graph alone (k = 16): our batch (Morton order, range(0) threads) ...
 void bm_knn_graph(benchmark::State& state, const std::string& name) {

@@ -53,9 +53,10 @@ class knn_index {
 };
 
 /// The k nearest neighbours of every point of a set, among the set: row i of `index` / `dist2`
-/// (k entries from i·k) lists the neighbours of point i nearest first, ties by index, as
-/// knn_index::query(pts[i], k) would; the first entry is i itself or a duplicate of it
-/// (distance 0). k = min(requested, #P).
+/// (k entries from i·k) lists the neighbours of point i nearest first; the first entry is i
+/// itself or a duplicate of it (distance 0). Equidistant neighbours come in a deterministic
+/// order (their rank on the Morton curve below), which for ties may differ from
+/// knn_index::query's order by index. k = min(requested, #P).
 struct knn_graph {
   std::size_t k = 0;
   std::vector<std::uint32_t> index;  ///< #P × k point indices
@@ -67,11 +68,12 @@ struct knn_graph {
   }
 };
 
-/// All k-nearest-neighbour rows of `pts` in one batch (exact, as knn_index::query): the queries
-/// run on up to `threads` threads (0: all cores) in the order of a Morton (Z-order) curve over
-/// the points' bounding box, so that consecutive queries walk the same branches of the k-d tree,
-/// and each writes straight into its row (no allocation per query). The result does not depend
-/// on `threads`. Throws InvalidArgument when a point is not finite or k < 1.
+/// All k-nearest-neighbour rows of `pts` in one batch (exact, as knn_index::query): the points
+/// are sorted along a Morton (Z-order) curve over their bounding box, indexed in that order and
+/// queried in that order on up to `threads` threads (0: all cores), so that consecutive queries
+/// walk the same branches of the k-d tree; each writes straight into its row (no allocation per
+/// query). The result does not depend on `threads`. Throws InvalidArgument when a point is not
+/// finite or k < 1.
 [[nodiscard]] knn_graph nearest_neighbour_graph(std::span<const vec3f> pts, int k,
                                                 unsigned threads = 0);
 
