@@ -65,9 +65,10 @@ auto with_octree(const std::string& path, F&& f) {
 }
 
 int build(const build_request& r) {
-  const auto opt = octree_options(r.params, interactive(r.as_json));
+  auto opt = octree_options(r.params, interactive(r.as_json));
   read_report report;
   const point_cloud cloud = read_points(r.input, &report);
+  if (!opt.viewpoint) opt.viewpoint = cloud.sensor;  // a PCD's scanner, unless overridden
   for (const auto& w : report.warnings) std::cerr << "warning: " << w << "\n";
   return with_point_set(cloud, r.input, [&](const auto& pts) {
     const auto t = build_point_octree(pts, opt);

@@ -173,6 +173,7 @@ triangle_mesh finish_mesh(raw_geometry&& g, const std::string& path, read_report
     }
   }
   m.texture_path = std::move(g.texture_path);
+  m.vertices.sensor = g.sensor;
   return m;
 }
 

@@ -38,6 +38,8 @@ struct raw_geometry {
   /// An origin the file asks for (write_ply stores one); used when it is finite and inside the
   /// bounding box of the finite points, else the box centre is used.
   std::optional<vec3d> origin_hint;
+  /// The scanner's position in the file's coordinates, when the format records it.
+  std::optional<vec3d> sensor;
 };
 
 /// Drops non-finite points (and faces using them), chooses the origin, converts positions to

@@ -335,6 +335,7 @@ raw_geometry read_pcd_file(const std::string& path, read_report& report) {
   const std::string_view data = std::string_view(bytes).substr(h.data_begin);
   const auto* base = reinterpret_cast<const unsigned char*>(data.data());
   raw_geometry g;
+  g.sensor = vec3d::Zero();  // the points are in the sensor's frame (the pose is not applied)
   const auto total = mul_checked(h.points, h.point_size);
   if (!total) format_error(path, "header", "POINTS × point size overflows");
 

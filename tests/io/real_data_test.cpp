@@ -168,6 +168,11 @@ TEST(RealData, MilkCartonPcd) {
   for (const auto& col : c.colours)
     distinct.insert((std::uint32_t{col.r} << 16) | (std::uint32_t{col.g} << 8) | col.b);
   EXPECT_EQ(distinct.size(), 90348u);
+  // The points are in the Kinect's frame: the scanner at the origin, every point in front of it
+  // (z < 0, looking down −z), which is what orienting normals towards it relies on.
+  ASSERT_TRUE(c.sensor.has_value());
+  EXPECT_EQ(*c.sensor, pbr_lod::vec3d::Zero());
+  EXPECT_FALSE(read_points(data_file("1.2-with-color.las")).sensor.has_value());
 }
 
 // The LiDAR sample: 1,065 points with colours; world coordinates (origin + positions) must

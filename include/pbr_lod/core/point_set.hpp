@@ -13,6 +13,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,9 @@ struct point_cloud {
   std::vector<std::uint8_t> materials;  ///< or empty
   std::vector<vec3f> axis_u;            ///< splat ellipse semi-axis vectors (tangent), or empty
   std::vector<vec3f> axis_v;            ///< second semi-axis, orthogonal to axis_u, or empty
+  /// Where the scanner stood, in world coordinates, when the file says (a PCD's points are in
+  /// its sensor's frame: the origin). Orients estimated normals without the k-NN graph.
+  std::optional<vec3d> sensor;
 
   [[nodiscard]] std::size_t size() const { return positions.size(); }
   [[nodiscard]] bool empty() const { return positions.empty(); }
