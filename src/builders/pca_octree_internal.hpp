@@ -1,6 +1,7 @@
 // pbr_lod — what the PCA octree's translation units share (not installed).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include "pbr_lod/builders/pca_octree.hpp"
@@ -24,16 +25,27 @@ void pca_derive_bounds(pca_data& d);
 /// the quantisation-error stats and kmeans_seconds.
 void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads);
 
-/// Reads/writes `bits` bits of `v` at bit position `pos` of a little-endian byte record.
+/// Reads/writes `bits` (≤ 32) bits of `v` at bit position `pos` of a little-endian byte
+/// record, a byte at a time (a record holds one node; encode and decode touch every field).
 template <std::size_t N>
 void put_bits(std::array<std::uint8_t, N>& r, unsigned pos, std::uint32_t v, unsigned bits) {
-  for (unsigned i = 0; i < bits; ++i, ++pos)
-    if ((v >> i) & 1u) r[pos >> 3] = static_cast<std::uint8_t>(r[pos >> 3] | (1u << (pos & 7)));
+  for (unsigned done = 0; done < bits;) {
+    const unsigned off = pos & 7u, take = std::min(8u - off, bits - done);
+    const std::uint32_t part = (v >> done) & ((1u << take) - 1u);
+    r[pos >> 3] = static_cast<std::uint8_t>(r[pos >> 3] | (part << off));
+    done += take;
+    pos += take;
+  }
 }
 template <std::size_t N>
 std::uint32_t get_bits(const std::array<std::uint8_t, N>& r, unsigned pos, unsigned bits) {
   std::uint32_t v = 0;
-  for (unsigned i = 0; i < bits; ++i, ++pos) v |= ((r[pos >> 3] >> (pos & 7)) & 1u) << i;
+  for (unsigned done = 0; done < bits;) {
+    const unsigned off = pos & 7u, take = std::min(8u - off, bits - done);
+    v |= ((static_cast<std::uint32_t>(r[pos >> 3]) >> off) & ((1u << take) - 1u)) << done;
+    done += take;
+    pos += take;
+  }
   return v;
 }
 

@@ -170,8 +170,33 @@ double angle_deg(const vec3f& a, const vec3f& b) {
 }
 /// Angle between two axes whose sign does not matter.
 double axis_angle_deg(const vec3f& a, const vec3f& b) {
-  return std::min(angle_deg(a, b), angle_deg(a, -b));
+  return std::acos(
+             std::min(std::abs(static_cast<double>(a.normalized().dot(b.normalized()))), 1.0)) *
+         180 / std::numbers::pi;
 }
+
+/// What quantisation changed in a run of nodes (maxima, and sums for the means).
+struct quantise_errors {
+  double max_mean_cell = 0, max_axis_deg = 0, max_normal_axis_deg = 0;
+  double sum_sigma_p = 0, sum_sigma_n = 0;
+  void add(const pca_node& a, const pca_node& b) {
+    max_mean_cell = std::max(
+        max_mean_cell, static_cast<double>((a.mean - b.mean).cwiseAbs().maxCoeff()) / a.cell_size);
+    for (int k = 0; k < 3; ++k)
+      max_axis_deg = std::max(max_axis_deg, axis_angle_deg(a.frame.col(k), b.frame.col(k)));
+    max_normal_axis_deg =
+        std::max(max_normal_axis_deg, angle_deg(a.normal_frame.col(2), b.normal_frame.col(2)));
+    sum_sigma_p += static_cast<double>((a.sigma - b.sigma).cwiseAbs().maxCoeff() / a.sigma.x());
+    sum_sigma_n += static_cast<double>((a.normal_sigma - b.normal_sigma).cwiseAbs().maxCoeff());
+  }
+  void add(const quantise_errors& o) {
+    max_mean_cell = std::max(max_mean_cell, o.max_mean_cell);
+    max_axis_deg = std::max(max_axis_deg, o.max_axis_deg);
+    max_normal_axis_deg = std::max(max_normal_axis_deg, o.max_normal_axis_deg);
+    sum_sigma_p += o.sum_sigma_p;
+    sum_sigma_n += o.sum_sigma_n;
+  }
+};
 
 }  // namespace
 
@@ -290,36 +315,30 @@ void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads) {
   const auto t1 = std::chrono::steady_clock::now();
   d.stats.kmeans_seconds = std::chrono::duration<double>(t1 - t0).count();
 
-  // Encode, then decode into the nodes (what load() will reproduce bit for bit).
+  // Encode, then decode into the nodes (what load() will reproduce bit for bit), and compare.
+  // Blocks of a fixed size, summed in block order: the error sums do not depend on threads.
   d.records.assign(n, {});
   if (colour) d.colour_records.assign(n, 0);
-  const std::vector<pca_node> before = d.nodes;
-  parallel_chunks(n, threads, 4096, [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t i = lo; i < hi; ++i) {
+  constexpr std::size_t block = 4096;
+  std::vector<quantise_errors> errors((n + block - 1) / block);
+  parallel_tasks(errors.size(), threads, [&](std::size_t b, unsigned) {
+    for (std::size_t i = b * block; i < std::min(n, (b + 1) * block); ++i) {
       const auto id = static_cast<std::uint32_t>(i);
+      const pca_node before = d.nodes[i];
       encode_node(d, id, ap[i], an[i]);
       if (colour) d.colour_records[i] = encode_colour(d.colours[i], ac[i]);
       pca_decode_node(d, id, d.nodes[i], colour ? &d.colours[i] : nullptr);
+      errors[b].add(before, d.nodes[i]);
     }
   });
-  // What quantisation cost.
+  quantise_errors e;
+  for (const auto& b : errors) e.add(b);
   auto& st = d.stats;
-  double sp_err = 0, sn_err = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const pca_node &a = before[i], &b = d.nodes[i];
-    st.max_mean_error_cell =
-        std::max(st.max_mean_error_cell,
-                 static_cast<double>((a.mean - b.mean).cwiseAbs().maxCoeff()) / a.cell_size);
-    for (int k = 0; k < 3; ++k)
-      st.max_axis_error_deg =
-          std::max(st.max_axis_error_deg, axis_angle_deg(a.frame.col(k), b.frame.col(k)));
-    st.max_normal_axis_error_deg = std::max(
-        st.max_normal_axis_error_deg, angle_deg(a.normal_frame.col(2), b.normal_frame.col(2)));
-    sp_err += static_cast<double>((a.sigma - b.sigma).cwiseAbs().maxCoeff() / a.sigma.x());
-    sn_err += static_cast<double>((a.normal_sigma - b.normal_sigma).cwiseAbs().maxCoeff());
-  }
-  st.mean_sigma_p_error = sp_err / static_cast<double>(n);
-  st.mean_sigma_n_error_deg = sn_err / static_cast<double>(n) * 180 / std::numbers::pi;
+  st.max_mean_error_cell = e.max_mean_cell;
+  st.max_axis_error_deg = e.max_axis_deg;
+  st.max_normal_axis_error_deg = e.max_normal_axis_deg;
+  st.mean_sigma_p_error = e.sum_sigma_p / static_cast<double>(n);
+  st.mean_sigma_n_error_deg = e.sum_sigma_n / static_cast<double>(n) * 180 / std::numbers::pi;
   st.quantise_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
 }
