@@ -89,6 +89,149 @@ void validate(const pca_input& in, const pca_octree_options& o) {
   need(o.knn >= 3 || !in.normals.empty(), "knn must be at least 3");
 }
 
+/// The points being partitioned (reordered in place with their normals and colours, a stable
+/// counting sort per node, so that every node's points are contiguous and each pass streams
+/// through memory), and the split rule's parameters.
+struct octree_points {
+  std::vector<vec3d>& pos;
+  std::vector<vec3f>& normals;
+  std::vector<rgb8>& cols;  ///< empty without colour
+  double cube_size;
+  std::uint32_t leaf_size, max_depth;
+  std::vector<vec3d> pos_tmp = std::vector<vec3d>(pos.size());
+  std::vector<vec3f> nrm_tmp = std::vector<vec3f>(pos.size());
+  std::vector<rgb8> col_tmp = std::vector<rgb8>(cols.size());
+  std::vector<std::uint8_t> oct = std::vector<std::uint8_t>(pos.size());
+};
+
+/// A node of a part of the octree while it is built: structure, points, cell.
+struct part_node {
+  build_node range;
+  vec3d cell_min;
+  std::uint32_t first = 0;
+  std::uint8_t count = 0, mask = 0, depth = 0;
+};
+
+/// Splits node `i` of `part` at its cell centre (§3) unless it holds at most leaf_size points,
+/// reaches max_depth or holds one position only; appends its children to `part` in octant order.
+/// Touches only the node's own range of the points, so disjoint nodes split concurrently.
+void split_node(octree_points& p, std::vector<part_node>& part, std::size_t i) {
+  const build_node r = part[i].range;
+  const std::uint8_t depth = part[i].depth;
+  if (r.end - r.begin <= p.leaf_size || depth >= p.max_depth) return;
+  const double half = p.cube_size / std::ldexp(1.0, depth + 1);
+  const vec3d cmin = part[i].cell_min, mid = cmin + vec3d::Constant(half);
+  std::array<std::uint32_t, 9> start{};
+  vec3d plo = p.pos[r.begin], phi = plo;
+  for (std::uint32_t k = r.begin; k < r.end; ++k) {
+    const vec3d& q = p.pos[k];
+    plo = plo.cwiseMin(q);
+    phi = phi.cwiseMax(q);
+    p.oct[k] = static_cast<std::uint8_t>(
+        (q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) | (q.z() >= mid.z() ? 4u : 0u));
+    ++start[p.oct[k] + 1u];
+  }
+  if (plo == phi) return;  // all points identical: no split separates them
+  for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
+  std::array<std::uint32_t, 8> at{};
+  for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
+  const bool colour = !p.cols.empty();
+  for (std::uint32_t k = r.begin; k < r.end; ++k) {
+    const std::uint32_t to = at[p.oct[k]]++;
+    p.pos_tmp[to] = p.pos[k];
+    p.nrm_tmp[to] = p.normals[k];
+    if (colour) p.col_tmp[to] = p.cols[k];
+  }
+  std::copy(p.pos_tmp.begin() + r.begin, p.pos_tmp.begin() + r.end, p.pos.begin() + r.begin);
+  std::copy(p.nrm_tmp.begin() + r.begin, p.nrm_tmp.begin() + r.end, p.normals.begin() + r.begin);
+  if (colour)
+    std::copy(p.col_tmp.begin() + r.begin, p.col_tmp.begin() + r.end, p.cols.begin() + r.begin);
+  part[i].first = static_cast<std::uint32_t>(part.size());
+  for (unsigned o8 = 0; o8 < 8; ++o8) {
+    if (start[o8 + 1] == start[o8]) continue;
+    part[i].mask = static_cast<std::uint8_t>(part[i].mask | (1u << o8));
+    ++part[i].count;
+    part.push_back({{r.begin + start[o8], r.begin + start[o8 + 1]},
+                    cmin + vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0),
+                    0,
+                    0,
+                    0,
+                    static_cast<std::uint8_t>(depth + 1)});
+  }
+}
+
+/// Appends the subtrees of `parts` (each a subtree in breadth-first order, parts[s][0] the
+/// frontier node top[s]) to the tree top[0..] in breadth-first order. A level of the whole tree
+/// is the concatenation of the parts' nodes at that level, in part order, because the frontier
+/// is one whole level: this is the order of the one-part build.
+void merge_parts(std::vector<part_node>& top, std::size_t frontier,
+                 const std::vector<std::vector<part_node>>& parts) {
+  std::size_t levels = 0;
+  for (const auto& part : parts) levels = std::max<std::size_t>(levels, part.back().depth);
+  const std::size_t d0 = top[frontier].depth, span = levels - d0 + 1;
+  // local[s][l]: where level d0 + l starts in part s (breadth first: levels are contiguous);
+  // global[s][l]: where it goes in the whole tree.
+  std::vector<std::vector<std::size_t>> local(parts.size(), std::vector<std::size_t>(span + 1));
+  std::vector<std::vector<std::size_t>> global(parts.size(), std::vector<std::size_t>(span));
+  for (std::size_t s = 0; s < parts.size(); ++s) {
+    for (const auto& nd : parts[s]) ++local[s][nd.depth - d0 + 1];
+    for (std::size_t l = 0; l < span; ++l) local[s][l + 1] += local[s][l];
+  }
+  std::size_t next = top.size();
+  for (std::size_t l = 1; l < span; ++l)
+    for (std::size_t s = 0; s < parts.size(); ++s) {
+      global[s][l] = next;
+      next += local[s][l + 1] - local[s][l];
+    }
+  const auto where = [&](std::size_t s, std::size_t j) -> std::uint32_t {
+    if (j == 0) return static_cast<std::uint32_t>(frontier + s);
+    const std::size_t l = parts[s][j].depth - d0;
+    return static_cast<std::uint32_t>(global[s][l] + j - local[s][l]);
+  };
+  top.resize(next);
+  for (std::size_t s = 0; s < parts.size(); ++s)
+    for (std::size_t j = 0; j < parts[s].size(); ++j) {
+      part_node nd = parts[s][j];
+      if (nd.count > 0) nd.first = where(s, nd.first);
+      top[where(s, j)] = nd;
+    }
+}
+
+/// §3's octree: breadth first until a whole level holds enough nodes to share among threads,
+/// then each of that level's subtrees on its own (the points of different subtrees are
+/// disjoint ranges), merged back into breadth-first order. The tree and the order of the
+/// points do not depend on the number of threads. Returns each node's range of points.
+std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned threads) {
+  constexpr std::size_t frontier_nodes = 256;
+  std::vector<part_node> top{
+      {{0, static_cast<std::uint32_t>(p.pos.size())}, d.cube_min, 0, 0, 0, 0}};
+  std::size_t level = 0;  // first node of the level being split
+  while (level < top.size() && top.size() - level < frontier_nodes) {
+    const std::size_t end = top.size();
+    for (std::size_t i = level; i < end; ++i) split_node(p, top, i);
+    level = end;
+  }
+  if (level < top.size()) {
+    std::vector<std::vector<part_node>> parts(top.size() - level);
+    parallel_tasks(parts.size(), threads, [&](std::size_t s, unsigned) {
+      auto& part = parts[s];
+      part.push_back(top[level + s]);
+      for (std::size_t i = 0; i < part.size(); ++i) split_node(p, part, i);
+    });
+    merge_parts(top, level, parts);
+  }
+  d.nodes.assign(top.size(), pca_node{});
+  std::vector<build_node> ranges(top.size());
+  for (std::size_t i = 0; i < top.size(); ++i) {
+    d.nodes[i].first = top[i].first;
+    d.nodes[i].count = top[i].count;
+    d.nodes[i].mask = top[i].mask;
+    d.nodes[i].depth = top[i].depth;
+    ranges[i] = top[i].range;
+  }
+  return ranges;
+}
+
 }  // namespace
 
 pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
@@ -142,72 +285,11 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   d.cube_min = vec3d::Constant(-0.5 * size);
 
   // ---- §3: top-down octree, breadth first; children contiguous, in octant order.
-  // The points are reordered in place with their normals and colours (a stable counting sort
-  // per node), so every node's points are contiguous: each pass streams through memory.
   const bool colour = !in.colours.empty();
   std::vector<rgb8> cols(in.colours.begin(), in.colours.end());
-  std::vector<vec3d> pos_tmp(n);
-  std::vector<vec3f> nrm_tmp(n);
-  std::vector<rgb8> col_tmp(cols.size());
-  std::vector<std::uint8_t> oct(n);
-  std::vector<build_node> ranges{{0, static_cast<std::uint32_t>(n)}};
-  std::vector<vec3d> cell_min{d.cube_min};
-  d.nodes.emplace_back();
-  for (std::size_t i = 0; i < d.nodes.size(); ++i) {
-    const build_node r = ranges[i];
-    const std::uint32_t count = r.end - r.begin;
-    pca_node& nd = d.nodes[i];
-    st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
-    if (count <= o.leaf_size || nd.depth >= o.max_depth) continue;
-    vec3d plo = pos[r.begin], phi = plo;
-    for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      plo = plo.cwiseMin(pos[k]);
-      phi = phi.cwiseMax(pos[k]);
-    }
-    if (plo == phi) continue;  // all points identical: no split separates them
-    const double half = d.cube_size / std::ldexp(1.0, nd.depth + 1);
-    const vec3d mid = cell_min[i] + vec3d::Constant(half);
-    std::array<std::uint32_t, 9> start{};
-    for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      const vec3d& q = pos[k];
-      oct[k] =
-          static_cast<std::uint8_t>((q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) |
-                                    (q.z() >= mid.z() ? 4u : 0u));
-      ++start[oct[k] + 1u];
-    }
-    for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
-    std::array<std::uint32_t, 8> at{};
-    for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
-    for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      const std::uint32_t to = at[oct[k]]++;
-      pos_tmp[to] = pos[k];
-      nrm_tmp[to] = normals[k];
-      if (colour) col_tmp[to] = cols[k];
-    }
-    std::copy(pos_tmp.begin() + r.begin, pos_tmp.begin() + r.end, pos.begin() + r.begin);
-    std::copy(nrm_tmp.begin() + r.begin, nrm_tmp.begin() + r.end, normals.begin() + r.begin);
-    if (colour)
-      std::copy(col_tmp.begin() + r.begin, col_tmp.begin() + r.end, cols.begin() + r.begin);
-    const auto first = static_cast<std::uint32_t>(d.nodes.size());
-    std::uint8_t mask = 0, kids = 0;
-    const std::uint8_t depth = static_cast<std::uint8_t>(nd.depth + 1);
-    const vec3d cmin = cell_min[i];
-    for (unsigned o8 = 0; o8 < 8; ++o8) {
-      if (start[o8 + 1] == start[o8]) continue;
-      mask = static_cast<std::uint8_t>(mask | (1u << o8));
-      ++kids;
-      ranges.push_back({r.begin + start[o8], r.begin + start[o8 + 1]});
-      cell_min.push_back(cmin +
-                         vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0));
-      pca_node c;
-      c.depth = depth;
-      d.nodes.push_back(c);
-    }
-    pca_node& parent = d.nodes[i];  // (push_back may have moved it)
-    parent.first = first;
-    parent.count = kids;
-    parent.mask = mask;
-  }
+  octree_points pts{pos, normals, cols, d.cube_size, o.leaf_size, o.max_depth};
+  const std::vector<build_node> ranges = build_octree(pts, d, threads);
+  for (const auto& nd : d.nodes) st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   st.nodes = d.nodes.size();
   for (const auto& nd : d.nodes) st.leaves += nd.count == 0 ? 1 : 0;
   check_progress(o, 0.35);
