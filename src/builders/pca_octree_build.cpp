@@ -232,6 +232,63 @@ std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned thr
   return ranges;
 }
 
+/// §3: the PCA of every node's positions, normals and colours. The normals need each node's
+/// own frame (the unwrap is about its mean normal), so every node visits its points; the
+/// positions' and colours' moments are summed at the leaves and merged up the tree level by
+/// level (Chan et al.'s update, core/covariance.hpp), so each point is summed once.
+void node_statistics(pca_data& d, const std::vector<build_node>& ranges,
+                     const std::vector<vec3d>& pos, const std::vector<vec3f>& normals,
+                     const std::vector<rgb8>& cols, unsigned threads) {
+  const std::size_t n = d.nodes.size();
+  const bool colour = !cols.empty();
+  if (colour) d.colours.resize(n);
+  std::vector<scatter_accumulator> mp(n), mc(colour ? n : 0);
+  // Breadth first: each level is a contiguous range, its children all in the next one.
+  std::vector<std::size_t> level{0};
+  for (std::size_t i = 1; i < n; ++i)
+    if (d.nodes[i].depth != d.nodes[i - 1].depth) level.push_back(i);
+  level.push_back(n);
+  for (std::size_t l = level.size() - 1; l-- > 0;) {
+    parallel_pieces(level[l + 1] - level[l], threads, 16 * threads, 256,
+                    [&](std::size_t lo, std::size_t hi) {
+                      for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i) {
+                        const pca_node& nd = d.nodes[i];
+                        const build_node r = ranges[i];
+                        if (nd.count == 0) {
+                          mp[i] = position_moments(pos.data() + r.begin, r.end - r.begin);
+                          if (colour)
+                            mc[i] = colour_moments(cols.data() + r.begin, r.end - r.begin);
+                          continue;
+                        }
+                        for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+                          mp[i] += mp[c];
+                          if (colour) mc[i] += mc[c];
+                        }
+                      }
+                    });
+  }
+  const std::size_t pieces = std::min<std::size_t>(n, 64 * threads);
+  parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
+    const auto [lo_n, hi_n] = piece_range(n, pieces, t);
+    for (std::size_t i = lo_n; i < hi_n; ++i) {
+      const build_node r = ranges[i];
+      // The normals first: their mean is what the degenerate position rules align z with.
+      // If they cancel out, the first sample's normal stands in (deterministic).
+      const pca_normal_result pn =
+          pca_normals(normals.data() + r.begin, r.end - r.begin, normals[r.begin].cast<double>());
+      const pca_position_result pp =
+          pca_positions_from(mp[i].mean, mp[i].covariance(), pn.frame.col(2));
+      pca_node& nd = d.nodes[i];
+      nd.mean = pp.mean.cast<float>();
+      nd.frame = pp.frame.cast<float>();
+      nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
+      nd.normal_frame = pn.frame.cast<float>();
+      nd.normal_sigma = pn.sigma.cast<float>();
+      if (colour) d.colours[i] = pca_colours_from(mc[i].mean, mc[i].covariance());
+    }
+  });
+}
+
 }  // namespace
 
 pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
@@ -285,7 +342,6 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   d.cube_min = vec3d::Constant(-0.5 * size);
 
   // ---- §3: top-down octree, breadth first; children contiguous, in octant order.
-  const bool colour = !in.colours.empty();
   std::vector<rgb8> cols(in.colours.begin(), in.colours.end());
   octree_points pts{pos, normals, cols, d.cube_size, o.leaf_size, o.max_depth};
   const std::vector<build_node> ranges = build_octree(pts, d, threads);
@@ -295,27 +351,7 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   check_progress(o, 0.35);
 
   // ---- §3: independent PCA of each node's positions, normals and colours.
-  if (colour) d.colours.resize(d.nodes.size());
-  const std::size_t pieces = std::min<std::size_t>(d.nodes.size(), 64 * threads);
-  parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
-    const auto [lo_n, hi_n] = piece_range(d.nodes.size(), pieces, t);
-    for (std::size_t i = lo_n; i < hi_n; ++i) {
-      const build_node r = ranges[i];
-      const std::size_t m = r.end - r.begin;
-      // The normals first: their mean is what the degenerate position rules align z with.
-      // If they cancel out, the first sample's normal stands in (deterministic).
-      const pca_normal_result pn =
-          pca_normals(normals.data() + r.begin, m, normals[r.begin].cast<double>());
-      const pca_position_result pp = pca_positions(pos.data() + r.begin, m, pn.frame.col(2));
-      pca_node& nd = d.nodes[i];
-      nd.mean = pp.mean.cast<float>();
-      nd.frame = pp.frame.cast<float>();
-      nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
-      nd.normal_frame = pn.frame.cast<float>();
-      nd.normal_sigma = pn.sigma.cast<float>();
-      if (colour) d.colours[i] = pca_colours(cols.data() + r.begin, m);
-    }
-  });
+  node_statistics(d, ranges, pos, normals, cols, threads);
   pca_derive_cells(d);
   st.tree_seconds = seconds_since(tt);
   check_progress(o, 0.6);

@@ -5,6 +5,7 @@
 #include <cstdint>
 
 #include "pbr_lod/builders/pca_octree.hpp"
+#include "pbr_lod/core/covariance.hpp"
 
 namespace pbr_lod::detail {
 
@@ -13,6 +14,15 @@ unsigned pca_threads(unsigned requested);
 
 /// §3 colour PCA of the colours c[0..n) (RGB / 255; pca_octree_stats.cpp).
 pca_colour pca_colours(const rgb8* c, std::size_t n);
+/// The same from the colours' mean and covariance.
+pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov);
+/// §3 position PCA (pca_positions) from the points' mean and covariance.
+pca_position_result pca_positions_from(const vec3d& mean, const mat3d& cov,
+                                       const vec3d& mean_normal);
+/// Count, mean and centred scatter of n points, or of n colours as RGB / 255 (two passes).
+/// An inner node's are its children's merged (Chan et al.), so each point is summed once.
+scatter_accumulator position_moments(const vec3d* p, std::size_t n);
+scatter_accumulator colour_moments(const rgb8* c, std::size_t n);
 
 /// Cells of every node from the root cube and the child masks (top-down). Before decoding:
 /// μ_p is quantised relative to the node's cell.

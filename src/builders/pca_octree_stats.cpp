@@ -65,18 +65,32 @@ vec3d any_orthogonal_d(const vec3d& n) {
 // ---------------------------------------------------------------------------------------------
 // §3: position PCA with the degenerate rules.
 // ---------------------------------------------------------------------------------------------
-pca_position_result pca_positions(const vec3d* p, std::size_t n, const vec3d& mean_normal) {
-  pca_position_result r;
-  if (n == 0) return r;
+scatter_accumulator position_moments(const vec3d* p, std::size_t n) {
+  scatter_accumulator a;
+  if (n == 0) return a;
   vec3d mean = vec3d::Zero();
   for (std::size_t i = 0; i < n; ++i) mean += p[i];
   mean /= static_cast<double>(n);
-  mat3d cov = mat3d::Zero();
+  mat3d s = mat3d::Zero();
   for (std::size_t i = 0; i < n; ++i) {
     const vec3d d = p[i] - mean;
-    cov.noalias() += d * d.transpose();
+    s.noalias() += d * d.transpose();
   }
-  cov /= static_cast<double>(n);
+  a.n = static_cast<double>(n);
+  a.mean = mean;
+  a.scatter = s;
+  return a;
+}
+
+pca_position_result pca_positions(const vec3d* p, std::size_t n, const vec3d& mean_normal) {
+  if (n == 0) return {};
+  const scatter_accumulator a = position_moments(p, n);
+  return pca_positions_from(a.mean, a.covariance(), mean_normal);
+}
+
+pca_position_result pca_positions_from(const vec3d& mean, const mat3d& cov,
+                                       const vec3d& mean_normal) {
+  pca_position_result r;
   r.mean = mean;
   const vec3d normal = (all_finite(mean_normal) && mean_normal.norm() > 0.5)
                            ? mean_normal.normalized()
@@ -177,22 +191,35 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
   return r;
 }
 
-/// §3: colour PCA of (r, g, b) in [0, 1]; no floor on σ_c (the paper finds none necessary).
-pca_colour pca_colours(const rgb8* c, std::size_t n) {
-  pca_colour r;
-  vec3d mean = vec3d::Zero();
+scatter_accumulator colour_moments(const rgb8* c, std::size_t n) {
+  scatter_accumulator a;
+  if (n == 0) return a;
   const auto get = [&](std::size_t i) -> vec3d {
     const rgb8 k = c[i];
     return vec3d(k.r, k.g, k.b) / 255.0;
   };
+  vec3d mean = vec3d::Zero();
   for (std::size_t i = 0; i < n; ++i) mean += get(i);
   mean /= static_cast<double>(n);
-  mat3d cov = mat3d::Zero();
+  mat3d s = mat3d::Zero();
   for (std::size_t i = 0; i < n; ++i) {
     const vec3d d = get(i) - mean;
-    cov.noalias() += d * d.transpose();
+    s.noalias() += d * d.transpose();
   }
-  cov /= static_cast<double>(n);
+  a.n = static_cast<double>(n);
+  a.mean = mean;
+  a.scatter = s;
+  return a;
+}
+
+/// §3: colour PCA of (r, g, b) in [0, 1]; no floor on σ_c (the paper finds none necessary).
+pca_colour pca_colours(const rgb8* c, std::size_t n) {
+  const scatter_accumulator a = colour_moments(c, n);
+  return pca_colours_from(a.mean, a.covariance());
+}
+
+pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov) {
+  pca_colour r;
   Eigen::SelfAdjointEigenSolver<mat3d> es(cov);
   const vec3d ev = es.eigenvalues().cwiseMax(0.0);
   mat3d f = mat3d::Identity();

@@ -58,7 +58,9 @@ TEST(pca_octree, FileBytesDoNotDependOnThreads) {
 // The octree against a brute-force one: §3's rule (split a cell at its centre while it holds
 // more than leaf_size points that are not all equal) applied breadth first, one node at a time.
 // The builder splits the levels below 256 nodes' worth in parallel and merges the parts back;
-// the result must be this tree node for node: same order, children, octant masks and depths.
+// the result must be this tree node for node: same order, children, octant masks and depths,
+// and each node's position statistics those of its own points (the builder merges moments
+// bottom-up instead of summing every node's points).
 TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
   const auto cloud = make_wavy_surface(40000, 5);
   const auto pts = point_set<with_normals>::from(cloud);
@@ -82,6 +84,14 @@ TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
     const cell c = q[i];
     const auto& nd = t.at(static_cast<std::uint32_t>(i));
     ASSERT_EQ(nd.depth, c.depth) << i;
+    // Inner nodes merge their children's moments: the same PCA as over their own points.
+    std::vector<vec3d> own;
+    for (const auto k : c.points) own.push_back(rel(k));
+    const auto ref =
+        detail::pca_positions(own.data(), own.size(), nd.normal_frame.col(2).cast<double>());
+    ASSERT_LT((nd.mean.cast<double>() - ref.mean).norm(), 1e-6 * t.cube_size()) << i;
+    for (int k = 0; k < 3; ++k)
+      ASSERT_NEAR(nd.sigma[k], ref.sigma[k], 1e-5 * ref.sigma[0] + 1e-14) << i << " σ" << k;
     bool same = true;
     for (const auto k : c.points) same = same && rel(k) == rel(c.points[0]);
     if (c.points.size() <= 4 || same) {
