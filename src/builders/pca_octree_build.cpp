@@ -316,24 +316,43 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
     st.estimated_normals = true;
   } else {
     normals.resize(n);
-    for (std::size_t i = 0; i < n; ++i) normals[i] = in.normals[i].normalized();
+    parallel_chunks(n, threads, 1u << 16, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) normals[i] = in.normals[i].normalized();
+    });
   }
   check_progress(o, 0.2);
   const auto tt = clock_type::now();
 
   // A double origin at the centre of the data's box; positions relative to it in double.
-  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (const auto& p : in.positions) {
-    lo = lo.cwiseMin(p.cast<double>());
-    hi = hi.cwiseMax(p.cast<double>());
+  // (Minima and maxima do not depend on the order of the chunks.)
+  constexpr std::size_t chunks = 64;
+  std::vector<std::array<vec3d, 2>> box(chunks);
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [b, e] = piece_range(n, chunks, c);
+    vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (std::size_t i = b; i < e; ++i) {
+      lo = lo.cwiseMin(in.positions[i].cast<double>());
+      hi = hi.cwiseMax(in.positions[i].cast<double>());
+    }
+    box[c] = {lo, hi};
+  });
+  vec3d lo = box[0][0], hi = box[0][1];
+  for (const auto& b : box) {
+    lo = lo.cwiseMin(b[0]);
+    hi = hi.cwiseMax(b[1]);
   }
   const vec3d centre_rel = 0.5 * (lo + hi);
   d.origin = in.origin + centre_rel;
   std::vector<vec3d> pos(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    pos[i] = in.positions[i].cast<double>() - centre_rel;
-    d.input_radius = std::max(d.input_radius, pos[i].norm());
-  }
+  std::vector<double> radius(chunks, 0.0);
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [b, e] = piece_range(n, chunks, c);
+    for (std::size_t i = b; i < e; ++i) {
+      pos[i] = in.positions[i].cast<double>() - centre_rel;
+      radius[c] = std::max(radius[c], pos[i].norm());
+    }
+  });
+  d.input_radius = *std::max_element(radius.begin(), radius.end());
   // The root cell: a cube about the box, enlarged by a hair so that no point lies on its far
   // faces after rounding.
   double size = (hi - lo).maxCoeff();
