@@ -6,6 +6,7 @@
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
 
 namespace pbr_lod {
@@ -238,6 +239,37 @@ TEST(pca_octree, BunnyBuildsAndRenders) {
   const vec3d c = t.origin() + t.at(0).mean.cast<double>();
   const image img = render_image(t, camera_for(c, t.at(0).radius / 2), 1);
   EXPECT_GT(img.covered_count(), 3000u);
+}
+
+// What quantisation (§3.1) costs in image error: the quantised and the float hierarchy of the
+// same 20 000 demo-scene points, drawn with the same seed from three views at 3 radii (256²,
+// one-pixel points), each compared with the mesh rendered at full detail, and with each other.
+// Measured (mean of the views): against the mesh 11.48 dB quantised and float alike (the error
+// is the generated points' shading noise, which both share), quantised against float 13.77 dB.
+// A quantiser that swaps f_p¹ and f_p³ (each disc then stands across the surface) measured
+// 10.74 dB against the mesh (0.74 dB lower) and 10.55 dB against float: the bounds, 0.3 dB and
+// 12.5 dB, lie between a working and a broken quantiser with margin on both sides.
+TEST(pca_octree, QuantisationCostsLittleImageError) {
+  const auto mesh = make_demo_scene(16);
+  const auto pts = point_set<with_normals_colours>::from(sample_surface(mesh, 20000, 7));
+  const auto q = build_pca_octree(pts, {.quantise = true});
+  const auto f = build_pca_octree(pts, {.quantise = false});
+  const sphere s = bounding_sphere_about_box_centre(pts.positions);
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = false};
+  double psnr_q = 0, psnr_f = 0, psnr_qf = 0;
+  for (const double az : {30.0, 150.0, 270.0}) {
+    const camera cam = camera::orbit(pts.origin + s.centre.cast<double>(), s.radius, az, 20, 3, 1,
+                                     viewport{256, 256});
+    const image ref = render_reference(mesh, cam, ro);
+    const image iq = render_image(q, cam, 5), iff = render_image(f, cam, 5);
+    psnr_q += compare_images(ref, iq).psnr / 3;
+    psnr_f += compare_images(ref, iff).psnr / 3;
+    psnr_qf += compare_images(iff, iq).psnr / 3;
+  }
+  EXPECT_GT(psnr_f, 10.0) << "the renders show the scene";
+  EXPECT_GT(psnr_q, psnr_f - 0.3) << "float " << psnr_f << " dB, quantised " << psnr_q << " dB";
+  EXPECT_GT(psnr_qf, 12.5) << "quantised against float";
 }
 
 }  // namespace
