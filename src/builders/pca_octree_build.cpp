@@ -112,40 +112,109 @@ struct part_node {
   std::uint8_t count = 0, mask = 0, depth = 0;
 };
 
+/// Octant of q about mid (bit 0 = +x half, 1 = +y, 2 = +z).
+inline std::uint8_t octant(const vec3d& q, const vec3d& mid) {
+  return static_cast<std::uint8_t>((q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) |
+                                   (q.z() >= mid.z() ? 4u : 0u));
+}
+
+/// Moves point k of the range to slot `to` of the scratch arrays.
+inline void move_to_scratch(octree_points& p, std::uint32_t k, std::uint32_t to) {
+  p.pos_tmp[to] = p.pos[k];
+  p.nrm_tmp[to] = p.normals[k];
+  if (!p.cols.empty()) p.col_tmp[to] = p.cols[k];
+}
+void copy_back(octree_points& p, std::size_t b, std::size_t e) {
+  using d = std::ptrdiff_t;
+  std::copy(p.pos_tmp.begin() + d(b), p.pos_tmp.begin() + d(e), p.pos.begin() + d(b));
+  std::copy(p.nrm_tmp.begin() + d(b), p.nrm_tmp.begin() + d(e), p.normals.begin() + d(b));
+  if (!p.cols.empty())
+    std::copy(p.col_tmp.begin() + d(b), p.col_tmp.begin() + d(e), p.cols.begin() + d(b));
+}
+
+/// Stable counting sort of the points of r by octant about mid; start[o] is where octant o
+/// begins (relative to r.begin), start[8] the count. False (nothing moved) when all of r's
+/// positions coincide.
+bool partition_serial(octree_points& p, build_node r, const vec3d& mid,
+                      std::array<std::uint32_t, 9>& start) {
+  start = {};
+  vec3d plo = p.pos[r.begin], phi = plo;
+  for (std::uint32_t k = r.begin; k < r.end; ++k) {
+    plo = plo.cwiseMin(p.pos[k]);
+    phi = phi.cwiseMax(p.pos[k]);
+    p.oct[k] = octant(p.pos[k], mid);
+    ++start[p.oct[k] + 1u];
+  }
+  if (plo == phi) return false;
+  for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
+  std::array<std::uint32_t, 8> at{};
+  for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
+  for (std::uint32_t k = r.begin; k < r.end; ++k) move_to_scratch(p, k, at[p.oct[k]]++);
+  copy_back(p, r.begin, r.end);
+  return true;
+}
+
+/// partition_serial() in contiguous chunks on up to `threads` threads: chunk c's points of
+/// octant o go after those of chunks before c, which is the serial (stable) order.
+bool partition_parallel(octree_points& p, build_node r, const vec3d& mid, unsigned threads,
+                        std::array<std::uint32_t, 9>& start) {
+  const std::size_t m = r.end - r.begin,
+                    chunks = std::min<std::size_t>(m, 4 * std::size_t{threads});
+  std::vector<std::array<std::uint32_t, 8>> at(chunks);
+  std::vector<std::array<vec3d, 2>> box(chunks);
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [lo, hi] = piece_range(m, chunks, c);
+    at[c] = {};
+    box[c] = {p.pos[r.begin + lo], p.pos[r.begin + lo]};
+    for (std::size_t k = r.begin + lo; k < r.begin + hi; ++k) {
+      box[c][0] = box[c][0].cwiseMin(p.pos[k]);
+      box[c][1] = box[c][1].cwiseMax(p.pos[k]);
+      p.oct[k] = octant(p.pos[k], mid);
+      ++at[c][p.oct[k]];
+    }
+  });
+  bool same = true;
+  for (const auto& b : box) same = same && b[0] == box[0][0] && b[1] == box[0][0];
+  if (same) return false;
+  start = {};
+  for (const auto& a : at)
+    for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += a[o8];
+  for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
+  std::array<std::uint32_t, 8> next{};
+  for (int o8 = 0; o8 < 8; ++o8) next[o8] = r.begin + start[o8];
+  for (auto& a : at)  // counts → where each chunk's points of each octant go
+    for (int o8 = 0; o8 < 8; ++o8) {
+      const std::uint32_t count = a[o8];
+      a[o8] = next[o8];
+      next[o8] += count;
+    }
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [lo, hi] = piece_range(m, chunks, c);
+    for (std::size_t k = r.begin + lo; k < r.begin + hi; ++k)
+      move_to_scratch(p, static_cast<std::uint32_t>(k), at[c][p.oct[k]]++);
+  });
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [lo, hi] = piece_range(m, chunks, c);
+    copy_back(p, r.begin + lo, r.begin + hi);
+  });
+  return true;
+}
+
 /// Splits node `i` of `part` at its cell centre (§3) unless it holds at most leaf_size points,
 /// reaches max_depth or holds one position only; appends its children to `part` in octant order.
-/// Touches only the node's own range of the points, so disjoint nodes split concurrently.
-void split_node(octree_points& p, std::vector<part_node>& part, std::size_t i) {
+/// Touches only the node's own range of the points, so disjoint nodes split concurrently; a
+/// large node's points are partitioned on `threads` threads.
+void split_node(octree_points& p, std::vector<part_node>& part, std::size_t i, unsigned threads) {
   const build_node r = part[i].range;
   const std::uint8_t depth = part[i].depth;
   if (r.end - r.begin <= p.leaf_size || depth >= p.max_depth) return;
   const double half = p.cube_size / std::ldexp(1.0, depth + 1);
   const vec3d cmin = part[i].cell_min, mid = cmin + vec3d::Constant(half);
   std::array<std::uint32_t, 9> start{};
-  vec3d plo = p.pos[r.begin], phi = plo;
-  for (std::uint32_t k = r.begin; k < r.end; ++k) {
-    const vec3d& q = p.pos[k];
-    plo = plo.cwiseMin(q);
-    phi = phi.cwiseMax(q);
-    p.oct[k] = static_cast<std::uint8_t>(
-        (q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) | (q.z() >= mid.z() ? 4u : 0u));
-    ++start[p.oct[k] + 1u];
-  }
-  if (plo == phi) return;  // all points identical: no split separates them
-  for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
-  std::array<std::uint32_t, 8> at{};
-  for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
-  const bool colour = !p.cols.empty();
-  for (std::uint32_t k = r.begin; k < r.end; ++k) {
-    const std::uint32_t to = at[p.oct[k]]++;
-    p.pos_tmp[to] = p.pos[k];
-    p.nrm_tmp[to] = p.normals[k];
-    if (colour) p.col_tmp[to] = p.cols[k];
-  }
-  std::copy(p.pos_tmp.begin() + r.begin, p.pos_tmp.begin() + r.end, p.pos.begin() + r.begin);
-  std::copy(p.nrm_tmp.begin() + r.begin, p.nrm_tmp.begin() + r.end, p.normals.begin() + r.begin);
-  if (colour)
-    std::copy(p.col_tmp.begin() + r.begin, p.col_tmp.begin() + r.end, p.cols.begin() + r.begin);
+  const bool split = threads > 1 && r.end - r.begin >= (1u << 16)
+                         ? partition_parallel(p, r, mid, threads, start)
+                         : partition_serial(p, r, mid, start);
+  if (!split) return;  // all points identical: no split separates them
   part[i].first = static_cast<std::uint32_t>(part.size());
   for (unsigned o8 = 0; o8 < 8; ++o8) {
     if (start[o8 + 1] == start[o8]) continue;
@@ -208,7 +277,7 @@ std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned thr
   std::size_t level = 0;  // first node of the level being split
   while (level < top.size() && top.size() - level < frontier_nodes) {
     const std::size_t end = top.size();
-    for (std::size_t i = level; i < end; ++i) split_node(p, top, i);
+    for (std::size_t i = level; i < end; ++i) split_node(p, top, i, threads);
     level = end;
   }
   if (level < top.size()) {
@@ -216,7 +285,7 @@ std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned thr
     parallel_tasks(parts.size(), threads, [&](std::size_t s, unsigned) {
       auto& part = parts[s];
       part.push_back(top[level + s]);
-      for (std::size_t i = 0; i < part.size(); ++i) split_node(p, part, i);
+      for (std::size_t i = 0; i < part.size(); ++i) split_node(p, part, i, 1);
     });
     merge_parts(top, level, parts);
   }

@@ -47,9 +47,10 @@ TEST(pca_octree, SaveLoadRoundTripsBitExactly) {
 }
 
 // The same input and options give the same bytes whatever the thread count (no timings in the
-// file, parallel steps combine in a fixed order).
+// file, parallel steps combine in a fixed order). 70 000 points: enough for the root to be
+// partitioned in parallel chunks (≥ 65 536 points) and for k-means' 16 k sample.
 TEST(pca_octree, FileBytesDoNotDependOnThreads) {
-  const auto pts = demo_points(5000);
+  const auto pts = demo_points(70000);
   build_pca_octree(pts, {.threads = 1}).save(temp("t1.lod"));
   build_pca_octree(pts, {.threads = 3}).save(temp("t3.lod"));
   EXPECT_EQ(read_bytes(temp("t1.lod")), read_bytes(temp("t3.lod")));
@@ -57,12 +58,13 @@ TEST(pca_octree, FileBytesDoNotDependOnThreads) {
 
 // The octree against a brute-force one: §3's rule (split a cell at its centre while it holds
 // more than leaf_size points that are not all equal) applied breadth first, one node at a time.
-// The builder splits the levels below 256 nodes' worth in parallel and merges the parts back;
+// The builder partitions large nodes (≥ 65 536 points) in parallel chunks, splits the levels
+// below 256 nodes' worth in parallel and merges the parts back;
 // the result must be this tree node for node: same order, children, octant masks and depths,
 // and each node's position statistics those of its own points (the builder merges moments
 // bottom-up instead of summing every node's points).
 TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
-  const auto cloud = make_wavy_surface(40000, 5);
+  const auto cloud = make_wavy_surface(80000, 5);
   const auto pts = point_set<with_normals>::from(cloud);
   const auto t = build_pca_octree(pts, {.leaf_size = 4, .quantise = false, .threads = 3});
   struct cell {
