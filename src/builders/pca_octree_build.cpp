@@ -440,13 +440,13 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
 
   // ---- §3: independent PCA of each node's positions, normals and colours.
   node_statistics(d, ranges, pos, normals, cols, threads);
-  pca_derive_cells(d);
+  pca_derive_cells(d, threads);
   st.tree_seconds = seconds_since(tt);
   check_progress(o, 0.6);
 
   // ---- §3.1: classification and quantisation (the hierarchy then holds the decoded values).
   if (o.quantise) pca_quantise(d, o, threads);
-  pca_derive_bounds(d);
+  pca_derive_bounds(d, threads);
   check_progress(o, 1);
   st.seconds = seconds_since(t0);
   st.has_timings = true;
@@ -456,56 +456,90 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
 // ---------------------------------------------------------------------------------------------
 // Derived data (build and load).
 // ---------------------------------------------------------------------------------------------
-void pca_derive_cells(pca_data& d) {
+namespace {
+/// Where each level of the breadth-first tree starts (and, last, the node count): a level's
+/// children are the next level, in order.
+std::vector<std::size_t> tree_levels(const pca_data& d) {
+  std::vector<std::size_t> at{0, 1};
+  while (at.back() < d.nodes.size()) {
+    std::size_t kids = 0;
+    for (std::size_t i = at[at.size() - 2]; i < at.back(); ++i) kids += d.nodes[i].count;
+    if (kids == 0) break;
+    at.push_back(std::min(d.nodes.size(), at.back() + kids));
+  }
+  return at;
+}
+}  // namespace
+
+void pca_derive_cells(pca_data& d, unsigned threads) {
   if (d.nodes.empty()) return;
   d.nodes[0].cell_min = d.cube_min;
   d.nodes[0].cell_size = d.cube_size;
-  for (auto& nd : d.nodes) {
-    if (nd.count == 0) continue;
-    const double half = 0.5 * nd.cell_size;
-    std::uint32_t c = nd.first;
-    for (unsigned o8 = 0; o8 < 8; ++o8) {
-      if (!(nd.mask & (1u << o8))) continue;
-      pca_node& ch = d.nodes[c++];
-      ch.cell_min =
-          nd.cell_min + vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0);
-      ch.cell_size = half;
-      ch.depth = static_cast<std::uint8_t>(nd.depth + 1);
-    }
+  const std::vector<std::size_t> level = tree_levels(d);
+  for (std::size_t l = 0; l + 1 < level.size(); ++l) {
+    parallel_pieces(
+        level[l + 1] - level[l], threads, 8 * threads, 4096, [&](std::size_t lo, std::size_t hi) {
+          for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i) {
+            const pca_node& nd = d.nodes[i];
+            if (nd.count == 0) continue;
+            const double half = 0.5 * nd.cell_size;
+            std::uint32_t c = nd.first;
+            for (unsigned o8 = 0; o8 < 8; ++o8) {
+              if (!(nd.mask & (1u << o8))) continue;
+              pca_node& ch = d.nodes[c++];
+              ch.cell_min = nd.cell_min +
+                            vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0);
+              ch.cell_size = half;
+              ch.depth = static_cast<std::uint8_t>(nd.depth + 1);
+            }
+          }
+        });
   }
 }
 
-void pca_derive_bounds(pca_data& d) {
+namespace {
+/// λ, the bounding sphere and the normal cone of node i, from its statistics and its children's
+/// bounds (pca_derive_bounds).
+void derive_node_bounds(pca_data& d, std::size_t i) {
+  const float pi = std::numbers::pi_v<float>;
+  pca_node& nd = d.nodes[i];
+  // §3: λ = c·√(σ_n¹/‖σ_p‖), ‖σ_p‖ in units of the root's (see pca_octree_options).
+  float lambda = 1;
+  if (d.curvature_c > 0) {
+    const float rel = nd.sigma.norm() / d.lambda_norm;
+    const float l = d.curvature_c * std::sqrt(nd.normal_sigma.x() / std::max(rel, 1e-30f));
+    lambda = std::clamp(std::isfinite(l) ? l : d.lambda_max, 1.0f, d.lambda_max);
+  }
+  nd.lambda = lambda;
+  // The generator truncates at γ: positions lie in the ellipsoid of semi-axes γ·λ·σ_p,
+  // normals within γ·σ_n¹ of the mean normal. Children's bounds are added so that the
+  // sphere and the cone hold everything the subtree generates.
+  float r = d.gamma * lambda * nd.sigma.x();
+  float cone = std::min(pi, d.gamma * nd.normal_sigma.x());
+  const vec3f axis = nd.normal_frame.col(2);
+  for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+    const pca_node& ch = d.nodes[c];
+    r = std::max(r, (ch.mean - nd.mean).norm() + ch.radius);
+    const float a = std::acos(std::clamp(axis.dot(ch.normal_frame.col(2)), -1.0f, 1.0f));
+    cone = std::max(cone, a + ch.cone_angle);
+  }
+  // Float rounding of the generated points: a relative hair on top.
+  nd.radius = r * (1 + 1e-5f) + 1e-6f * nd.mean.cwiseAbs().maxCoeff() + 1e-30f;
+  nd.cone_angle = std::min(pi, cone + 1e-4f);
+}
+}  // namespace
+
+void pca_derive_bounds(pca_data& d, unsigned threads) {
   if (d.nodes.empty()) return;
   const float root_norm = d.nodes[0].sigma.norm();
   d.lambda_norm = root_norm > 0 ? root_norm : 1.0f;
-  const float pi = std::numbers::pi_v<float>;
-  for (std::size_t i = d.nodes.size(); i-- > 0;) {
-    pca_node& nd = d.nodes[i];
-    // §3: λ = c·√(σ_n¹/‖σ_p‖), ‖σ_p‖ in units of the root's (see pca_octree_options).
-    float lambda = 1;
-    if (d.curvature_c > 0) {
-      const float rel = nd.sigma.norm() / d.lambda_norm;
-      const float l = d.curvature_c * std::sqrt(nd.normal_sigma.x() / std::max(rel, 1e-30f));
-      lambda = std::clamp(std::isfinite(l) ? l : d.lambda_max, 1.0f, d.lambda_max);
-    }
-    nd.lambda = lambda;
-    // The generator truncates at γ: positions lie in the ellipsoid of semi-axes γ·λ·σ_p,
-    // normals within γ·σ_n¹ of the mean normal. Children's bounds are added so that the
-    // sphere and the cone hold everything the subtree generates.
-    float r = d.gamma * lambda * nd.sigma.x();
-    float cone = std::min(pi, d.gamma * nd.normal_sigma.x());
-    const vec3f axis = nd.normal_frame.col(2);
-    for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
-      const pca_node& ch = d.nodes[c];
-      r = std::max(r, (ch.mean - nd.mean).norm() + ch.radius);
-      const float a = std::acos(std::clamp(axis.dot(ch.normal_frame.col(2)), -1.0f, 1.0f));
-      cone = std::max(cone, a + ch.cone_angle);
-    }
-    // Float rounding of the generated points: a relative hair on top.
-    nd.radius = r * (1 + 1e-5f) + 1e-6f * nd.mean.cwiseAbs().maxCoeff() + 1e-30f;
-    nd.cone_angle = std::min(pi, cone + 1e-4f);
-  }
+  const std::vector<std::size_t> level = tree_levels(d);
+  for (std::size_t l = level.size() - 1; l-- > 0;)
+    parallel_pieces(level[l + 1] - level[l], threads, 8 * threads, 4096,
+                    [&](std::size_t lo, std::size_t hi) {
+                      for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i)
+                        derive_node_bounds(d, i);
+                    });
 }
 
 bool operator==(const pca_data& a, const pca_data& b) {

@@ -26,9 +26,9 @@ scatter_accumulator colour_moments(const rgb8* c, std::size_t n);
 
 /// Cells of every node from the root cube and the child masks (top-down). Before decoding:
 /// μ_p is quantised relative to the node's cell.
-void pca_derive_cells(pca_data& d);
+void pca_derive_cells(pca_data& d, unsigned threads = 1);
 /// λ, bounding-sphere radii and normal-cone angles (bottom-up), from the decoded statistics.
-void pca_derive_bounds(pca_data& d);
+void pca_derive_bounds(pca_data& d, unsigned threads = 1);
 
 /// §3.1: k-means classification of σ_p, σ_n, σ_c, encoding of every node into its record and
 /// decoding back into d.nodes / d.colours (so the hierarchy holds what the file holds). Fills
