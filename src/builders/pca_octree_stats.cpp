@@ -170,9 +170,13 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
     double w;  // (θ/r)²
     if (l.z() > 0 && r2 <= near_pole * len2) {
       w = theta_over_sin_squared(r2 / len2) / len2;
-    } else {
+    } else if (r2 > 0) {
       const double theta = std::atan2(std::sqrt(r2), l.z());
-      w = r2 > 0 ? theta * theta / r2 : 0.0;
+      w = theta * theta / r2;
+    } else {  // on the axis: the pole adds nothing, the antipode unwraps to (π, 0)
+      const double theta = std::atan2(0.0, l.z());
+      m(0, 0) += theta * theta;
+      continue;
     }
     m.noalias() += w * (xy * xy.transpose());
   }

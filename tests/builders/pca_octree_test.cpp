@@ -173,7 +173,8 @@ TEST(pca_octree, UnwrapRoundTrips) {
 
 // pca_normals() takes a series instead of atan2 for normals near the pole: its σ_n must equal
 // the brute-force moments of unwrap_normal() (the definition) to rounding, for spreads that put
-// every normal near the pole, some, and none (σ 0.02, 0.2 and 0.8 rad about the mean).
+// every normal near the pole, some, and none (σ 0.02, 0.2 and 0.8 rad about the mean), and
+// for normals exactly on the axis.
 TEST(pca_octree, NormalMomentsMatchTheUnwrapDefinition) {
   std::mt19937 rng(11);
   std::normal_distribution<double> g;
@@ -195,6 +196,12 @@ TEST(pca_octree, NormalMomentsMatchTheUnwrapDefinition) {
     EXPECT_NEAR(m(1, 1), minor, 1e-12 * major) << spread;
     EXPECT_NEAR(m(0, 1), 0.0, 1e-12 * major) << spread;
   }
+  // Normals exactly on the axis: three at +z (the mean, so the pole) and one at −z, which
+  // unwraps to (π, 0): the moments are diag(π²/4, 0), so σ_n = (π/2, 0).
+  const std::vector<vec3f> axis{vec3f::UnitZ(), vec3f::UnitZ(), vec3f::UnitZ(), -vec3f::UnitZ()};
+  const auto r = detail::pca_normals(axis.data(), axis.size(), vec3d::UnitZ());
+  EXPECT_NEAR(r.sigma.x(), std::numbers::pi / 2, 1e-12);
+  EXPECT_NEAR(r.sigma.y(), 0.0, 1e-12);
 }
 // The quantised tree has the same octree as the float one (quantisation does not change the
 // structure), so node by node: μ_p within half a step of 10 bits of its cell, f_p³ and the mean
