@@ -307,11 +307,11 @@ TEST(pca_octree, BunnyBuildsAndRenders) {
 // What quantisation (§3.1) costs in image error: the quantised and the float hierarchy of the
 // same 20 000 demo-scene points, drawn with the same seed from three views at 3 radii (256²,
 // one-pixel points), each compared with the mesh rendered at full detail, and with each other.
-// Measured (mean of the views): against the mesh 11.48 dB quantised and float alike (the error
-// is the generated points' shading noise, which both share), quantised against float 13.77 dB.
+// Measured (mean of the views): against the mesh 11.47 dB float, 11.50 dB quantised (the error
+// is the generated points' shading noise, which both share); quantised against float 12.95 dB.
 // A quantiser that swaps f_p¹ and f_p³ (each disc then stands across the surface) measured
-// 10.74 dB against the mesh (0.74 dB lower) and 10.55 dB against float: the bounds, 0.3 dB and
-// 12.5 dB, lie between a working and a broken quantiser with margin on both sides.
+// 10.73 dB against the mesh (0.74 dB below float) and 10.38 dB against float: the bounds,
+// 0.3 dB and 11.7 dB, lie between a working and a broken quantiser with margin on both sides.
 TEST(pca_octree, QuantisationCostsLittleImageError) {
   const auto mesh = make_demo_scene(16);
   const auto pts = point_set<with_normals_colours>::from(sample_surface(mesh, 20000, 7));
@@ -332,7 +332,7 @@ TEST(pca_octree, QuantisationCostsLittleImageError) {
   }
   EXPECT_GT(psnr_f, 10.0) << "the renders show the scene";
   EXPECT_GT(psnr_q, psnr_f - 0.3) << "float " << psnr_f << " dB, quantised " << psnr_q << " dB";
-  EXPECT_GT(psnr_qf, 12.5) << "quantised against float";
+  EXPECT_GT(psnr_qf, 11.7) << "quantised against float";
 }
 
 }  // namespace
