@@ -240,7 +240,7 @@ TEST(pca_octree, HysteresisCutIsFinerAndCovers) {
   pca_octree_cut<with_normals_colours> exact(t), hyst(t);
   pca_octree_policy ph;
   ph.render.merge_px = 8;
-  std::size_t visits[3] = {}, points[3] = {}, merges[2] = {}, finer_frames = 0;
+  std::size_t visits[3] = {}, points[3] = {}, merges[2] = {}, splits = 0, finer_frames = 0;
   for (int f = 0; f < 16; ++f) {
     const double dist = f < 8 ? 4.0 - 0.35 * f : 1.2 + 0.35 * (f - 8);
     const view v(camera::orbit(c, r, 22.5 * f, 10, dist, 1, viewport{96, 72}), t.origin());
@@ -262,6 +262,7 @@ TEST(pca_octree, HysteresisCutIsFinerAndCovers) {
     points[2] += sh.points;
     merges[0] += exact.last_frame().merges;
     merges[1] += hyst.last_frame().merges;
+    splits += hyst.last_frame().splits;
     finer_frames += hyst.drawn() != fresh_drawn ? 1 : 0;
     std::vector<int> on(t.nodes().size(), 0), above(t.nodes().size(), 0);
     for (auto n : hyst.cut()) on[n] = 1;
@@ -284,7 +285,8 @@ TEST(pca_octree, HysteresisCutIsFinerAndCovers) {
   std::cout << "frames 1..15 visits: fresh " << visits[0] << ", exact cut " << visits[1]
             << ", merge_px 8 " << visits[2] << "; points (all frames): " << points[0] << ", "
             << points[1] << ", " << points[2] << "; merges: exact " << merges[0] << ", merge_px 8 "
-            << merges[1] << "; frames finer than fresh " << finer_frames << "\n";
+            << merges[1] << ", splits " << splits << "; frames finer than fresh " << finer_frames
+            << "\n";
   EXPECT_LT(merges[1], merges[0]);
   EXPECT_GT(finer_frames, 0u);
 }
