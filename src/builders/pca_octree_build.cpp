@@ -230,8 +230,8 @@ void split_node(octree_points& p, std::vector<part_node>& part, std::size_t i, u
 }
 
 /// Appends the subtrees of `parts` (each a subtree in breadth-first order, parts[s][0] the
-/// frontier node top[s]) to the tree top[0..] in breadth-first order. A level of the whole tree
-/// is the concatenation of the parts' nodes at that level, in part order, because the frontier
+/// frontier node top[frontier + s]) to the tree `top` in breadth-first order. A level of the whole
+/// tree is the concatenation of the parts' nodes at that level, in part order, because the frontier
 /// is one whole level: this is the order of the one-part build.
 void merge_parts(std::vector<part_node>& top, std::size_t frontier,
                  const std::vector<std::vector<part_node>>& parts) {
