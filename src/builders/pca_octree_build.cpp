@@ -311,51 +311,56 @@ void node_statistics(pca_data& d, const std::vector<build_node>& ranges,
   const std::size_t n = d.nodes.size();
   const bool colour = !cols.empty();
   if (colour) d.colours.resize(n);
-  std::vector<scatter_accumulator> mp(n), mc(colour ? n : 0);
-  // Breadth first: each level is a contiguous range, its children all in the next one.
-  std::vector<std::size_t> level{0};
-  for (std::size_t i = 1; i < n; ++i)
-    if (d.nodes[i].depth != d.nodes[i - 1].depth) level.push_back(i);
-  level.push_back(n);
-  for (std::size_t l = level.size() - 1; l-- > 0;) {
-    parallel_pieces(level[l + 1] - level[l], threads, 16 * threads, 256,
-                    [&](std::size_t lo, std::size_t hi) {
-                      for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i) {
-                        const pca_node& nd = d.nodes[i];
-                        const build_node r = ranges[i];
-                        if (nd.count == 0) {
-                          mp[i] = position_moments(pos.data() + r.begin, r.end - r.begin);
-                          if (colour)
-                            mc[i] = colour_moments(cols.data() + r.begin, r.end - r.begin);
-                          continue;
-                        }
-                        for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
-                          mp[i] += mp[c];
-                          if (colour) mc[i] += mc[c];
-                        }
-                      }
-                    });
-  }
+  // The normals first: their mean is what the degenerate position rules align z with. If they
+  // cancel out, the first sample's normal stands in (deterministic).
+  std::vector<vec3d> mean_normal(n);
   const std::size_t pieces = std::min<std::size_t>(n, 64 * threads);
   parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
     const auto [lo_n, hi_n] = piece_range(n, pieces, t);
     for (std::size_t i = lo_n; i < hi_n; ++i) {
       const build_node r = ranges[i];
-      // The normals first: their mean is what the degenerate position rules align z with.
-      // If they cancel out, the first sample's normal stands in (deterministic).
       const pca_normal_result pn =
           pca_normals(normals.data() + r.begin, r.end - r.begin, normals[r.begin].cast<double>());
-      const pca_position_result pp =
-          pca_positions_from(mp[i].mean, mp[i].covariance(), pn.frame.col(2));
-      pca_node& nd = d.nodes[i];
-      nd.mean = pp.mean.cast<float>();
-      nd.frame = pp.frame.cast<float>();
-      nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
-      nd.normal_frame = pn.frame.cast<float>();
-      nd.normal_sigma = pn.sigma.cast<float>();
-      if (colour) d.colours[i] = pca_colours_from(mc[i].mean, mc[i].covariance());
+      d.nodes[i].normal_frame = pn.frame.cast<float>();
+      d.nodes[i].normal_sigma = pn.sigma.cast<float>();
+      mean_normal[i] = pn.frame.col(2);
     }
   });
+  // Breadth first: each level is a contiguous range, its children all in the next one, so the
+  // moments of two levels at a time suffice.
+  std::vector<std::size_t> level{0};
+  for (std::size_t i = 1; i < n; ++i)
+    if (d.nodes[i].depth != d.nodes[i - 1].depth) level.push_back(i);
+  level.push_back(n);
+  std::vector<scatter_accumulator> below, here, colour_below, colour_here;
+  for (std::size_t l = level.size() - 1; l-- > 0;) {
+    const std::size_t b = level[l], e = level[l + 1];
+    here.assign(e - b, {});
+    if (colour) colour_here.assign(e - b, {});
+    parallel_pieces(e - b, threads, 16 * threads, 256, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = b + lo; i < b + hi; ++i) {
+        pca_node& nd = d.nodes[i];
+        scatter_accumulator& mp = here[i - b];
+        const build_node r = ranges[i];
+        if (nd.count == 0) {
+          mp = position_moments(pos.data() + r.begin, r.end - r.begin);
+          if (colour) colour_here[i - b] = colour_moments(cols.data() + r.begin, r.end - r.begin);
+        }
+        for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+          mp += below[c - e];
+          if (colour) colour_here[i - b] += colour_below[c - e];
+        }
+        const pca_position_result pp = pca_positions_from(mp.mean, mp.covariance(), mean_normal[i]);
+        nd.mean = pp.mean.cast<float>();
+        nd.frame = pp.frame.cast<float>();
+        nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
+        if (colour)
+          d.colours[i] = pca_colours_from(colour_here[i - b].mean, colour_here[i - b].covariance());
+      }
+    });
+    std::swap(below, here);
+    std::swap(colour_below, colour_here);
+  }
 }
 
 }  // namespace
