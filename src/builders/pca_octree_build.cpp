@@ -89,20 +89,37 @@ void validate(const pca_input& in, const pca_octree_options& o) {
   need(o.knn >= 3 || !in.normals.empty(), "knn must be at least 3");
 }
 
-/// The points being partitioned (reordered in place with their normals and colours, a stable
-/// counting sort per node, so that every node's points are contiguous and each pass streams
-/// through memory), and the split rule's parameters.
+/// The points being partitioned (reordered in place, a stable counting sort per node, so that
+/// every node's points are contiguous and each pass streams through memory), with the input
+/// index of each (normals and colours follow once, at the end: permute_by()), and the split
+/// rule's parameters.
 struct octree_points {
   std::vector<vec3d>& pos;
-  std::vector<vec3f>& normals;
-  std::vector<rgb8>& cols;  ///< empty without colour
   double cube_size;
   std::uint32_t leaf_size, max_depth;
+  std::vector<std::uint32_t> index = identity(pos.size());
   std::vector<vec3d> pos_tmp = std::vector<vec3d>(pos.size());
-  std::vector<vec3f> nrm_tmp = std::vector<vec3f>(pos.size());
-  std::vector<rgb8> col_tmp = std::vector<rgb8>(cols.size());
+  std::vector<std::uint32_t> index_tmp = std::vector<std::uint32_t>(pos.size());
   std::vector<std::uint8_t> oct = std::vector<std::uint8_t>(pos.size());
+
+  static std::vector<std::uint32_t> identity(std::size_t n) {
+    std::vector<std::uint32_t> v(n);
+    for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<std::uint32_t>(i);
+    return v;
+  }
 };
+
+/// v reordered as the octree ordered the points: out[i] = v[index[i]].
+template <class T>
+std::vector<T> permute_by(const std::vector<T>& v, const std::vector<std::uint32_t>& index,
+                          unsigned threads) {
+  std::vector<T> out(v.size());
+  if (v.empty()) return out;
+  parallel_chunks(v.size(), threads, 1u << 16, [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t i = lo; i < hi; ++i) out[i] = v[index[i]];
+  });
+  return out;
+}
 
 /// A node of a part of the octree while it is built: structure, points, cell.
 struct part_node {
@@ -121,15 +138,12 @@ inline std::uint8_t octant(const vec3d& q, const vec3d& mid) {
 /// Moves point k of the range to slot `to` of the scratch arrays.
 inline void move_to_scratch(octree_points& p, std::uint32_t k, std::uint32_t to) {
   p.pos_tmp[to] = p.pos[k];
-  p.nrm_tmp[to] = p.normals[k];
-  if (!p.cols.empty()) p.col_tmp[to] = p.cols[k];
+  p.index_tmp[to] = p.index[k];
 }
 void copy_back(octree_points& p, std::size_t b, std::size_t e) {
   using d = std::ptrdiff_t;
   std::copy(p.pos_tmp.begin() + d(b), p.pos_tmp.begin() + d(e), p.pos.begin() + d(b));
-  std::copy(p.nrm_tmp.begin() + d(b), p.nrm_tmp.begin() + d(e), p.normals.begin() + d(b));
-  if (!p.cols.empty())
-    std::copy(p.col_tmp.begin() + d(b), p.col_tmp.begin() + d(e), p.cols.begin() + d(b));
+  std::copy(p.index_tmp.begin() + d(b), p.index_tmp.begin() + d(e), p.index.begin() + d(b));
 }
 
 /// Stable counting sort of the points of r by octant about mid; start[o] is where octant o
@@ -435,9 +449,11 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   d.cube_min = vec3d::Constant(-0.5 * size);
 
   // ---- §3: top-down octree, breadth first; children contiguous, in octant order.
-  std::vector<rgb8> cols(in.colours.begin(), in.colours.end());
-  octree_points pts{pos, normals, cols, d.cube_size, o.leaf_size, o.max_depth};
+  octree_points pts{pos, d.cube_size, o.leaf_size, o.max_depth};
   const std::vector<build_node> ranges = build_octree(pts, d, threads);
+  normals = permute_by(normals, pts.index, threads);
+  const std::vector<rgb8> cols =
+      permute_by(std::vector<rgb8>(in.colours.begin(), in.colours.end()), pts.index, threads);
   for (const auto& nd : d.nodes) st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   st.nodes = d.nodes.size();
   for (const auto& nd : d.nodes) st.leaves += nd.count == 0 ? 1 : 0;
