@@ -218,6 +218,149 @@ BENCHMARK_CAPTURE(bm_table1, happy_buddha, std::string("happy_vrip_res3.ply"))
     ->Iterations(1)
     ->Unit(benchmark::kMillisecond);
 
+// ---- Image error against eye distance (Fig. 7) and what quantisation costs in it ----------
+
+/// A model with its full-detail mesh: the reference every render is compared with.
+struct scene_input {
+  std::string name;
+  point_cloud points;
+  triangle_mesh mesh;
+};
+const scene_input& scene(const std::string& name) {
+  static std::map<std::string, scene_input> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second;
+  scene_input s{name, {}, {}};
+  if (name == "demo") {  // the generated scene, sampled with its normals
+    s.mesh = make_demo_scene(64);
+    s.points = sample_surface(s.mesh, 200000, 5);
+    s.points.colours.clear();
+  } else {
+    s.mesh = read_mesh(test::data_file(name));
+    s.points = read_points(test::data_file(name));
+  }
+  return cache.emplace(name, std::move(s)).first->second;
+}
+
+struct rotation_error {
+  double psnr = 0;    ///< mean over the views of the PSNR against the mesh (dB)
+  double holes = 0;   ///< mean hole fraction
+  double points = 0;  ///< mean points generated per frame
+};
+
+/// Renders `t` from `views` azimuths (a full turn, elevation 20°, 512², shading) at `distance`
+/// radii with points of `point_px` pixels, against the mesh rendered at full detail from the
+/// same camera (the paper's Fig. 7(c) measure), averaged over the views.
+/// The render of t from cam with points of point_px pixels, and the points generated.
+template <class T>
+std::pair<image, std::size_t> render_view(const T& t, const camera& cam, float point_px) {
+  constexpr effects fx{.shading = true, .colour = false};
+  render_options ro;
+  ro.fx = fx;
+  pca_octree_policy policy;
+  policy.render.point_px = point_px;
+  const view v(cam, t.origin());
+  rasterizer<T::attrs, fx> r(v, ro);
+  const std::size_t points = traverse(t, v, traverse_options{}, r, policy).points;
+  return {r.finish(), points};
+}
+
+/// View k of a turn of `views` about the model (elevation 20°, 512²) at `distance` radii.
+camera turn_view(const scene_input& in, int k, int views, double distance) {
+  const sphere s = bounding_sphere_about_box_centre(in.points.positions);
+  return camera::orbit(in.points.origin + s.centre.cast<double>(), s.radius, 30 + 360.0 * k / views,
+                       20, distance, 1, viewport{512, 512});
+}
+
+/// Renders `t` from `views` azimuths (a full turn) at `distance` radii with points of
+/// `point_px` pixels, against the mesh rendered at full detail from the same camera (the
+/// paper's Fig. 7(c) measure), averaged over the views. With `other`, also the PSNR of t's
+/// render against other's (same seed).
+template <class T>
+rotation_error over_rotation(const T& t, const scene_input& in, double distance, float point_px,
+                             int views = 4, const T* other = nullptr,
+                             double* psnr_other = nullptr) {
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = false};
+  rotation_error e;
+  for (int k = 0; k < views; ++k) {
+    const camera cam = turn_view(in, k, views, distance);
+    const auto [img, points] = render_view(t, cam, point_px);
+    e.points += static_cast<double>(points);
+    const image_error err = compare_images(render_reference(in.mesh, cam, ro), img);
+    e.psnr += err.psnr;
+    e.holes += err.hole_fraction;
+    if (other)
+      *psnr_other += compare_images(render_view(*other, cam, point_px).first, img).psnr / views;
+  }
+  e.psnr /= views;
+  e.holes /= views;
+  e.points /= views;
+  return e;
+}
+
+template <attributes A>
+std::pair<pca_octree<pca_octree_attributes(A)>, pca_octree<pca_octree_attributes(A)>> both_trees(
+    const point_cloud& c) {
+  const auto pts = point_set<A>::from(c);
+  return {build_pca_octree(pts, {.quantise = true}), build_pca_octree(pts, {.quantise = false})};
+}
+
+// What quantisation (§3.1) costs in image error: the quantised and the float hierarchy of the
+// same input, rendered alike at 3 radii, each against the mesh; point sizes 1, 2 and 4 px (the
+// tool's --tolerance). Printed as a markdown table.
+void bm_quantised_image(benchmark::State& state, const std::string& name) {
+  const scene_input& in = scene(name);
+  for (auto _ : state) {
+    const auto run = [&](const auto& trees) {
+      std::printf(
+          "\n%s, 3 radii, 4 views: | point px | points | PSNR float | PSNR quantised | "
+          "PSNR quantised vs float |\n",
+          name.c_str());
+      for (const float px : {1.0f, 2.0f, 4.0f}) {
+        double qf = 0;
+        const rotation_error q = over_rotation(trees.first, in, 3, px, 4, &trees.second, &qf);
+        const rotation_error f = over_rotation(trees.second, in, 3, px);
+        std::printf("| %.0f | %.0f | %.2f dB | %.2f dB | %.2f dB |\n", static_cast<double>(px),
+                    q.points, f.psnr, q.psnr, qf);
+      }
+    };
+    if (in.points.normals.empty())
+      run(both_trees<positions_only>(in.points));
+    else
+      run(both_trees<with_normals>(in.points));
+  }
+}
+BENCHMARK_CAPTURE(bm_quantised_image, bunny, std::string("bun_zipper.ply"))
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(bm_quantised_image, demo, std::string("demo"))
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+
+// Fig. 7: points generated and image error against the mesh per eye distance, averaged over a
+// turn of 8 views, one-pixel points. Printed as a markdown table.
+void bm_fig7(benchmark::State& state, const std::string& name) {
+  const scene_input& in = scene(name);
+  for (auto _ : state) {
+    const auto run = [&](const auto& t) {
+      std::printf("\n%s, 8 views: | distance (radii) | points | PSNR | holes %% |\n", name.c_str());
+      for (const double dist : {2.0, 3.0, 4.0, 6.0, 8.0, 12.0}) {
+        const rotation_error e = over_rotation(t, in, dist, 1.0f, 8);
+        std::printf("| %.1f | %.0f | %.2f dB | %.3f |\n", dist, e.points, e.psnr, 100 * e.holes);
+      }
+    };
+    if (in.points.normals.empty())
+      run(build_pca_octree(point_set<positions_only>::from(in.points)));
+    else
+      run(build_pca_octree(point_set<with_normals>::from(in.points)));
+  }
+}
+BENCHMARK_CAPTURE(bm_fig7, bunny, std::string("bun_zipper.ply"))
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(bm_fig7, demo, std::string("demo"))->Iterations(1)->Unit(benchmark::kMillisecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -89,6 +89,294 @@ void validate(const pca_input& in, const pca_octree_options& o) {
   need(o.knn >= 3 || !in.normals.empty(), "knn must be at least 3");
 }
 
+/// The points being partitioned (reordered in place, a stable counting sort per node, so that
+/// every node's points are contiguous and each pass streams through memory), with the input
+/// index of each (normals and colours follow once, at the end: permute_by()), and the split
+/// rule's parameters.
+struct octree_points {
+  std::vector<vec3d>& pos;
+  double cube_size;
+  std::uint32_t leaf_size, max_depth;
+  std::vector<std::uint32_t> index = identity(pos.size());
+  std::vector<vec3d> pos_tmp = std::vector<vec3d>(pos.size());
+  std::vector<std::uint32_t> index_tmp = std::vector<std::uint32_t>(pos.size());
+  std::vector<std::uint8_t> oct = std::vector<std::uint8_t>(pos.size());
+
+  static std::vector<std::uint32_t> identity(std::size_t n) {
+    std::vector<std::uint32_t> v(n);
+    for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<std::uint32_t>(i);
+    return v;
+  }
+};
+
+/// v reordered as the octree ordered the points: out[i] = v[index[i]].
+template <class T>
+std::vector<T> permute_by(const std::vector<T>& v, const std::vector<std::uint32_t>& index,
+                          unsigned threads) {
+  std::vector<T> out(v.size());
+  if (v.empty()) return out;
+  parallel_chunks(v.size(), threads, 1u << 16, [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t i = lo; i < hi; ++i) out[i] = v[index[i]];
+  });
+  return out;
+}
+
+/// A node of a part of the octree while it is built: structure, points, cell.
+struct part_node {
+  build_node range;
+  vec3d cell_min;
+  std::uint32_t first = 0;
+  std::uint8_t count = 0, mask = 0, depth = 0;
+};
+
+/// Octant of q about mid (bit 0 = +x half, 1 = +y, 2 = +z).
+inline std::uint8_t octant(const vec3d& q, const vec3d& mid) {
+  return static_cast<std::uint8_t>((q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) |
+                                   (q.z() >= mid.z() ? 4u : 0u));
+}
+
+/// Moves point k of the range to slot `to` of the scratch arrays.
+inline void move_to_scratch(octree_points& p, std::uint32_t k, std::uint32_t to) {
+  p.pos_tmp[to] = p.pos[k];
+  p.index_tmp[to] = p.index[k];
+}
+void copy_back(octree_points& p, std::size_t b, std::size_t e) {
+  using d = std::ptrdiff_t;
+  std::copy(p.pos_tmp.begin() + d(b), p.pos_tmp.begin() + d(e), p.pos.begin() + d(b));
+  std::copy(p.index_tmp.begin() + d(b), p.index_tmp.begin() + d(e), p.index.begin() + d(b));
+}
+
+/// Stable counting sort of the points of r by octant about mid; start[o] is where octant o
+/// begins (relative to r.begin), start[8] the count. False (nothing moved) when all of r's
+/// positions coincide.
+bool partition_serial(octree_points& p, build_node r, const vec3d& mid,
+                      std::array<std::uint32_t, 9>& start) {
+  start = {};
+  vec3d plo = p.pos[r.begin], phi = plo;
+  for (std::uint32_t k = r.begin; k < r.end; ++k) {
+    plo = plo.cwiseMin(p.pos[k]);
+    phi = phi.cwiseMax(p.pos[k]);
+    p.oct[k] = octant(p.pos[k], mid);
+    ++start[p.oct[k] + 1u];
+  }
+  if (plo == phi) return false;
+  for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
+  std::array<std::uint32_t, 8> at{};
+  for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
+  for (std::uint32_t k = r.begin; k < r.end; ++k) move_to_scratch(p, k, at[p.oct[k]]++);
+  copy_back(p, r.begin, r.end);
+  return true;
+}
+
+/// partition_serial() in contiguous chunks on up to `threads` threads: chunk c's points of
+/// octant o go after those of chunks before c, which is the serial (stable) order.
+bool partition_parallel(octree_points& p, build_node r, const vec3d& mid, unsigned threads,
+                        std::array<std::uint32_t, 9>& start) {
+  const std::size_t m = r.end - r.begin,
+                    chunks = std::min<std::size_t>(m, 4 * std::size_t{threads});
+  std::vector<std::array<std::uint32_t, 8>> at(chunks);
+  std::vector<std::array<vec3d, 2>> box(chunks);
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [lo, hi] = piece_range(m, chunks, c);
+    at[c] = {};
+    box[c] = {p.pos[r.begin + lo], p.pos[r.begin + lo]};
+    for (std::size_t k = r.begin + lo; k < r.begin + hi; ++k) {
+      box[c][0] = box[c][0].cwiseMin(p.pos[k]);
+      box[c][1] = box[c][1].cwiseMax(p.pos[k]);
+      p.oct[k] = octant(p.pos[k], mid);
+      ++at[c][p.oct[k]];
+    }
+  });
+  bool same = true;
+  for (const auto& b : box) same = same && b[0] == box[0][0] && b[1] == box[0][0];
+  if (same) return false;
+  start = {};
+  for (const auto& a : at)
+    for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += a[o8];
+  for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
+  std::array<std::uint32_t, 8> next{};
+  for (int o8 = 0; o8 < 8; ++o8) next[o8] = r.begin + start[o8];
+  for (auto& a : at)  // counts → where each chunk's points of each octant go
+    for (int o8 = 0; o8 < 8; ++o8) {
+      const std::uint32_t count = a[o8];
+      a[o8] = next[o8];
+      next[o8] += count;
+    }
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [lo, hi] = piece_range(m, chunks, c);
+    for (std::size_t k = r.begin + lo; k < r.begin + hi; ++k)
+      move_to_scratch(p, static_cast<std::uint32_t>(k), at[c][p.oct[k]]++);
+  });
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [lo, hi] = piece_range(m, chunks, c);
+    copy_back(p, r.begin + lo, r.begin + hi);
+  });
+  return true;
+}
+
+/// Splits node `i` of `part` at its cell centre (§3) unless it holds at most leaf_size points,
+/// reaches max_depth or holds one position only; appends its children to `part` in octant order.
+/// Touches only the node's own range of the points, so disjoint nodes split concurrently; a
+/// large node's points are partitioned on `threads` threads.
+void split_node(octree_points& p, std::vector<part_node>& part, std::size_t i, unsigned threads) {
+  const build_node r = part[i].range;
+  const std::uint8_t depth = part[i].depth;
+  if (r.end - r.begin <= p.leaf_size || depth >= p.max_depth) return;
+  const double half = p.cube_size / std::ldexp(1.0, depth + 1);
+  const vec3d cmin = part[i].cell_min, mid = cmin + vec3d::Constant(half);
+  std::array<std::uint32_t, 9> start{};
+  const bool split = threads > 1 && r.end - r.begin >= (1u << 16)
+                         ? partition_parallel(p, r, mid, threads, start)
+                         : partition_serial(p, r, mid, start);
+  if (!split) return;  // all points identical: no split separates them
+  part[i].first = static_cast<std::uint32_t>(part.size());
+  for (unsigned o8 = 0; o8 < 8; ++o8) {
+    if (start[o8 + 1] == start[o8]) continue;
+    part[i].mask = static_cast<std::uint8_t>(part[i].mask | (1u << o8));
+    ++part[i].count;
+    part.push_back({{r.begin + start[o8], r.begin + start[o8 + 1]},
+                    cmin + vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0),
+                    0,
+                    0,
+                    0,
+                    static_cast<std::uint8_t>(depth + 1)});
+  }
+}
+
+/// Appends the subtrees of `parts` (each a subtree in breadth-first order, parts[s][0] the
+/// frontier node top[frontier + s]) to the tree `top` in breadth-first order. A level of the whole
+/// tree is the concatenation of the parts' nodes at that level, in part order, because the frontier
+/// is one whole level: this is the order of the one-part build.
+void merge_parts(std::vector<part_node>& top, std::size_t frontier,
+                 const std::vector<std::vector<part_node>>& parts) {
+  std::size_t levels = 0;
+  for (const auto& part : parts) levels = std::max<std::size_t>(levels, part.back().depth);
+  const std::size_t d0 = top[frontier].depth, span = levels - d0 + 1;
+  // local[s][l]: where level d0 + l starts in part s (breadth first: levels are contiguous);
+  // global[s][l]: where it goes in the whole tree.
+  std::vector<std::vector<std::size_t>> local(parts.size(), std::vector<std::size_t>(span + 1));
+  std::vector<std::vector<std::size_t>> global(parts.size(), std::vector<std::size_t>(span));
+  for (std::size_t s = 0; s < parts.size(); ++s) {
+    for (const auto& nd : parts[s]) ++local[s][nd.depth - d0 + 1];
+    for (std::size_t l = 0; l < span; ++l) local[s][l + 1] += local[s][l];
+  }
+  std::size_t next = top.size();
+  for (std::size_t l = 1; l < span; ++l)
+    for (std::size_t s = 0; s < parts.size(); ++s) {
+      global[s][l] = next;
+      next += local[s][l + 1] - local[s][l];
+    }
+  const auto where = [&](std::size_t s, std::size_t j) -> std::uint32_t {
+    if (j == 0) return static_cast<std::uint32_t>(frontier + s);
+    const std::size_t l = parts[s][j].depth - d0;
+    return static_cast<std::uint32_t>(global[s][l] + j - local[s][l]);
+  };
+  top.resize(next);
+  for (std::size_t s = 0; s < parts.size(); ++s)
+    for (std::size_t j = 0; j < parts[s].size(); ++j) {
+      part_node nd = parts[s][j];
+      if (nd.count > 0) nd.first = where(s, nd.first);
+      top[where(s, j)] = nd;
+    }
+}
+
+/// §3's octree: breadth first until a whole level holds enough nodes to share among threads,
+/// then each of that level's subtrees on its own (the points of different subtrees are
+/// disjoint ranges), merged back into breadth-first order. The tree and the order of the
+/// points do not depend on the number of threads. Returns each node's range of points.
+std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned threads) {
+  constexpr std::size_t frontier_nodes = 256;
+  std::vector<part_node> top{
+      {{0, static_cast<std::uint32_t>(p.pos.size())}, d.cube_min, 0, 0, 0, 0}};
+  std::size_t level = 0;  // first node of the level being split
+  while (level < top.size() && top.size() - level < frontier_nodes) {
+    const std::size_t end = top.size();
+    for (std::size_t i = level; i < end; ++i) split_node(p, top, i, threads);
+    level = end;
+  }
+  if (level < top.size()) {
+    std::vector<std::vector<part_node>> parts(top.size() - level);
+    parallel_tasks(parts.size(), threads, [&](std::size_t s, unsigned) {
+      auto& part = parts[s];
+      part.push_back(top[level + s]);
+      for (std::size_t i = 0; i < part.size(); ++i) split_node(p, part, i, 1);
+    });
+    merge_parts(top, level, parts);
+  }
+  d.nodes.assign(top.size(), pca_node{});
+  std::vector<build_node> ranges(top.size());
+  for (std::size_t i = 0; i < top.size(); ++i) {
+    d.nodes[i].first = top[i].first;
+    d.nodes[i].count = top[i].count;
+    d.nodes[i].mask = top[i].mask;
+    d.nodes[i].depth = top[i].depth;
+    ranges[i] = top[i].range;
+  }
+  return ranges;
+}
+
+/// §3: the PCA of every node's positions, normals and colours. The normals need each node's
+/// own frame (the unwrap is about its mean normal), so every node visits its points; the
+/// positions' and colours' moments are summed at the leaves and merged up the tree level by
+/// level (Chan et al.'s update, core/covariance.hpp), so each point is summed once.
+void node_statistics(pca_data& d, const std::vector<build_node>& ranges,
+                     const std::vector<vec3d>& pos, const std::vector<vec3f>& normals,
+                     const std::vector<rgb8>& cols, unsigned threads) {
+  const std::size_t n = d.nodes.size();
+  const bool colour = !cols.empty();
+  if (colour) d.colours.resize(n);
+  // The normals first: their mean is what the degenerate position rules align z with. If they
+  // cancel out, the first sample's normal stands in (deterministic).
+  std::vector<vec3d> mean_normal(n);
+  const std::size_t pieces = std::min<std::size_t>(n, 64 * threads);
+  parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
+    const auto [lo_n, hi_n] = piece_range(n, pieces, t);
+    for (std::size_t i = lo_n; i < hi_n; ++i) {
+      const build_node r = ranges[i];
+      const pca_normal_result pn =
+          pca_normals(normals.data() + r.begin, r.end - r.begin, normals[r.begin].cast<double>());
+      d.nodes[i].normal_frame = pn.frame.cast<float>();
+      d.nodes[i].normal_sigma = pn.sigma.cast<float>();
+      mean_normal[i] = pn.frame.col(2);
+    }
+  });
+  // Breadth first: each level is a contiguous range, its children all in the next one, so the
+  // moments of two levels at a time suffice.
+  std::vector<std::size_t> level{0};
+  for (std::size_t i = 1; i < n; ++i)
+    if (d.nodes[i].depth != d.nodes[i - 1].depth) level.push_back(i);
+  level.push_back(n);
+  std::vector<scatter_accumulator> below, here, colour_below, colour_here;
+  for (std::size_t l = level.size() - 1; l-- > 0;) {
+    const std::size_t b = level[l], e = level[l + 1];
+    here.assign(e - b, {});
+    if (colour) colour_here.assign(e - b, {});
+    parallel_pieces(e - b, threads, 16 * threads, 256, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = b + lo; i < b + hi; ++i) {
+        pca_node& nd = d.nodes[i];
+        scatter_accumulator& mp = here[i - b];
+        const build_node r = ranges[i];
+        if (nd.count == 0) {
+          mp = position_moments(pos.data() + r.begin, r.end - r.begin);
+          if (colour) colour_here[i - b] = colour_moments(cols.data() + r.begin, r.end - r.begin);
+        }
+        for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+          mp += below[c - e];
+          if (colour) colour_here[i - b] += colour_below[c - e];
+        }
+        const pca_position_result pp = pca_positions_from(mp.mean, mp.covariance(), mean_normal[i]);
+        nd.mean = pp.mean.cast<float>();
+        nd.frame = pp.frame.cast<float>();
+        nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
+        if (colour)
+          d.colours[i] = pca_colours_from(colour_here[i - b].mean, colour_here[i - b].covariance());
+      }
+    });
+    std::swap(below, here);
+    std::swap(colour_below, colour_here);
+  }
+}
+
 }  // namespace
 
 pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
@@ -116,24 +404,43 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
     st.estimated_normals = true;
   } else {
     normals.resize(n);
-    for (std::size_t i = 0; i < n; ++i) normals[i] = in.normals[i].normalized();
+    parallel_chunks(n, threads, 1u << 16, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) normals[i] = in.normals[i].normalized();
+    });
   }
   check_progress(o, 0.2);
   const auto tt = clock_type::now();
 
   // A double origin at the centre of the data's box; positions relative to it in double.
-  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (const auto& p : in.positions) {
-    lo = lo.cwiseMin(p.cast<double>());
-    hi = hi.cwiseMax(p.cast<double>());
+  // (Minima and maxima do not depend on the order of the chunks.)
+  constexpr std::size_t chunks = 64;
+  std::vector<std::array<vec3d, 2>> box(chunks);
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [b, e] = piece_range(n, chunks, c);
+    vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (std::size_t i = b; i < e; ++i) {
+      lo = lo.cwiseMin(in.positions[i].cast<double>());
+      hi = hi.cwiseMax(in.positions[i].cast<double>());
+    }
+    box[c] = {lo, hi};
+  });
+  vec3d lo = box[0][0], hi = box[0][1];
+  for (const auto& b : box) {
+    lo = lo.cwiseMin(b[0]);
+    hi = hi.cwiseMax(b[1]);
   }
   const vec3d centre_rel = 0.5 * (lo + hi);
   d.origin = in.origin + centre_rel;
   std::vector<vec3d> pos(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    pos[i] = in.positions[i].cast<double>() - centre_rel;
-    d.input_radius = std::max(d.input_radius, pos[i].norm());
-  }
+  std::vector<double> radius(chunks, 0.0);
+  parallel_tasks(chunks, threads, [&](std::size_t c, unsigned) {
+    const auto [b, e] = piece_range(n, chunks, c);
+    for (std::size_t i = b; i < e; ++i) {
+      pos[i] = in.positions[i].cast<double>() - centre_rel;
+      radius[c] = std::max(radius[c], pos[i].norm());
+    }
+  });
+  d.input_radius = *std::max_element(radius.begin(), radius.end());
   // The root cell: a cube about the box, enlarged by a hair so that no point lies on its far
   // faces after rounding.
   double size = (hi - lo).maxCoeff();
@@ -142,105 +449,25 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   d.cube_min = vec3d::Constant(-0.5 * size);
 
   // ---- §3: top-down octree, breadth first; children contiguous, in octant order.
-  // The points are reordered in place with their normals and colours (a stable counting sort
-  // per node), so every node's points are contiguous: each pass streams through memory.
-  const bool colour = !in.colours.empty();
-  std::vector<rgb8> cols(in.colours.begin(), in.colours.end());
-  std::vector<vec3d> pos_tmp(n);
-  std::vector<vec3f> nrm_tmp(n);
-  std::vector<rgb8> col_tmp(cols.size());
-  std::vector<std::uint8_t> oct(n);
-  std::vector<build_node> ranges{{0, static_cast<std::uint32_t>(n)}};
-  std::vector<vec3d> cell_min{d.cube_min};
-  d.nodes.emplace_back();
-  for (std::size_t i = 0; i < d.nodes.size(); ++i) {
-    const build_node r = ranges[i];
-    const std::uint32_t count = r.end - r.begin;
-    pca_node& nd = d.nodes[i];
-    st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
-    if (count <= o.leaf_size || nd.depth >= o.max_depth) continue;
-    vec3d plo = pos[r.begin], phi = plo;
-    for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      plo = plo.cwiseMin(pos[k]);
-      phi = phi.cwiseMax(pos[k]);
-    }
-    if (plo == phi) continue;  // all points identical: no split separates them
-    const double half = d.cube_size / std::ldexp(1.0, nd.depth + 1);
-    const vec3d mid = cell_min[i] + vec3d::Constant(half);
-    std::array<std::uint32_t, 9> start{};
-    for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      const vec3d& q = pos[k];
-      oct[k] =
-          static_cast<std::uint8_t>((q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) |
-                                    (q.z() >= mid.z() ? 4u : 0u));
-      ++start[oct[k] + 1u];
-    }
-    for (int o8 = 0; o8 < 8; ++o8) start[o8 + 1] += start[o8];
-    std::array<std::uint32_t, 8> at{};
-    for (int o8 = 0; o8 < 8; ++o8) at[o8] = r.begin + start[o8];
-    for (std::uint32_t k = r.begin; k < r.end; ++k) {
-      const std::uint32_t to = at[oct[k]]++;
-      pos_tmp[to] = pos[k];
-      nrm_tmp[to] = normals[k];
-      if (colour) col_tmp[to] = cols[k];
-    }
-    std::copy(pos_tmp.begin() + r.begin, pos_tmp.begin() + r.end, pos.begin() + r.begin);
-    std::copy(nrm_tmp.begin() + r.begin, nrm_tmp.begin() + r.end, normals.begin() + r.begin);
-    if (colour)
-      std::copy(col_tmp.begin() + r.begin, col_tmp.begin() + r.end, cols.begin() + r.begin);
-    const auto first = static_cast<std::uint32_t>(d.nodes.size());
-    std::uint8_t mask = 0, kids = 0;
-    const std::uint8_t depth = static_cast<std::uint8_t>(nd.depth + 1);
-    const vec3d cmin = cell_min[i];
-    for (unsigned o8 = 0; o8 < 8; ++o8) {
-      if (start[o8 + 1] == start[o8]) continue;
-      mask = static_cast<std::uint8_t>(mask | (1u << o8));
-      ++kids;
-      ranges.push_back({r.begin + start[o8], r.begin + start[o8 + 1]});
-      cell_min.push_back(cmin +
-                         vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0));
-      pca_node c;
-      c.depth = depth;
-      d.nodes.push_back(c);
-    }
-    pca_node& parent = d.nodes[i];  // (push_back may have moved it)
-    parent.first = first;
-    parent.count = kids;
-    parent.mask = mask;
-  }
+  octree_points pts{pos, d.cube_size, o.leaf_size, o.max_depth};
+  const std::vector<build_node> ranges = build_octree(pts, d, threads);
+  normals = permute_by(normals, pts.index, threads);
+  const std::vector<rgb8> cols =
+      permute_by(std::vector<rgb8>(in.colours.begin(), in.colours.end()), pts.index, threads);
+  for (const auto& nd : d.nodes) st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   st.nodes = d.nodes.size();
   for (const auto& nd : d.nodes) st.leaves += nd.count == 0 ? 1 : 0;
   check_progress(o, 0.35);
 
   // ---- §3: independent PCA of each node's positions, normals and colours.
-  if (colour) d.colours.resize(d.nodes.size());
-  const std::size_t pieces = std::min<std::size_t>(d.nodes.size(), 64 * threads);
-  parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
-    const auto [lo_n, hi_n] = piece_range(d.nodes.size(), pieces, t);
-    for (std::size_t i = lo_n; i < hi_n; ++i) {
-      const build_node r = ranges[i];
-      const std::size_t m = r.end - r.begin;
-      // The normals first: their mean is what the degenerate position rules align z with.
-      // If they cancel out, the first sample's normal stands in (deterministic).
-      const pca_normal_result pn =
-          pca_normals(normals.data() + r.begin, m, normals[r.begin].cast<double>());
-      const pca_position_result pp = pca_positions(pos.data() + r.begin, m, pn.frame.col(2));
-      pca_node& nd = d.nodes[i];
-      nd.mean = pp.mean.cast<float>();
-      nd.frame = pp.frame.cast<float>();
-      nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
-      nd.normal_frame = pn.frame.cast<float>();
-      nd.normal_sigma = pn.sigma.cast<float>();
-      if (colour) d.colours[i] = pca_colours(cols.data() + r.begin, m);
-    }
-  });
-  pca_derive_cells(d);
+  node_statistics(d, ranges, pos, normals, cols, threads);
+  pca_derive_cells(d, threads);
   st.tree_seconds = seconds_since(tt);
   check_progress(o, 0.6);
 
   // ---- §3.1: classification and quantisation (the hierarchy then holds the decoded values).
   if (o.quantise) pca_quantise(d, o, threads);
-  pca_derive_bounds(d);
+  pca_derive_bounds(d, threads);
   check_progress(o, 1);
   st.seconds = seconds_since(t0);
   st.has_timings = true;
@@ -250,56 +477,90 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
 // ---------------------------------------------------------------------------------------------
 // Derived data (build and load).
 // ---------------------------------------------------------------------------------------------
-void pca_derive_cells(pca_data& d) {
+namespace {
+/// Where each level of the breadth-first tree starts (and, last, the node count): a level's
+/// children are the next level, in order.
+std::vector<std::size_t> tree_levels(const pca_data& d) {
+  std::vector<std::size_t> at{0, 1};
+  while (at.back() < d.nodes.size()) {
+    std::size_t kids = 0;
+    for (std::size_t i = at[at.size() - 2]; i < at.back(); ++i) kids += d.nodes[i].count;
+    if (kids == 0) break;
+    at.push_back(std::min(d.nodes.size(), at.back() + kids));
+  }
+  return at;
+}
+}  // namespace
+
+void pca_derive_cells(pca_data& d, unsigned threads) {
   if (d.nodes.empty()) return;
   d.nodes[0].cell_min = d.cube_min;
   d.nodes[0].cell_size = d.cube_size;
-  for (auto& nd : d.nodes) {
-    if (nd.count == 0) continue;
-    const double half = 0.5 * nd.cell_size;
-    std::uint32_t c = nd.first;
-    for (unsigned o8 = 0; o8 < 8; ++o8) {
-      if (!(nd.mask & (1u << o8))) continue;
-      pca_node& ch = d.nodes[c++];
-      ch.cell_min =
-          nd.cell_min + vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0);
-      ch.cell_size = half;
-      ch.depth = static_cast<std::uint8_t>(nd.depth + 1);
-    }
+  const std::vector<std::size_t> level = tree_levels(d);
+  for (std::size_t l = 0; l + 1 < level.size(); ++l) {
+    parallel_pieces(
+        level[l + 1] - level[l], threads, 8 * threads, 4096, [&](std::size_t lo, std::size_t hi) {
+          for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i) {
+            const pca_node& nd = d.nodes[i];
+            if (nd.count == 0) continue;
+            const double half = 0.5 * nd.cell_size;
+            std::uint32_t c = nd.first;
+            for (unsigned o8 = 0; o8 < 8; ++o8) {
+              if (!(nd.mask & (1u << o8))) continue;
+              pca_node& ch = d.nodes[c++];
+              ch.cell_min = nd.cell_min +
+                            vec3d((o8 & 1) ? half : 0, (o8 & 2) ? half : 0, (o8 & 4) ? half : 0);
+              ch.cell_size = half;
+              ch.depth = static_cast<std::uint8_t>(nd.depth + 1);
+            }
+          }
+        });
   }
 }
 
-void pca_derive_bounds(pca_data& d) {
+namespace {
+/// λ, the bounding sphere and the normal cone of node i, from its statistics and its children's
+/// bounds (pca_derive_bounds).
+void derive_node_bounds(pca_data& d, std::size_t i) {
+  const float pi = std::numbers::pi_v<float>;
+  pca_node& nd = d.nodes[i];
+  // §3: λ = c·√(σ_n¹/‖σ_p‖), ‖σ_p‖ in units of the root's (see pca_octree_options).
+  float lambda = 1;
+  if (d.curvature_c > 0) {
+    const float rel = nd.sigma.norm() / d.lambda_norm;
+    const float l = d.curvature_c * std::sqrt(nd.normal_sigma.x() / std::max(rel, 1e-30f));
+    lambda = std::clamp(std::isfinite(l) ? l : d.lambda_max, 1.0f, d.lambda_max);
+  }
+  nd.lambda = lambda;
+  // The generator truncates at γ: positions lie in the ellipsoid of semi-axes γ·λ·σ_p,
+  // normals within γ·σ_n¹ of the mean normal. Children's bounds are added so that the
+  // sphere and the cone hold everything the subtree generates.
+  float r = d.gamma * lambda * nd.sigma.x();
+  float cone = std::min(pi, d.gamma * nd.normal_sigma.x());
+  const vec3f axis = nd.normal_frame.col(2);
+  for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+    const pca_node& ch = d.nodes[c];
+    r = std::max(r, (ch.mean - nd.mean).norm() + ch.radius);
+    const float a = std::acos(std::clamp(axis.dot(ch.normal_frame.col(2)), -1.0f, 1.0f));
+    cone = std::max(cone, a + ch.cone_angle);
+  }
+  // Float rounding of the generated points: a relative hair on top.
+  nd.radius = r * (1 + 1e-5f) + 1e-6f * nd.mean.cwiseAbs().maxCoeff() + 1e-30f;
+  nd.cone_angle = std::min(pi, cone + 1e-4f);
+}
+}  // namespace
+
+void pca_derive_bounds(pca_data& d, unsigned threads) {
   if (d.nodes.empty()) return;
   const float root_norm = d.nodes[0].sigma.norm();
   d.lambda_norm = root_norm > 0 ? root_norm : 1.0f;
-  const float pi = std::numbers::pi_v<float>;
-  for (std::size_t i = d.nodes.size(); i-- > 0;) {
-    pca_node& nd = d.nodes[i];
-    // §3: λ = c·√(σ_n¹/‖σ_p‖), ‖σ_p‖ in units of the root's (see pca_octree_options).
-    float lambda = 1;
-    if (d.curvature_c > 0) {
-      const float rel = nd.sigma.norm() / d.lambda_norm;
-      const float l = d.curvature_c * std::sqrt(nd.normal_sigma.x() / std::max(rel, 1e-30f));
-      lambda = std::clamp(std::isfinite(l) ? l : d.lambda_max, 1.0f, d.lambda_max);
-    }
-    nd.lambda = lambda;
-    // The generator truncates at γ: positions lie in the ellipsoid of semi-axes γ·λ·σ_p,
-    // normals within γ·σ_n¹ of the mean normal. Children's bounds are added so that the
-    // sphere and the cone hold everything the subtree generates.
-    float r = d.gamma * lambda * nd.sigma.x();
-    float cone = std::min(pi, d.gamma * nd.normal_sigma.x());
-    const vec3f axis = nd.normal_frame.col(2);
-    for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
-      const pca_node& ch = d.nodes[c];
-      r = std::max(r, (ch.mean - nd.mean).norm() + ch.radius);
-      const float a = std::acos(std::clamp(axis.dot(ch.normal_frame.col(2)), -1.0f, 1.0f));
-      cone = std::max(cone, a + ch.cone_angle);
-    }
-    // Float rounding of the generated points: a relative hair on top.
-    nd.radius = r * (1 + 1e-5f) + 1e-6f * nd.mean.cwiseAbs().maxCoeff() + 1e-30f;
-    nd.cone_angle = std::min(pi, cone + 1e-4f);
-  }
+  const std::vector<std::size_t> level = tree_levels(d);
+  for (std::size_t l = level.size() - 1; l-- > 0;)
+    parallel_pieces(level[l + 1] - level[l], threads, 8 * threads, 4096,
+                    [&](std::size_t lo, std::size_t hi) {
+                      for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i)
+                        derive_node_bounds(d, i);
+                    });
 }
 
 bool operator==(const pca_data& a, const pca_data& b) {

@@ -1,9 +1,11 @@
 // pbr_lod — what the PCA octree's translation units share (not installed).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include "pbr_lod/builders/pca_octree.hpp"
+#include "pbr_lod/core/covariance.hpp"
 
 namespace pbr_lod::detail {
 
@@ -12,28 +14,48 @@ unsigned pca_threads(unsigned requested);
 
 /// §3 colour PCA of the colours c[0..n) (RGB / 255; pca_octree_stats.cpp).
 pca_colour pca_colours(const rgb8* c, std::size_t n);
+/// The same from the colours' mean and covariance.
+pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov);
+/// §3 position PCA (pca_positions) from the points' mean and covariance.
+pca_position_result pca_positions_from(const vec3d& mean, const mat3d& cov,
+                                       const vec3d& mean_normal);
+/// Count, mean and centred scatter of n points, or of n colours as RGB / 255 (two passes).
+/// An inner node's are its children's merged (Chan et al.), so each point is summed once.
+scatter_accumulator position_moments(const vec3d* p, std::size_t n);
+scatter_accumulator colour_moments(const rgb8* c, std::size_t n);
 
 /// Cells of every node from the root cube and the child masks (top-down). Before decoding:
 /// μ_p is quantised relative to the node's cell.
-void pca_derive_cells(pca_data& d);
+void pca_derive_cells(pca_data& d, unsigned threads = 1);
 /// λ, bounding-sphere radii and normal-cone angles (bottom-up), from the decoded statistics.
-void pca_derive_bounds(pca_data& d);
+void pca_derive_bounds(pca_data& d, unsigned threads = 1);
 
 /// §3.1: k-means classification of σ_p, σ_n, σ_c, encoding of every node into its record and
 /// decoding back into d.nodes / d.colours (so the hierarchy holds what the file holds). Fills
 /// the quantisation-error stats and kmeans_seconds.
 void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads);
 
-/// Reads/writes `bits` bits of `v` at bit position `pos` of a little-endian byte record.
+/// Reads/writes `bits` (≤ 32) bits of `v` at bit position `pos` of a little-endian byte
+/// record, a byte at a time (a record holds one node; encode and decode touch every field).
 template <std::size_t N>
 void put_bits(std::array<std::uint8_t, N>& r, unsigned pos, std::uint32_t v, unsigned bits) {
-  for (unsigned i = 0; i < bits; ++i, ++pos)
-    if ((v >> i) & 1u) r[pos >> 3] = static_cast<std::uint8_t>(r[pos >> 3] | (1u << (pos & 7)));
+  for (unsigned done = 0; done < bits;) {
+    const unsigned off = pos & 7u, take = std::min(8u - off, bits - done);
+    const std::uint32_t part = (v >> done) & ((1u << take) - 1u);
+    r[pos >> 3] = static_cast<std::uint8_t>(r[pos >> 3] | (part << off));
+    done += take;
+    pos += take;
+  }
 }
 template <std::size_t N>
 std::uint32_t get_bits(const std::array<std::uint8_t, N>& r, unsigned pos, unsigned bits) {
   std::uint32_t v = 0;
-  for (unsigned i = 0; i < bits; ++i, ++pos) v |= ((r[pos >> 3] >> (pos & 7)) & 1u) << i;
+  for (unsigned done = 0; done < bits;) {
+    const unsigned off = pos & 7u, take = std::min(8u - off, bits - done);
+    v |= ((static_cast<std::uint32_t>(r[pos >> 3]) >> off) & ((1u << take) - 1u)) << done;
+    done += take;
+    pos += take;
+  }
   return v;
 }
 

@@ -4,12 +4,12 @@
 //   A. Kalaiah, A. Varshney. Statistical Point Geometry. SGP 2003.
 // What this file implements:
 //   §3.1, Fig. 5  k-means over the nodes' σ_p, σ_n and σ_c (kmeans(): k-means++ seeding on a
-//                 seeded sample, Lloyd iterations with exact nearest-centre search through
-//                 core/knn, then every node's nearest entry), 12/12/6-bit indices; μ_p in 32 bits
-//                 (10-11-11 over the node's octree cell), f_p and f_n as an axis (16-bit normal
-//                 code, core/normal_quantization) and a rotation about it (8 bits), μ_c 5-6-5,
-//                 f_c as a 7-bit axis and a 3-bit rotation: 13 bytes a node, 17 with colour
-//                 (pca_quantise(), encode_node(), pca_decode_node()).
+//                 seeded sample, Lloyd iterations with an exact nearest-centre search (a k-d
+//                 tree over the codebook), then every node's nearest entry), 12/12/6-bit
+//                 indices; μ_p in 32 bits (10-11-11 over the node's octree cell), f_p and f_n as an
+//                 axis (16-bit normal code, core/normal_quantization) and a rotation about it (8
+//                 bits), μ_c 5-6-5, f_c as a 7-bit axis and a 3-bit rotation: 13 bytes a node, 17
+//                 with colour (pca_quantise(), encode_node(), pca_decode_node()).
 // Deviations (docs/pca-octree.md): σ_p is classified as log₂(σ_p / cell edge), so that one
 // codebook serves every octree level with a bounded relative error (the paper clusters raw
 // σ_p); the 10-bit axis of μ_p is the world axis least aligned with f_p³ (our cells are cubes,
@@ -18,10 +18,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <numeric>
 
-#include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pca_octree_internal.hpp"
@@ -73,6 +73,142 @@ mat3f decode_frame(const vec3f& z, std::uint32_t code, int bits) {
   return f;
 }
 
+/// Exact nearest codebook entry of a point: the least squared distance (in float, summed
+/// x, y, z), ties to the lowest entry, through a k-d tree over the entries (median splits on the
+/// widest axis, leaves of up to 8). A far side is skipped only when its slab distance exceeds
+/// the best distance, which float rounding keeps exact (rounding is monotone), so the answer
+/// is brute force's and does not depend on the tree's shape. Replaces a general k-NN index:
+/// the codebooks are small and the queries many (every node of the tree).
+class nearest_entry {
+ public:
+  explicit nearest_entry(const std::vector<vec3f>& centres) : c_(centres) {
+    order_.resize(centres.size());
+    std::iota(order_.begin(), order_.end(), 0u);
+    if (!centres.empty()) build(0, static_cast<std::uint32_t>(centres.size()));
+  }
+  [[nodiscard]] std::uint32_t operator()(const vec3f& q) const {
+    float best = std::numeric_limits<float>::infinity();
+    std::uint32_t at = 0;
+    if (!nodes_.empty()) search(0, q, best, at);
+    return at;
+  }
+
+ private:
+  static constexpr std::uint32_t leaf_entries = 8;
+  struct kd_node {
+    std::uint32_t begin, end;  // entries order_[begin, end) (leaf)
+    int axis = -1;             // -1: leaf
+    float split = 0;
+    std::uint32_t left = 0, right = 0;
+  };
+  std::uint32_t build(std::uint32_t b, std::uint32_t e) {
+    const auto id = static_cast<std::uint32_t>(nodes_.size());
+    nodes_.push_back({b, e});
+    if (e - b <= leaf_entries) return id;
+    vec3f lo = c_[order_[b]], hi = lo;
+    for (std::uint32_t i = b; i < e; ++i) {
+      lo = lo.cwiseMin(c_[order_[i]]);
+      hi = hi.cwiseMax(c_[order_[i]]);
+    }
+    Eigen::Index axis = 0;
+    if (!((hi - lo).maxCoeff(&axis) > 0)) return id;  // all equal
+    const std::uint32_t m = b + (e - b) / 2;
+    std::nth_element(order_.begin() + b, order_.begin() + m, order_.begin() + e,
+                     [&](std::uint32_t u, std::uint32_t v) {
+                       return c_[u][axis] < c_[v][axis] || (c_[u][axis] == c_[v][axis] && u < v);
+                     });
+    const float split = c_[order_[m]][axis];
+    const std::uint32_t left = build(b, m), right = build(m, e);
+    kd_node& nd = nodes_[id];
+    nd.axis = static_cast<int>(axis);
+    nd.split = split;
+    nd.left = left;
+    nd.right = right;
+    return id;
+  }
+  void search(std::uint32_t n, const vec3f& q, float& best, std::uint32_t& at) const {
+    const kd_node& nd = nodes_[n];
+    if (nd.axis < 0) {
+      for (std::uint32_t i = nd.begin; i < nd.end; ++i) {
+        const std::uint32_t k = order_[i];
+        const float dx = q.x() - c_[k].x(), dy = q.y() - c_[k].y(), dz = q.z() - c_[k].z();
+        const float d = dx * dx + dy * dy + dz * dz;
+        if (d < best || (d == best && k < at)) {
+          best = d;
+          at = k;
+        }
+      }
+      return;
+    }
+    const float diff = q[nd.axis] - nd.split;
+    search(diff < 0 ? nd.left : nd.right, q, best, at);
+    if (diff * diff <= best) search(diff < 0 ? nd.right : nd.left, q, best, at);
+  }
+
+  const std::vector<vec3f>& c_;
+  std::vector<std::uint32_t> order_;
+  std::vector<kd_node> nodes_;
+};
+
+/// k-means++ seeding (Arthur & Vassilvitskii 2007) of up to k centres from the sample xs: each
+/// new centre drawn with probability proportional to the squared distance to the nearest
+/// chosen one. The distances are kept in blocks of a fixed size whose sums are taken in block
+/// order, so the draws do not depend on the number of threads.
+std::vector<vec3f> seed_centres(const std::vector<vec3f>& xs, std::uint32_t k, std::uint64_t& rng,
+                                unsigned threads) {
+  const std::size_t s = xs.size();
+  constexpr std::size_t block = 2048;
+  const std::size_t blocks = (s + block - 1) / block;
+  std::vector<double> x(s), y(s), z(s), block_sum(blocks);
+  for (std::size_t i = 0; i < s; ++i) {
+    x[i] = xs[i].x();
+    y[i] = xs[i].y();
+    z[i] = xs[i].z();
+  }
+  std::vector<vec3f> centres;
+  centres.reserve(k);
+  std::vector<double> d2(s, std::numeric_limits<double>::infinity());
+  std::size_t next =
+      std::min(s - 1, static_cast<std::size_t>(uniform01(rng) * static_cast<double>(s)));
+  while (true) {
+    centres.push_back(xs[next]);
+    const double cx = x[next], cy = y[next], cz = z[next];
+    parallel_tasks(blocks, threads, [&](std::size_t b, unsigned) {
+      double sum = 0;
+      for (std::size_t i = b * block; i < std::min(s, (b + 1) * block); ++i) {
+        const double dx = x[i] - cx, dy = y[i] - cy, dz = z[i] - cz;
+        d2[i] = std::min(d2[i], dx * dx + dy * dy + dz * dz);
+        sum += d2[i];
+      }
+      block_sum[b] = sum;
+    });
+    if (centres.size() >= k) break;
+    double total = 0;
+    for (const double v : block_sum) total += v;
+    if (!(total > 0)) break;  // every sample is a centre already
+    const double r = uniform01(rng) * total;
+    // The block holding the draw, then the sample within it (or, after rounding, later on).
+    double acc = 0;
+    std::size_t b = 0;
+    while (b + 1 < blocks && acc + block_sum[b] <= r) acc += block_sum[b++];
+    next = s;
+    for (std::size_t i = b * block; i < s; ++i) {
+      acc += d2[i];
+      if (acc > r && d2[i] > 0) {
+        next = i;
+        break;
+      }
+    }
+    if (next == s)  // rounding at the end of the scan: the last sample not yet a centre
+      for (std::size_t i = s; i-- > 0;)
+        if (d2[i] > 0) {
+          next = i;
+          break;
+        }
+  }
+  return centres;
+}
+
 /// §3.1 classification: k-means of x into at most k entries (fewer when x has fewer distinct
 /// values). Writes every point's entry to assign. Deterministic for a given seed, whatever the
 /// thread count: assignments are computed per point in parallel, sums sequentially.
@@ -96,54 +232,14 @@ std::vector<vec3f> kmeans(const std::vector<vec3f>& x, std::uint32_t k, const pc
   }
   std::vector<vec3f> xs(s);
   for (std::size_t i = 0; i < s; ++i) xs[i] = x[pick[i]];
-
-  // k-means++ seeding (Arthur & Vassilvitskii 2007): each new centre drawn with probability
-  // proportional to the squared distance to the nearest chosen one.
-  std::vector<vec3f> centres;
-  centres.reserve(k);
-  std::vector<double> d2(s, std::numeric_limits<double>::infinity());
-  std::size_t next =
-      std::min(s - 1, static_cast<std::size_t>(uniform01(rng) * static_cast<double>(s)));
-  while (true) {
-    const vec3f c = xs[next];
-    centres.push_back(c);
-    parallel_chunks(s, threads, 4096, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t i = lo; i < hi; ++i)
-        d2[i] = std::min(d2[i], (xs[i] - c).cast<double>().squaredNorm());
-    });
-    if (centres.size() >= k) break;
-    double total = 0;
-    for (const double v : d2) total += v;
-    if (!(total > 0)) break;  // every sample is a centre already
-    const double r = uniform01(rng) * total;
-    double acc = 0;
-    next = s;
-    for (std::size_t i = 0; i < s; ++i) {
-      acc += d2[i];
-      if (acc > r && d2[i] > 0) {
-        next = i;
-        break;
-      }
-    }
-    if (next == s)  // rounding at the end of the scan: the last sample not yet a centre
-      for (std::size_t i = s; i-- > 0;)
-        if (d2[i] > 0) {
-          next = i;
-          break;
-        }
-  }
+  std::vector<vec3f> centres = seed_centres(xs, k, rng, threads);
 
   // Lloyd iterations on the sample.
   const auto nearest = [&](const std::vector<vec3f>& pts, std::vector<std::uint32_t>& out) {
-    const knn_index index(centres);
+    const nearest_entry index(centres);
     out.resize(pts.size());
-    parallel_chunks(pts.size(), threads, 2048, [&](std::size_t lo, std::size_t hi) {
-      std::vector<std::uint32_t> idx;
-      std::vector<float> dist;
-      for (std::size_t i = lo; i < hi; ++i) {
-        index.query(pts[i], 1, idx, dist);
-        out[i] = idx.empty() ? 0 : idx[0];
-      }
+    parallel_pieces(pts.size(), threads, 8 * threads, 2048, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) out[i] = index(pts[i]);
     });
   };
   std::vector<std::uint32_t> a, prev;
@@ -170,8 +266,33 @@ double angle_deg(const vec3f& a, const vec3f& b) {
 }
 /// Angle between two axes whose sign does not matter.
 double axis_angle_deg(const vec3f& a, const vec3f& b) {
-  return std::min(angle_deg(a, b), angle_deg(a, -b));
+  return std::acos(
+             std::min(std::abs(static_cast<double>(a.normalized().dot(b.normalized()))), 1.0)) *
+         180 / std::numbers::pi;
 }
+
+/// What quantisation changed in a run of nodes (maxima, and sums for the means).
+struct quantise_errors {
+  double max_mean_cell = 0, max_axis_deg = 0, max_normal_axis_deg = 0;
+  double sum_sigma_p = 0, sum_sigma_n = 0;
+  void add(const pca_node& a, const pca_node& b) {
+    max_mean_cell = std::max(
+        max_mean_cell, static_cast<double>((a.mean - b.mean).cwiseAbs().maxCoeff()) / a.cell_size);
+    for (int k = 0; k < 3; ++k)
+      max_axis_deg = std::max(max_axis_deg, axis_angle_deg(a.frame.col(k), b.frame.col(k)));
+    max_normal_axis_deg =
+        std::max(max_normal_axis_deg, angle_deg(a.normal_frame.col(2), b.normal_frame.col(2)));
+    sum_sigma_p += static_cast<double>((a.sigma - b.sigma).cwiseAbs().maxCoeff() / a.sigma.x());
+    sum_sigma_n += static_cast<double>((a.normal_sigma - b.normal_sigma).cwiseAbs().maxCoeff());
+  }
+  void add(const quantise_errors& o) {
+    max_mean_cell = std::max(max_mean_cell, o.max_mean_cell);
+    max_axis_deg = std::max(max_axis_deg, o.max_axis_deg);
+    max_normal_axis_deg = std::max(max_normal_axis_deg, o.max_normal_axis_deg);
+    sum_sigma_p += o.sum_sigma_p;
+    sum_sigma_n += o.sum_sigma_n;
+  }
+};
 
 }  // namespace
 
@@ -290,36 +411,30 @@ void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads) {
   const auto t1 = std::chrono::steady_clock::now();
   d.stats.kmeans_seconds = std::chrono::duration<double>(t1 - t0).count();
 
-  // Encode, then decode into the nodes (what load() will reproduce bit for bit).
+  // Encode, then decode into the nodes (what load() will reproduce bit for bit), and compare.
+  // Blocks of a fixed size, summed in block order: the error sums do not depend on threads.
   d.records.assign(n, {});
   if (colour) d.colour_records.assign(n, 0);
-  const std::vector<pca_node> before = d.nodes;
-  parallel_chunks(n, threads, 4096, [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t i = lo; i < hi; ++i) {
+  constexpr std::size_t block = 4096;
+  std::vector<quantise_errors> errors((n + block - 1) / block);
+  parallel_tasks(errors.size(), threads, [&](std::size_t b, unsigned) {
+    for (std::size_t i = b * block; i < std::min(n, (b + 1) * block); ++i) {
       const auto id = static_cast<std::uint32_t>(i);
+      const pca_node before = d.nodes[i];
       encode_node(d, id, ap[i], an[i]);
       if (colour) d.colour_records[i] = encode_colour(d.colours[i], ac[i]);
       pca_decode_node(d, id, d.nodes[i], colour ? &d.colours[i] : nullptr);
+      errors[b].add(before, d.nodes[i]);
     }
   });
-  // What quantisation cost.
+  quantise_errors e;
+  for (const auto& b : errors) e.add(b);
   auto& st = d.stats;
-  double sp_err = 0, sn_err = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const pca_node &a = before[i], &b = d.nodes[i];
-    st.max_mean_error_cell =
-        std::max(st.max_mean_error_cell,
-                 static_cast<double>((a.mean - b.mean).cwiseAbs().maxCoeff()) / a.cell_size);
-    for (int k = 0; k < 3; ++k)
-      st.max_axis_error_deg =
-          std::max(st.max_axis_error_deg, axis_angle_deg(a.frame.col(k), b.frame.col(k)));
-    st.max_normal_axis_error_deg = std::max(
-        st.max_normal_axis_error_deg, angle_deg(a.normal_frame.col(2), b.normal_frame.col(2)));
-    sp_err += static_cast<double>((a.sigma - b.sigma).cwiseAbs().maxCoeff() / a.sigma.x());
-    sn_err += static_cast<double>((a.normal_sigma - b.normal_sigma).cwiseAbs().maxCoeff());
-  }
-  st.mean_sigma_p_error = sp_err / static_cast<double>(n);
-  st.mean_sigma_n_error_deg = sn_err / static_cast<double>(n) * 180 / std::numbers::pi;
+  st.max_mean_error_cell = e.max_mean_cell;
+  st.max_axis_error_deg = e.max_axis_deg;
+  st.max_normal_axis_error_deg = e.max_normal_axis_deg;
+  st.mean_sigma_p_error = e.sum_sigma_p / static_cast<double>(n);
+  st.mean_sigma_n_error_deg = e.sum_sigma_n / static_cast<double>(n) * 180 / std::numbers::pi;
   st.quantise_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
 }

@@ -9,6 +9,7 @@
 //         solvers are most of the compile time of the builder.
 
 #include <Eigen/Eigenvalues>
+#include <array>
 #include <cmath>
 
 #include "pca_octree_internal.hpp"
@@ -35,6 +36,21 @@ mat3d canonical_frame(vec3d f1, vec3d f3, const vec3d& toward) {
   return f;
 }
 
+/// Normals within asin(√near_pole) ≈ 11.5° of the pole take theta_over_sin_squared() instead
+/// of atan2: most normals of a node lie there, and atan2 was most of the normal PCA's time.
+constexpr double near_pole = 0.04;
+/// (θ / sin θ)² for s = sin²θ ≤ near_pole, θ < π/2: the series asin²(x) / x² =
+/// Σ_{n≥1} 2^(2n−1)·s^(n−1) / (n²·C(2n, n)) to n = 9; the next term is below 1e-14 relative
+/// at s = near_pole (what atan2 gives, to rounding).
+double theta_over_sin_squared(double s) {
+  constexpr std::array<double, 9> c{
+      1.0,          1.0 / 3,        8.0 / 45,     4.0 / 35,          128.0 / 1575,
+      128.0 / 2079, 1024.0 / 21021, 256.0 / 6435, 131072.0 / 3938220};
+  double p = c[8];
+  for (std::size_t k = 8; k-- > 0;) p = p * s + c[k];
+  return p;
+}
+
 /// any_orthogonal() in double (the float one would leave 1e-8 of non-orthogonality).
 vec3d any_orthogonal_d(const vec3d& n) {
   const vec3d a = n.cwiseAbs();
@@ -49,18 +65,32 @@ vec3d any_orthogonal_d(const vec3d& n) {
 // ---------------------------------------------------------------------------------------------
 // §3: position PCA with the degenerate rules.
 // ---------------------------------------------------------------------------------------------
-pca_position_result pca_positions(const vec3d* p, std::size_t n, const vec3d& mean_normal) {
-  pca_position_result r;
-  if (n == 0) return r;
+scatter_accumulator position_moments(const vec3d* p, std::size_t n) {
+  scatter_accumulator a;
+  if (n == 0) return a;
   vec3d mean = vec3d::Zero();
   for (std::size_t i = 0; i < n; ++i) mean += p[i];
   mean /= static_cast<double>(n);
-  mat3d cov = mat3d::Zero();
+  mat3d s = mat3d::Zero();
   for (std::size_t i = 0; i < n; ++i) {
     const vec3d d = p[i] - mean;
-    cov.noalias() += d * d.transpose();
+    s.noalias() += d * d.transpose();
   }
-  cov /= static_cast<double>(n);
+  a.n = static_cast<double>(n);
+  a.mean = mean;
+  a.scatter = s;
+  return a;
+}
+
+pca_position_result pca_positions(const vec3d* p, std::size_t n, const vec3d& mean_normal) {
+  if (n == 0) return {};
+  const scatter_accumulator a = position_moments(p, n);
+  return pca_positions_from(a.mean, a.covariance(), mean_normal);
+}
+
+pca_position_result pca_positions_from(const vec3d& mean, const mat3d& cov,
+                                       const vec3d& mean_normal) {
+  pca_position_result r;
   r.mean = mean;
   const vec3d normal = (all_finite(mean_normal) && mean_normal.norm() > 0.5)
                            ? mean_normal.normalized()
@@ -130,11 +160,25 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
   f.col(1) = z.cross(f.col(0));
   f.col(2) = z;
   // Second moments of the unwrapped normals about the pole (the generator of §4 is centred
-  // there).
+  // there): uv·uvᵀ = (θ/r)²·(x, y)(x, y)ᵀ for the normal (x, y, z) in the frame, r = |(x, y)|.
+  const mat3d ft = f.transpose();
   Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
   for (std::size_t i = 0; i < count; ++i) {
-    const vec2d uv = unwrap_normal(f, n[i].cast<double>());
-    m.noalias() += uv * uv.transpose();
+    const vec3d l = ft * n[i].cast<double>();
+    const vec2d xy = l.head<2>();
+    const double r2 = xy.squaredNorm(), len2 = r2 + l.z() * l.z();
+    double w;  // (θ/r)²
+    if (l.z() > 0 && r2 <= near_pole * len2) {
+      w = theta_over_sin_squared(r2 / len2) / len2;
+    } else if (r2 > 0) {
+      const double theta = std::atan2(std::sqrt(r2), l.z());
+      w = theta * theta / r2;
+    } else {  // on the axis: the pole adds nothing, the antipode unwraps to (π, 0)
+      const double theta = std::atan2(0.0, l.z());
+      m(0, 0) += theta * theta;
+      continue;
+    }
+    m.noalias() += w * (xy * xy.transpose());
   }
   if (count > 0) m /= static_cast<double>(count);
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(m);
@@ -151,22 +195,35 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
   return r;
 }
 
-/// §3: colour PCA of (r, g, b) in [0, 1]; no floor on σ_c (the paper finds none necessary).
-pca_colour pca_colours(const rgb8* c, std::size_t n) {
-  pca_colour r;
-  vec3d mean = vec3d::Zero();
+scatter_accumulator colour_moments(const rgb8* c, std::size_t n) {
+  scatter_accumulator a;
+  if (n == 0) return a;
   const auto get = [&](std::size_t i) -> vec3d {
     const rgb8 k = c[i];
     return vec3d(k.r, k.g, k.b) / 255.0;
   };
+  vec3d mean = vec3d::Zero();
   for (std::size_t i = 0; i < n; ++i) mean += get(i);
   mean /= static_cast<double>(n);
-  mat3d cov = mat3d::Zero();
+  mat3d s = mat3d::Zero();
   for (std::size_t i = 0; i < n; ++i) {
     const vec3d d = get(i) - mean;
-    cov.noalias() += d * d.transpose();
+    s.noalias() += d * d.transpose();
   }
-  cov /= static_cast<double>(n);
+  a.n = static_cast<double>(n);
+  a.mean = mean;
+  a.scatter = s;
+  return a;
+}
+
+/// §3: colour PCA of (r, g, b) in [0, 1]; no floor on σ_c (the paper finds none necessary).
+pca_colour pca_colours(const rgb8* c, std::size_t n) {
+  const scatter_accumulator a = colour_moments(c, n);
+  return pca_colours_from(a.mean, a.covariance());
+}
+
+pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov) {
+  pca_colour r;
   Eigen::SelfAdjointEigenSolver<mat3d> es(cov);
   const vec3d ev = es.eigenvalues().cwiseMax(0.0);
   mat3d f = mat3d::Identity();

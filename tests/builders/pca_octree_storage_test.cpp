@@ -1,5 +1,7 @@
 // Tests of the PCA octree's file and of hard inputs (Kalaiah & Varshney 2003 §3.1 storage; the
 // DESIGN's numerics and errors). Each case says why its expectation holds.
+#include <bit>
+
 #include "builders/pca_octree_test_util.hpp"
 
 namespace pbr_lod {
@@ -45,12 +47,83 @@ TEST(pca_octree, SaveLoadRoundTripsBitExactly) {
 }
 
 // The same input and options give the same bytes whatever the thread count (no timings in the
-// file, parallel steps combine in a fixed order).
+// file, parallel steps combine in a fixed order). 70 000 points: enough for the root to be
+// partitioned in parallel chunks (≥ 65 536 points) and for k-means' 16 k sample.
 TEST(pca_octree, FileBytesDoNotDependOnThreads) {
-  const auto pts = demo_points(5000);
+  const auto pts = demo_points(70000);
   build_pca_octree(pts, {.threads = 1}).save(temp("t1.lod"));
   build_pca_octree(pts, {.threads = 3}).save(temp("t3.lod"));
   EXPECT_EQ(read_bytes(temp("t1.lod")), read_bytes(temp("t3.lod")));
+}
+
+// The octree against a brute-force one: §3's rule (split a cell at its centre while it holds
+// more than leaf_size points that are not all equal) applied breadth first, one node at a time.
+// The builder partitions large nodes (≥ 65 536 points) in parallel chunks, splits the levels
+// below 256 nodes' worth in parallel and merges the parts back;
+// the result must be this tree node for node: same order, children, octant masks and depths,
+// and each node's position statistics those of its own points (the builder merges moments
+// bottom-up instead of summing every node's points).
+TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
+  const auto cloud = make_wavy_surface(80000, 5);
+  const auto pts = point_set<with_normals>::from(cloud);
+  const auto t = build_pca_octree(pts, {.leaf_size = 4, .quantise = false, .threads = 3});
+  struct cell {
+    std::vector<std::uint32_t> points;
+    vec3d min;
+    double size;
+    std::uint8_t depth;
+  };
+  std::vector<cell> q(1);
+  for (std::uint32_t i = 0; i < pts.size(); ++i) q[0].points.push_back(i);
+  q[0].min = t.cube_min();
+  q[0].size = t.cube_size();
+  const auto rel = [&](std::uint32_t i) -> vec3d {
+    return pts.positions[i].cast<double>() - t.origin();
+  };
+  ASSERT_EQ(pts.origin, vec3d::Zero());
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    ASSERT_LT(i, t.nodes().size());
+    const cell c = q[i];
+    const auto& nd = t.at(static_cast<std::uint32_t>(i));
+    ASSERT_EQ(nd.depth, c.depth) << i;
+    // Inner nodes merge their children's moments: the same PCA as over their own points.
+    std::vector<vec3d> own;
+    for (const auto k : c.points) own.push_back(rel(k));
+    const auto ref =
+        detail::pca_positions(own.data(), own.size(), nd.normal_frame.col(2).cast<double>());
+    ASSERT_LT((nd.mean.cast<double>() - ref.mean).norm(), 1e-6 * t.cube_size()) << i;
+    for (int k = 0; k < 3; ++k)
+      ASSERT_NEAR(nd.sigma[k], ref.sigma[k], 1e-5 * ref.sigma[0] + 1e-14) << i << " σ" << k;
+    bool same = true;
+    for (const auto k : c.points) same = same && rel(k) == rel(c.points[0]);
+    if (c.points.size() <= 4 || same) {
+      ASSERT_EQ(nd.count, 0u) << i;
+      continue;
+    }
+    const double half = 0.5 * c.size;
+    const vec3d mid = c.min + vec3d::Constant(half);
+    std::array<cell, 8> kids;
+    for (const auto k : c.points) {
+      const vec3d p = rel(k);
+      const unsigned o = (p.x() >= mid.x() ? 1u : 0u) | (p.y() >= mid.y() ? 2u : 0u) |
+                         (p.z() >= mid.z() ? 4u : 0u);
+      kids[o].points.push_back(k);
+    }
+    ASSERT_EQ(nd.first, q.size()) << i;
+    unsigned mask = 0;
+    for (unsigned o = 0; o < 8; ++o) {
+      if (kids[o].points.empty()) continue;
+      mask |= 1u << o;
+      kids[o].min = c.min + vec3d((o & 1) ? half : 0, (o & 2) ? half : 0, (o & 4) ? half : 0);
+      kids[o].size = half;
+      kids[o].depth = static_cast<std::uint8_t>(c.depth + 1);
+      q.push_back(std::move(kids[o]));
+    }
+    ASSERT_EQ(nd.mask, mask) << i;
+    ASSERT_EQ(nd.count, std::popcount(mask)) << i;
+  }
+  EXPECT_EQ(q.size(), t.nodes().size());
+  EXPECT_GT(q.size(), 2000u) << "deep enough for the parallel parts";
 }
 
 // Corrupt files give a FormatError naming the file and what is wrong, never a crash.

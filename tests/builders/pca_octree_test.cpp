@@ -171,6 +171,38 @@ TEST(pca_octree, UnwrapRoundTrips) {
 
 // ---- §3.1: quantisation ---------------------------------------------------------------------
 
+// pca_normals() takes a series instead of atan2 for normals near the pole: its σ_n must equal
+// the brute-force moments of unwrap_normal() (the definition) to rounding, for spreads that put
+// every normal near the pole, some, and none (σ 0.02, 0.2 and 0.8 rad about the mean), and
+// for normals exactly on the axis.
+TEST(pca_octree, NormalMomentsMatchTheUnwrapDefinition) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g;
+  for (const double spread : {0.02, 0.2, 0.8}) {
+    const mat3d F = random_rotation(rng);
+    std::vector<vec3f> n(5000);
+    for (auto& m : n)
+      m = detail::wrap_normal(F, vec2d(spread * g(rng), 0.5 * spread * g(rng))).cast<float>();
+    const auto r = detail::pca_normals(n.data(), n.size(), vec3d::UnitZ());
+    Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
+    for (const auto& v : n) {
+      const vec2d uv = detail::unwrap_normal(r.frame, v.cast<double>());
+      m += uv * uv.transpose();
+    }
+    m /= static_cast<double>(n.size());
+    const double major = r.sigma.x() * r.sigma.x(), minor = r.sigma.y() * r.sigma.y();
+    // In the result's frame the moments are diagonal, with σ² on the diagonal.
+    EXPECT_NEAR(m(0, 0), major, 1e-12 * major) << spread;
+    EXPECT_NEAR(m(1, 1), minor, 1e-12 * major) << spread;
+    EXPECT_NEAR(m(0, 1), 0.0, 1e-12 * major) << spread;
+  }
+  // Normals exactly on the axis: three at +z (the mean, so the pole) and one at −z, which
+  // unwraps to (π, 0): the moments are diag(π²/4, 0), so σ_n = (π/2, 0).
+  const std::vector<vec3f> axis{vec3f::UnitZ(), vec3f::UnitZ(), vec3f::UnitZ(), -vec3f::UnitZ()};
+  const auto r = detail::pca_normals(axis.data(), axis.size(), vec3d::UnitZ());
+  EXPECT_NEAR(r.sigma.x(), std::numbers::pi / 2, 1e-12);
+  EXPECT_NEAR(r.sigma.y(), 0.0, 1e-12);
+}
 // The quantised tree has the same octree as the float one (quantisation does not change the
 // structure), so node by node: μ_p within half a step of 10 bits of its cell, f_p³ and the mean
 // normal within the 16-bit normal table's stated bound, f_p¹ and f_n¹ within twice that plus

@@ -262,6 +262,13 @@ struct pca_render_options {
   float point_px = 1;
   /// Refine a node needing more than this many points (§4: 40).
   float split_points = 40;
+  /// Fig. 6 DoMerge in pca_octree_cut. 0: a cut node asks its parent to merge as soon as the
+  /// parent need not split, so the kept cut is exactly the fresh traversal's. > 0: the paper's
+  /// hysteresis ("screen-space size less than a threshold (8)"), read as an area: a node that
+  /// is drawn asks only while its projected bounding sphere covers fewer than merge_px pixels
+  /// (in units of point_px²; culled nodes ask always), and still only when its parent need not
+  /// split. The cut is then at least as fine as the fresh traversal's and changes less often.
+  float merge_px = 0;
   /// Upper bound on the points of one node (a node reaching the eye plane counts the whole
   /// viewport as its area: at 512² that is 3.3 M points, so this cap applies).
   std::uint32_t max_points = 1u << 20;
@@ -433,8 +440,9 @@ struct pca_octree_policy : default_policy {
 ///     walk continues with the first child;
 ///   * otherwise it is drawn (or stays culled: frustum, or normal cone — the cone's width covers
 ///     the widest normal-ellipse intercept, γ·σ_n¹, of the subtree).
-/// The parent test stands for the paper's "screen-space size below 8 pixels": with it, the cut
-/// after a frame is exactly the fresh traversal's (the split test is monotone, see
+/// By default the parent test stands for the paper's "screen-space size below 8 pixels" (which
+/// pca_render_options::merge_px restores, with its hysteresis): with it, the cut after a frame
+/// is exactly the fresh traversal's (the split test is monotone, see
 /// pca_octree_policy), so the frame draws the same points, in the same order, while evaluating
 /// only the list's nodes and their parents. Generated points live in a cache bank of 16-point
 /// blocks: a node keeps the blocks it filled while it stays in the cut and generates only the
@@ -500,7 +508,7 @@ class pca_octree_cut {
     node_id n = head_;
     while (n != none) {
       const node_id q = parent_[n];
-      if (q != none && state(q, v, o, p) != refine) {  // merge request to the parent
+      if (q != none && state(q, v, o, p) != refine && wants_merge(n, v, o, p)) {
         if (merge_stamp_[q] != frame_) {
           merge_stamp_[q] = frame_;
           merge_count_[q] = 1;
@@ -580,6 +588,16 @@ class pca_octree_cut {
       r = refine;
     state_[n] = static_cast<std::uint8_t>(r);
     return r;
+  }
+  /// Fig. 6 DoMerge (see pca_render_options::merge_px).
+  bool wants_merge(node_id n, const view& v, const traverse_options& o,
+                   const pca_octree_policy& p) {
+    if (!(p.render.merge_px > 0)) return true;
+    const int s = state(n, v, o, p);
+    if (s == culled_frustum || s == culled_backface) return true;
+    const float r = projected_radius_exact(v, t_->bounding_sphere(n));
+    const float px = p.render.point_px;
+    return std::isfinite(r) && std::numbers::pi_v<float> * r * r / (px * px) < p.render.merge_px;
   }
   /// Replaces n in the list by its children; returns the first child.
   node_id split(node_id n) {
