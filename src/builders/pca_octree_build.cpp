@@ -399,7 +399,7 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   std::vector<vec3f> normals;
   if (in.normals.empty()) {
     const auto te = clock_type::now();
-    normals = estimate_normals(in.positions, o.knn, true);
+    normals = estimate_normals(in.positions, o.knn, true, threads);
     st.estimation_seconds = seconds_since(te);
     st.estimated_normals = true;
   } else {

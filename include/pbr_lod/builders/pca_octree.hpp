@@ -93,7 +93,8 @@ struct pca_octree_options {
   std::uint64_t kmeans_seed = 1;
   /// Neighbours for the PCA normal of a sample when the input has no normals (core/estimation).
   int knn = 16;
-  /// Threads for the build (0 = hardware concurrency). The file does not depend on it.
+  /// Threads for the build, the normal estimation included (0 = hardware concurrency). The file
+  /// does not depend on it.
   unsigned threads = 0;
   /// Called with the fraction done (0..1); return false to cancel (build throws Cancelled).
   std::function<bool(double)> progress = {};
