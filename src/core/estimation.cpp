@@ -472,6 +472,11 @@ void check_normals(std::span<const vec3f> positions, std::span<const vec3f> norm
                             " is zero or not finite");
 }
 
+/// Reports the fraction done between stages; a false answer cancels.
+void report(const estimation_options& opt, double fraction) {
+  if (opt.progress && !opt.progress(fraction)) throw Cancelled("estimation: cancelled");
+}
+
 void check_options(const estimation_options& opt) {
   if (opt.k_normals < 3)
     throw InvalidArgument("estimate_normals: k = " + std::to_string(opt.k_normals) + " < 3");
@@ -492,9 +497,13 @@ std::vector<vec3f> estimate_normals(std::span<const vec3f> positions,
   const unsigned threads = resolve_threads(opt.threads);
   const sorted_points s = sort_points(positions);
   const knn_index index(s.pos);
+  report(opt, 0.1);
   const int kk = clamp_k(opt.k_normals, positions.size());
   const auto table = knn_table(s.pos, index, kk, threads);
-  return unsort(normals_from(s.pos, table, kk, kk, opt, threads), s.order);
+  report(opt, 0.7);
+  auto normals = unsort(normals_from(s.pos, table, kk, kk, opt, threads), s.order);
+  report(opt, 1);
+  return normals;
 }
 
 std::vector<vec3f> estimate_normals(std::span<const vec3f> positions, int k, bool orient,
@@ -530,13 +539,18 @@ estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
   const unsigned threads = resolve_threads(opt.threads);
   const sorted_points s = sort_points(positions);
   const knn_index index(s.pos);
+  report(opt, 0.1);
   const int kn = clamp_k(opt.k_normals, positions.size()),
             ke = clamp_k(opt.k_ellipses, positions.size());
   const int stride = std::max(kn, ke);
   const auto table = knn_table(s.pos, index, stride, threads);
+  report(opt, 0.6);
   const std::vector<vec3f> normals = normals_from(s.pos, table, stride, kn, opt, threads);
+  report(opt, 0.85);
   splat_axes e = ellipses_from(s.pos, normals, index, table, stride, ke, opt.ellipses, threads);
-  return {unsort(normals, s.order), {unsort(e.u, s.order), unsort(e.v, s.order)}};
+  estimated_splats out{unsort(normals, s.order), {unsort(e.u, s.order), unsort(e.v, s.order)}};
+  report(opt, 1);
+  return out;
 }
 
 estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions, int k_normals,

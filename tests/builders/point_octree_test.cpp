@@ -272,7 +272,20 @@ TEST(PointOctree, RejectsBadInput) {
   // Cancel from the progress callback: throws, returns nothing.
   EXPECT_THROW(
       (void)build_point_octree(demo_points(5000), {.progress = [](double f) { return f < 0.05; }}),
-      Cancelled);
+      Cancelled);  // Positions only: the k-NN estimation reports the first tenth and is cancelled
+                   // inside it.
+  point_set<positions_only> bare;
+  bare.positions = demo_points(5000).positions;
+  std::vector<double> seen;
+  EXPECT_THROW((void)build_point_octree(bare, {.progress =
+                                                   [&](double f) {
+                                                     seen.push_back(f);
+                                                     return f < 0.05;
+                                                   }}),
+               Cancelled);
+  ASSERT_GE(seen.size(), 2u);
+  EXPECT_GT(seen.back(), 0.0);
+  EXPECT_LT(seen.back(), 0.1);
 }
 
 // A parallel build reports progress only on the calling thread, rising from 0 to 1, with reports

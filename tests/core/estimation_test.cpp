@@ -247,6 +247,33 @@ TEST(EstimateNormals, OrientedTowardsTheViewpoint) {
   EXPECT_THROW((void)estimate_normals(pts, opt), InvalidArgument);
 }
 
+// Progress rises to 1 between the stages, on the calling thread; a false answer cancels with
+// Cancelled (the k-NN stage is the longest: a cancel at its end must not run the rest).
+TEST(EstimateNormals, ProgressAndCancel) {
+  const auto cloud = make_wavy_surface(20000, 2);
+  std::vector<double> seen;
+  estimation_options opt{.threads = 2, .progress = [&](double f) {
+                           seen.push_back(f);
+                           return true;
+                         }};
+  (void)estimate_normals_and_ellipses(cloud.positions, opt);
+  ASSERT_GE(seen.size(), 4u);
+  EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+  EXPECT_GT(seen.front(), 0.0);
+  EXPECT_EQ(seen.back(), 1.0);
+  seen.clear();
+  (void)estimate_normals(cloud.positions, opt);
+  ASSERT_GE(seen.size(), 3u);
+  EXPECT_EQ(seen.back(), 1.0);
+  std::size_t calls = 0;
+  opt.progress = [&](double f) {
+    ++calls;
+    return f < 0.5;
+  };
+  EXPECT_THROW((void)estimate_normals_and_ellipses(cloud.positions, opt), Cancelled);
+  EXPECT_EQ(calls, 2u);
+}
+
 // Two spheres far apart: the k-NN graph has two components and each is oriented from its own
 // top sample, so both come out outward (CGAL's mst_orient_normals oriented only the component
 // of the global top sample and left the other with canonical, mixed signs).

@@ -21,6 +21,7 @@
 // coordinates of a georeferenced scan cast to float would already have lost the surface.
 #pragma once
 
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -68,6 +69,9 @@ struct estimation_options {
                                     ///< the cloud's origin), for normal_orientation::viewpoint
   ellipse_rule ellipses = ellipse_rule::local_spacing;
   unsigned threads = 0;  ///< 0: all cores
+  /// Called on the calling thread between stages (index, k-NN, normals, ellipses) with the
+  /// fraction done; returning false cancels: the call throws pbr_lod::Cancelled.
+  std::function<bool(double)> progress = {};
 };
 
 /// Unit normals, one per position (P #P by 3 positions).

@@ -733,6 +733,8 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   if constexpr (In.colour) copy(work.colours, points.colours);
   estimation_options est_opt{
       .k_normals = opt.knn, .k_ellipses = opt.knn_ellipses, .threads = threads};
+  // The estimation is the first tenth of the reported progress; a cancel there throws Cancelled.
+  if (opt.progress) est_opt.progress = [&](double f) { return opt.progress(0.1 * f); };
   if (opt.viewpoint) {
     est_opt.orientation = normal_orientation::viewpoint;
     est_opt.viewpoint = vec3d(*opt.viewpoint - points.origin).template cast<float>();
