@@ -18,8 +18,10 @@
 
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_render.hpp"
+#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
 #include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/one_pass_shadows.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "support/data.hpp"
 
 namespace {
@@ -222,21 +224,27 @@ camera bench_camera(const rho_grid<3>& g, double dist, int size = 512) {
   return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {size, size});
 }
 
-// §4.1 / §5.1: the flexible traversal alone (counting sink), float vs fixed, splat size s.
+// §4.1 / §5.1: the flexible traversal alone (the common traverse with rho_grid_policy into a
+// counting sink: positions only), float vs fixed, splat size s.
+template <rho_grid_arithmetic Ar>
+traverse_stats traverse_once(const rho_grid<3>& g, const view& v, float s) {
+  const rho_grid_hierarchy<3, positions_only> h(g);
+  counting_sink<positions_only> sink;
+  const auto st = traverse(h, v, {.tolerance_px = s}, sink, rho_grid_policy<3, Ar>(g, v));
+  benchmark::DoNotOptimize(sink.points);
+  return st;
+}
 void bm_traverse(benchmark::State& state) {
   const auto& g = bunny_tri6();
   const view v(bench_camera(g, double(state.range(2)) / 10), g.origin());
-  rho_grid_render_options o{.splat_px = float(state.range(1))};
-  o.arithmetic = state.range(0) ? rho_grid_arithmetic::fixed : rho_grid_arithmetic::floating;
-  rho_grid_traverse_stats st;
-  for (auto _ : state) {
-    std::size_t n = 0;
-    st = rho_grid_traverse(g, v, o, [&](const rho_grid_cell_ref&, bool) { ++n; });
-    benchmark::DoNotOptimize(n);
-  }
+  const auto s = float(state.range(1));
+  traverse_stats st;
+  for (auto _ : state)
+    st = state.range(0) ? traverse_once<rho_grid_arithmetic::fixed>(g, v, s)
+                        : traverse_once<rho_grid_arithmetic::floating>(g, v, s);
   state.counters["visited"] = double(st.visited);
-  state.counters["splats"] = double(st.splats);
-  state.counters["points"] = double(st.points);
+  state.counters["splats"] = double(st.emitted_nodes);
+  state.counters["points"] = double(st.emitted_leaves);
   state.counters["cells/s"] = benchmark::Counter(double(st.visited) * double(state.iterations()),
                                                  benchmark::Counter::kIsRate);
 }
@@ -254,17 +262,28 @@ BENCHMARK(bm_traverse)
 // the rasteriser's two-pass shadow map.
 void bm_frame(benchmark::State& state) {
   const auto& g = bunny_tri6();
-  const camera cam = bench_camera(g, 2.5);
-  rho_grid_render_options o;
-  o.raster.fx = effects{.shading = true, .shadows = state.range(0) == 2};
-  o.raster.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
-  rho_grid_traverse_stats st;
-  for (auto _ : state) {
-    const image img = state.range(0) == 1 ? render_rho_grid_one_pass_shadows(g, cam, o, &st)
-                                          : render_rho_grid(g, cam, o, &st);
-    benchmark::DoNotOptimize(img.colour.data());
-  }
-  state.counters["drawn"] = double(st.splats + st.points);
+  const view v(bench_camera(g, 2.5), g.origin());
+  render_options o;
+  o.fx = effects{.shading = true, .shadows = state.range(0) == 2};
+  o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  const traverse_options t{.tolerance_px = 1};
+  const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
+  traverse_stats st;
+  with_rho_grid_hierarchy(g, [&](const auto& h) {
+    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+    for (auto _ : state) {
+      image img;
+      if constexpr (A.normal) {
+        if (state.range(0) == 1)
+          img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, &order), &st);
+      }
+      if (img.colour.empty())
+        img = render<A>(
+            v, o, [&](auto& sink) { st = traverse(h, v, t, sink, rho_grid_policy<3>(g, v)); });
+      benchmark::DoNotOptimize(img.colour.data());
+    }
+  });
+  state.counters["drawn"] = double(st.emitted_nodes + st.emitted_leaves);
   state.counters["fps"] =
       benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
 }
