@@ -82,11 +82,8 @@ image draw_grid(const rho_grid<R>& g, const view& v, const render_options& o, fl
 int render_lod(const render_request& r) {
   return visit_rho(rho_grid_file_rho(r.input), [&]<int R>() {
     const auto g = rho_grid<R>::load(r.input);
-    // The camera orbits the bounding cube.
-    point_cloud cube;
-    cube.origin = g.origin();
-    cube.positions = {vec3f::Zero(), vec3f::Constant(static_cast<float>(g.cube_side()))};
-    const camera cam = make_camera(cube, r.view);
+    // Framed like the input: the grid records the input's bounding sphere.
+    const camera cam = make_camera(g.input_centre(), g.input_radius(), r.view);
     const view v(cam, g.origin());
     render_options o = lod_render_options(r.view, g.has_materials());
     o.fx.shading = o.fx.shading && g.has_normals();

@@ -404,7 +404,7 @@ void check_round_trip(const rho_grid<Rho>& g) {
   const auto back = rho_grid<Rho>::parse(is);
   EXPECT_TRUE(back == g);
   // Payload size is exactly the §3.2 count; the file adds a fixed header and checksum.
-  const std::size_t header = 8 + 6 * 4 + 5 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
+  const std::size_t header = 8 + 6 * 4 + 9 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
   EXPECT_EQ(is.size(), header + (g.payload_bits(rho_grid_layout::is) + 7) / 8 + 8);
   const auto nis = g.serialise(rho_grid_layout::nis);
   EXPECT_EQ(nis.size(), header + (g.payload_bits(rho_grid_layout::nis) + 7) / 8 + 8);
@@ -442,7 +442,7 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     expect_cuts_and_flips_throw(bytes, 16, rng);
     // The first payload code: in NIS at payload bit 0, in IS after the root's σ bits. Flipping
     // each of its 27 bits adds or removes a child: the counts no longer agree.
-    const std::size_t payload = 8 + 6 * 4 + 5 * 8 + 3 * 8 + 8;
+    const std::size_t payload = 8 + 6 * 4 + 9 * 8 + 3 * 8 + 8;
     const int start = layout == rho_grid_layout::is ? g.sigma() : 0;
     for (int b = 0; b < 27; ++b) {
       auto bad = bytes;
@@ -452,7 +452,7 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     }
     // A level count that lies.
     auto bad = bytes;
-    bad[8 + 6 * 4 + 5 * 8 + 8] ^= 1;  // level 1 count
+    bad[8 + 6 * 4 + 9 * 8 + 8] ^= 1;  // level 1 count
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
     // Wrong version and magic.
     bad = bytes;
@@ -460,6 +460,22 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
     bad = bytes;
     bad[0] = 'X';
+    EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
+    // Files of versions 1 and 2 had no input bounds: rejected, with what to do.
+    for (const unsigned char old : {1, 2}) {
+      bad = bytes;
+      bad[8] = old;
+      try {
+        (void)rho_grid<3>::parse(reseal(bad));
+        ADD_FAILURE() << "version " << int(old) << " accepted";
+      } catch (const FormatError& e) {
+        EXPECT_NE(std::string(e.what()).find("rebuild"), std::string::npos) << e.what();
+      }
+    }
+    // A NaN input radius (the last header double before the level counts).
+    bad = bytes;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::memcpy(bad.data() + 8 + 6 * 4 + 8 * 8, &nan, 8);
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
   }
   EXPECT_THROW((void)rho_grid<3>::load("/nonexistent/rho.lod"), IoError);
@@ -543,7 +559,7 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
   EXPECT_DOUBLE_EQ(back.stats().bits_per_sample_incore, g.stats().bits_per_sample_incore);
   // The reported sizes are those of the file: header + both streams + checksum.
   const auto cs = g.coded_size();
-  const std::size_t header = 8 + 6 * 4 + 5 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
+  const std::size_t header = 8 + 6 * 4 + 9 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
   EXPECT_EQ(cs.file_bytes, bytes.size());
   EXPECT_EQ(header + cs.geometry_bytes + cs.attribute_bytes + 8, bytes.size());
   EXPECT_EQ(cs.geometry_bytes == 0, g.depth() == 0);
@@ -637,7 +653,7 @@ TEST(RhoGridCompressed, TruncatedOrCorruptStreamsAreErrors) {
   const auto bytes = g.serialise(rho_grid_layout::compressed);
   std::mt19937 rng(3);
   expect_cuts_and_flips_throw(bytes, 32, rng);
-  const std::size_t counts = 8 + 6 * 4 + 5 * 8, models = counts + 4 * 8, lengths = models + 8;
+  const std::size_t counts = 8 + 6 * 4 + 9 * 8, models = counts + 4 * 8, lengths = models + 8;
   const auto expect_error = [&](std::vector<unsigned char> b, const char* why) {
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(std::move(b))), FormatError) << why;
   };
