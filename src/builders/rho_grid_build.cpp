@@ -31,8 +31,8 @@
 #include "pbr_lod/builders/detail/rho_grid_impl.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
-#include "pbr_lod/raster/reference.hpp"
 
 namespace pbr_lod {
 namespace {
