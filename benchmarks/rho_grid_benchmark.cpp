@@ -224,24 +224,43 @@ camera bench_camera(const rho_grid<3>& g, double dist, int size = 512) {
   return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {size, size});
 }
 
-// §4.1 / §5.1: the flexible traversal alone (the common traverse with rho_grid_policy into a
-// counting sink: positions only), float vs fixed, splat size s.
+// §4.1 / §5.1: the flexible traversal (the common traverse with rho_grid_policy), float vs
+// fixed, splat size s. prims = 0: the traversal's decisions alone (the policy's emit only counts
+// the cells, what Render() costs without drawing); prims = 1: the cells' points (centre,
+// positions only) sent to a counting sink, what a renderer gets.
 template <rho_grid_arithmetic Ar>
-traverse_stats traverse_once(const rho_grid<3>& g, const view& v, float s) {
+struct counting_rho_policy : rho_grid_policy<3, Ar> {
+  std::size_t* cells = nullptr;
+  template <class H, class S>
+  void emit(const H&, const rho_grid_cell&, const view&, float, const traverse_options&, S&) const {
+    ++*cells;
+  }
+};
+template <rho_grid_arithmetic Ar>
+traverse_stats traverse_once(const rho_grid<3>& g, const view& v, float s, bool prims) {
   const rho_grid_hierarchy<3, positions_only> h(g);
   counting_sink<positions_only> sink;
-  const auto st = traverse(h, v, {.tolerance_px = s}, sink, rho_grid_policy<3, Ar>(g, v));
-  benchmark::DoNotOptimize(sink.points);
+  const traverse_options o{.tolerance_px = s};
+  if (prims) {
+    const auto st = traverse(h, v, o, sink, rho_grid_policy<3, Ar>(g, v));
+    benchmark::DoNotOptimize(sink.points);
+    return st;
+  }
+  std::size_t cells = 0;
+  const auto st =
+      traverse(h, v, o, sink, counting_rho_policy<Ar>{rho_grid_policy<3, Ar>(g, v), &cells});
+  benchmark::DoNotOptimize(cells);
   return st;
 }
 void bm_traverse(benchmark::State& state) {
   const auto& g = bunny_tri6();
   const view v(bench_camera(g, double(state.range(2)) / 10), g.origin());
   const auto s = float(state.range(1));
+  const bool prims = state.range(3) != 0;
   traverse_stats st;
   for (auto _ : state)
-    st = state.range(0) ? traverse_once<rho_grid_arithmetic::fixed>(g, v, s)
-                        : traverse_once<rho_grid_arithmetic::floating>(g, v, s);
+    st = state.range(0) ? traverse_once<rho_grid_arithmetic::fixed>(g, v, s, prims)
+                        : traverse_once<rho_grid_arithmetic::floating>(g, v, s, prims);
   state.counters["visited"] = double(st.visited);
   state.counters["splats"] = double(st.emitted_nodes);
   state.counters["points"] = double(st.emitted_leaves);
@@ -249,13 +268,15 @@ void bm_traverse(benchmark::State& state) {
                                                  benchmark::Counter::kIsRate);
 }
 BENCHMARK(bm_traverse)
-    ->ArgNames({"fixed", "s", "dist10"})
-    ->Args({0, 1, 25})
-    ->Args({1, 1, 25})
-    ->Args({0, 1, 80})
-    ->Args({1, 1, 80})
-    ->Args({0, 4, 25})
-    ->Args({1, 4, 25})
+    ->ArgNames({"fixed", "s", "dist10", "prims"})
+    ->Args({0, 1, 25, 0})
+    ->Args({1, 1, 25, 0})
+    ->Args({0, 1, 80, 0})
+    ->Args({1, 1, 80, 0})
+    ->Args({0, 4, 25, 0})
+    ->Args({1, 4, 25, 0})
+    ->Args({0, 1, 25, 1})
+    ->Args({1, 1, 25, 1})
     ->Unit(benchmark::kMillisecond);
 
 // Whole frames (512², shading) into the shared rasteriser: no shadows, one-pass shadows (§4.2),

@@ -35,6 +35,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -102,9 +103,12 @@ class rho_grid_hierarchy {
 
   /// Child j (digit j = x + ρ·y + ρ²·z, set in n's code) of inner cell n.
   [[nodiscard]] node_id child(const node_id& n, int j) const {
-    const auto& code = g_->code(n.cell);
+    return child(n, j, g_->first_child(n.cell) + std::uint32_t(g_->code(n.cell).rank(j)));
+  }
+  /// Child j of n when its cell index is already known (a traversal counting set bits).
+  [[nodiscard]] static node_id child(const node_id& n, int j, std::uint32_t cell) {
     return {
-        g_->first_child(n.cell) + std::uint32_t(code.rank(j)),
+        cell,
         n.level + 1,
         {n.pos[0] * Rho + std::uint32_t(j % Rho), n.pos[1] * Rho + std::uint32_t((j / Rho) % Rho),
          n.pos[2] * Rho + std::uint32_t(j / (Rho * Rho))}};
@@ -334,7 +338,7 @@ class rho_grid_policy {
   /// Tables for grid g seen by v (relative to g.origin()); children visited in `order` (a
   /// permutation of 0..ρ³−1, e.g. rho_grid_light_order) or in digit order.
   rho_grid_policy(const rho_grid<Rho>& g, const view& v, const std::array<int, R3>* order = nullptr)
-      : t_(g, v, Arith == rho_grid_arithmetic::fixed) {
+      : t_(g, v, Arith == rho_grid_arithmetic::fixed), digit_order_(order == nullptr) {
     if (order)
       order_ = *order;
     else
@@ -362,11 +366,22 @@ class rho_grid_policy {
   void for_each_child(const H& h, const rho_grid_cell& n, const state& hs, F&& f) const {
     const auto& code = h.grid().code(n.cell);
     const auto& tab = t_.levels[std::size_t(n.level) + 1];
-    for (const int j : order_) {
-      if (!code.test(j)) continue;
+    const auto visit_child = [&](int j, std::uint32_t cell) {
       const auto& d = tab.disp[std::size_t(j)];
-      f(h.child(n, j), state{hs.x + d.x, hs.y + d.y, hs.w + d.w});
+      f(H::child(n, j, cell), state{hs.x + d.x, hs.y + d.y, hs.w + d.w});
+    };
+    std::uint32_t cell = h.grid().first_child(n.cell);
+    if (digit_order_) {
+      // Digit order is the child table's: walk the set bits, no rank per child.
+      using word = typename rho_grid<Rho>::code_type::word;
+      constexpr int word_bits = rho_grid<Rho>::code_type::word_bits;
+      for (std::size_t i = 0; i < code.w.size(); ++i)
+        for (word bits = code.w[i]; bits != 0; bits = word(bits & (bits - 1)))
+          visit_child(int(i) * word_bits + std::countr_zero(bits), cell++);
+      return;
     }
+    for (const int j : order_)
+      if (code.test(j)) visit_child(j, cell + std::uint32_t(code.rank(j)));
   }
 
   template <class H, class S>
@@ -382,6 +397,7 @@ class rho_grid_policy {
 
  private:
   tables t_;
+  bool digit_order_;
   std::array<int, R3> order_;
 };
 
