@@ -18,8 +18,10 @@
 
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_render.hpp"
+#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
 #include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/one_pass_shadows.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "support/data.hpp"
 
 namespace {
@@ -222,49 +224,87 @@ camera bench_camera(const rho_grid<3>& g, double dist, int size = 512) {
   return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {size, size});
 }
 
-// §4.1 / §5.1: the flexible traversal alone (counting sink), float vs fixed, splat size s.
+// §4.1 / §5.1: the flexible traversal (the common traverse with rho_grid_policy), float vs
+// fixed, splat size s. prims = 0: the traversal's decisions alone (the policy's emit only counts
+// the cells, what Render() costs without drawing); prims = 1: the cells' points (centre,
+// positions only) sent to a counting sink, what a renderer gets.
+template <rho_grid_arithmetic Ar>
+struct counting_rho_policy : rho_grid_policy<3, Ar> {
+  std::size_t* cells = nullptr;
+  template <class H, class S>
+  void emit(const H&, const rho_grid_cell&, const view&, float, const traverse_options&, S&) const {
+    ++*cells;
+  }
+};
+template <rho_grid_arithmetic Ar>
+traverse_stats traverse_once(const rho_grid<3>& g, const view& v, float s, bool prims) {
+  const rho_grid_hierarchy<3, positions_only> h(g);
+  counting_sink<positions_only> sink;
+  const traverse_options o{.tolerance_px = s};
+  if (prims) {
+    const auto st = traverse(h, v, o, sink, rho_grid_policy<3, Ar>(g, v));
+    benchmark::DoNotOptimize(sink.points);
+    return st;
+  }
+  std::size_t cells = 0;
+  const auto st =
+      traverse(h, v, o, sink, counting_rho_policy<Ar>{rho_grid_policy<3, Ar>(g, v), &cells});
+  benchmark::DoNotOptimize(cells);
+  return st;
+}
 void bm_traverse(benchmark::State& state) {
   const auto& g = bunny_tri6();
   const view v(bench_camera(g, double(state.range(2)) / 10), g.origin());
-  rho_grid_render_options o{.splat_px = float(state.range(1))};
-  o.arithmetic = state.range(0) ? rho_grid_arithmetic::fixed : rho_grid_arithmetic::floating;
-  rho_grid_traverse_stats st;
-  for (auto _ : state) {
-    std::size_t n = 0;
-    st = rho_grid_traverse(g, v, o, [&](const rho_grid_cell_ref&, bool) { ++n; });
-    benchmark::DoNotOptimize(n);
-  }
+  const auto s = float(state.range(1));
+  const bool prims = state.range(3) != 0;
+  traverse_stats st;
+  for (auto _ : state)
+    st = state.range(0) ? traverse_once<rho_grid_arithmetic::fixed>(g, v, s, prims)
+                        : traverse_once<rho_grid_arithmetic::floating>(g, v, s, prims);
   state.counters["visited"] = double(st.visited);
-  state.counters["splats"] = double(st.splats);
-  state.counters["points"] = double(st.points);
+  state.counters["splats"] = double(st.emitted_nodes);
+  state.counters["points"] = double(st.emitted_leaves);
   state.counters["cells/s"] = benchmark::Counter(double(st.visited) * double(state.iterations()),
                                                  benchmark::Counter::kIsRate);
 }
 BENCHMARK(bm_traverse)
-    ->ArgNames({"fixed", "s", "dist10"})
-    ->Args({0, 1, 25})
-    ->Args({1, 1, 25})
-    ->Args({0, 1, 80})
-    ->Args({1, 1, 80})
-    ->Args({0, 4, 25})
-    ->Args({1, 4, 25})
+    ->ArgNames({"fixed", "s", "dist10", "prims"})
+    ->Args({0, 1, 25, 0})
+    ->Args({1, 1, 25, 0})
+    ->Args({0, 1, 80, 0})
+    ->Args({1, 1, 80, 0})
+    ->Args({0, 4, 25, 0})
+    ->Args({1, 4, 25, 0})
+    ->Args({0, 1, 25, 1})
+    ->Args({1, 1, 25, 1})
     ->Unit(benchmark::kMillisecond);
 
 // Whole frames (512², shading) into the shared rasteriser: no shadows, one-pass shadows (§4.2),
 // the rasteriser's two-pass shadow map.
 void bm_frame(benchmark::State& state) {
   const auto& g = bunny_tri6();
-  const camera cam = bench_camera(g, 2.5);
-  rho_grid_render_options o;
-  o.raster.fx = effects{.shading = true, .shadows = state.range(0) == 2};
-  o.raster.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
-  rho_grid_traverse_stats st;
-  for (auto _ : state) {
-    const image img = state.range(0) == 1 ? render_rho_grid_one_pass_shadows(g, cam, o, &st)
-                                          : render_rho_grid(g, cam, o, &st);
-    benchmark::DoNotOptimize(img.colour.data());
-  }
-  state.counters["drawn"] = double(st.splats + st.points);
+  const view v(bench_camera(g, 2.5), g.origin());
+  render_options o;
+  o.fx = effects{.shading = true, .shadows = state.range(0) == 2};
+  o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  const traverse_options t{.tolerance_px = 1};
+  const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
+  traverse_stats st;
+  with_rho_grid_hierarchy(g, [&](const auto& h) {
+    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+    for (auto _ : state) {
+      image img;
+      if constexpr (A.normal) {
+        if (state.range(0) == 1)
+          img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, &order), &st);
+      }
+      if (img.colour.empty())
+        img = render<A>(
+            v, o, [&](auto& sink) { st = traverse(h, v, t, sink, rho_grid_policy<3>(g, v)); });
+      benchmark::DoNotOptimize(img.colour.data());
+    }
+  });
+  state.counters["drawn"] = double(st.emitted_nodes + st.emitted_leaves);
   state.counters["fps"] =
       benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
 }

@@ -2,8 +2,10 @@
 #include <iostream>
 
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_render.hpp"
+#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
+#include "pbr_lod/raster/one_pass_shadows.hpp"
 #include "pbr_lod/raster/png.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "tool.hpp"
 
 namespace pbrlod_tool {
@@ -57,41 +59,57 @@ int build(const build_request& r) {
   });
 }
 
+/// One frame of g through the common traversal with the §4.1 policy (s = the tolerance); with
+/// shadows and normals, the paper's one-pass shadows (§4.2): children front to back from the
+/// light, shaded through raster/one_pass_shadows.hpp.
+template <int R>
+image draw_grid(const rho_grid<R>& g, const view& v, const render_options& o, float tolerance,
+                bool one_pass, traverse_stats& st) {
+  const traverse_options t{.tolerance_px = tolerance};
+  return with_rho_grid_hierarchy(g, [&](const auto& h) {
+    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+    if constexpr (A.normal) {
+      if (one_pass) {
+        const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
+        return render_one_pass_shadows(h, v, o, t, rho_grid_policy<R>(g, v, &order), &st);
+      }
+    }
+    return render<A>(v, o,
+                     [&](auto& sink) { st = traverse(h, v, t, sink, rho_grid_policy<R>(g, v)); });
+  });
+}
+
 int render_lod(const render_request& r) {
   return visit_rho(rho_grid_file_rho(r.input), [&]<int R>() {
     const auto g = rho_grid<R>::load(r.input);
-    // The camera orbits the bounding cube.
-    point_cloud cube;
-    cube.origin = g.origin();
-    cube.positions = {vec3f::Zero(), vec3f::Constant(static_cast<float>(g.cube_side()))};
-    const camera cam = make_camera(cube, r.view);
-    rho_grid_render_options o;
-    o.splat_px = r.tolerance;  // s: the splat condition dx, dy ≤ w·s (§4.1)
-    o.raster = lod_render_options(r.view, g.has_materials());
-    o.raster.fx.shading = o.raster.fx.shading && g.has_normals();
-    rho_grid_traverse_stats st;
+    // Framed like the input: the grid records the input's bounding sphere.
+    const camera cam = make_camera(g.input_centre(), g.input_radius(), r.view);
+    const view v(cam, g.origin());
+    render_options o = lod_render_options(r.view, g.has_materials());
+    o.fx.shading = o.fx.shading && g.has_normals();
+    const bool one_pass = o.fx.shadows && g.has_normals();
+    traverse_stats st;
     const auto t0 = clock_type::now();
-    // Shadows: the paper's one-pass front-to-back shadows (§4.2) when the grid has normals.
-    const bool one_pass = o.raster.fx.shadows && g.has_normals();
-    const image img = one_pass ? render_rho_grid_one_pass_shadows(g, cam, o, &st)
-                               : render_rho_grid(g, cam, o, &st);
+    const image img = draw_grid(g, v, o, r.tolerance, one_pass, st);
     const double frame_s = seconds_since(t0);
     write_png(r.output, img);
+    // splats: inner cells drawn at s pixels (the splat condition of §4.1); points: leaves.
     if (r.as_json) {
       json j;
       j.str("input", r.input).str("output", r.output).str("method", "rho-grid");
-      j.num("tolerance_px", r.tolerance).str("effects", o.raster.fx.to_string());
+      j.num("tolerance_px", r.tolerance).str("effects", o.fx.to_string());
       j.boolean("one_pass_shadows", one_pass);
       j.integer("width", img.width).integer("height", img.height);
       j.integer("cells_visited", static_cast<long long>(st.visited));
-      j.integer("culled", static_cast<long long>(st.culled));
-      j.integer("splats", static_cast<long long>(st.splats));
-      j.integer("points", static_cast<long long>(st.points));
+      j.integer("culled", static_cast<long long>(st.culled_frustum));
+      j.integer("splats", static_cast<long long>(st.emitted_nodes));
+      j.integer("points", static_cast<long long>(st.emitted_leaves));
       j.num("frame_seconds", frame_s);
       std::cout << j.text() << "\n";
     } else {
-      std::cout << "wrote " << r.output << ": " << st.splats << " splats and " << st.points
-                << " points at s = " << r.tolerance << " px (" << frame_s << " s)\n";
+      std::cout << "wrote " << r.output << ": " << st.emitted_nodes << " splats and "
+                << st.emitted_leaves << " points at s = " << r.tolerance << " px (" << frame_s
+                << " s)\n";
     }
     return 0;
   });

@@ -72,12 +72,16 @@ std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n,
 }
 
 camera make_camera(const point_cloud& c, const view_args& a) {
+  const auto [centre, radius] = world_bounds(c);
+  return make_camera(centre, radius, a);
+}
+
+camera make_camera(const vec3d& centre, double radius, const view_args& a) {
   const auto v = parse_numbers(a.view, ',', 3, "--view");
   const auto sz = parse_numbers(a.size, 'x', 2, "--size");
   if (!(sz[0] >= 1 && sz[1] >= 1 && sz[0] <= 16384 && sz[1] <= 16384))
     throw InvalidArgument("--size: width and height must lie in 1..16384");
   if (!(v[2] > 0)) throw InvalidArgument("--view: the distance must be positive");
-  const auto [centre, radius] = world_bounds(c);
   return camera::orbit(centre, radius > 0 ? radius : 1.0, v[0], v[1], v[2], a.up == "z" ? 2 : 1,
                        {static_cast<int>(sz[0]), static_cast<int>(sz[1])});
 }

@@ -174,6 +174,8 @@ struct view_args {
 std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n, const char* what);
 /// The orbit camera of --view/--size/--up around the bounding sphere of c.
 camera make_camera(const point_cloud& c, const view_args& a);
+/// The same around a world-space bounding sphere (a hierarchy's recorded input bounds).
+camera make_camera(const vec3d& centre, double radius, const view_args& a);
 /// --effects for a hierarchy: 'default' = shading, and colour when the hierarchy has colours.
 render_options lod_render_options(const view_args& a, bool has_colour);
 json error_json(const image_error& e);

@@ -25,10 +25,10 @@
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/memory.hpp"
+#include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
-#include "pbr_lod/raster/png.hpp"
-#include "pbr_lod/raster/reference.hpp"
+#include "pbr_lod/io/texture.hpp"
 
 namespace pbr_lod::detail {
 
@@ -272,13 +272,13 @@ void finalise_points(const vec3d& x, double r, const vec3d* c, std::size_t n, ve
 }
 
 struct texture {
-  image img;
+  texture_image img;
   [[nodiscard]] rgb8 at(double x, double y) const {  // texel coordinates, wrapped (GL_REPEAT)
     const auto w = static_cast<long>(img.width), h = static_cast<long>(img.height);
     long ix = static_cast<long>(std::floor(x)) % w, iy = static_cast<long>(std::floor(y)) % h;
     if (ix < 0) ix += w;
     if (iy < 0) iy += h;
-    return img.colour[static_cast<std::size_t>(iy) * static_cast<std::size_t>(w) +
+    return img.texels[static_cast<std::size_t>(iy) * static_cast<std::size_t>(w) +
                       static_cast<std::size_t>(ix)];
   }
   /// Texel coordinates of texture coordinate (u, v): OBJ's v grows upwards, the image's rows down.
@@ -987,7 +987,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   texture tex;
   if (colour) {
     if (textured) {
-      tex.img = read_png(mesh.texture_path);
+      tex.img = read_png_texture(mesh.texture_path);
       if (tex.img.width <= 0 || tex.img.height <= 0)
         throw FormatError(mesh.texture_path + ": empty texture");
       for (std::size_t f = 0; f < nf; ++f)

@@ -30,8 +30,9 @@
 
 #include "pbr_lod/builders/detail/rho_grid_impl.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
+#include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
-#include "pbr_lod/raster/reference.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -440,13 +441,22 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
 
 }  // namespace
 
+/// Records the input's bounding sphere (rho_grid::input_centre) in g.
+template <int Rho>
+rho_grid<Rho> with_input_bounds(rho_grid<Rho> g, const point_cloud& in) {
+  const sphere s = bounding_sphere_about_box_centre(in.positions);
+  detail::rho_grid_access<Rho>::set_input_bounds(g, in.origin + s.centre.cast<double>(),
+                                                 double(s.radius));
+  return g;
+}
+
 template <int Rho>
 rho_grid<Rho> build_rho_grid(const triangle_mesh& mesh, const rho_grid_options& options) {
-  return build_from_mesh<Rho>(mesh, options);
+  return with_input_bounds(build_from_mesh<Rho>(mesh, options), mesh.vertices);
 }
 template <int Rho>
 rho_grid<Rho> build_rho_grid(const point_cloud& points, const rho_grid_options& options) {
-  return build_from_points<Rho>(points, options);
+  return with_input_bounds(build_from_points<Rho>(points, options), points);
 }
 
 #define PBR_LOD_RHO_GRID_BUILD(R)                                                        \

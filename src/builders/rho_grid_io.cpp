@@ -4,15 +4,17 @@
 // File layout (little endian):
 //   magic "PBRLODRG", u32 version, u32 ρ, u32 depth k, u32 layout (0 NIS, 1 IS),
 //   u32 normal bits, u32 material bits, f64 origin[3], f64 cube side, f64 build seconds,
-//   u64 cells per level [k + 1], u64 payload bits, payload bytes ⌈bits/8⌉, u64 FNV-1a of all
-//   bytes before it.
+//   f64 input centre[3] (world), f64 input radius (rho_grid::input_centre), u64 cells per level [k
+//   + 1], u64 payload bits, payload bytes ⌈bits/8⌉, u64 FNV-1a of all bytes before it.
 // Payload, pre-order from the root (children in increasing digit order):
 //   NIS  ρ³-bit code of every inner cell, then the σ-bit attribute of every leaf
 //   IS   per cell: σ-bit attribute, then (inner cells) the ρ³-bit code
 // The cells of one level appear in pre-order in path order, which is the breadth-first order of
 // the in-core structure, so reading appends to per-level arrays and needs no reordering.
 //
-// Compressed layout (2, beyond the paper; version 2, NIS/IS files stay version 1): the same
+// Version 3 for every layout; versions 1 (NIS, IS) and 2 (compressed) had no input bounds and
+// are rejected with a message to rebuild.
+// Compressed layout (2, beyond the paper): the same
 // header up to the cells per level, then u32 geometry context model, u32 attribute predictor,
 // u64 geometry bytes G, u64 attribute bytes A, G + A bytes of the two range-coded streams
 // (rho_grid_codec.cpp), u64 FNV-1a.
@@ -32,8 +34,9 @@ namespace pbr_lod {
 namespace {
 
 constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'};
-constexpr std::uint32_t version = 1;             // NIS, IS
-constexpr std::uint32_t version_compressed = 2;  // + the compressed layout
+/// Bytes before the cells per level: magic, 6 u32, 9 f64 (origin, side, seconds, input bounds).
+constexpr std::size_t fixed_header_bytes = 8 + 6 * 4 + 9 * 8;
+constexpr std::uint32_t version = 3;  // + the input's bounds; 1 (NIS, IS) and 2 (compressed) before
 
 struct header_writer {
   std::vector<unsigned char>& b;
@@ -70,7 +73,7 @@ template <int Rho>
 void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_grid_layout layout) {
   header_writer h{out};
   for (char c : magic) h.put(c);
-  h.put(layout == rho_grid_layout::compressed ? version_compressed : version);
+  h.put(version);
   h.put(std::uint32_t(Rho));
   h.put(std::uint32_t(g.depth()));
   h.put(std::uint32_t(layout));
@@ -81,6 +84,10 @@ void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_gri
   h.put(g.origin().z());
   h.put(g.cube_side());
   h.put(g.stats().build_seconds);
+  h.put(g.input_centre().x());
+  h.put(g.input_centre().y());
+  h.put(g.input_centre().z());
+  h.put(g.input_radius());
   for (int l = 0; l <= g.depth(); ++l)
     h.put(std::uint64_t(g.level_begin(l + 1) - g.level_begin(l)));
 }
@@ -112,7 +119,7 @@ rho_grid_coded_size rho_grid<Rho>::coded_size() const {
   // Read the two stream lengths back from the file just written: the sizes are those of the
   // bytes the decoder reads, never an estimate.
   std::uint64_t gb = 0, ab = 0;
-  const std::size_t lengths = 8 + 6 * 4 + 5 * 8 + std::size_t(depth_ + 1) * 8 + 2 * 4;
+  const std::size_t lengths = fixed_header_bytes + std::size_t(depth_ + 1) * 8 + 2 * 4;
   std::memcpy(&gb, bytes.data() + lengths, 8);
   std::memcpy(&ab, bytes.data() + lengths + 8, 8);
   rho_grid_coded_size s;
@@ -171,9 +178,14 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   for (char c : magic)
     if (r.get<char>("magic") != c) throw FormatError(what + ": not a pbr_lod rho-grid (bad magic)");
   const auto ver = r.get<std::uint32_t>("version");
-  if (ver != version && ver != version_compressed)
+  if (ver == 1 || ver == 2)
+    throw FormatError(what + ": version " + std::to_string(ver) +
+                      " (written before files recorded their input's bounds); this library reads "
+                      "version " +
+                      std::to_string(version) + ": rebuild the file");
+  if (ver != version)
     throw FormatError(what + ": version " + std::to_string(ver) + ", this library reads " +
-                      std::to_string(version) + " and " + std::to_string(version_compressed));
+                      std::to_string(version));
   const auto rho_in = r.get<std::uint32_t>("rho");
   if (rho_in != std::uint32_t(Rho))
     throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
@@ -183,9 +195,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
     throw FormatError(what + ": depth " + std::to_string(depth) + " exceeds the maximum " +
                       std::to_string(rho_grid_max_depth(Rho)));
   const auto layout = r.get<std::uint32_t>("layout");
-  if (layout > 2 || (layout == 2) != (ver == version_compressed))
-    throw FormatError(what + ": unknown layout " + std::to_string(layout) + " for version " +
-                      std::to_string(ver));
+  if (layout > 2) throw FormatError(what + ": unknown layout " + std::to_string(layout));
   const auto nb = r.get<std::uint32_t>("normal bits");
   const auto mb = r.get<std::uint32_t>("material bits");
   if ((nb != 0 && (nb < std::uint32_t(normal_quantizer::min_bits) || nb > 16)) || mb > 8 ||
@@ -200,6 +210,13 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   const double seconds = r.get<double>("build seconds");
   if (!all_finite(origin) || !std::isfinite(side) || !(side > 0))
     throw FormatError(what + ": origin or cube side is not finite and positive");
+  vec3d in_centre;
+  in_centre.x() = r.get<double>("input centre");
+  in_centre.y() = r.get<double>("input centre");
+  in_centre.z() = r.get<double>("input centre");
+  const double in_radius = r.get<double>("input radius");
+  if (!all_finite(in_centre) || !std::isfinite(in_radius) || !(in_radius >= 0))
+    throw FormatError(what + ": input bounds are not finite (radius ≥ 0)");
   constexpr std::uint64_t R3 = std::uint64_t(Rho) * Rho * Rho;
   std::vector<std::uint64_t> per_level(depth + 1);
   std::uint64_t total = 0;
@@ -218,6 +235,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   if (layout == 2) {
     rho_grid g;
     access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+    access::set_input_bounds(g, in_centre, in_radius);
     const auto gm = r.get<std::uint32_t>("geometry context model");
     const auto am = r.get<std::uint32_t>("attribute predictor");
     if (gm > 2 || am > 1)
@@ -261,6 +279,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
 
   rho_grid g;
   access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+  access::set_input_bounds(g, in_centre, in_radius);
   auto& codes = access::codes(g);
   auto& attrs = access::attrs(g);
   std::vector<std::vector<code_type>> lcodes(depth);

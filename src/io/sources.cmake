@@ -8,7 +8,8 @@ target_sources(pbr_lod PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/ply_writer.cpp
   ${CMAKE_CURRENT_LIST_DIR}/openmesh_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/pcd_reader.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/las_reader.cpp)
+  ${CMAKE_CURRENT_LIST_DIR}/las_reader.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/png_read.cpp)
 
 # Debian's liblzf-dev ships a config defining liblzf::liblzf (include dir /usr/include/liblzf);
 # fall back to a plain search where it does not.

@@ -12,12 +12,14 @@
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/detail/rho_grid_impl.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_render.hpp"
+#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/one_pass_shadows.hpp"
 #include "pbr_lod/raster/png.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
 
@@ -87,6 +89,70 @@ template <int Rho>
 camera default_camera(const rho_grid<Rho>& g, int w = 256) {
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {w, w});
+}
+
+/// One drawn cell, and whether it was drawn as an inner cell's splat.
+struct drawn_cell {
+  rho_grid_cell cell;
+  bool splat;
+};
+
+/// rho_grid_policy that also records the cells it emits.
+template <int Rho, rho_grid_arithmetic Ar>
+struct recording_rho_policy : rho_grid_policy<Rho, Ar> {
+  std::vector<drawn_cell>* out = nullptr;
+  template <class H, class S>
+  void emit(const H& h, const rho_grid_cell& n, const view& v, float size,
+            const traverse_options& o, S& sink) const {
+    if (out) out->push_back({n, !h.is_leaf(n)});
+    rho_grid_policy<Rho, Ar>::emit(h, n, v, size, o, sink);
+  }
+};
+
+/// The §4.1 traversal of g (positions only) at splat size s; the drawn cells go to `out`.
+template <int Rho, rho_grid_arithmetic Ar = rho_grid_arithmetic::floating>
+traverse_stats traverse_cells(const rho_grid<Rho>& g, const view& v, float s,
+                              std::vector<drawn_cell>* out = nullptr) {
+  const rho_grid_hierarchy<Rho, positions_only> h(g);
+  counting_sink<positions_only> sink;
+  return traverse(h, v, traverse_options{.tolerance_px = s}, sink,
+                  recording_rho_policy<Rho, Ar>{rho_grid_policy<Rho, Ar>(g, v), out});
+}
+
+/// What `pbrlod render` draws: g with the attributes it stores, through render() and the
+/// common traversal with the §4.1 policy.
+template <int Rho>
+image render_grid(const rho_grid<Rho>& g, const camera& cam, float s, const render_options& ro,
+                  rho_grid_arithmetic a = rho_grid_arithmetic::floating,
+                  traverse_stats* st = nullptr) {
+  const view v(cam, g.origin());
+  return with_rho_grid_hierarchy(g, [&](const auto& h) {
+    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+    const traverse_options t{.tolerance_px = s};
+    traverse_stats ts;
+    const image img = render<A>(v, ro, [&](auto& sink) {
+      ts = a == rho_grid_arithmetic::fixed
+               ? traverse(h, v, t, sink, rho_grid_policy<Rho, rho_grid_arithmetic::fixed>(g, v))
+               : traverse(h, v, t, sink, rho_grid_policy<Rho>(g, v));
+    });
+    if (st) *st = ts;
+    return img;
+  });
+}
+
+/// §4.2: g (with normals) drawn with one-pass shadows, children front to back from the light.
+template <int Rho>
+image render_grid_one_pass(const rho_grid<Rho>& g, const camera& cam, float s,
+                           const render_options& ro, traverse_stats* ts,
+                           one_pass_shadow_stats* ss) {
+  const view v(cam, g.origin());
+  const auto order = rho_grid_light_order<Rho>(ro.sun.direction.normalized());
+  const traverse_options t{.tolerance_px = s};
+  const rho_grid_policy<Rho> p(g, v, &order);
+  if (g.has_materials())
+    return render_one_pass_shadows(rho_grid_hierarchy<Rho, with_normals_colours>(g), v, ro, t, p,
+                                   ts, ss);
+  return render_one_pass_shadows(rho_grid_hierarchy<Rho, with_normals>(g), v, ro, t, p, ts, ss);
 }
 
 /// Every truncation (lengths 0, then steps of 1 + n/step) and 200 random single-bit flips (the
@@ -338,7 +404,7 @@ void check_round_trip(const rho_grid<Rho>& g) {
   const auto back = rho_grid<Rho>::parse(is);
   EXPECT_TRUE(back == g);
   // Payload size is exactly the §3.2 count; the file adds a fixed header and checksum.
-  const std::size_t header = 8 + 6 * 4 + 5 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
+  const std::size_t header = 8 + 6 * 4 + 9 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
   EXPECT_EQ(is.size(), header + (g.payload_bits(rho_grid_layout::is) + 7) / 8 + 8);
   const auto nis = g.serialise(rho_grid_layout::nis);
   EXPECT_EQ(nis.size(), header + (g.payload_bits(rho_grid_layout::nis) + 7) / 8 + 8);
@@ -376,7 +442,7 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     expect_cuts_and_flips_throw(bytes, 16, rng);
     // The first payload code: in NIS at payload bit 0, in IS after the root's σ bits. Flipping
     // each of its 27 bits adds or removes a child: the counts no longer agree.
-    const std::size_t payload = 8 + 6 * 4 + 5 * 8 + 3 * 8 + 8;
+    const std::size_t payload = 8 + 6 * 4 + 9 * 8 + 3 * 8 + 8;
     const int start = layout == rho_grid_layout::is ? g.sigma() : 0;
     for (int b = 0; b < 27; ++b) {
       auto bad = bytes;
@@ -386,7 +452,7 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     }
     // A level count that lies.
     auto bad = bytes;
-    bad[8 + 6 * 4 + 5 * 8 + 8] ^= 1;  // level 1 count
+    bad[8 + 6 * 4 + 9 * 8 + 8] ^= 1;  // level 1 count
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
     // Wrong version and magic.
     bad = bytes;
@@ -394,6 +460,22 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
     bad = bytes;
     bad[0] = 'X';
+    EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
+    // Files of versions 1 and 2 had no input bounds: rejected, with what to do.
+    for (const unsigned char old : {1, 2}) {
+      bad = bytes;
+      bad[8] = old;
+      try {
+        (void)rho_grid<3>::parse(reseal(bad));
+        ADD_FAILURE() << "version " << int(old) << " accepted";
+      } catch (const FormatError& e) {
+        EXPECT_NE(std::string(e.what()).find("rebuild"), std::string::npos) << e.what();
+      }
+    }
+    // A NaN input radius (the last header double before the level counts).
+    bad = bytes;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::memcpy(bad.data() + 8 + 6 * 4 + 8 * 8, &nan, 8);
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
   }
   EXPECT_THROW((void)rho_grid<3>::load("/nonexistent/rho.lod"), IoError);
@@ -477,7 +559,7 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
   EXPECT_DOUBLE_EQ(back.stats().bits_per_sample_incore, g.stats().bits_per_sample_incore);
   // The reported sizes are those of the file: header + both streams + checksum.
   const auto cs = g.coded_size();
-  const std::size_t header = 8 + 6 * 4 + 5 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
+  const std::size_t header = 8 + 6 * 4 + 9 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
   EXPECT_EQ(cs.file_bytes, bytes.size());
   EXPECT_EQ(header + cs.geometry_bytes + cs.attribute_bytes + 8, bytes.size());
   EXPECT_EQ(cs.geometry_bytes == 0, g.depth() == 0);
@@ -571,7 +653,7 @@ TEST(RhoGridCompressed, TruncatedOrCorruptStreamsAreErrors) {
   const auto bytes = g.serialise(rho_grid_layout::compressed);
   std::mt19937 rng(3);
   expect_cuts_and_flips_throw(bytes, 32, rng);
-  const std::size_t counts = 8 + 6 * 4 + 5 * 8, models = counts + 4 * 8, lengths = models + 8;
+  const std::size_t counts = 8 + 6 * 4 + 9 * 8, models = counts + 4 * 8, lengths = models + 8;
   const auto expect_error = [&](std::vector<unsigned char> b, const char* why) {
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(std::move(b))), FormatError) << why;
   };
@@ -639,10 +721,9 @@ void check_valid(const rho_grid<Rho>& g, std::size_t leaves) {
   EXPECT_TRUE(all_finite(g.origin()));
   EXPECT_TRUE(std::isfinite(g.cube_side()) && g.cube_side() > 0);
   EXPECT_TRUE(rho_grid<Rho>::parse(g.serialise(rho_grid_layout::is)) == g);
-  rho_grid_render_options o;
-  o.raster.fx.shading = g.has_normals();
-  rho_grid_traverse_stats st;
-  const image img = render_rho_grid(g, default_camera(g, 64), o, &st);
+  render_options o;
+  o.fx.shading = g.has_normals();
+  const image img = render_grid(g, default_camera(g, 64), 1, o);
   for (float d : img.depth) EXPECT_FALSE(std::isnan(d));
 }
 
@@ -696,6 +777,45 @@ TEST(RhoGridDegenerate, FarFromTheOriginBuildsTheSameTree) {
 // §4, §4.1, §5.1 rendering
 // ---------------------------------------------------------------------------------------------
 
+// The ρ-grid models Hierarchy: children() are exactly the cells the code and child table name
+// (the breadth-first numbering is its own brute-force reference: every cell is reached once),
+// each child's bounding sphere lies inside its parent's, and the generic traversal with the
+// default policy at tolerance 0 and no culling emits every leaf once and nothing else.
+TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
+  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 4});
+  const rho_grid_hierarchy<3, with_normals> h(g);
+  std::vector<int> reached(g.cell_count(), 0);
+  std::vector<rho_grid_cell> stack{h.root()};
+  reached[0] = 1;
+  while (!stack.empty()) {
+    const rho_grid_cell n = stack.back();
+    stack.pop_back();
+    const sphere ps = h.bounding_sphere(n);
+    std::size_t count = 0;
+    for (const rho_grid_cell c : h.children(n)) {
+      ASSERT_EQ(c.level, n.level + 1);
+      ++reached[c.cell];
+      const sphere cs = h.bounding_sphere(c);
+      EXPECT_LE((cs.centre - ps.centre).norm() + cs.radius, ps.radius * (1 + 1e-5f));
+      stack.push_back(c);
+      ++count;
+    }
+    EXPECT_EQ(count, h.is_leaf(n) ? 0u : std::size_t(g.code(n.cell).count()));
+  }
+  EXPECT_EQ(std::count(reached.begin(), reached.end(), 1), std::ptrdiff_t(g.cell_count()));
+  const view v(default_camera(g), g.origin());
+  counting_sink<with_normals> sink;
+  const auto st = traverse(h, v, traverse_options{.tolerance_px = 0, .frustum_cull = false}, sink);
+  EXPECT_EQ(st.emitted_leaves, g.leaf_count());
+  EXPECT_EQ(st.emitted_nodes, 0u);
+  EXPECT_EQ(sink.points, g.leaf_count());
+  // Asking for attributes the grid does not store is an error, not garbage.
+  point_cloud bare;
+  bare.positions = {vec3f(0, 0, 0), vec3f(1, 1, 1)};
+  const auto gb = build_rho_grid<2>(bare, {.depth = 2});
+  EXPECT_THROW((void)(rho_grid_hierarchy<2, with_normals>(gb)), InvalidArgument);
+}
+
 // The float and the fixed-point traversals make the same decisions: the cells drawn agree except
 // where a test is within rounding of equality (bounded here to 0.1 % of the cells), and the
 // images agree to the same degree.
@@ -706,13 +826,12 @@ TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
       const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
       const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 40, 15, dist, 1, {200, 150});
       const view v(cam, g.origin());
+      std::vector<drawn_cell> dfl, dfx;
+      (void)traverse_cells(g, v, s, &dfl);
+      (void)traverse_cells<3, rho_grid_arithmetic::fixed>(g, v, s, &dfx);
       std::vector<std::uint32_t> fl, fx;
-      rho_grid_render_options o{.splat_px = s};
-      (void)rho_grid_traverse(g, v, o,
-                              [&](const rho_grid_cell_ref& r, bool) { fl.push_back(r.cell); });
-      o.arithmetic = rho_grid_arithmetic::fixed;
-      (void)rho_grid_traverse(g, v, o,
-                              [&](const rho_grid_cell_ref& r, bool) { fx.push_back(r.cell); });
+      for (const auto& d : dfl) fl.push_back(d.cell.cell);
+      for (const auto& d : dfx) fx.push_back(d.cell.cell);
       std::vector<std::uint32_t> diff;
       std::sort(fl.begin(), fl.end());
       std::sort(fx.begin(), fx.end());
@@ -720,11 +839,10 @@ TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
                                     std::back_inserter(diff));
       EXPECT_GT(fl.size(), 100u);
       EXPECT_LE(double(diff.size()), 1e-3 * double(fl.size())) << "s " << s << " dist " << dist;
-      rho_grid_render_options of{.splat_px = s};
-      of.raster.fx.shading = true;
-      const image a = render_rho_grid(g, cam, of);
-      of.arithmetic = rho_grid_arithmetic::fixed;
-      const image b = render_rho_grid(g, cam, of);
+      render_options of;
+      of.fx.shading = true;
+      const image a = render_grid(g, cam, s, of);
+      const image b = render_grid(g, cam, s, of, rho_grid_arithmetic::fixed);
       std::size_t differ = 0;
       for (std::size_t i = 0; i < a.size(); ++i) differ += a.colour[i] == b.colour[i] ? 0 : 1;
       EXPECT_LE(double(differ), 1e-3 * double(a.size()));
@@ -742,21 +860,20 @@ TEST(RhoGridRender, SplatConditionAndCulling) {
   // s = 1 goes on to the leaves.
   const auto count = [&](double dist, float s, double az = 30) {
     const camera cam = camera::orbit(c, 0.5 * g.cube_side(), az, 20, dist, 1, {256, 256});
-    rho_grid_render_options o{.splat_px = s};
-    return rho_grid_traverse(g, view(cam, g.origin()), o, [](const auto&, bool) {});
+    return traverse_cells(g, view(cam, g.origin()), s);
   };
+  // emitted_nodes: inner cells drawn as splats; emitted_leaves: leaves drawn as points.
   const auto far = count(60, 1), near = count(2, 1), mid = count(8, 1), coarse = count(8, 4);
-  EXPECT_GT(far.splats, 0u);
-  EXPECT_LT(far.splats + far.points, near.splats + near.points);
-  EXPECT_GT(near.points, 0u);
-  EXPECT_LT(coarse.splats + coarse.points, mid.splats + mid.points);
-  EXPECT_GT(coarse.splats, 0u);
+  EXPECT_GT(far.emitted_nodes, 0u);
+  EXPECT_LT(far.emitted_nodes + far.emitted_leaves, near.emitted_nodes + near.emitted_leaves);
+  EXPECT_GT(near.emitted_leaves, 0u);
+  EXPECT_LT(coarse.emitted_nodes + coarse.emitted_leaves, mid.emitted_nodes + mid.emitted_leaves);
+  EXPECT_GT(coarse.emitted_nodes, 0u);
   camera away = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 3, 1, {256, 256});
   away.target = away.eye + (away.eye - c);
-  const auto none = rho_grid_traverse(g, view(away, g.origin()), rho_grid_render_options{},
-                                      [](const auto&, bool) {});
-  EXPECT_EQ(none.splats + none.points, 0u);
-  EXPECT_GE(none.culled, 1u);
+  const auto none = traverse_cells(g, view(away, g.origin()), 1);
+  EXPECT_EQ(none.emitted_nodes + none.emitted_leaves, 0u);
+  EXPECT_GE(none.culled_frustum, 1u);
 }
 
 // Conservative bounds: every drawn inner cell's projected cube (its 8 corners, exactly) is at
@@ -768,24 +885,25 @@ TEST(RhoGridRender, SplatConditionIsConservative) {
   const view v(cam, g.origin());
   std::size_t checked = 0;
   const float s = 3;
-  (void)rho_grid_traverse(
-      g, v, rho_grid_render_options{.splat_px = s}, [&](const rho_grid_cell_ref& r, bool splat) {
-        if (!splat) return;
-        const double side = g.cell_side(r.level);
-        float x0 = 1e30f, x1 = -1e30f, y0 = 1e30f, y1 = -1e30f;
-        for (int k = 0; k < 8; ++k) {
-          const vec3f p((r.pos[0] + (k & 1)) * side, (r.pos[1] + ((k >> 1) & 1)) * side,
-                        (r.pos[2] + (k >> 2)) * side);
-          const vec2f q = v.eye_to_screen(v.to_eye(p));
-          x0 = std::min(x0, q.x());
-          x1 = std::max(x1, q.x());
-          y0 = std::min(y0, q.y());
-          y1 = std::max(y1, q.y());
-        }
-        EXPECT_LE(x1 - x0, s * (1 + 1e-4f));
-        EXPECT_LE(y1 - y0, s * (1 + 1e-4f));
-        ++checked;
-      });
+  std::vector<drawn_cell> drawn;
+  (void)traverse_cells(g, v, s, &drawn);
+  for (const auto& [r, splat] : drawn) {
+    if (!splat) continue;
+    const double side = g.cell_side(r.level);
+    float x0 = 1e30f, x1 = -1e30f, y0 = 1e30f, y1 = -1e30f;
+    for (int k = 0; k < 8; ++k) {
+      const vec3f p((r.pos[0] + (k & 1)) * side, (r.pos[1] + ((k >> 1) & 1)) * side,
+                    (r.pos[2] + (k >> 2)) * side);
+      const vec2f q = v.eye_to_screen(v.to_eye(p));
+      x0 = std::min(x0, q.x());
+      x1 = std::max(x1, q.x());
+      y0 = std::min(y0, q.y());
+      y1 = std::max(y1, q.y());
+    }
+    EXPECT_LE(x1 - x0, s * (1 + 1e-4f));
+    EXPECT_LE(y1 - y0, s * (1 + 1e-4f));
+    ++checked;
+  }
   EXPECT_GT(checked, 100u);
 }
 
@@ -866,13 +984,14 @@ TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
   for (float s : {1.0f, 2.0f, 4.0f, 8.0f}) {
     for (int az : {0, 120, 240}) {
       const camera cam = camera::orbit(c, 0.5 * g.cube_side(), az, 35, 2.5, 1, {128, 128});
-      rho_grid_render_options o{.splat_px = s};
-      o.raster.sun.direction = vec3f(-0.5f, 1.0f, 0.4f);
-      o.raster.fx = effects{.shading = true, .shadows = true};
-      rho_grid_traverse_stats st;
-      (void)render_rho_grid_one_pass_shadows(g, cam, o, &st);
+      render_options o;
+      o.sun.direction = vec3f(-0.5f, 1.0f, 0.4f);
+      o.fx = effects{.shading = true, .shadows = true};
+      traverse_stats ts;
+      one_pass_shadow_stats st;
+      (void)render_grid_one_pass(g, cam, s, o, &ts, &st);
       if (s >= 2) {
-        ASSERT_GT(st.splats, 0u) << "s " << s;  // coarse splats beside leaves
+        ASSERT_GT(ts.emitted_nodes, 0u) << "s " << s;  // coarse splats beside leaves
       }
       EXPECT_EQ(st.shadowed, 0u) << "s " << s << " azimuth " << az << ": " << st.shadowed << " of "
                                  << st.lit + st.shadowed << " samples";
@@ -885,15 +1004,15 @@ TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   // At 5 radii a leaf spans ~0.6 px: the points close the surface, so neither map leaks.
   const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 5, 1, {256, 256});
-  rho_grid_render_options o;
-  o.raster.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
-  o.raster.fx = effects{.shading = true, .colour = true, .shadows = true};
-  o.raster.shadow_map_size = 512;
-  rho_grid_traverse_stats st;
-  const image one = render_rho_grid_one_pass_shadows(g, cam, o, &st);
-  const image two = render_rho_grid(g, cam, o);
-  o.raster.fx.shadows = false;
-  const image unshadowed = render_rho_grid(g, cam, o);
+  render_options o;
+  o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  o.fx = effects{.shading = true, .colour = true, .shadows = true};
+  o.shadow_map_size = 512;
+  one_pass_shadow_stats st;
+  const image one = render_grid_one_pass(g, cam, 1, o, nullptr, &st);
+  const image two = render_grid(g, cam, 1, o);
+  o.fx.shadows = false;
+  const image unshadowed = render_grid(g, cam, 1, o);
   const auto e = compare_images(two, one);
   if (std::getenv("RHO_DEBUG_PNG")) {
     write_png("/tmp/rho_one.png", one);

@@ -1,6 +1,7 @@
 // Uses the installed headers and the shared library: builds a view and projects a sphere.
 #include <pbr_lod/core/camera.hpp>
 #include <pbr_lod/core/synthetic.hpp>
+#include <pbr_lod/traverse/screen_size.hpp>
 #include <pbr_lod/traverse/sink.hpp>
 #include <pbr_lod/version.hpp>
 

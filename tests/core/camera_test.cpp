@@ -3,6 +3,8 @@
 #include <random>
 
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/traverse/culling.hpp"
+#include "pbr_lod/traverse/screen_size.hpp"
 
 namespace pbr_lod {
 namespace {

@@ -1,9 +1,11 @@
-// Shadows (two-pass shadow map) and hole filling (screen-space reconstruction).
+// Shadows (two-pass shadow map, one-pass sink adapter) and hole filling (screen-space
+// reconstruction).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <vector>
 
+#include "pbr_lod/raster/one_pass_shadows.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 
 namespace pbr_lod {
@@ -116,6 +118,68 @@ TEST(Shadows, SplatsAndPointsCastShadows) {
     }
   EXPECT_TRUE(splat_shadow);
   EXPECT_TRUE(point_shadow);
+}
+
+// --- one-pass shadows (raster/one_pass_shadows.hpp) ----------------------------------------------
+
+/// Receives the shaded points: position and colour, in order.
+struct shaded_points {
+  std::vector<point_prim<attributes{.colour = true}>> out;
+  void point(const point_prim<attributes{.colour = true}>& p) { out.push_back(p); }
+  void splat(const splat_prim<attributes{.colour = true}>&) {}
+  void triangle(const triangle_prim<attributes{.colour = true}>&) {}
+};
+
+/// Points on a grid of spacing h over [-half, half]² at height y, normal +y.
+void plane_points(auto& sink, float y, float half, float h) {
+  for (float x = -half; x <= half + 1e-4f; x += h)
+    for (float z = -half; z <= half + 1e-4f; z += h) {
+      point_prim<N> p{vec3f(x, y, z), 1.0f};
+      p.normal = vec3f(0, 1, 0);
+      sink.point(p);
+    }
+}
+
+// A small square above a large one, light straight above. Sent front to back from the light (the
+// small square first), the large square's points under the small one are shadowed — exactly
+// those within the small square's extent, up to one footprint — and every other point is lit:
+// shaded white × ambient or white × Lambert (1, the normal faces the light). Sent back to front,
+// nothing can be shadowed yet when the large square arrives: the adapter depends on the order, as
+// the method does.
+TEST(OnePassShadows, SquareShadowsThePlaneBelowWhenDrawnFirst) {
+  const view v(camera::orbit(vec3d::Zero(), 2, 0, 60, 3, 1, {64, 64}), vec3d::Zero());
+  render_options o;
+  o.flat_colour = {200, 200, 200};
+  o.sun = {vec3f(0, 1, 0), 0.25f};
+  o.shadow_map_size = 512;
+  const float h = 0.05f, r = h * 1.3f;  // footprint r/√3 ≈ 0.75 h: the points close the surface
+  const sphere bounds{vec3f::Zero(), 2};
+  for (const bool front_to_back : {true, false}) {
+    shaded_points inner;
+    one_pass_shadow_sink<N, shaded_points> shade(v, o, vec3f(0, 1, 0), bounds, inner);
+    shade.node_radius(r);
+    if (front_to_back) plane_points(shade, 1, 0.5f, h);
+    plane_points(shade, 0, 1, h);
+    if (!front_to_back) plane_points(shade, 1, 0.5f, h);
+    std::size_t checked = 0;
+    for (const auto& p : inner.out) {
+      const bool under = p.position.y() < 0.5f && std::abs(p.position.x()) < 0.5f - r &&
+                         std::abs(p.position.z()) < 0.5f - r;
+      const bool clear = p.position.y() > 0.5f || std::abs(p.position.x()) > 0.5f + r ||
+                         std::abs(p.position.z()) > 0.5f + r;
+      const std::uint8_t lit = 200, dark = 50;  // 200 × 1, 200 × 0.25
+      if (under && front_to_back) {
+        EXPECT_EQ(p.colour.r, dark) << p.position.transpose();
+        ++checked;
+      } else if (clear || !front_to_back) {
+        EXPECT_EQ(p.colour.r, lit) << p.position.transpose();
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 800u);
+    EXPECT_EQ(shade.stats().lit + shade.stats().shadowed, inner.out.size());
+    EXPECT_EQ(shade.stats().shadowed > 0, front_to_back);
+  }
 }
 
 // --- hole filling ------------------------------------------------------------------------------

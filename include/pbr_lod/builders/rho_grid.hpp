@@ -16,11 +16,13 @@
 //                Eq. 4 (Table 1).
 //   §3.3         the in-core runtime structure: per inner cell its code, its attribute and a
 //                32-bit index into one contiguous child table; leaves hold their attribute only.
-//   §4, §4.1     flexible rendering (rho_grid_render.hpp): recursive traversal with transform
+//   §4, §4.1     flexible rendering (rho_grid_hierarchy.hpp): the grid as a Hierarchy and the
+//                paper's traversal as a policy of the common traverse — transform
 //                factorisation (displacement tables), conservative screen bounds from a bounds
 //                table, the splat condition dx ≤ w·s, dy ≤ w·s in homogeneous coordinates,
 //                frustum culling; §5.1 the same traversal in fixed point.
-//   §4.2         one-pass shadows for a directional light (rho_grid_render.hpp).
+//   §4.2         one-pass shadows for a directional light: the light's child order
+//                (rho_grid_hierarchy.hpp) and the shading sink (raster/one_pass_shadows.hpp).
 // The build runs level by level (§5.2: "constructed level-by-level"): only the cells of the
 // current level are held besides the output, so memory stays bounded by the structure itself.
 //
@@ -183,6 +185,12 @@ class rho_grid {
   [[nodiscard]] bool empty() const { return attrs_count_ == 0; }
   [[nodiscard]] vec3d origin() const { return origin_; }
   [[nodiscard]] double cube_side() const { return side_; }
+  /// The input's bounding sphere in world coordinates: centre of the input points' bounding box,
+  /// radius to the farthest point (core/bounds.hpp, bounding_sphere_about_box_centre) — what
+  /// `pbrlod render` frames, so the same --view frames an input and its ρ-grid alike. The cube
+  /// is larger (a power-of-ρ grid around the box) and would frame the model smaller.
+  [[nodiscard]] vec3d input_centre() const { return input_centre_; }
+  [[nodiscard]] double input_radius() const { return input_radius_; }
   [[nodiscard]] int normal_bits() const { return normal_bits_; }
   [[nodiscard]] int material_bits() const { return material_bits_; }
   [[nodiscard]] int sigma() const { return normal_bits_ + material_bits_; }
@@ -248,6 +256,7 @@ class rho_grid {
   /// Equal structure and attributes (sample points and stats are not compared).
   friend bool operator==(const rho_grid& a, const rho_grid& b) {
     return a.depth_ == b.depth_ && a.origin_ == b.origin_ && a.side_ == b.side_ &&
+           a.input_centre_ == b.input_centre_ && a.input_radius_ == b.input_radius_ &&
            a.normal_bits_ == b.normal_bits_ && a.material_bits_ == b.material_bits_ &&
            a.codes_ == b.codes_ && a.first_child_ == b.first_child_ && a.attrs_ == b.attrs_ &&
            a.level_start_ == b.level_start_ && a.attrs_count_ == b.attrs_count_;
@@ -258,6 +267,8 @@ class rho_grid {
   int depth_ = 0;
   vec3d origin_ = vec3d::Zero();
   double side_ = 1;
+  vec3d input_centre_ = vec3d::Zero();
+  double input_radius_ = 0;
   int normal_bits_ = 0, material_bits_ = 0;
   std::vector<code_type> codes_;            // inner cells
   std::vector<std::uint32_t> first_child_;  // inner cells

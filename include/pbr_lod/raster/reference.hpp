@@ -10,10 +10,8 @@
 //    square whose side is the projection of that diameter at the point's depth.
 #pragma once
 
-#include <cmath>
-#include <vector>
-
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/mesh_normals.hpp"  // area_weighted_normals(), which the reference shades with
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/core/triangle_mesh.hpp"
 #include "pbr_lod/raster/effects.hpp"
@@ -30,21 +28,5 @@ namespace pbr_lod {
 /// InvalidArgument when the cloud is invalid (point_cloud::validate).
 [[nodiscard]] image render_reference(const point_cloud& c, const camera& cam,
                                      const render_options& opt);
-
-/// Area-weighted vertex normals of a mesh (each face adds its cross product, i.e. its normal
-/// times twice its area, to its three vertices); unit length, or zero for a vertex without a
-/// face of non-zero area.
-[[nodiscard]] std::vector<vec3f> area_weighted_normals(const triangle_mesh& m);
-
-/// The unnormalised sums behind area_weighted_normals(), in double, faces in input order (on
-/// huge pages when large): area_weighted_normals(m)[i] == unit_or_zero(sums[i]). For builders
-/// that normalise on the way, without the float copy.
-[[nodiscard]] std::vector<vec3d> area_weighted_normal_sums(const triangle_mesh& m);
-
-/// s normalised to float, or zero when s has no (finite) length.
-[[nodiscard]] inline vec3f unit_or_zero(const vec3d& s) {
-  const double len = s.norm();
-  return len > 0 && std::isfinite(len) ? vec3f((s / len).cast<float>()) : vec3f::Zero();
-}
 
 }  // namespace pbr_lod

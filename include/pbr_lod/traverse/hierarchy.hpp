@@ -27,6 +27,8 @@
 
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/traverse/culling.hpp"
+#include "pbr_lod/traverse/screen_size.hpp"
 #include "pbr_lod/traverse/sink.hpp"
 
 namespace pbr_lod {

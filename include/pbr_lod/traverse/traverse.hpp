@@ -10,9 +10,23 @@
 // Method-specific behaviour plugs in through a Policy (see default_policy): the size estimate
 // (Pajarola's tilted-area metric, PMR's per-leaf level choice), the refine rule, and the emit
 // step. The traversal itself stays one loop; the policies are specialisations of it.
+//
+// A policy whose method decides from something other than a bounding sphere (the ρ-grid's
+// incremental homogeneous positions and bounds tables) may also define, all optional:
+//   p.root_state(h, v, o) -> State        per-entry state carried down the stack (the root's)
+//   p.visit(h, n, state, v, o) -> visit_result
+//                                         replaces the sphere tests, the size estimate and the
+//                                         refine rule: cull, emit or refine n
+//   p.for_each_child(h, n, state, f)      calls f(child, child_state) for n's children in the
+//                                         order they are to be visited (replaces h.children(n))
+// A policy without them compiles to the loop it always had: the entry holds no state (an empty
+// member takes no room) and none of the hooks' branches exist.
 #pragma once
 
+#include <algorithm>
+#include <concepts>
 #include <cstddef>
+#include <utility>
 #include <vector>
 
 #include "pbr_lod/traverse/hierarchy.hpp"
@@ -62,7 +76,36 @@ struct default_policy {
   }
 };
 
+/// What a policy's visit() decides for a node.
+struct visit_result {
+  enum class verdict { cull, emit, refine } what;
+  float size_px;  ///< the node's screen size, passed on to the policy's emit()
+};
+
 namespace detail {
+struct no_traverse_state {};
+template <class P, class H>
+concept has_root_state = requires(const P& p, const H& h, const view& v,
+                                  const traverse_options& o) {
+  p.root_state(h, v, o);
+};
+template <class P, class H>
+struct traverse_state {
+  using type = no_traverse_state;
+};
+template <class P, class H>
+requires has_root_state<P, H>
+struct traverse_state<P, H> {
+  using type = decltype(std::declval<const P&>().root_state(
+      std::declval<const H&>(), std::declval<const view&>(),
+      std::declval<const traverse_options&>()));
+};
+template <class P, class H, class State>
+concept has_visit = requires(const P& p, const H& h, const typename H::node_id& n, const State& s,
+                             const view& v, const traverse_options& o) {
+  { p.visit(h, n, s, v, o) } -> std::same_as<visit_result>;
+};
+
 /// Forwards to a sink and counts what passes, so the stats know primitives by kind.
 template <attributes A, class S>
 struct counting_forwarder {
@@ -91,40 +134,71 @@ traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S&
   traverse_stats st;
   if (h.empty()) return st;
   detail::counting_forwarder<H::attrs, S> out{sink};
+  using node_id = typename H::node_id;
+  using state_type = typename detail::traverse_state<Policy, H>::type;
   struct entry {
-    typename H::node_id node;
+    node_id node;
     int planes;  // frustum planes still straddled by the parent
+    [[no_unique_address]] state_type state;
   };
   std::vector<entry> stack;
   stack.reserve(256);
-  stack.push_back({h.root(), o.frustum_cull ? 0x3f : 0});
+  const int all_planes = o.frustum_cull ? 0x3f : 0;
+  if constexpr (detail::has_root_state<Policy, H>)
+    stack.push_back({h.root(), all_planes, policy.root_state(h, v, o)});
+  else
+    stack.push_back({h.root(), all_planes, {}});
   while (!stack.empty()) {
     const entry e = stack.back();
     stack.pop_back();
     ++st.visited;
-    const sphere s = h.bounding_sphere(e.node);
     int planes = e.planes;
-    if (o.cull_volume == traverse_options::volume::view_cone) {
-      if (o.frustum_cull && outside_view_cone(v, s)) {
+    float size;
+    bool refine;
+    if constexpr (detail::has_visit<Policy, H, state_type>) {
+      const visit_result r = policy.visit(h, e.node, e.state, v, o);
+      if (r.what == visit_result::verdict::cull) {
         ++st.culled_frustum;
         continue;
       }
-    } else if (planes != 0) {
-      planes = frustum_test(v, s, planes);
-      if (planes < 0) {
-        ++st.culled_frustum;
-        continue;
+      size = r.size_px;
+      refine = r.what == visit_result::verdict::refine;
+    } else {
+      const sphere s = h.bounding_sphere(e.node);
+      if (o.cull_volume == traverse_options::volume::view_cone) {
+        if (o.frustum_cull && outside_view_cone(v, s)) {
+          ++st.culled_frustum;
+          continue;
+        }
+      } else if (planes != 0) {
+        planes = frustum_test(v, s, planes);
+        if (planes < 0) {
+          ++st.culled_frustum;
+          continue;
+        }
       }
-    }
-    if constexpr (HasNormalCones<H>) {
-      if (o.backface_cull && back_facing(s, h.normal_cone(e.node), v.eye)) {
-        ++st.culled_backface;
-        continue;
+      if constexpr (HasNormalCones<H>) {
+        if (o.backface_cull && back_facing(s, h.normal_cone(e.node), v.eye)) {
+          ++st.culled_backface;
+          continue;
+        }
       }
+      size = policy.screen_size(h, e.node, s, v, o);
+      refine = policy.refine(h, e.node, size, o);
     }
-    const float size = policy.screen_size(h, e.node, s, v, o);
-    if (policy.refine(h, e.node, size, o)) {
-      for (const auto& c : h.children(e.node)) stack.push_back({c, planes});
+    if (refine) {
+      if constexpr (requires {
+                      policy.for_each_child(h, e.node, e.state, [](node_id, state_type) {});
+                    }) {
+        // The stack pops last-pushed first: reverse what the policy gave to visit it in order.
+        const std::size_t first = stack.size();
+        policy.for_each_child(h, e.node, e.state, [&](const node_id& c, const state_type& cs) {
+          stack.push_back({c, planes, cs});
+        });
+        std::reverse(stack.begin() + static_cast<std::ptrdiff_t>(first), stack.end());
+      } else {
+        for (const auto& c : h.children(e.node)) stack.push_back({c, planes, e.state});
+      }
       continue;
     }
     if (h.is_leaf(e.node))

@@ -72,6 +72,10 @@ struct rho_grid_access {
   static auto& attrs(grid& g) { return g.attrs_; }
   static auto& samples(grid& g) { return g.sample_points_; }
   static auto& stats(grid& g) { return g.stats_; }
+  static void set_input_bounds(grid& g, const vec3d& centre, double radius) {
+    g.input_centre_ = centre;
+    g.input_radius_ = radius;
+  }
   static void set_frame(grid& g, int depth, const vec3d& origin, double side, int nb, int mb) {
     g.depth_ = depth;
     g.origin_ = origin;

@@ -1,0 +1,407 @@
+// pbr_lod — the ρ-grid as a Hierarchy, and its §4.1 traversal as a policy of the common traverse
+// (Duguet & Drettakis 2004, §4, §4.1, §4.2 child order, §5.1).
+//
+// rho_grid_hierarchy<ρ, A> models Hierarchy (traverse/hierarchy.hpp) over a built rho_grid<ρ>:
+// a node is a cell with its level and integer position (positions are implicit in the path),
+// A ⊆ {normal, colour} is the compile-time attribute set of the primitives (normal = the decoded
+// σ-bit normal, colour = the material's palette colour), and emit() sends one point_prim at the
+// cell centre. Any traversal policy can drive it; rho_grid_policy is the paper's.
+//
+// rho_grid_policy is the paper's Render(cell, centre, level) with Botsch et al.'s transformation
+// factorisation: the homogeneous screen position H = (X, Y, W) of a cell centre is its parent's
+// plus an entry of a per-level displacement table (one vec add per cell, no matrix product) —
+// the traversal's per-entry state — and the conservative screen bounds of a cell come from a
+// per-level bounds table:
+//   A_x = max over the cube's corners of |ΔX|, A_y likewise, B = max |ΔW|.
+// With E_x = A_x·W + B·|X|, every corner's x = X'/W' lies within E_x / (W·(W − B)) of X/W
+// (while W − B > 0: the cell is wholly in front of the eye). So, all in homogeneous coordinates
+// without a division (§4.1, Eq. 6):
+//   splat condition   2·E_x ≤ s·W·(W − B)  and  2·E_y ≤ s·W·(W − B)
+//   frustum culling   X·(W − B) + E_x < −c_x·W·(W − B)  (left of the screen; likewise right,
+//                     top, bottom), W − B > z_far (beyond), W + B < z_near (behind the viewer)
+// s is traverse_options::tolerance_px. A cell meeting the splat condition is emitted as a square
+// splat of s pixels (an inner cell's intermediate sample) or a one-pixel point (a leaf); a leaf
+// is emitted in any case; a cell that straddles the near plane is refined. X is measured from
+// the principal point, so |X| is small near the screen centre.
+//
+// §5.1 fixed point: rho_grid_policy<ρ, rho_grid_arithmetic::fixed> runs the same tests with H,
+// the displacement and bounds tables in 64-bit fixed point (F fractional bits chosen per view so
+// every |value| < 2^40) and 128-bit products. Cells where the two disagree are those whose test
+// is within rounding of equality (measured in docs/rho-grid.md; the tests bound it).
+//
+// §4.2: the policy visits children in any fixed order; rho_grid_light_order() gives the one that
+// is front to back from a directional light, which raster/one_pass_shadows.hpp needs.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <numeric>
+#include <ranges>
+#include <type_traits>
+#include <vector>
+
+#include "pbr_lod/builders/rho_grid.hpp"
+#include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/traverse/hierarchy.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
+
+namespace pbr_lod {
+
+enum class rho_grid_arithmetic { floating, fixed };
+
+/// A node of a ρ-grid hierarchy: the cell index (rho_grid numbering), its level and its integer
+/// position in [0, ρ^level)³ — the path the implicit positions need.
+struct rho_grid_cell {
+  std::uint32_t cell;
+  int level;
+  std::array<std::uint32_t, 3> pos;
+};
+
+/// The colour of material m (8-entry palette, repeated).
+[[nodiscard]] inline rgb8 rho_grid_material_colour(std::uint32_t m) {
+  static constexpr std::array<rgb8, 8> palette{
+      rgb8{200, 200, 200}, rgb8{220, 80, 60},  rgb8{80, 180, 90},  rgb8{70, 110, 210},
+      rgb8{230, 200, 70},  rgb8{170, 90, 200}, rgb8{70, 200, 200}, rgb8{240, 140, 60}};
+  return palette[m % 8];
+}
+
+/// A built rho_grid<Rho> seen as a Hierarchy whose primitives carry the attributes A (normals
+/// decoded from the σ-bit attribute, colours from the material palette). Holds a pointer to the
+/// grid, which must outlive it. Const member functions are safe for concurrent readers.
+template <int Rho, attributes A>
+class rho_grid_hierarchy {
+  static_assert(attributes{.normal = true, .colour = true}.contains(A),
+                "a ρ-grid has normals and materials (drawn as colours) only");
+
+ public:
+  static constexpr attributes attrs = A;
+  static constexpr int children_per_cell = Rho * Rho * Rho;
+  using node_id = rho_grid_cell;
+
+  /// Throws InvalidArgument when A asks for normals or colours the grid does not store.
+  explicit rho_grid_hierarchy(const rho_grid<Rho>& g) : g_(&g) {
+    if (A.normal && !g.has_normals())
+      throw InvalidArgument("rho-grid: normals requested, the grid stores none");
+    if (A.colour && !g.has_materials())
+      throw InvalidArgument("rho-grid: colours requested, the grid stores no materials");
+    if constexpr (A.normal) q_ = normal_quantizer::shared(g.normal_bits());  // one per process
+    // cell_side() takes a pow(); a frame asks for it once per drawn cell.
+    for (int l = 0; l <= g.depth(); ++l) side_.push_back(g.cell_side(l));
+  }
+
+  [[nodiscard]] const rho_grid<Rho>& grid() const { return *g_; }
+  [[nodiscard]] vec3d origin() const { return g_->origin(); }
+  [[nodiscard]] bool empty() const { return g_->empty(); }
+  [[nodiscard]] node_id root() const { return {0, 0, {0, 0, 0}}; }
+  [[nodiscard]] bool is_leaf(const node_id& n) const { return g_->is_leaf(n.cell); }
+
+  /// Child j (digit j = x + ρ·y + ρ²·z, set in n's code) of inner cell n.
+  [[nodiscard]] node_id child(const node_id& n, int j) const {
+    return child(n, j, g_->first_child(n.cell) + std::uint32_t(g_->code(n.cell).rank(j)));
+  }
+  /// Child j of n when its cell index is already known (a traversal counting set bits).
+  [[nodiscard]] static node_id child(const node_id& n, int j, std::uint32_t cell) {
+    return {
+        cell,
+        n.level + 1,
+        {n.pos[0] * Rho + std::uint32_t(j % Rho), n.pos[1] * Rho + std::uint32_t((j / Rho) % Rho),
+         n.pos[2] * Rho + std::uint32_t(j / (Rho * Rho))}};
+  }
+  [[nodiscard]] auto children(const node_id& n) const {
+    const int count = is_leaf(n) ? 0 : children_per_cell;
+    return std::views::iota(0, count) |
+           std::views::filter([this, c = n.cell](int j) { return g_->code(c).test(j); }) |
+           std::views::transform([this, n](int j) { return child(n, j); });
+  }
+
+  /// Centre of cell n relative to origin().
+  [[nodiscard]] vec3f centre(const node_id& n) const {
+    const double s = side_[std::size_t(n.level)];
+    return vec3f(float((double(n.pos[0]) + 0.5) * s), float((double(n.pos[1]) + 0.5) * s),
+                 float((double(n.pos[2]) + 0.5) * s));
+  }
+  /// The cell's circumscribed sphere: the surface it samples lies in the cell.
+  [[nodiscard]] sphere bounding_sphere(const node_id& n) const {
+    return {centre(n), 0.5f * std::sqrt(3.0f) * float(side_[std::size_t(n.level)])};
+  }
+
+  /// The cell's sample as a square of size_px pixels at the cell centre.
+  template <class S>
+  void emit_sample(const node_id& n, float size_px, S& sink) const {
+    point_prim<A> p{centre(n), size_px};
+    if constexpr (A.normal) p.normal = q_->decode(g_->normal_code(n.cell));
+    if constexpr (A.colour) p.colour = rho_grid_material_colour(g_->material(n.cell));
+    sink.point(p);
+  }
+  /// A leaf as a one-pixel point, an inner cell as a square covering its projected cell (the
+  /// projected diameter of its bounding sphere). rho_grid_policy emits inner cells at its splat
+  /// size s instead, as the paper does.
+  template <class S>
+  void emit(const node_id& n, const view& v, S& sink) const {
+    emit_sample(
+        n, is_leaf(n) ? 1.0f : std::max(1.0f, 2 * projected_radius_exact(v, bounding_sphere(n))),
+        sink);
+  }
+
+ private:
+  const rho_grid<Rho>* g_;
+  std::shared_ptr<const normal_quantizer> q_;
+  std::vector<double> side_;  // cell side per level
+};
+
+/// Calls f(rho_grid_hierarchy<Rho, A>(g)) with A the attributes g stores (normals when it has
+/// normals, colours when it has materials): the ρ-grid's run-time σ split, made compile time.
+template <int Rho, class F>
+decltype(auto) with_rho_grid_hierarchy(const rho_grid<Rho>& g, F&& f) {
+  constexpr attributes N{.normal = true}, C{.colour = true};
+  if (g.has_normals() && g.has_materials()) return f(rho_grid_hierarchy<Rho, N | C>(g));
+  if (g.has_normals()) return f(rho_grid_hierarchy<Rho, N>(g));
+  if (g.has_materials()) return f(rho_grid_hierarchy<Rho, C>(g));
+  return f(rho_grid_hierarchy<Rho, positions_only>(g));
+}
+
+namespace detail {
+
+// ---- arithmetic policies: the same traversal in float and in fixed point (§5.1)
+struct rho_float_arith {
+  using value = float;
+  using wide = float;
+  double scale = 1;
+  [[nodiscard]] value from(double x) const { return static_cast<float>(x); }
+  [[nodiscard]] static wide mul(value a, value b) { return a * b; }
+  [[nodiscard]] static wide splat_scale(float s) { return s; }
+  static constexpr int splat_shift = 1;  // 2·E ≤ s·W·(W − B)
+  [[nodiscard]] static wide lhs(wide e) { return 2 * e; }
+};
+
+__extension__ using int128 = __int128;
+
+struct rho_fixed_arith {
+  using value = std::int64_t;
+  using wide = int128;
+  double scale = 1;  // 2^F
+  [[nodiscard]] value from(double x) const {
+    return static_cast<std::int64_t>(std::llround(x * scale));
+  }
+  [[nodiscard]] static wide mul(value a, value b) { return wide(a) * wide(b); }
+  /// s in 1/256 pixels: 512·E ≤ s₂₅₆·W·(W − B).
+  [[nodiscard]] static wide splat_scale(float s) { return wide(std::llround(double(s) * 256)); }
+  [[nodiscard]] static wide lhs(wide e) { return 512 * e; }
+};
+
+template <int Rho, class Arith>
+struct rho_traversal {
+  static constexpr int R3 = Rho * Rho * Rho;
+  using value = typename Arith::value;
+  struct hom {
+    value x, y, w;
+  };
+  struct level_tables {
+    std::array<hom, R3> disp;  ///< H offset of child j's centre from its parent's
+    value ax, ay, b;           ///< bounds table: max |ΔX|, |ΔY|, |ΔW| over the cell's corners
+  };
+  Arith arith;
+  hom root{};
+  std::vector<level_tables> levels;
+  value cx{}, cy{}, znear{}, zfar{};
+
+  rho_traversal(const rho_grid<Rho>& g, const view& v, bool fixed) {
+    // Rows of the map p ↦ (X, Y, W) in pixels × depth, relative to the principal point.
+    const vec3d r = v.right.cast<double>() * double(v.focal_px);
+    const vec3d u = -v.up.cast<double>() * double(v.focal_px);
+    const vec3d f = v.forward.cast<double>();
+    const vec3d c0 = vec3d::Constant(0.5 * g.cube_side()) - v.eye.cast<double>();
+    const std::array<double, 3> h0{r.dot(c0), u.dot(c0), f.dot(c0)};
+    struct dl {
+      std::array<std::array<double, 3>, R3> d;
+      double ax, ay, b;
+    };
+    std::vector<dl> dt(std::size_t(g.depth()) + 1);
+    double bound = std::max({std::abs(h0[0]), std::abs(h0[1]), std::abs(h0[2])});
+    for (int l = 0; l <= g.depth(); ++l) {
+      const double s = g.cell_side(l), hs = 0.5 * s;
+      auto& e = dt[std::size_t(l)];
+      e.ax = hs * r.cwiseAbs().sum();
+      e.ay = hs * u.cwiseAbs().sum();
+      e.b = hs * f.cwiseAbs().sum();
+      double dmax = 0;
+      for (int j = 0; j < R3; ++j) {
+        const vec3d o =
+            s * vec3d(double(j % Rho) + 0.5 - 0.5 * Rho, double((j / Rho) % Rho) + 0.5 - 0.5 * Rho,
+                      double(j / (Rho * Rho)) + 0.5 - 0.5 * Rho);
+        e.d[std::size_t(j)] = {r.dot(o), u.dot(o), f.dot(o)};
+        dmax = std::max({dmax, std::abs(r.dot(o)), std::abs(u.dot(o)), std::abs(f.dot(o))});
+      }
+      bound += dmax + std::max({e.ax, e.ay, e.b});
+    }
+    bound = std::max({bound, double(v.z_far), 0.5 * double(v.width), 0.5 * double(v.height)});
+    if (fixed) {
+      // F fractional bits so that every value stays below 2^40 (products below 2^81 in int128).
+      const int f_bits = std::clamp(40 - int(std::ceil(std::log2(std::max(bound, 1e-300)))), 0, 40);
+      arith.scale = std::ldexp(1.0, f_bits);
+    }
+    root = {arith.from(h0[0]), arith.from(h0[1]), arith.from(h0[2])};
+    levels.resize(dt.size());
+    for (std::size_t l = 0; l < dt.size(); ++l) {
+      for (int j = 0; j < R3; ++j) {
+        const auto& d = dt[l].d[std::size_t(j)];
+        levels[l].disp[std::size_t(j)] = {arith.from(d[0]), arith.from(d[1]), arith.from(d[2])};
+      }
+      levels[l].ax = arith.from(dt[l].ax);
+      levels[l].ay = arith.from(dt[l].ay);
+      levels[l].b = arith.from(dt[l].b);
+    }
+    cx = arith.from(0.5 * v.width);
+    cy = arith.from(0.5 * v.height);
+    znear = arith.from(double(v.z_near));
+    zfar = arith.from(double(v.z_far));
+  }
+
+  enum class verdict { cull, draw, refine };
+
+  /// The §4.1 tests for a cell at level l with homogeneous centre h.
+  [[nodiscard]] verdict test(const hom& h, int l, bool leaf, float s, bool cull) const {
+    const auto& t = levels[std::size_t(l)];
+    if (h.w + t.b < znear) return verdict::cull;  // wholly behind the viewer
+    const value den = h.w - t.b;
+    if (!(den > znear)) return leaf ? verdict::draw : verdict::refine;  // straddles the eye plane
+    const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
+    const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
+    if (cull) {
+      if (den > zfar) return verdict::cull;
+      const auto wd = Arith::mul(h.w, den);
+      // X·den ± E compared with ∓c·W·den: products of three values, taken in two steps so the
+      // fixed-point path stays exact in 128 bits (c_x·W·den = c_x·(W·den)/scale).
+      const auto xd = Arith::mul(h.x, den), yd = Arith::mul(h.y, den);
+      const auto cxwd = scaled(cx, wd), cywd = scaled(cy, wd);
+      if (xd + ex < -cxwd || xd - ex > cxwd || yd + ey < -cywd || yd - ey > cywd)
+        return verdict::cull;
+    }
+    const auto rhs = Arith::splat_scale(s) * Arith::mul(h.w, den);
+    if (Arith::lhs(ex) <= rhs && Arith::lhs(ey) <= rhs) return verdict::draw;
+    return leaf ? verdict::draw : verdict::refine;
+  }
+
+  /// c·p / scale for a wide product p (float: c·p).
+  [[nodiscard]] auto scaled(value c, const typename Arith::wide& p) const {
+    if constexpr (std::is_same_v<value, float>)
+      return c * p;
+    else
+      return typename Arith::wide(c) * p /
+             typename Arith::wide(static_cast<std::int64_t>(arith.scale));
+  }
+};
+
+}  // namespace detail
+
+/// The child visiting order that is front to back from a directional light (§4.2, Fig. 3):
+/// children sorted by decreasing projection of their centre offsets on `to_light` (the direction
+/// towards the light); ties keep digit order. For cubes of one grid, a child that occludes
+/// another along the light has a strictly larger projection, so this order never draws an
+/// occluder after what it shadows.
+template <int Rho>
+[[nodiscard]] std::array<int, Rho * Rho * Rho> rho_grid_light_order(const vec3f& to_light) {
+  std::array<int, Rho * Rho * Rho> ord;
+  std::iota(ord.begin(), ord.end(), 0);
+  const vec3d l = to_light.cast<double>();
+  const auto proj = [&](int j) { return l.dot(vec3d(j % Rho, (j / Rho) % Rho, j / (Rho * Rho))); };
+  std::stable_sort(ord.begin(), ord.end(), [&](int a, int b) { return proj(a) > proj(b); });
+  return ord;
+}
+
+/// The §4.1 traversal as a policy of traverse(): per-entry state H = (X, Y, W), visit() = the
+/// bounds-table tests (they replace the bounding-sphere culling and size estimate), children in
+/// a fixed order (digit order unless given), inner cells emitted as s-pixel squares with
+/// s = traverse_options::tolerance_px. Built for one view: pass traverse() the same view.
+///   rho_grid_hierarchy<3, with_normals> h(g);
+///   const view v(cam, g.origin());
+///   traverse(h, v, {.tolerance_px = s}, sink, rho_grid_policy<3>(g, v));
+/// traverse_options: tolerance_px is s, frustum_cull switches the off-screen and far tests;
+/// metric, cull_volume and backface_cull do not apply. Stats: emitted_nodes = inner cells drawn
+/// as splats, emitted_leaves = leaves drawn as points, culled_frustum = subtrees culled.
+template <int Rho, rho_grid_arithmetic Arith = rho_grid_arithmetic::floating>
+class rho_grid_policy {
+  static constexpr int R3 = Rho * Rho * Rho;
+  using arith = std::conditional_t<Arith == rho_grid_arithmetic::fixed, detail::rho_fixed_arith,
+                                   detail::rho_float_arith>;
+  using tables = detail::rho_traversal<Rho, arith>;
+
+ public:
+  using state = typename tables::hom;
+
+  /// Tables for grid g seen by v (relative to g.origin()); children visited in `order` (a
+  /// permutation of 0..ρ³−1, e.g. rho_grid_light_order) or in digit order.
+  rho_grid_policy(const rho_grid<Rho>& g, const view& v, const std::array<int, R3>* order = nullptr)
+      : t_(g, v, Arith == rho_grid_arithmetic::fixed), digit_order_(order == nullptr) {
+    if (order)
+      order_ = *order;
+    else
+      std::iota(order_.begin(), order_.end(), 0);
+  }
+
+  template <class H>
+  [[nodiscard]] state root_state(const H&, const view&, const traverse_options&) const {
+    return t_.root;
+  }
+
+  template <class H>
+  [[nodiscard]] visit_result visit(const H& h, const rho_grid_cell& n, const state& hs, const view&,
+                                   const traverse_options& o) const {
+    using verdict = typename tables::verdict;
+    const bool leaf = h.is_leaf(n);
+    const float s = splat_size(o);
+    const verdict vd = t_.test(hs, n.level, leaf, s, o.frustum_cull);
+    if (vd == verdict::cull) return {visit_result::verdict::cull, 0};
+    if (vd == verdict::draw) return {visit_result::verdict::emit, leaf ? 1.0f : s};
+    return {visit_result::verdict::refine, s};
+  }
+
+  template <class H, class F>
+  void for_each_child(const H& h, const rho_grid_cell& n, const state& hs, F&& f) const {
+    const auto& code = h.grid().code(n.cell);
+    const auto& tab = t_.levels[std::size_t(n.level) + 1];
+    const auto visit_child = [&](int j, std::uint32_t cell) {
+      const auto& d = tab.disp[std::size_t(j)];
+      f(H::child(n, j, cell), state{hs.x + d.x, hs.y + d.y, hs.w + d.w});
+    };
+    std::uint32_t cell = h.grid().first_child(n.cell);
+    if (digit_order_) {
+      // Digit order is the child table's: walk the set bits, no rank per child.
+      using word = typename rho_grid<Rho>::code_type::word;
+      constexpr int word_bits = rho_grid<Rho>::code_type::word_bits;
+      for (std::size_t i = 0; i < code.w.size(); ++i)
+        for (word bits = code.w[i]; bits != 0; bits = word(bits & (bits - 1)))
+          visit_child(int(i) * word_bits + std::countr_zero(bits), cell++);
+      return;
+    }
+    for (const int j : order_)
+      if (code.test(j)) visit_child(j, cell + std::uint32_t(code.rank(j)));
+  }
+
+  template <class H, class S>
+  void emit(const H& h, const rho_grid_cell& n, const view&, float size_px, const traverse_options&,
+            S& sink) const {
+    h.emit_sample(n, size_px, sink);
+  }
+
+  /// s: the tolerance, or 1 when it is not a positive number.
+  [[nodiscard]] static float splat_size(const traverse_options& o) {
+    return std::isfinite(o.tolerance_px) && o.tolerance_px > 0 ? o.tolerance_px : 1.0f;
+  }
+
+ private:
+  tables t_;
+  bool digit_order_;
+  std::array<int, R3> order_;
+};
+
+static_assert(Hierarchy<rho_grid_hierarchy<3, positions_only>>);
+static_assert(Hierarchy<rho_grid_hierarchy<2, attributes{.normal = true, .colour = true}>>);
+
+}  // namespace pbr_lod

@@ -1,0 +1,197 @@
+// pbr_lod — one-pass shadows for a directional light (Duguet & Drettakis 2004, §4.2), as a Sink
+// adapter any hierarchy can draw through.
+//
+// When a traversal emits front to back from the light, every occluder of a sample is emitted
+// before it. So one orthographic light map, looked up and then written as each sample arrives,
+// says at once whether the sample is lit: no second pass over the frame. one_pass_shadow_sink
+// does that between a traversal and the rasteriser: it shades each primitive it receives (albedo
+// × two-sided Lambert when lit, × ambient in shadow, what the rasteriser's two-pass shadows
+// compose) and forwards it with that colour. render_one_pass_shadows() wires it up for any
+// Hierarchy and a policy that visits front to back from the light (for the ρ-grid:
+// rho_grid_policy with rho_grid_light_order, builders/rho_grid_hierarchy.hpp).
+//
+// The map stores each occluder's far extent (the depth of its node's centre + the node's
+// bounding radius r) over its footprint (a disk of r/√3 — half the side of a cube whose
+// circumsphere has radius r — plus half a texel), and a sample is shadowed only when that is
+// nearer than its own near extent (centre − r − the bias). Comparing extents, not centres, keeps
+// a coarse node from shadowing the finer nodes of the surface it lies on (docs/rho-grid.md).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <vector>
+
+#include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/traverse/hierarchy.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
+
+namespace pbr_lod {
+
+struct one_pass_shadow_stats {
+  std::size_t lit = 0, shadowed = 0;  ///< primitives classified
+};
+
+/// The orthographic light map over a bounding sphere, n × n texels across its diameter.
+class one_pass_light_map {
+ public:
+  /// `to_light` unit; `bounds` contains everything drawn; bias in texels.
+  one_pass_light_map(const vec3f& to_light, const sphere& bounds, int texels, float bias_texels)
+      : l_(to_light),
+        lu_(any_orthogonal(to_light)),
+        lv_(to_light.cross(lu_)),
+        c0_(bounds.centre),
+        half_(bounds.radius),
+        n_(std::max(2, texels)),
+        texel_(2 * bounds.radius / float(n_)),
+        bias_(bias_texels * texel_),
+        depth_(std::size_t(n_) * std::size_t(n_), std::numeric_limits<float>::infinity()) {}
+
+  /// True when a sample at p whose node has bounding radius r is shadowed by what was written
+  /// before; then writes the sample's own footprint.
+  bool shadowed_then_write(const vec3f& p, float r) {
+    const vec3f d = p - c0_;
+    const float tu = (d.dot(lu_) + half_) / texel_, tv = (d.dot(lv_) + half_) / texel_;
+    const float z = -d.dot(l_);  // distance from the light, up to a constant
+    const int ix = std::clamp(int(tu), 0, n_ - 1), iy = std::clamp(int(tv), 0, n_ - 1);
+    const bool shadowed = at(ix, iy) < z - r - bias_;
+    const float fr = (r / std::sqrt(3.0f)) / texel_ + 0.5f;
+    const int rr = int(std::ceil(fr));
+    for (int y = std::max(0, iy - rr); y <= std::min(n_ - 1, iy + rr); ++y)
+      for (int x = std::max(0, ix - rr); x <= std::min(n_ - 1, ix + rr); ++x) {
+        const float dx = float(x) + 0.5f - tu, dy = float(y) + 0.5f - tv;
+        if (dx * dx + dy * dy > fr * fr) continue;
+        float& t = at(x, y);
+        t = std::min(t, z + r);
+      }
+    return shadowed;
+  }
+
+ private:
+  float& at(int x, int y) { return depth_[std::size_t(y) * std::size_t(n_) + std::size_t(x)]; }
+  vec3f l_, lu_, lv_, c0_;
+  float half_;
+  int n_;
+  float texel_, bias_;
+  std::vector<float> depth_;
+};
+
+/// Sink<A> (A with normals) that shades what it receives lit or in shadow and forwards it as
+/// primitives of colours only to `Inner`. The bounding radius of the next primitives is set with
+/// node_radius() (render_one_pass_shadows does it per emitted node).
+template <attributes A, class Inner>
+class one_pass_shadow_sink {
+  static_assert(A.normal, "one-pass shadows shade: the primitives need normals");
+  static constexpr attributes out_attrs{.colour = true};
+
+ public:
+  one_pass_shadow_sink(const view& v, const render_options& o, const vec3f& to_light,
+                       const sphere& bounds, Inner& inner)
+      : map_(to_light, bounds, o.shadow_map_size, o.shadow_bias_texels),
+        l_(to_light),
+        eye_(v.eye),
+        flat_(o.flat_colour),
+        ambient_(std::isfinite(o.sun.ambient) ? std::clamp(o.sun.ambient, 0.0f, 1.0f) : 0.0f),
+        inner_(inner) {}
+
+  void node_radius(float r) { r_ = r; }
+  [[nodiscard]] const one_pass_shadow_stats& stats() const { return st_; }
+
+  void point(const point_prim<A>& p) {
+    point_prim<out_attrs> q{p.position, p.size_px};
+    q.colour = shade(p.position, p.normal, albedo(p), classify(p.position));
+    inner_.point(q);
+  }
+  void splat(const splat_prim<A>& s) {
+    splat_prim<out_attrs> q{s.centre, s.u, s.v};
+    q.colour = shade(s.centre, s.normal, albedo(s), classify(s.centre));
+    inner_.splat(q);
+  }
+  void triangle(const triangle_prim<A>& t) {
+    const vec3f c = (t.p[0] + t.p[1] + t.p[2]) / 3;
+    const bool dark = classify(c);
+    triangle_prim<out_attrs> q{t.p};
+    for (std::size_t k = 0; k < 3; ++k) {
+      rgb8 a = flat_;
+      if constexpr (A.colour) a = t.colour[k];
+      q.colour[k] = shade(t.p[k], t.normal[k], a, dark);
+    }
+    inner_.triangle(q);
+  }
+
+ private:
+  bool classify(const vec3f& p) {
+    const bool dark = map_.shadowed_then_write(p, r_);
+    ++(dark ? st_.shadowed : st_.lit);
+    return dark;
+  }
+  template <class P>
+  [[nodiscard]] rgb8 albedo(const P& p) const {
+    if constexpr (A.colour) return p.colour;
+    return flat_;
+  }
+  [[nodiscard]] rgb8 shade(const vec3f& p, vec3f n, rgb8 albedo, bool dark) const {
+    if (n.dot(p - eye_) > 0) n = -n;  // two-sided, as the rasteriser
+    return detail::scale_colour(albedo, dark ? ambient_ : detail::lambert(n, l_, ambient_));
+  }
+
+  one_pass_light_map map_;
+  vec3f l_, eye_;
+  rgb8 flat_;
+  float ambient_;
+  float r_ = 0;
+  Inner& inner_;
+  one_pass_shadow_stats st_;
+};
+
+namespace detail {
+/// Forwards to Policy and tells the shadow sink each emitted node's bounding radius first.
+template <class Policy, class ShadowSink>
+struct node_radius_policy : Policy {
+  ShadowSink* shadows;
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
+            const traverse_options& o, S& sink) const {
+    shadows->node_radius(h.bounding_sphere(n).radius);
+    Policy::emit(h, n, v, size, o, sink);
+  }
+};
+}  // namespace detail
+
+/// Renders h for view v (relative to h.origin()) with one-pass shadows from o.sun in one
+/// traversal. `policy` must emit front to back from the light; the light map covers
+/// h.bounding_sphere(h.root()) with o.shadow_map_size² texels. Shading is that of the
+/// rasteriser's; the frame is drawn with colour only (and hole filling when o.fx asks for it).
+/// Needs normals (static) and a non-zero light direction (throws InvalidArgument).
+template <Hierarchy H, class Policy>
+[[nodiscard]] image render_one_pass_shadows(const H& h, const view& v, const render_options& o,
+                                            const traverse_options& t, const Policy& policy,
+                                            traverse_stats* tstats = nullptr,
+                                            one_pass_shadow_stats* sstats = nullptr) {
+  static_assert(H::attrs.normal, "one-pass shadows need normals");
+  const vec3f dir = o.sun.direction;
+  if (!all_finite(dir) || !(dir.squaredNorm() > 0))
+    throw InvalidArgument("one-pass shadows need a non-zero light direction");
+  constexpr attributes C{.colour = true};
+  render_options ro = o;
+  ro.fx = effects{.colour = true, .hole_filling = o.fx.hole_filling};
+  traverse_stats ts;
+  one_pass_shadow_stats ss;
+  image img = render<C>(v, ro, [&](auto& sink) {
+    if (h.empty()) return;
+    using sink_type = std::decay_t<decltype(sink)>;
+    one_pass_shadow_sink<H::attrs, sink_type> shade(v, o, dir.normalized(),
+                                                    h.bounding_sphere(h.root()), sink);
+    const detail::node_radius_policy<Policy, decltype(shade)> p{policy, &shade};
+    ts = traverse(h, v, t, shade, p);
+    ss = shade.stats();
+  });
+  if (tstats) *tstats = ts;
+  if (sstats) *sstats = ss;
+  return img;
+}
+
+}  // namespace pbr_lod
