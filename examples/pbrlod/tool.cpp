@@ -8,6 +8,7 @@
 #include <iostream>
 #include <stdexcept>
 
+#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/error.hpp"
 
@@ -19,15 +20,15 @@ bool is_hierarchy_file(const std::string& path) {
 }
 
 lod_header peek_lod(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw IoError(path + ": cannot open");
-  char magic[8] = {};
+  // The head every format shares (core/binary.hpp): magic, version, then (all but the ρ-grid)
+  // the flags; the method's own load() validates the rest.
+  const auto bytes = detail::load_file_prefix(path, 16);
+  if (bytes.size() < 16) throw FormatError(path + ": too short for a pbr_lod hierarchy file");
+  detail::byte_reader r{bytes, 0, path};
   lod_header h;
-  f.read(magic, 8);
-  f.read(reinterpret_cast<char*>(&h.version), 4);
-  f.read(reinterpret_cast<char*>(&h.flags), 4);
-  if (!f) throw FormatError(path + ": too short for a pbr_lod hierarchy file");
-  h.magic.assign(magic, 8);
+  for (int i = 0; i < 8; ++i) h.magic.push_back(r.get<char>("magic"));
+  h.version = r.get<std::uint32_t>("version");
+  h.flags = r.get<std::uint32_t>("flags");
   return h;
 }
 

@@ -31,8 +31,7 @@
 namespace pbr_lod::detail {
 
 namespace {
-constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'G'};
-constexpr std::uint32_t version = 1;
+constexpr file_format pca_format{"PCA octree", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'G'}, 1};
 constexpr std::size_t header_bytes = 8 + 4 * 2 + 4 * 2 + 4 * 3 + 8 * 2 + 4 * 3 + 8 * 8;
 constexpr std::size_t float_node_floats = 26, float_colour_floats = 15;
 
@@ -55,8 +54,7 @@ void save_pca_data(const pca_data& d, const std::string& path) {
   const bool colour = !d.colours.empty();
   byte_writer w;
   w.bytes.reserve(pca_file_bytes(d));
-  for (char c : magic) w.put(c);
-  w.put(version);
+  write_head(w, pca_format);
   w.put(static_cast<std::uint32_t>((colour ? 1u : 0u) | (d.quantised ? 2u : 0u)));
   w.put(d.leaf_size);
   w.put(d.max_depth);
@@ -99,12 +97,8 @@ void save_pca_data(const pca_data& d, const std::string& path) {
       w.put_vec(c.sigma);
     }
   }
-  w.put(fnv1a(w.bytes.data(), w.bytes.size()));
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw IoError(path + ": cannot open for writing");
-  f.write(reinterpret_cast<const char*>(w.bytes.data()),
-          static_cast<std::streamsize>(w.bytes.size()));
-  if (!f) throw IoError(path + ": write failed");
+  append_checksum(w);
+  save_file_bytes(path, w.bytes);
 }
 
 namespace {
@@ -128,20 +122,10 @@ mat3f get_frame(byte_reader& r, const std::string& path, const char* what, std::
 pca_data load_pca_data(const std::string& path, bool colour) {
   const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
-  for (char c : magic)
-    if (r.get<char>("magic") != c)
-      throw FormatError(path + ": not a pbr_lod PCA octree file (bad magic, expected PBRLODSG)");
-  const auto ver = r.get<std::uint32_t>("version");
-  if (ver != version)
-    throw FormatError(path + ": version " + std::to_string(ver) + ", this library reads version " +
-                      std::to_string(version));
+  read_head(r, pca_format);
   const auto flags = r.get<std::uint32_t>("flags");
   if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
-  if (((flags & 1u) != 0) != colour)
-    throw FormatError(path + ((flags & 1u)
-                                  ? ": the file has colours, the requested pca_octree has none"
-                                  : ": the file has no colours, the requested pca_octree "
-                                    "needs them"));
+  check_colour_flag((flags & 1u) != 0, colour, path, "pca_octree");
   pca_data d;
   d.quantised = (flags & 2u) != 0;
   d.leaf_size = r.get<std::uint32_t>("leaf size");
@@ -186,9 +170,7 @@ pca_data load_pca_data(const std::string& path, bool colour) {
     bad(std::to_string(nn) + " nodes and codebooks of " + std::to_string(kp) + ", " +
         std::to_string(kn) + ", " + std::to_string(kc) + " entries do not match the file size " +
         std::to_string(size));
-  std::uint64_t stored;
-  std::memcpy(&stored, bytes.data() + size - 8, 8);
-  if (stored != fnv1a(bytes.data(), bytes.size() - 8)) bad("checksum mismatch (corrupt file)");
+  if (!checksum_matches(bytes)) bad("checksum mismatch (corrupt file)");
 
   d.codebook_p.resize(kp);
   for (std::uint32_t i = 0; i < kp; ++i) {

@@ -40,15 +40,13 @@ bool operator==(const pmr_data& a, const pmr_data& b) {
 
 namespace {
 
-constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'M'};
-constexpr std::uint32_t version = 1;
+constexpr file_format pmr_format{"PMR", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'M'}, 1};
 constexpr std::size_t node_bytes = 4 * 8 + 4 * 4, leaf_bytes = 12, level_bytes = 20, tri_bytes = 12,
                       umbrella_bytes = 12;
 
 std::vector<unsigned char> encode(const pmr_data& d) {
   byte_writer w;
-  for (const char c : magic) w.put(c);
-  w.put(version);
+  write_head(w, pmr_format);
   w.put(std::uint32_t{0});
   for (const vec3d* v : {&d.origin, &d.input_min, &d.input_max})
     for (int k = 0; k < 3; ++k) w.put((*v)[k]);
@@ -95,7 +93,7 @@ std::vector<unsigned char> encode(const pmr_data& d) {
     w.put(u.radius);
   }
   for (const auto i : d.umbrella_index) w.put(i);
-  w.put(fnv1a(w.bytes.data(), w.bytes.size()));
+  append_checksum(w);
   return std::move(w.bytes);
 }
 
@@ -138,6 +136,7 @@ class reader {
     throw FormatError(path_ + ": " + msg + " (at byte " + std::to_string(pos_) + ")");
   }
   [[nodiscard]] std::size_t pos() const { return pos_; }
+  void skip_head() { pos_ = 12; }
   [[nodiscard]] std::size_t size() const { return n_; }
 
  private:
@@ -184,13 +183,7 @@ class mapping {
 
 pmr_data decode(reader& r, const unsigned char* bytes) {
   pmr_data d;
-  char m[8];
-  for (char& c : m) c = r.get<char>("magic");
-  if (std::memcmp(m, magic, 8) != 0) r.fail("not a PMR hierarchy file (magic is not PBRLODPM)");
-  const auto ver = r.get<std::uint32_t>("version");
-  if (ver != version)
-    r.fail("version " + std::to_string(ver) + " is not supported (expected " +
-           std::to_string(version) + ")");
+  r.skip_head();  // checked by read_head() in load_pmr_data
   if (r.get<std::uint32_t>("flags") != 0) r.fail("unknown flags");
   for (vec3d* v : {&d.origin, &d.input_min, &d.input_max})
     for (int k = 0; k < 3; ++k) {
@@ -346,15 +339,13 @@ std::size_t pmr_file_bytes(const pmr_data& d) {
 }
 
 void save_pmr_data(const pmr_data& d, const std::string& path) {
-  const auto bytes = encode(d);
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw IoError(path + ": cannot open for writing");
-  f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-  if (!f) throw IoError(path + ": write failed");
+  save_file_bytes(path, encode(d));
 }
 
 pmr_data load_pmr_data(const std::string& path) {
   const mapping m(path);
+  byte_reader head{std::span(m.data(), m.size()), 0, path};
+  read_head(head, pmr_format);
   reader r(m.data(), m.size(), path);
   return decode(r, m.data());
 }

@@ -1561,8 +1561,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
 // Version 1 (float nodes, fewer stats) is rejected: rebuild the file.
 // ---------------------------------------------------------------------------------------------
 namespace {
-constexpr char pop_magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'P'};
-constexpr std::uint32_t pop_version = 2;
+constexpr file_format pop_format{"POP", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'P'}, 2};
 constexpr std::size_t header_bytes = 8 + 4 * 5 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 8;
 constexpr std::size_t root_bytes = 16;
 
@@ -1606,8 +1605,7 @@ void save_pop_data(const pop_data& d, const std::string& path) {
   const int bits = d.normal_bits;
   byte_writer w;
   w.bytes.reserve(pop_file_bytes(d));
-  for (char c : pop_magic) w.put(c);
-  w.put(pop_version);
+  write_head(w, pop_format);
   w.put(static_cast<std::uint32_t>((colour ? 1u : 0u) | (qn ? 2u : 0u)));
   w.put(static_cast<std::uint32_t>(bits));
   w.put(static_cast<std::uint32_t>(d.spheres));
@@ -1656,35 +1654,17 @@ void save_pop_data(const pop_data& d, const std::string& path) {
     w.put(nd.leaf);
     if (colour) w.put(d.node_colours[i]);
   }
-  w.put(fnv1a(w.bytes.data(), w.bytes.size()));
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw IoError(path + ": cannot open for writing");
-  f.write(reinterpret_cast<const char*>(w.bytes.data()),
-          static_cast<std::streamsize>(w.bytes.size()));
-  if (!f) throw IoError(path + ": write failed");
+  append_checksum(w);
+  save_file_bytes(path, w.bytes);
 }
 
 pop_data load_pop_data(const std::string& path, bool colour) {
   const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
-  for (char c : pop_magic)
-    if (r.get<char>("magic") != c)
-      throw FormatError(path + ": not a pbr_lod POP file (bad magic, expected PBRLODPP)");
-  const auto version = r.get<std::uint32_t>("version");
-  if (version == 1)
-    throw FormatError(path +
-                      ": POP file version 1 (float node records) is no longer read; this "
-                      "library reads version 2 — rebuild the file with pbrlod build --method pop");
-  if (version != pop_version)
-    throw FormatError(path + ": version " + std::to_string(version) +
-                      ", this library reads version " + std::to_string(pop_version));
+  read_head(r, pop_format, 1);  // version 1 had float node records
   const auto flags = r.get<std::uint32_t>("flags");
   if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
-  if (((flags & 1u) != 0) != colour)
-    throw FormatError(path + ((flags & 1u)
-                                  ? ": the file has colours, the requested pop_tree has none"
-                                  : ": the file has no colours, the requested pop_tree "
-                                    "needs them"));
+  check_colour_flag((flags & 1u) != 0, colour, path, "pop_tree");
   const bool qn = (flags & 2u) != 0;
   const auto bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
   if (bits < normal_quantizer::min_bits || bits > normal_quantizer::max_bits)
@@ -1704,10 +1684,7 @@ pop_data load_pop_data(const std::string& path, bool colour) {
     throw FormatError(path + ": " + std::to_string(nv) + " vertices, " + std::to_string(nf) +
                       " faces and " + std::to_string(nn) + " nodes do not match the file size " +
                       std::to_string(size));
-  std::uint64_t stored;
-  std::memcpy(&stored, bytes.data() + size - 8, 8);
-  if (stored != fnv1a(bytes.data(), bytes.size() - 8))
-    throw FormatError(path + ": checksum mismatch (corrupt file)");
+  if (!checksum_matches(bytes)) throw FormatError(path + ": checksum mismatch (corrupt file)");
 
   const auto shared_quant = normal_quantizer::shared(bits);
   const normal_quantizer& quant = *shared_quant;

@@ -33,10 +33,9 @@
 namespace pbr_lod {
 namespace {
 
-constexpr char magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'};
+constexpr detail::file_format rho_format{"rho-grid", {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'}, 3};
 /// Bytes before the cells per level: magic, 6 u32, 9 f64 (origin, side, seconds, input bounds).
 constexpr std::size_t fixed_header_bytes = 8 + 6 * 4 + 9 * 8;
-constexpr std::uint32_t version = 3;  // + the input's bounds; 1 (NIS, IS) and 2 (compressed) before
 
 struct header_writer {
   std::vector<unsigned char>& b;
@@ -72,8 +71,8 @@ Code get_code(detail::bit_reader& r, int bits) {
 template <int Rho>
 void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_grid_layout layout) {
   header_writer h{out};
-  for (char c : magic) h.put(c);
-  h.put(version);
+  for (char c : rho_format.magic) h.put(c);
+  h.put(rho_format.version);
   h.put(std::uint32_t(Rho));
   h.put(std::uint32_t(g.depth()));
   h.put(std::uint32_t(layout));
@@ -175,17 +174,8 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
                                    const std::string& what) {
   using access = detail::rho_grid_access<Rho>;
   detail::byte_reader r{bytes, 0, what};
-  for (char c : magic)
-    if (r.get<char>("magic") != c) throw FormatError(what + ": not a pbr_lod rho-grid (bad magic)");
-  const auto ver = r.get<std::uint32_t>("version");
-  if (ver == 1 || ver == 2)
-    throw FormatError(what + ": version " + std::to_string(ver) +
-                      " (written before files recorded their input's bounds); this library reads "
-                      "version " +
-                      std::to_string(version) + ": rebuild the file");
-  if (ver != version)
-    throw FormatError(what + ": version " + std::to_string(ver) + ", this library reads " +
-                      std::to_string(version));
+  // Versions 1 (NIS, IS) and 2 (compressed) did not record the input's bounds.
+  detail::read_head(r, rho_format, 2);
   const auto rho_in = r.get<std::uint32_t>("rho");
   if (rho_in != std::uint32_t(Rho))
     throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
@@ -248,9 +238,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
       throw FormatError(what + ": " + std::to_string(bytes.size()) +
                         " bytes, the header declares " + std::to_string(gbytes) + " + " +
                         std::to_string(abytes) + " coded bytes (truncated or padded)");
-    std::uint64_t stored;
-    std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
-    if (stored != detail::fnv1a(bytes.data(), bytes.size() - 8))
+    if (!detail::checksum_matches(bytes))
       throw FormatError(what + ": checksum mismatch (corrupt stream)");
     const detail::rho_coder_options opt{.geometry = detail::rho_geometry_context(gm),
                                         .attributes = detail::rho_attribute_predictor(am)};
@@ -270,9 +258,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   if (bytes.size() - r.pos < 8 || bytes.size() - r.pos - 8 != payload_bytes)
     throw FormatError(what + ": " + std::to_string(bytes.size()) + " bytes, expected " +
                       std::to_string(r.pos + payload_bytes + 8) + " (truncated or padded)");
-  std::uint64_t stored;
-  std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
-  if (stored != detail::fnv1a(bytes.data(), bytes.size() - 8))
+  if (!detail::checksum_matches(bytes))
     throw FormatError(what + ": checksum mismatch (corrupt stream)");
   if (bits % 8 != 0 && (bytes[r.pos + payload_bytes - 1] >> (bits % 8)) != 0)
     throw FormatError(what + ": non-zero padding bits after the payload");
@@ -367,11 +353,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
 
 template <int Rho>
 void rho_grid<Rho>::save(const std::string& path, rho_grid_layout layout) const {
-  const auto bytes = serialise(layout);
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw IoError(path + ": cannot open for writing");
-  f.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
-  if (!f) throw IoError(path + ": write failed");
+  detail::save_file_bytes(path, serialise(layout));
 }
 
 template <int Rho>
@@ -382,9 +364,7 @@ rho_grid<Rho> rho_grid<Rho>::load(const std::string& path) {
 int rho_grid_file_rho(const std::string& path) {
   const auto bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};
-  for (char c : magic)
-    if (r.get<char>("magic") != c) throw FormatError(path + ": not a pbr_lod rho-grid (bad magic)");
-  (void)r.get<std::uint32_t>("version");
+  detail::read_head(r, rho_format, 2);
   const auto rho = r.get<std::uint32_t>("rho");
   if (rho < 2 || rho > 5) throw FormatError(path + ": rho " + std::to_string(rho) + " unsupported");
   return int(rho);

@@ -1,6 +1,8 @@
 // pbr_lod — little-endian byte buffers for the builders' file formats: a writer, a reader that
-// checks every read against the buffer's end and names what it was reading, and the FNV-1a
-// checksum every .lod file ends with. Shared by the point-octree, ρ-grid and POP formats.
+// checks every read against the buffer's end and names what it was reading, and what every
+// hierarchy file shares: its head (8-byte magic, u32 version), the FNV-1a checksum it ends with,
+// the colour flag, and reading and writing the whole file. Used by all five builders' formats
+// and by the pbrlod tool (which method wrote a file).
 #pragma once
 
 #include <cmath>
@@ -8,6 +10,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -49,8 +52,20 @@ inline std::vector<unsigned char> load_file_bytes(const std::string& path) {
   return bytes;
 }
 
+/// The first `n` bytes of the file at `path` (fewer when it is shorter): enough to tell which
+/// format a file is without reading all of it. Throws IoError when it cannot be opened.
+inline std::vector<unsigned char> load_file_prefix(const std::string& path, std::size_t n) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError(path + ": cannot open");
+  std::vector<unsigned char> bytes(n);
+  f.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(n));
+  if (f.bad()) throw IoError(path + ": read error");
+  bytes.resize(static_cast<std::size_t>(f.gcount()));
+  return bytes;
+}
+
 struct byte_reader {
-  const std::vector<unsigned char>& bytes;
+  std::span<const unsigned char> bytes;  ///< a loaded file or a mapping of one
   std::size_t pos = 0;
   const std::string& path;
   template <class T>
@@ -84,6 +99,68 @@ inline std::uint64_t fnv1a(const unsigned char* p, std::size_t n) {
   std::uint64_t h = 1469598103934665603ull;
   for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
   return h;
+}
+
+/// What a hierarchy file format is called and how it starts: "PBRLOD" + two letters naming the
+/// method, then the u32 version this library writes and reads.
+struct file_format {
+  const char* name;  ///< for messages: "point-octree", "POP", ...
+  char magic[8];
+  std::uint32_t version;
+};
+
+inline void write_head(byte_writer& w, const file_format& f) {
+  for (const char c : f.magic) w.put(c);
+  w.put(f.version);
+}
+
+/// Reads and checks the magic and the version. Older versions (`retired` and below) name
+/// themselves and ask for a rebuild; any other version names the one this library reads.
+inline void read_head(byte_reader& r, const file_format& f, std::uint32_t retired = 0) {
+  for (const char c : f.magic)
+    if (r.get<char>("magic") != c)
+      throw FormatError(r.path + ": not a pbr_lod " + f.name + " file (bad magic, expected " +
+                        std::string(f.magic, 8) + ")");
+  const auto v = r.get<std::uint32_t>("version");
+  if (v >= 1 && v <= retired)
+    throw FormatError(r.path + ": " + f.name + " file version " + std::to_string(v) +
+                      " is no longer read; this library reads version " +
+                      std::to_string(f.version) + ": rebuild the file with pbrlod build");
+  if (v != f.version)
+    throw FormatError(r.path + ": version " + std::to_string(v) + ", this library reads version " +
+                      std::to_string(f.version));
+}
+
+/// Whether a file's colour flag matches the hierarchy type asked to load it.
+inline void check_colour_flag(bool file_has, bool type_has, const std::string& path,
+                              const char* type_name) {
+  if (file_has != type_has)
+    throw FormatError(path +
+                      (file_has ? ": the file has colours, the requested "
+                                : ": the file has no colours, the requested ") +
+                      type_name + (file_has ? " has none" : " needs them"));
+}
+
+/// Appends the FNV-1a checksum of everything written so far.
+inline void append_checksum(byte_writer& w) {
+  w.put(fnv1a(w.bytes.data(), w.bytes.size()));
+}
+
+/// Whether the last 8 bytes are the FNV-1a checksum of the rest (a file shorter than that is
+/// never valid).
+inline bool checksum_matches(const std::vector<unsigned char>& bytes) {
+  if (bytes.size() < 8) return false;
+  std::uint64_t stored = 0;
+  std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
+  return stored == fnv1a(bytes.data(), bytes.size() - 8);
+}
+
+/// Writes the whole file; throws IoError when it cannot be opened or written.
+inline void save_file_bytes(const std::string& path, const std::vector<unsigned char>& bytes) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) throw IoError(path + ": cannot open for writing");
+  f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  if (!f) throw IoError(path + ": write failed");
 }
 
 }  // namespace pbr_lod::detail

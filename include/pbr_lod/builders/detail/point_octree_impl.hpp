@@ -832,8 +832,8 @@ point_octree<point_octree_attributes(In)> build_point_octree(const point_set<In>
 // ---------------------------------------------------------------------------------------------
 namespace detail {
 
-inline constexpr char point_octree_magic[8] = {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'O'};
-inline constexpr std::uint32_t point_octree_version = 1;
+inline constexpr file_format point_octree_format{
+    "point-octree", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'O'}, 1};
 
 template <attributes A>
 struct point_octree_io {
@@ -868,8 +868,7 @@ struct point_octree_io {
   static std::vector<unsigned char> serialise(const tree& t) {
     byte_writer w;
     w.bytes.reserve(t.file_bytes());
-    for (char c : point_octree_magic) w.put(c);
-    w.put(point_octree_version);
+    write_head(w, point_octree_format);
     w.put(static_cast<std::uint32_t>((A.colour ? 1u : 0u) | (t.normal_bits_ > 0 ? 2u : 0u)));
     w.put(static_cast<std::uint32_t>(t.normal_bits_));
     w.put(static_cast<std::uint64_t>(t.nodes_.size()));
@@ -901,7 +900,7 @@ struct point_octree_io {
                       s.axis_v[i]);
       if constexpr (A.colour) w.put(s.colours[i]);
     }
-    w.put(fnv1a(w.bytes.data(), w.bytes.size()));
+    append_checksum(w);
     return w.bytes;
   }
 
@@ -934,18 +933,9 @@ struct point_octree_io {
   static tree load(const std::string& path) {
     const std::vector<unsigned char> bytes = load_file_bytes(path);
     byte_reader r{bytes, 0, path};
-    for (char c : point_octree_magic)
-      if (r.get<char>("magic") != c)
-        throw FormatError(path + ": not a pbr_lod point-octree file (bad magic)");
-    const auto version = r.get<std::uint32_t>("version");
-    if (version != point_octree_version)
-      throw FormatError(path + ": version " + std::to_string(version) +
-                        ", this library reads version " + std::to_string(point_octree_version));
+    read_head(r, point_octree_format);
     const auto flags = r.get<std::uint32_t>("flags");
-    if (((flags & 1u) != 0) != A.colour)
-      throw FormatError(path + std::string(": the file ") + ((flags & 1u) ? "has" : "has no") +
-                        " colours, the requested point_octree type " +
-                        ((A.colour) ? "needs them" : "has none"));
+    check_colour_flag((flags & 1u) != 0, A.colour, path, "point_octree");
     if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
     const auto bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
     if (((flags & 2u) != 0) != (bits > 0) || bits < 0 || (bits > 0 && (bits < 6 || bits > 24)))
@@ -962,13 +952,7 @@ struct point_octree_io {
                         std::to_string(n_samples) + " samples need " +
                         std::to_string(expect + n_nodes * nb + n_samples * sb + 8) +
                         " bytes, the file has " + std::to_string(bytes.size()));
-    const std::uint64_t stored = [&] {
-      std::uint64_t h;
-      std::memcpy(&h, bytes.data() + bytes.size() - 8, 8);
-      return h;
-    }();
-    if (stored != fnv1a(bytes.data(), bytes.size() - 8))
-      throw FormatError(path + ": checksum mismatch (corrupt file)");
+    if (!checksum_matches(bytes)) throw FormatError(path + ": checksum mismatch (corrupt file)");
 
     tree t;
     t.normal_bits_ = bits;
@@ -1079,11 +1063,7 @@ std::size_t point_octree<A>::memory_bytes() const {
 
 template <attributes A>
 void point_octree<A>::save(const std::string& path) const {
-  const auto bytes = detail::point_octree_io<A>::serialise(*this);
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw IoError(path + ": cannot open for writing");
-  f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-  if (!f) throw IoError(path + ": write failed");
+  detail::save_file_bytes(path, detail::point_octree_io<A>::serialise(*this));
 }
 
 template <attributes A>
