@@ -46,7 +46,7 @@ void set_file_stats(pop_data& d, std::size_t size);  // with the file format, be
 /// threads keep both cores busy when one of them runs slower.
 constexpr std::size_t pieces_per_thread = 8, min_piece = 2048;
 template <class F>
-void parallel_chunks(std::size_t n, unsigned threads, F&& f) {
+void for_pieces(std::size_t n, unsigned threads, F&& f) {
   detail::parallel_pieces(n, threads, pieces_per_thread * threads, min_piece, f);
 }
 
@@ -869,7 +869,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   double adjacency_seconds = 0;
   std::vector<face_slots> nbr;  // becomes d.faces below (same size: nf × 3 u32)
   const bool by_edges = opt.adjacency == pop_adjacency::edge_sort;
-  // The same pieces as parallel_chunks() above, over the vertices (the buckets are by vertex).
+  // The same pieces as for_pieces() above, over the vertices (the buckets are by vertex).
   const std::size_t vertex_pieces =
       piece_count(nv, threads, pieces_per_thread * threads, min_piece);
   const std::size_t bucket_pieces = by_edges ? vertex_pieces : 0;
@@ -1013,7 +1013,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
   // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
   if (colour)
-    parallel_chunks(nf, threads, [&](std::size_t lo, std::size_t hi) {
+    for_pieces(nf, threads, [&](std::size_t lo, std::size_t hi) {
       for (std::size_t f = lo; f < hi; ++f) {
         if (textured) {
           face_colour[f] = tex.average(mesh.face_texcoords[f]);
@@ -1033,7 +1033,7 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   // that the splits below run over one contiguous array (no indirection through a permutation).
   scratch_vector<split_key> perm;
   resize_fresh(perm, n_leaves, threads);
-  parallel_chunks(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
+  for_pieces(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t g = lo; g < hi; ++g) {
       vec3d s = vec3d::Zero();
       for (std::uint32_t k = gstart[g]; k < gstart[g + 1]; ++k)

@@ -17,9 +17,6 @@
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <tbb/blocked_range.h>
-#include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -27,12 +24,14 @@
 #include <memory>
 #include <numeric>
 #include <optional>
+#include <thread>
 
 #include "pbr_lod/builders/detail/rho_grid_impl.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -305,9 +304,10 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   tree.accelerate_distance_queries();
   (void)tree.closest_point(K::Point_3(0, 0, 0));  // builds the search structure before threads
 
-  std::optional<tbb::global_control> threads;
-  if (o.threads > 0)
-    threads.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(o.threads));
+  // The library's pool with an explicit thread count (core/parallel.hpp): no process-wide TBB
+  // limit that would also cap every other thread of the caller's program.
+  const unsigned threads =
+      o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
 
   rho_grid<Rho> g;
   access::set_frame(g, k, f.min, f.side, nb, mb);
@@ -326,90 +326,93 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
     std::vector<vec3f> lsamples(o.keep_sample_points ? nl : 0);
     ws.note((level.capacity() + nl * R3) * sizeof(cell_pos) + nl * sizeof(typename lb::code) +
             nl * 2 + lsamples.size() * sizeof(vec3f));
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nl, 64), [&](const auto& range) {
-      std::vector<tri_vector::const_iterator> hits;
-      for (std::size_t ci = range.begin(); ci != range.end(); ++ci) {
-        const cell_pos& p = level[ci];
-        const vec3d ctr = lb::centre(p, span, f);
-        const auto [pt, it] =
-            tree.closest_point_and_primitive(K::Point_3(ctr.x(), ctr.y(), ctr.z()));
-        const vec3d s(pt.x(), pt.y(), pt.z());
-        if (o.keep_sample_points) lsamples[ci] = s.cast<float>();
-        const std::size_t ti = std::size_t(it - tris.cbegin());
-        const auto& fc = m.faces[face_of[ti]];
-        if (nb + mb > 0) {
-          // Barycentric coordinates of the closest point (double, Cramer on the normal equations).
-          const auto P = [&](int i) {
-            const auto& v = tris[ti].vertex(i);
-            return vec3d(v.x(), v.y(), v.z());
-          };
-          const vec3d a = P(0), e1 = P(1) - a, e2 = P(2) - a, d = s - a;
-          const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
-          const double den = d11 * d22 - d12 * d12;
-          double b1 = 0, b2 = 0;
-          if (den > 0) {
-            b1 = std::clamp((d22 * e1.dot(d) - d12 * e2.dot(d)) / den, 0.0, 1.0);
-            b2 = std::clamp((d11 * e2.dot(d) - d12 * e1.dot(d)) / den, 0.0, 1.0 - b1);
-          }
-          const double b0 = 1 - b1 - b2;
-          std::uint32_t nc = 0, mc = 0;
-          if (nb > 0) {
-            vec3d nrm = b0 * vnormals[fc[0]].cast<double>() + b1 * vnormals[fc[1]].cast<double>() +
-                        b2 * vnormals[fc[2]].cast<double>();
-            if (!(nrm.norm() > 1e-12) || !all_finite(nrm)) nrm = e1.cross(e2);
-            nc = q->encode(nrm.cast<float>());
-          }
-          if (mb > 0) {
-            const int vmax = b0 >= b1 && b0 >= b2 ? 0 : (b1 >= b2 ? 1 : 2);
-            mc = m.vertices.materials[fc[std::size_t(vmax)]];
-          }
-          lattrs[ci] = std::uint16_t(pack_attr(nc, mc, nb));
-        }
-        if (l == k) continue;
-        // Childhood code: exact triangle/box tests of the triangles meeting this cell.
-        const auto box = [&](std::uint64_t x0, std::uint64_t y0, std::uint64_t z0,
-                             std::uint64_t sp) {
-          return CGAL::Bbox_3(double(x0) * f.leaf, double(y0) * f.leaf, double(z0) * f.leaf,
-                              double(x0 + sp) * f.leaf, double(y0 + sp) * f.leaf,
-                              double(z0 + sp) * f.leaf);
-        };
-        const std::uint64_t bx = p[0] * span, by = p[1] * span, bz = p[2] * span;
-        hits.clear();
-        tree.all_intersected_primitives(box(bx, by, bz, span), std::back_inserter(hits));
-        typename lb::code cd;
-        const double cs = double(child_span) * f.leaf;
-        for (const auto& h : hits) {
-          const CGAL::Bbox_3 tb = h->bbox();
-          const auto range_of = [&](double lo_, double hi_, std::uint64_t base) {
-            const double o0 = double(base) * f.leaf;
-            const int a0 = std::clamp(int(std::floor((lo_ - o0) / cs)) - 1, 0, Rho - 1);
-            const int a1 = std::clamp(int(std::floor((hi_ - o0) / cs)) + 1, 0, Rho - 1);
-            return std::pair{a0, a1};
-          };
-          const auto [x0, x1] = range_of(tb.xmin(), tb.xmax(), bx);
-          const auto [y0, y1] = range_of(tb.ymin(), tb.ymax(), by);
-          const auto [z0, z1] = range_of(tb.zmin(), tb.zmax(), bz);
-          for (int z = z0; z <= z1; ++z)
-            for (int y = y0; y <= y1; ++y)
-              for (int x = x0; x <= x1; ++x) {
-                const int j = x + Rho * y + Rho * Rho * z;
-                if (cd.test(j)) continue;
-                if (CGAL::do_intersect(*h, box(bx + std::uint64_t(x) * child_span,
-                                               by + std::uint64_t(y) * child_span,
-                                               bz + std::uint64_t(z) * child_span, child_span)))
-                  cd.set(j);
+    detail::parallel_pieces(
+        nl, threads, 8 * std::size_t(threads), 64, [&](std::size_t first, std::size_t last) {
+          std::vector<tri_vector::const_iterator> hits;
+          for (std::size_t ci = first; ci != last; ++ci) {
+            const cell_pos& p = level[ci];
+            const vec3d ctr = lb::centre(p, span, f);
+            const auto [pt, it] =
+                tree.closest_point_and_primitive(K::Point_3(ctr.x(), ctr.y(), ctr.z()));
+            const vec3d s(pt.x(), pt.y(), pt.z());
+            if (o.keep_sample_points) lsamples[ci] = s.cast<float>();
+            const std::size_t ti = std::size_t(it - tris.cbegin());
+            const auto& fc = m.faces[face_of[ti]];
+            if (nb + mb > 0) {
+              // Barycentric coordinates of the closest point (double, Cramer on the normal
+              // equations).
+              const auto P = [&](int i) {
+                const auto& v = tris[ti].vertex(i);
+                return vec3d(v.x(), v.y(), v.z());
+              };
+              const vec3d a = P(0), e1 = P(1) - a, e2 = P(2) - a, d = s - a;
+              const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
+              const double den = d11 * d22 - d12 * d12;
+              double b1 = 0, b2 = 0;
+              if (den > 0) {
+                b1 = std::clamp((d22 * e1.dot(d) - d12 * e2.dot(d)) / den, 0.0, 1.0);
+                b2 = std::clamp((d11 * e2.dot(d) - d12 * e1.dot(d)) / den, 0.0, 1.0 - b1);
               }
-        }
-        if (cd.empty()) {
-          // Only possible through rounding at a cell face: keep the child holding the sample.
-          const auto axis = [&](double v, std::uint64_t base) {
-            return std::clamp(int(std::floor((v - double(base) * f.leaf) / cs)), 0, Rho - 1);
-          };
-          cd.set(axis(s.x(), bx) + Rho * axis(s.y(), by) + Rho * Rho * axis(s.z(), bz));
-        }
-        lcodes[ci] = cd;
-      }
-    });
+              const double b0 = 1 - b1 - b2;
+              std::uint32_t nc = 0, mc = 0;
+              if (nb > 0) {
+                vec3d nrm = b0 * vnormals[fc[0]].cast<double>() +
+                            b1 * vnormals[fc[1]].cast<double>() +
+                            b2 * vnormals[fc[2]].cast<double>();
+                if (!(nrm.norm() > 1e-12) || !all_finite(nrm)) nrm = e1.cross(e2);
+                nc = q->encode(nrm.cast<float>());
+              }
+              if (mb > 0) {
+                const int vmax = b0 >= b1 && b0 >= b2 ? 0 : (b1 >= b2 ? 1 : 2);
+                mc = m.vertices.materials[fc[std::size_t(vmax)]];
+              }
+              lattrs[ci] = std::uint16_t(pack_attr(nc, mc, nb));
+            }
+            if (l == k) continue;
+            // Childhood code: exact triangle/box tests of the triangles meeting this cell.
+            const auto box = [&](std::uint64_t x0, std::uint64_t y0, std::uint64_t z0,
+                                 std::uint64_t sp) {
+              return CGAL::Bbox_3(double(x0) * f.leaf, double(y0) * f.leaf, double(z0) * f.leaf,
+                                  double(x0 + sp) * f.leaf, double(y0 + sp) * f.leaf,
+                                  double(z0 + sp) * f.leaf);
+            };
+            const std::uint64_t bx = p[0] * span, by = p[1] * span, bz = p[2] * span;
+            hits.clear();
+            tree.all_intersected_primitives(box(bx, by, bz, span), std::back_inserter(hits));
+            typename lb::code cd;
+            const double cs = double(child_span) * f.leaf;
+            for (const auto& h : hits) {
+              const CGAL::Bbox_3 tb = h->bbox();
+              const auto range_of = [&](double lo_, double hi_, std::uint64_t base) {
+                const double o0 = double(base) * f.leaf;
+                const int a0 = std::clamp(int(std::floor((lo_ - o0) / cs)) - 1, 0, Rho - 1);
+                const int a1 = std::clamp(int(std::floor((hi_ - o0) / cs)) + 1, 0, Rho - 1);
+                return std::pair{a0, a1};
+              };
+              const auto [x0, x1] = range_of(tb.xmin(), tb.xmax(), bx);
+              const auto [y0, y1] = range_of(tb.ymin(), tb.ymax(), by);
+              const auto [z0, z1] = range_of(tb.zmin(), tb.zmax(), bz);
+              for (int z = z0; z <= z1; ++z)
+                for (int y = y0; y <= y1; ++y)
+                  for (int x = x0; x <= x1; ++x) {
+                    const int j = x + Rho * y + Rho * Rho * z;
+                    if (cd.test(j)) continue;
+                    if (CGAL::do_intersect(*h, box(bx + std::uint64_t(x) * child_span,
+                                                   by + std::uint64_t(y) * child_span,
+                                                   bz + std::uint64_t(z) * child_span, child_span)))
+                      cd.set(j);
+                  }
+            }
+            if (cd.empty()) {
+              // Only possible through rounding at a cell face: keep the child holding the sample.
+              const auto axis = [&](double v, std::uint64_t base) {
+                return std::clamp(int(std::floor((v - double(base) * f.leaf) / cs)), 0, Rho - 1);
+              };
+              cd.set(axis(s.x(), bx) + Rho * axis(s.y(), by) + Rho * Rho * axis(s.z(), bz));
+            }
+            lcodes[ci] = cd;
+          }
+        });
     cells += nl;
     if (cells > 0xffffffffull)
       throw InvalidArgument("rho-grid: more cells than 32-bit child indices address");

@@ -77,7 +77,7 @@ struct rho_grid_options {
   /// Bits of the material index (0..8), 0 for none; 3 = 8 materials as in the paper. Ignored
   /// when the input has no materials. Materials ≥ 2^bits are an InvalidArgument.
   int material_bits = 3;
-  /// Threads for the build (0 = TBB's default).
+  /// Threads for the build (0 = hardware concurrency). The grid does not depend on it.
   unsigned threads = 0;
   /// Keep the sampled surface point of every cell (world = origin + value) in sample_points
   /// (tests: every sample lies on the surface). Costs 12 bytes per cell.
