@@ -331,4 +331,8 @@ PBR_LOD_POINT_OCTREE_BUILD(extern, false, false, true)
 PBR_LOD_POINT_OCTREE_BUILD(extern, true, false, true)
 PBR_LOD_POINT_OCTREE_BUILD(extern, false, true, true)
 PBR_LOD_POINT_OCTREE_BUILD(extern, true, true, true)
+
+// The common interface (traverse/hierarchy.hpp): render, stats and tests drive it like any other.
+static_assert(Hierarchy<point_octree<point_octree_attributes(positions_only)>>);
+static_assert(Hierarchy<point_octree<point_octree_attributes(attributes{.colour = true})>>);
 }  // namespace pbr_lod

@@ -404,3 +404,9 @@ class pop_coherent_traversal {
 }  // namespace pbr_lod
 
 #include "pbr_lod/builders/detail/pop_impl.hpp"
+
+namespace pbr_lod {
+// The common interface (traverse/hierarchy.hpp): render, stats and tests drive it like any other.
+static_assert(Hierarchy<pop_tree<with_normals>>);
+static_assert(Hierarchy<pop_tree<with_normals_colours>>);
+}  // namespace pbr_lod
