@@ -1,5 +1,6 @@
 // pbrlod — the point-octree (Pajarola 2003): build, render and stats of its .lod files.
 #include <iostream>
+#include <limits>
 
 #include "pbr_lod/builders/point_octree.hpp"
 #include "pbr_lod/raster/png.hpp"
@@ -51,9 +52,13 @@ json octree_stats_json(const Tree& t, const std::string& path) {
   j.num("bytes_per_point_file", static_cast<double>(t.file_bytes()) / n);
   j.num("bytes_per_point_memory", static_cast<double>(t.memory_bytes()) / n);
   j.num("bits_per_sample", 8.0 * static_cast<double>(t.file_bytes()) / n);
-  j.num("build_seconds", st.seconds);
-  j.num("estimation_seconds", st.estimation_seconds);
-  j.num("tree_seconds", st.tree_seconds);
+  // The file holds no timings (its bytes depend only on the input and the options): `build
+  // --json` reports them, `stats` of a file reports null.
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  j.str("timings", st.has_timings ? "measured by this build" : "absent (not stored in the file)");
+  j.num("build_seconds", st.has_timings ? st.seconds : nan);
+  j.num("estimation_seconds", st.has_timings ? st.estimation_seconds : nan);
+  j.num("tree_seconds", st.has_timings ? st.tree_seconds : nan);
   return j;
 }
 

@@ -330,6 +330,36 @@ TEST(PointOctree, SaveLoadRoundTrip) {
   }
 }
 
+// Two builds of the same input, at different thread counts, write the same bytes (the file holds
+// no timings); a version 1 file (which did) is refused with a message that says to rebuild.
+TEST(PointOctree, FilesAreDeterministic) {
+  const auto pts = demo_points(30000, 4);
+  const auto dir = std::filesystem::temp_directory_path();
+  const auto bytes_of = [&](unsigned threads, const char* name) {
+    const auto path = (dir / name).string();
+    build_point_octree(pts, {.threads = threads}).save(path);
+    std::ifstream f(path, std::ios::binary);
+    return std::vector<char>(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  };
+  const auto a = bytes_of(1, "pbr_lod_octree_det_a.lod"),
+             b = bytes_of(2, "pbr_lod_octree_det_b.lod");
+  ASSERT_GT(a.size(), 16u);
+  EXPECT_TRUE(a == b);
+  const auto loaded = octree_nc::load((dir / "pbr_lod_octree_det_a.lod").string());
+  EXPECT_FALSE(loaded.stats().has_timings);
+  auto old = a;
+  old[8] = 1;  // the version field, little-endian
+  const auto path = (dir / "pbr_lod_octree_v1.lod").string();
+  std::ofstream(path, std::ios::binary).write(old.data(), static_cast<std::streamsize>(old.size()));
+  try {
+    (void)octree_nc::load(path);
+    ADD_FAILURE() << "version 1 accepted";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("version 1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("rebuild"), std::string::npos) << e.what();
+  }
+}
+
 TEST(PointOctree, LoadRejectsCorruptFiles) {
   const auto t = build_point_octree(demo_points(3000, 2));
   const auto path =

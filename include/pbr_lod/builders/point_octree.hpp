@@ -100,6 +100,9 @@ struct point_octree_options {
 }
 
 struct point_octree_build_stats {
+  /// Whether the timings below were measured by this build; a loaded file has none (its bytes
+  /// depend only on the input and the options, so two builds compare equal).
+  bool has_timings = false;
   double seconds = 0;             ///< whole build, including estimation
   double estimation_seconds = 0;  ///< normals + splat ellipses from k-NN (0 when given)
   double tree_seconds = 0;        ///< octree + covariances + bounding ellipses

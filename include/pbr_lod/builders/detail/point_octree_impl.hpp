@@ -807,6 +807,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
     st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   }
   st.seconds = std::chrono::duration<double>(clock::now() - t0).count();
+  st.has_timings = true;
   progress(1);
   return out;
 }
@@ -822,7 +823,8 @@ point_octree<point_octree_attributes(In)> build_point_octree(const point_set<In>
 // ---------------------------------------------------------------------------------------------
 // Storage (§5, Table 2). Little-endian file:
 //   header  "PBRLODPO" | u32 version | u32 flags (1 colour, 2 quantised) | u32 normal_bits
-//           | u64 nodes | u64 samples | f64 origin[3] | build stats (f64 seconds ×3, u64 input)
+//           | u64 nodes | u64 samples | f64 origin[3] | u64 input points
+//           (version 1 also held the build's timings: no two builds compared equal)
 //   nodes   f32 centre[3], f32 radius, f32 cone, u32 first, u32 count, u8 leaf, u8 depth,
 //           then quantised: u16/u32 normal code, u16/u32 axis code, f32 a, f32 b
 //                  or float: f32 normal[3], f32 axis_u[3], f32 axis_v[3]
@@ -833,7 +835,7 @@ point_octree<point_octree_attributes(In)> build_point_octree(const point_set<In>
 namespace detail {
 
 inline constexpr file_format point_octree_format{
-    "point-octree", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'O'}, 1};
+    "point-octree", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'O'}, 2};
 
 template <attributes A>
 struct point_octree_io {
@@ -848,7 +850,7 @@ struct point_octree_io {
   static std::size_t sample_bytes(int bits) {
     return 12 + orientation_bytes(bits) + (A.colour ? 3 : 0);
   }
-  static constexpr std::size_t header_bytes = 8 + 4 * 3 + 8 * 2 + 8 * 3 + 8 * 3 + 8;
+  static constexpr std::size_t header_bytes = 8 + 4 * 3 + 8 * 2 + 8 * 3 + 8;
 
   using code_t = typename tree::orientation_code;
   static void put_orientation(byte_writer& w, int bits, const code_t* code, const vec3f& n,
@@ -876,9 +878,6 @@ struct point_octree_io {
     w.put(t.samples_.origin.x());
     w.put(t.samples_.origin.y());
     w.put(t.samples_.origin.z());
-    w.put(t.stats_.seconds);
-    w.put(t.stats_.estimation_seconds);
-    w.put(t.stats_.tree_seconds);
     w.put(static_cast<std::uint64_t>(t.stats_.input_points));
     const int bits = t.normal_bits_;
     for (std::size_t i = 0; i < t.nodes_.size(); ++i) {
@@ -933,7 +932,7 @@ struct point_octree_io {
   static tree load(const std::string& path) {
     const std::vector<unsigned char> bytes = load_file_bytes(path);
     byte_reader r{bytes, 0, path};
-    read_head(r, point_octree_format);
+    read_head(r, point_octree_format, 1);  // version 1 stored the build's timings
     const auto flags = r.get<std::uint32_t>("flags");
     check_colour_flag((flags & 1u) != 0, A.colour, path, "point_octree");
     if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
@@ -963,9 +962,6 @@ struct point_octree_io {
     s.origin.y() = r.get<double>("origin");
     s.origin.z() = r.get<double>("origin");
     if (!all_finite(s.origin)) throw FormatError(path + ": origin is not finite");
-    t.stats_.seconds = r.get<double>("stats");
-    t.stats_.estimation_seconds = r.get<double>("stats");
-    t.stats_.tree_seconds = r.get<double>("stats");
     t.stats_.input_points = r.get<std::uint64_t>("stats");
     t.nodes_.resize(n_nodes);
     if constexpr (A.colour) t.node_colours_.resize(n_nodes);
