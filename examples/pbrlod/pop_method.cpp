@@ -1,6 +1,7 @@
 // pbrlod — POP, triangle-leaf bounding-sphere trees (Chen & Nguyen 2001): build, render, stats.
 #include <cmath>
 #include <iostream>
+#include <limits>
 
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/raster/png.hpp"
@@ -33,10 +34,13 @@ json pop_stats_json(const Tree& t, const std::string& path) {
   j.integer("vertex_file_bytes", static_cast<long long>(st.vertex_file_bytes));
   j.integer("face_file_bytes", static_cast<long long>(st.face_file_bytes));
   j.integer("node_file_bytes", static_cast<long long>(st.node_file_bytes));
-  j.num("build_seconds", st.build_seconds);
-  j.num("prepare_seconds", st.prepare_seconds);
-  j.num("adjacency_seconds", st.adjacency_seconds);
-  j.num("tree_seconds", st.tree_seconds);
+  // The file holds no timings: `build --json` reports them, `stats` of a file reports null.
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  j.str("timings", st.has_timings ? "measured by this build" : "absent (not stored in the file)");
+  j.num("build_seconds", st.has_timings ? st.build_seconds : nan);
+  j.num("prepare_seconds", st.has_timings ? st.prepare_seconds : nan);
+  j.num("adjacency_seconds", st.has_timings ? st.adjacency_seconds : nan);
+  j.num("tree_seconds", st.has_timings ? st.tree_seconds : nan);
   return j;
 }
 

@@ -1536,17 +1536,17 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   st.adjacency_seconds = adjacency_seconds;
   st.tree_seconds = std::chrono::duration<double>(t1 - t_adj).count();
   st.build_seconds = std::chrono::duration<double>(t1 - t0).count();
+  st.has_timings = true;
   set_file_stats(d, pop_file_bytes(d));
   return d;
 }
 
 // ---------------------------------------------------------------------------------------------
-// Storage (§3.5). Little-endian file, version 2:
+// Storage (§3.5). Little-endian file, version 3:
 //   header   "PBRLODPP" | u32 version | u32 flags (1 = colour, 2 = quantised nodes)
 //            | u32 normal_bits | u32 sphere rule | u32 adjacency
 //            | u64 vertices | u64 faces | u64 nodes | f64 origin[3] | f32 q_min[3] | f32 q_step[3]
-//            | build stats: f64 build, prepare, adjacency, tree seconds | u64 isolated,
-//              non-manifold edges, degenerate, contained_inner
+//            | build stats: u64 isolated, non-manifold edges, degenerate, contained_inner
 //            | quantised nodes only: f32 root centre[3], f32 root radius
 //   vertices u16 q[3] | normal code (u16 when normal_bits ≤ 16, else u32) | [u8 rgb[3]]
 //   faces    u32 v[3]                          (in leaf order)
@@ -1558,11 +1558,12 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
 //            float: f32 centre[3] | f32 radius | f32 cone | normal code | u32 first | u8 count
 //              | u8 leaf | [u8 rgb[3]]
 //   trailer  u64 FNV-1a of every byte before it
-// Version 1 (float nodes, fewer stats) is rejected: rebuild the file.
+// Versions 1 (float nodes, fewer stats) and 2 (the build's timings, so no two builds compared
+// equal) are rejected: rebuild the file.
 // ---------------------------------------------------------------------------------------------
 namespace {
-constexpr file_format pop_format{"POP", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'P'}, 2};
-constexpr std::size_t header_bytes = 8 + 4 * 5 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 8;
+constexpr file_format pop_format{"POP", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'P'}, 3};
+constexpr std::size_t header_bytes = 8 + 4 * 5 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 4;
 constexpr std::size_t root_bytes = 16;
 
 std::size_t code_bytes(int bits) {
@@ -1616,10 +1617,6 @@ void save_pop_data(const pop_data& d, const std::string& path) {
   for (int k = 0; k < 3; ++k) w.put(d.origin[k]);
   for (int k = 0; k < 3; ++k) w.put(d.q_min[k]);
   for (int k = 0; k < 3; ++k) w.put(d.q_step[k]);
-  w.put(d.stats.build_seconds);
-  w.put(d.stats.prepare_seconds);
-  w.put(d.stats.adjacency_seconds);
-  w.put(d.stats.tree_seconds);
   w.put(static_cast<std::uint64_t>(d.stats.isolated_faces));
   w.put(static_cast<std::uint64_t>(d.stats.nonmanifold_edges));
   w.put(static_cast<std::uint64_t>(d.stats.degenerate_faces));
@@ -1661,7 +1658,7 @@ void save_pop_data(const pop_data& d, const std::string& path) {
 pop_data load_pop_data(const std::string& path, bool colour) {
   const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
-  read_head(r, pop_format, 1);  // version 1 had float node records
+  read_head(r, pop_format, 2);  // 1: float node records; 2: timings in the file
   const auto flags = r.get<std::uint32_t>("flags");
   if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
   check_colour_flag((flags & 1u) != 0, colour, path, "pop_tree");
@@ -1698,10 +1695,6 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   for (int k = 0; k < 3; ++k) d.q_min[k] = r.get_finite("quantisation origin", 0);
   for (int k = 0; k < 3; ++k) d.q_step[k] = r.get_finite("quantisation step", 0);
   if ((d.q_step.array() < 0).any()) throw FormatError(path + ": negative quantisation step");
-  d.stats.build_seconds = r.get<double>("stats");
-  d.stats.prepare_seconds = r.get<double>("stats");
-  d.stats.adjacency_seconds = r.get<double>("stats");
-  d.stats.tree_seconds = r.get<double>("stats");
   d.stats.isolated_faces = r.get<std::uint64_t>("stats");
   d.stats.nonmanifold_edges = r.get<std::uint64_t>("stats");
   d.stats.degenerate_faces = r.get<std::uint64_t>("stats");
@@ -1863,6 +1856,12 @@ pop_data load_pop_data(const std::string& path, bool colour) {
 }
 
 bool operator==(const pop_data& a, const pop_data& b) {
+  // The build's timings are not part of the hierarchy (the file does not hold them).
+  const auto untimed = [](pop_build_stats s) {
+    s.has_timings = false;
+    s.build_seconds = s.prepare_seconds = s.adjacency_seconds = s.tree_seconds = 0;
+    return s;
+  };
   return a.origin == b.origin && a.positions == b.positions && a.normals == b.normals &&
          a.colours == b.colours && a.faces == b.faces && a.nodes == b.nodes &&
          a.node_colours == b.node_colours && a.vertex_q == b.vertex_q && a.q_min == b.q_min &&
@@ -1870,7 +1869,7 @@ bool operator==(const pop_data& a, const pop_data& b) {
          a.node_normal_codes == b.node_normal_codes && a.normal_bits == b.normal_bits &&
          a.spheres == b.spheres && a.adjacency == b.adjacency &&
          a.quantised_nodes == b.quantised_nodes && a.node_sphere_codes == b.node_sphere_codes &&
-         a.stats == b.stats;
+         untimed(a.stats) == untimed(b.stats);
 }
 
 }  // namespace pbr_lod::detail

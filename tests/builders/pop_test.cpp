@@ -820,8 +820,9 @@ TEST(PopStorage, FloatNodesRoundTripAndCorruption) {
   std::filesystem::remove(path);
 }
 
-// Version 1 files (float nodes, before QSplat quantisation) are rejected with a message that
-// says so, before anything else is read.
+// Version 1 files (float nodes, before QSplat quantisation) and version 2 files (timings in the
+// file) are rejected with a message that says so, before anything else is read; two builds of
+// the same mesh at different thread counts write the same bytes.
 TEST(PopStorage, Version1IsRejectedClearly) {
   const auto t = build_pop<with_normals>(grid_mesh(4));
   const auto path = temp_path("v1.lod");
@@ -838,6 +839,16 @@ TEST(PopStorage, Version1IsRejectedClearly) {
     EXPECT_NE(std::string(e.what()).find("version 1"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("rebuild"), std::string::npos) << e.what();
   }
+  std::filesystem::remove(path);
+  const auto bytes_of = [&](unsigned threads) {
+    build_pop<with_normals>(grid_mesh(40), {.threads = threads}).save(path);
+    std::ifstream in(path, std::ios::binary);
+    return std::vector<char>(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  };
+  const auto single = bytes_of(1), both = bytes_of(2);
+  ASSERT_GT(single.size(), 16u);
+  EXPECT_TRUE(single == both);
+  EXPECT_FALSE(pop_n::load(path).stats().has_timings);
   std::filesystem::remove(path);
 }
 

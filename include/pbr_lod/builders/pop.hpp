@@ -104,6 +104,9 @@ struct pop_options {
 };
 
 struct pop_build_stats {
+  /// Whether the timings below were measured by this build; a loaded file has none (its bytes
+  /// depend only on the input and the options, so two builds compare equal).
+  bool has_timings = false;
   double build_seconds = 0;  ///< whole build
   /// from the start to the end of the first phase and the face colours: validation, vertex
   /// quantisation and normals, which share the threads with the edge adjacency and grouping
