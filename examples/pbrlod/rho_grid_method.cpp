@@ -1,5 +1,6 @@
 // pbrlod — ρ-grid packed point trees (Duguet & Drettakis 2004): build, render and stats.
 #include <iostream>
+#include <limits>
 
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/builders/rho_grid_hierarchy.hpp"
@@ -29,7 +30,10 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   j.num("bits_per_sample_coded_geometry", cs.bits_per_sample_geometry);
   j.num("bits_per_sample_coded_attributes", cs.bits_per_sample_attributes);
   j.integer("coded_file_bytes", static_cast<long long>(cs.file_bytes));
-  j.num("build_seconds", st.build_seconds);
+  // The file holds no timings: `build --json` reports them, `stats` of a file reports null.
+  j.str("timings", st.has_timings ? "measured by this build" : "absent (not stored in the file)");
+  j.num("build_seconds",
+        st.has_timings ? st.build_seconds : std::numeric_limits<double>::quiet_NaN());
   return j;
 }
 

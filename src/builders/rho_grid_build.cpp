@@ -223,6 +223,7 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
   auto& st = access::stats(g);
   st.peak_working_bytes = ws.peak;
   st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  st.has_timings = true;
   return g;
 }
 
@@ -439,6 +440,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   auto& st = access::stats(g);
   st.peak_working_bytes = ws.peak;
   st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  st.has_timings = true;
   return g;
 }
 

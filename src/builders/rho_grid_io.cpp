@@ -3,7 +3,7 @@
 //
 // File layout (little endian):
 //   magic "PBRLODRG", u32 version, u32 ρ, u32 depth k, u32 layout (0 NIS, 1 IS),
-//   u32 normal bits, u32 material bits, f64 origin[3], f64 cube side, f64 build seconds,
+//   u32 normal bits, u32 material bits, f64 origin[3], f64 cube side,
 //   f64 input centre[3] (world), f64 input radius (rho_grid::input_centre), u64 cells per level [k
 //   + 1], u64 payload bits, payload bytes ⌈bits/8⌉, u64 FNV-1a of all bytes before it.
 // Payload, pre-order from the root (children in increasing digit order):
@@ -12,8 +12,9 @@
 // The cells of one level appear in pre-order in path order, which is the breadth-first order of
 // the in-core structure, so reading appends to per-level arrays and needs no reordering.
 //
-// Version 3 for every layout; versions 1 (NIS, IS) and 2 (compressed) had no input bounds and
-// are rejected with a message to rebuild.
+// Version 4 for every layout; versions 1 (NIS, IS) and 2 (compressed) had no input bounds, and
+// 1–3 held the build's time (no two builds compared equal): they are rejected with a message to
+// rebuild.
 // Compressed layout (2, beyond the paper): the same
 // header up to the cells per level, then u32 geometry context model, u32 attribute predictor,
 // u64 geometry bytes G, u64 attribute bytes A, G + A bytes of the two range-coded streams
@@ -33,9 +34,9 @@
 namespace pbr_lod {
 namespace {
 
-constexpr detail::file_format rho_format{"rho-grid", {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'}, 3};
-/// Bytes before the cells per level: magic, 6 u32, 9 f64 (origin, side, seconds, input bounds).
-constexpr std::size_t fixed_header_bytes = 8 + 6 * 4 + 9 * 8;
+constexpr detail::file_format rho_format{"rho-grid", {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'}, 4};
+/// Bytes before the cells per level: magic, 6 u32, 8 f64 (origin, side, input bounds).
+constexpr std::size_t fixed_header_bytes = 8 + 6 * 4 + 8 * 8;
 
 struct header_writer {
   std::vector<unsigned char>& b;
@@ -82,7 +83,6 @@ void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_gri
   h.put(g.origin().y());
   h.put(g.origin().z());
   h.put(g.cube_side());
-  h.put(g.stats().build_seconds);
   h.put(g.input_centre().x());
   h.put(g.input_centre().y());
   h.put(g.input_centre().z());
@@ -174,8 +174,9 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
                                    const std::string& what) {
   using access = detail::rho_grid_access<Rho>;
   detail::byte_reader r{bytes, 0, what};
-  // Versions 1 (NIS, IS) and 2 (compressed) did not record the input's bounds.
-  detail::read_head(r, rho_format, 2);
+  // Versions 1 (NIS, IS) and 2 (compressed) did not record the input's bounds, 1–3 stored the
+  // build's time.
+  detail::read_head(r, rho_format, 3);
   const auto rho_in = r.get<std::uint32_t>("rho");
   if (rho_in != std::uint32_t(Rho))
     throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
@@ -197,7 +198,6 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   origin.y() = r.get<double>("origin");
   origin.z() = r.get<double>("origin");
   const double side = r.get<double>("cube side");
-  const double seconds = r.get<double>("build seconds");
   if (!all_finite(origin) || !std::isfinite(side) || !(side > 0))
     throw FormatError(what + ": origin or cube side is not finite and positive");
   vec3d in_centre;
@@ -245,7 +245,6 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
     detail::rho_grid_decode(g, bytes.data() + r.pos, std::size_t(gbytes),
                             bytes.data() + r.pos + gbytes, std::size_t(abytes), per_level, opt,
                             what);
-    access::stats(g).build_seconds = std::isfinite(seconds) ? seconds : 0;
     return g;
   }
   const std::uint64_t sigma = nb + mb, leaves = per_level[depth], inner = total - leaves;
@@ -347,7 +346,6 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
       attrs[c] = std::uint16_t(nc | (mat << nb));
     }
   }
-  access::stats(g).build_seconds = std::isfinite(seconds) ? seconds : 0;
   return g;
 }
 
@@ -364,7 +362,7 @@ rho_grid<Rho> rho_grid<Rho>::load(const std::string& path) {
 int rho_grid_file_rho(const std::string& path) {
   const auto bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};
-  detail::read_head(r, rho_format, 2);
+  detail::read_head(r, rho_format, 3);
   const auto rho = r.get<std::uint32_t>("rho");
   if (rho < 2 || rho > 5) throw FormatError(path + ": rho " + std::to_string(rho) + " unsupported");
   return int(rho);

@@ -404,7 +404,7 @@ void check_round_trip(const rho_grid<Rho>& g) {
   const auto back = rho_grid<Rho>::parse(is);
   EXPECT_TRUE(back == g);
   // Payload size is exactly the §3.2 count; the file adds a fixed header and checksum.
-  const std::size_t header = 8 + 6 * 4 + 9 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
+  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
   EXPECT_EQ(is.size(), header + (g.payload_bits(rho_grid_layout::is) + 7) / 8 + 8);
   const auto nis = g.serialise(rho_grid_layout::nis);
   EXPECT_EQ(nis.size(), header + (g.payload_bits(rho_grid_layout::nis) + 7) / 8 + 8);
@@ -442,7 +442,7 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     expect_cuts_and_flips_throw(bytes, 16, rng);
     // The first payload code: in NIS at payload bit 0, in IS after the root's σ bits. Flipping
     // each of its 27 bits adds or removes a child: the counts no longer agree.
-    const std::size_t payload = 8 + 6 * 4 + 9 * 8 + 3 * 8 + 8;
+    const std::size_t payload = 8 + 6 * 4 + 8 * 8 + 3 * 8 + 8;
     const int start = layout == rho_grid_layout::is ? g.sigma() : 0;
     for (int b = 0; b < 27; ++b) {
       auto bad = bytes;
@@ -452,7 +452,7 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     }
     // A level count that lies.
     auto bad = bytes;
-    bad[8 + 6 * 4 + 9 * 8 + 8] ^= 1;  // level 1 count
+    bad[8 + 6 * 4 + 8 * 8 + 8] ^= 1;  // level 1 count
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
     // Wrong version and magic.
     bad = bytes;
@@ -461,8 +461,9 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     bad = bytes;
     bad[0] = 'X';
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
-    // Files of versions 1 and 2 had no input bounds: rejected, with what to do.
-    for (const unsigned char old : {1, 2}) {
+    // Files of versions 1 and 2 had no input bounds, 1–3 the build's time: rejected, with what
+    // to do.
+    for (const unsigned char old : {1, 2, 3}) {
       bad = bytes;
       bad[8] = old;
       try {
@@ -475,10 +476,24 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
     // A NaN input radius (the last header double before the level counts).
     bad = bytes;
     const double nan = std::numeric_limits<double>::quiet_NaN();
-    std::memcpy(bad.data() + 8 + 6 * 4 + 8 * 8, &nan, 8);
+    std::memcpy(bad.data() + 8 + 6 * 4 + 7 * 8, &nan, 8);
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(bad)), FormatError);
   }
   EXPECT_THROW((void)rho_grid<3>::load("/nonexistent/rho.lod"), IoError);
+}
+
+// Two builds of the same mesh, at 1 and 2 threads, write the same bytes in every layout (the file
+// holds no timings); a loaded grid says it has none.
+TEST(RhoGridStream, FilesAreDeterministic) {
+  const auto a = build_rho_grid<3>(bunny_small(), {.depth = 4, .threads = 1});
+  const auto b = build_rho_grid<3>(bunny_small(), {.depth = 4, .threads = 2});
+  EXPECT_TRUE(a.stats().has_timings);
+  for (const auto layout : {rho_grid_layout::nis, rho_grid_layout::is}) {
+    const auto x = a.serialise(layout), y = b.serialise(layout);
+    ASSERT_GT(x.size(), 16u);
+    EXPECT_TRUE(x == y);
+    EXPECT_FALSE(rho_grid<3>::parse(x).stats().has_timings);
+  }
 }
 
 // §3.3: the in-core structure gives random access — the child table of cell c starts at
@@ -559,7 +574,7 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
   EXPECT_DOUBLE_EQ(back.stats().bits_per_sample_incore, g.stats().bits_per_sample_incore);
   // The reported sizes are those of the file: header + both streams + checksum.
   const auto cs = g.coded_size();
-  const std::size_t header = 8 + 6 * 4 + 9 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
+  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
   EXPECT_EQ(cs.file_bytes, bytes.size());
   EXPECT_EQ(header + cs.geometry_bytes + cs.attribute_bytes + 8, bytes.size());
   EXPECT_EQ(cs.geometry_bytes == 0, g.depth() == 0);
@@ -653,7 +668,7 @@ TEST(RhoGridCompressed, TruncatedOrCorruptStreamsAreErrors) {
   const auto bytes = g.serialise(rho_grid_layout::compressed);
   std::mt19937 rng(3);
   expect_cuts_and_flips_throw(bytes, 32, rng);
-  const std::size_t counts = 8 + 6 * 4 + 9 * 8, models = counts + 4 * 8, lengths = models + 8;
+  const std::size_t counts = 8 + 6 * 4 + 8 * 8, models = counts + 4 * 8, lengths = models + 8;
   const auto expect_error = [&](std::vector<unsigned char> b, const char* why) {
     EXPECT_THROW((void)rho_grid<3>::parse(reseal(std::move(b))), FormatError) << why;
   };

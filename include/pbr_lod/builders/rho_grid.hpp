@@ -95,6 +95,9 @@ struct rho_grid_stats {
   double bits_per_sample_nis = 0;     ///< NIS stream payload bits / n
   double bits_per_sample_is = 0;      ///< IS stream payload bits / n
   double bits_per_sample_incore = 0;  ///< memory_bytes()·8 / n
+  /// Whether build_seconds was measured by this build; a loaded file has no timings (its bytes
+  /// depend only on the input and the options, so two builds compare equal).
+  bool has_timings = false;
   double build_seconds = 0;
   /// Largest bytes held by the build's per-level working set (cell coordinates of two levels,
   /// sampling results) on top of the structure itself.
