@@ -233,11 +233,23 @@ std::vector<float> knn_spacing(std::span<const vec3f> pts, int k, unsigned threa
   std::vector<float> out(pts.size(), 0.0f);
   if (pts.size() < 2 || k <= 0) return out;
   // k + 1 neighbours: the first is the point itself (or a duplicate at distance 0, which is
-  // the same thing for a spacing).
-  const int want =
-      std::min<int>(k + 1, static_cast<int>(std::min<std::size_t>(pts.size(), 1u << 30)));
-  const knn_graph g = nearest_neighbour_graph(pts, want, threads);
-  for (std::size_t i = 0; i < pts.size(); ++i) out[i] = std::sqrt(g.dist2[i * g.k + g.k - 1]);
+  // the same thing for a spacing). Only the last distance is kept, so no k-NN table is built:
+  // the queries run in Morton order over a sorted copy, as nearest_neighbour_graph's do.
+  const std::size_t want = std::min<std::size_t>(std::size_t(k) + 1, pts.size());
+  const std::vector<std::uint32_t> order = morton_order(pts);
+  std::vector<vec3f> sorted(pts.size());
+  for (std::size_t r = 0; r < pts.size(); ++r) sorted[r] = pts[order[r]];
+  const knn_index index(sorted);
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  detail::parallel_pieces(
+      pts.size(), threads, 4 * threads, 4096, [&](std::size_t lo, std::size_t hi) {
+        std::vector<std::uint32_t> idx(want);
+        std::vector<float> d2(want);
+        for (std::size_t r = lo; r < hi; ++r) {
+          const std::size_t found = index.query(sorted[r], want, idx.data(), d2.data());
+          out[order[r]] = found ? std::sqrt(d2[found - 1]) : 0.0f;
+        }
+      });
   return out;
 }
 

@@ -72,6 +72,11 @@ TEST(Knn, GraphMatchesBruteForce) {
     EXPECT_EQ(h.index, g.index);
     EXPECT_EQ(h.dist2, g.dist2);
   }
+  // knn_spacing(k) is the distance of each row's (k + 1)-th entry (the point itself first), for
+  // every point in the caller's order.
+  const std::vector<float> s8 = knn_spacing(pts, 8, 2);
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    ASSERT_EQ(s8[i], std::sqrt(g.dist2[i * 9 + 8])) << i;
   // Fewer points than k: every row lists all of them.
   const knn_graph small = nearest_neighbour_graph(std::span(pts).first(4), 9);
   EXPECT_EQ(small.k, 4u);

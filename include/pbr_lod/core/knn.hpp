@@ -85,7 +85,8 @@ struct knn_graph {
 /// Per point, the distance to its k-th nearest neighbour other than itself (a duplicate counts
 /// as a neighbour at distance 0). When k ≥ #P the farthest other point is used instead; a single
 /// point (or k ≤ 0) gets 0.
-/// Computed as one nearest_neighbour_graph batch on up to `threads` threads (0: all cores).
+/// Queried in one Morton-ordered batch on up to `threads` threads (0: all cores), keeping only
+/// the distance (no k-NN table in memory).
 [[nodiscard]] std::vector<float> knn_spacing(std::span<const vec3f> pts, int k,
                                              unsigned threads = 0);
 
