@@ -54,6 +54,7 @@
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
+#include "pbr_lod/traverse/ranks.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 
 namespace pbr_lod {
@@ -471,19 +472,8 @@ class pca_octree_cut {
     blocks_.resize(n);
     filled_.assign(n, 0);
     if (n == 0) return;
-    // Ranks of the plain traversal's order (pre-order, children pushed in order, popped
-    // reversed) so that a frame emits as traverse() does.
-    std::vector<node_id> stack{t.root()};
-    node_id next = 0;
-    while (!stack.empty()) {
-      const node_id m = stack.back();
-      stack.pop_back();
-      rank_[m] = next++;
-      for (const node_id c : t.children(m)) {
-        parent_[c] = m;
-        stack.push_back(c);
-      }
-    }
+    // A frame emits its cut in traverse()'s order.
+    traversal_ranks(t, rank_, [&](node_id p, node_id c) { parent_[c] = p; });
   }
 
   struct frame_stats {

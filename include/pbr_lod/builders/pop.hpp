@@ -61,6 +61,7 @@
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/triangle_mesh.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
+#include "pbr_lod/traverse/ranks.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 
 namespace pbr_lod {

@@ -15,17 +15,7 @@ pop_coherent_traversal<A>::pop_coherent_traversal(const pop_tree<A>& t) : t_(&t)
   state_.assign(n, draw);
   size_.assign(n, 0);
   if (n == 0) return;
-  // The plain traversal pops a node, then pushes its children in order: it visits the tree in
-  // pre-order with the children reversed. Ranking every node that way orders any cut as the
-  // plain traversal emits it.
-  std::vector<node_id> stack{t.root()};
-  node_id next = 0;
-  while (!stack.empty()) {
-    const node_id m = stack.back();
-    stack.pop_back();
-    rank_[m] = next++;
-    for (const node_id c : t.children(m)) stack.push_back(c);
-  }
+  traversal_ranks(t, rank_);  // orders any cut as the plain traversal emits it
 }
 
 template <attributes A>
