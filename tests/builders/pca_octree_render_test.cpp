@@ -25,6 +25,22 @@ image render_image(const T& t, const camera& cam, std::uint64_t seed) {
   return r.finish();
 }
 
+/// The cut is an antichain that covers the tree: no two of its nodes on one root-to-leaf path,
+/// and every leaf below one of them.
+template <class T, class Cut>
+void expect_antichain_cover(const T& t, const Cut& cut, int frame) {
+  std::vector<int> on(t.nodes().size(), 0), above(t.nodes().size(), 0);
+  for (auto n : cut) on[n] = 1;
+  for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
+    above[n] += on[n];
+    ASSERT_LE(above[n], 1) << "frame " << frame << ": two cut nodes on one path";
+    for (auto ch : t.children(n)) above[ch] = above[n];
+    if (t.is_leaf(n)) {
+      ASSERT_EQ(above[n], 1) << "frame " << frame << ": leaf " << n << " uncovered";
+    }
+  }
+}
+
 // A cloud 10⁷ units from the origin builds and draws like the same cloud at the origin: the
 // hierarchy keeps a double origin and the camera is placed relative to the data in both cases,
 // so the images agree except for pixels where float rounding moves a point across an edge.
@@ -204,18 +220,7 @@ TEST(pca_octree, SplitMergeCutMatchesFreshTraversal) {
     merges += cut.last_frame().merges;
     splits += cut.last_frame().splits;
     cached += cut.last_frame().points_cached;
-    // antichain covering the tree
-    std::vector<int> on(t.nodes().size(), 0);
-    for (auto n : cut.cut()) on[n] = 1;
-    std::vector<int> above(t.nodes().size(), 0);  // cut nodes on the path from the root
-    for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
-      above[n] += on[n];
-      ASSERT_LE(above[n], 1) << "frame " << f << ": two cut nodes on one path";
-      for (auto ch : t.children(n)) above[ch] = above[n];
-      if (t.is_leaf(n)) {
-        ASSERT_EQ(above[n], 1) << "frame " << f << ": leaf " << n << " uncovered";
-      }
-    }
+    ASSERT_NO_FATAL_FAILURE(expect_antichain_cover(t, cut.cut(), f));
   }
   std::cout << "visits over frames 1..15: fresh " << fresh_visits << ", cut " << cut_visits
             << "; splits " << splits << ", merges " << merges << ", points from the bank " << cached
@@ -264,16 +269,9 @@ TEST(pca_octree, HysteresisCutIsFinerAndCovers) {
     merges[1] += hyst.last_frame().merges;
     splits += hyst.last_frame().splits;
     finer_frames += hyst.drawn() != fresh_drawn ? 1 : 0;
-    std::vector<int> on(t.nodes().size(), 0), above(t.nodes().size(), 0);
+    ASSERT_NO_FATAL_FAILURE(expect_antichain_cover(t, hyst.cut(), f));
+    std::vector<int> on(t.nodes().size(), 0);
     for (auto n : hyst.cut()) on[n] = 1;
-    for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
-      above[n] += on[n];
-      ASSERT_LE(above[n], 1) << "frame " << f << ": two cut nodes on one path";
-      for (auto ch : t.children(n)) above[ch] = above[n];
-      if (t.is_leaf(n)) {
-        ASSERT_EQ(above[n], 1) << "frame " << f << ": leaf " << n << " uncovered";
-      }
-    }
     for (auto n : hyst.drawn())
       ASSERT_FALSE(ph.refine(t, n, t.split_measure(n, v, ph.render), o)) << "frame " << f;
     for (auto n : fresh_drawn)
