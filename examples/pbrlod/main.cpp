@@ -13,10 +13,13 @@
 // that this version does not have.
 #include <CLI/CLI.hpp>
 
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 
-#include "pbr_lod/builders/point_octree.hpp"
+#include "contact_sheet.hpp"
+#include "lod.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/raster/png.hpp"
@@ -29,11 +32,7 @@ namespace pbrlod_tool {
 
 const std::vector<method_entry>& methods() {
   static const std::vector<method_entry> m = {
-      point_octree_method(),
-      rho_grid_method(),
-      pop_method(),
-      pca_octree_method(),
-      pmr_method(),
+      point_octree_method(), rho_grid_method(), pop_method(), pca_octree_method(), pmr_method(),
   };
   return m;
 }
@@ -63,7 +62,7 @@ void add_view_options(CLI::App* cmd, view_args& a) {
 const method_entry& lod_method(const std::string& path) {
   const auto h = peek_lod(path);
   for (const auto& m : methods())
-    if (!m.magic.empty() && m.magic == h.magic && m.render) return m;
+    if (!m.magic.empty() && m.magic == h.magic && m.load) return m;
   throw FormatError(path +
                     ": not a hierarchy file written by this version of pbrlod (unknown magic)");
 }
@@ -85,10 +84,49 @@ image render_input(const loaded_input& in, const camera& cam, const render_optio
                       : render_reference(in.mesh.vertices, cam, o);
 }
 
+/// The fields every method reports for a frame, then the method's own.
+json frame_json(const frame& f, const method_entry& m, float tolerance) {
+  json j;
+  j.str("method", m.name).num(m.tolerance_key, tolerance).str("effects", f.fx.to_string());
+  j.merge(f.extra);
+  j.integer("width", f.img.width).integer("height", f.img.height);
+  j.integer("nodes_visited", static_cast<long long>(f.st.visited));
+  j.integer("culled_frustum", static_cast<long long>(f.st.culled_frustum));
+  j.integer("culled_backface", static_cast<long long>(f.st.culled_backface));
+  j.integer("nodes_drawn", static_cast<long long>(f.st.emitted_nodes));
+  j.integer("leaves_drawn", static_cast<long long>(f.st.emitted_leaves));
+  j.integer("points", static_cast<long long>(f.st.points));
+  j.integer("triangles", static_cast<long long>(f.st.triangles));
+  j.integer("splats", static_cast<long long>(f.st.splats));
+  j.integer("covered_pixels", static_cast<long long>(f.img.covered_count()));
+  j.num("frame_seconds", f.seconds);
+  return j;
+}
+
+/// `render FILE.lod`: the camera frames the input's bounds the file records, as for the input.
+int render_hierarchy(const std::string& input, const view_args& va, float tolerance,
+                     const std::string& output, bool as_json, std::uint64_t seed) {
+  const method_entry& m = lod_method(input);
+  const auto l = m.load(input);
+  const auto [centre, radius] = l->input_bounds();
+  const frame f = l->draw(make_camera(centre, radius, va), va, tolerance, seed);
+  write_png(output, f.img);
+  if (as_json) {
+    json j;
+    j.str("input", input).str("output", output);
+    std::cout << j.merge(frame_json(f, m, tolerance)).text() << "\n";
+  } else {
+    std::cout << "wrote " << output << ": " << f.st.points << " points, " << f.st.splats
+              << " splats and " << f.st.triangles << " triangles at " << m.tolerance_key << " "
+              << tolerance << " (" << f.seconds << " s)\n";
+  }
+  return 0;
+}
+
 int cmd_render(const std::string& input, const view_args& va, float tolerance,
                const std::string& output, bool as_json, std::uint64_t seed) {
   if (is_hierarchy_file(input))
-    return lod_method(input).render({input, output, va, tolerance, as_json, seed});
+    return render_hierarchy(input, va, tolerance, output, as_json, seed);
   progress prog(as_json);
   prog.step("reading " + input);
   const auto in = load(input);
@@ -119,7 +157,11 @@ int cmd_render(const std::string& input, const view_args& va, float tolerance,
 }
 
 int cmd_stats(const std::string& input, bool as_json) {
-  if (is_hierarchy_file(input)) return lod_method(input).stats(input, as_json);
+  if (is_hierarchy_file(input)) {
+    const json j = lod_method(input).load(input)->stats(input);
+    std::cout << (as_json ? "" : input + ": ") << j.text() << "\n";
+    return 0;
+  }
   const auto in = load(input);
   const auto& c = in.mesh.vertices;
   const auto [centre, radius] = world_bounds(c);
@@ -191,7 +233,131 @@ int cmd_build(const std::string& method, const std::string& input, const std::st
               << ") is not available in pbr_lod " << version() << " yet\n";
     return 2;
   }
-  return it->build({input, output, params, as_json});
+  const auto l = it->build(params, build_input(input), interactive(as_json));
+  l->save(output);
+  std::cout << (as_json ? "" : "wrote " + output + ": ") << l->stats(output).text() << "\n";
+  return 0;
+}
+
+/// Points the demo samples from a mesh: one per vertex, at least 20,000.
+std::size_t demo_samples(const triangle_mesh& m) {
+  return std::max<std::size_t>(m.num_vertices(), 20000);
+}
+
+/// One line of the demo's summary table.
+struct demo_row {
+  std::string method, setting;
+  double psnr = 0, hole_fraction = 0, frame_ms = 0, build_s = 0, bytes_per_sample = 0;
+  std::size_t primitives = 0;
+  std::string note;  ///< why a builder has no frames
+};
+
+std::string fixed(double v, int digits) {
+  std::ostringstream o;
+  o.setf(std::ios::fixed);
+  o.precision(digits);
+  o << v;
+  return o.str();
+}
+
+/// "tolerance 4 px" or "factor 4": the setting as `render` names it.
+std::string setting_text(const method_entry& m, float tolerance) {
+  const std::string v = fixed(tolerance, tolerance == std::floor(tolerance) ? 0 : 1);
+  return m.tolerance_key == "tolerance_px" ? "tol " + v + " px" : m.tolerance_key + " " + v;
+}
+
+/// Builds one method from `in` with its defaults and draws it at its demo tolerances: one PNG,
+/// one contact-sheet tile and one table row each. A method that cannot build from this input
+/// (POP from a point cloud) gets a row saying why.
+json demo_method(const method_entry& m, const build_input& in, const camera& cam,
+                 const view_args& va, const image& ref, const std::string& dir, progress& prog,
+                 std::vector<sheet_tile>& tiles, std::vector<demo_row>& table) {
+  json j;
+  prog.step("building " + m.name);
+  const auto t0 = clock_type::now();
+  std::unique_ptr<lod> l;
+  try {
+    l = m.build({}, in, false);
+  } catch (const InvalidArgument& e) {
+    demo_row skipped;
+    skipped.method = m.name;
+    skipped.note = e.what();
+    table.push_back(skipped);
+    return j.str("skipped", e.what());
+  }
+  const double build_s = seconds_since(t0);
+  const double bps = static_cast<double>(l->file_bytes()) / static_cast<double>(l->samples());
+  j.num("build_seconds", build_s).integer("file_bytes", static_cast<long long>(l->file_bytes()));
+  j.num("bytes_per_sample", bps);
+  std::string frames;
+  for (const float tol : m.demo_tolerances) {
+    const std::string setting = setting_text(m, tol);
+    prog.step("rendering " + m.name + " at " + setting);
+    const frame f = l->draw(cam, va, tol, 1);
+    const image_error e = compare_images(ref, f.img);
+    const std::string png =
+        (fs::path(dir) / (m.name + "_" + fixed(tol, tol == std::floor(tol) ? 0 : 1) + ".png"))
+            .string();
+    write_png(png, f.img);
+    json fj = error_json(e);
+    fj.num(m.tolerance_key, tol).str("png", png).num("frame_seconds", f.seconds);
+    fj.integer("primitives", static_cast<long long>(f.st.primitives()));
+    frames += (frames.empty() ? "" : ",") + fj.text();
+    table.push_back({m.name, setting, e.psnr, e.hole_fraction, 1e3 * f.seconds, build_s, bps,
+                     f.st.primitives(), ""});
+    tiles.push_back(
+        {shrink(f.img, 2),
+         {m.name + "  " + setting,
+          fixed(e.psnr, 1) + " dB  holes " + fixed(100 * e.hole_fraction, 1) + "%",
+          std::to_string(f.st.primitives()) + " prim  " + fixed(1e3 * f.seconds, 1) + " ms"}});
+  }
+  return j.raw("frames", "[" + frames + "]");
+}
+
+void print_demo_table(const std::vector<demo_row>& rows) {
+  std::printf("%-12s %-15s %8s %7s %11s %9s %8s %9s\n", "builder", "setting", "PSNR dB", "holes%",
+              "primitives", "frame ms", "build s", "B/sample");
+  for (const demo_row& r : rows) {
+    if (!r.note.empty()) {
+      std::printf("%-12s %s\n", r.method.c_str(), r.note.c_str());
+      continue;
+    }
+    std::printf("%-12s %-15s %8.2f %7.2f %11zu %9.1f %8.2f %9.2f\n", r.method.c_str(),
+                r.setting.c_str(), r.psnr, 100 * r.hole_fraction, r.primitives, r.frame_ms,
+                r.build_s, r.bytes_per_sample);
+  }
+}
+
+/// The demo's splat quality (not LOD): the mesh's sampled points drawn as splats, without and
+/// with hole filling, against the mesh reference; and the reference again with shadows.
+json demo_splats(const loaded_input& mesh, const loaded_input& pts, const camera& cam,
+                 const render_options& o, const image& ref, const std::string& dir,
+                 progress& prog) {
+  json report;
+  for (const bool holes : {false, true}) {
+    render_options po = o;
+    po.fx.hole_filling = holes;
+    prog.step(holes ? "rendering splats with hole filling" : "rendering splats");
+    const auto t0 = clock_type::now();
+    const image img = render_input(pts, cam, po);
+    const double secs = seconds_since(t0);
+    const std::string png =
+        (fs::path(dir) / (holes ? "points_hole_filled.png" : "points.png")).string();
+    write_png(png, img);
+    json j = error_json(compare_images(ref, img));
+    j.str("png", png).num("seconds", secs);
+    report.object(holes ? "splats_hole_filled" : "splats", j);
+  }
+  render_options so = o;
+  so.fx.shadows = true;
+  prog.step("rendering with shadows");
+  const auto t0 = clock_type::now();
+  const image shadowed = render_input(mesh, cam, so);
+  const std::string png = (fs::path(dir) / "reference_shadows.png").string();
+  write_png(png, shadowed);
+  json j;
+  j.str("png", png).num("seconds", seconds_since(t0));
+  return report.object("shadows", j);
 }
 
 int cmd_demo(const std::string& input, const std::string& dir, bool as_json) {
@@ -208,7 +374,7 @@ int cmd_demo(const std::string& input, const std::string& dir, bool as_json) {
     in = load(input);
   }
   json report;
-  report.str("input", name).integer("points", static_cast<long long>(in.mesh.num_vertices()));
+  report.str("input", name).integer("vertices", static_cast<long long>(in.mesh.num_vertices()));
   report.integer("faces", static_cast<long long>(in.mesh.num_faces()));
   view_args va;
   va.size = "768x768";
@@ -226,86 +392,42 @@ int cmd_demo(const std::string& input, const std::string& dir, bool as_json) {
   write_png(ref_png, ref);
   report.str("reference_png", ref_png);
 
-  // 2. For a mesh: the same surface as a point cloud (one sample per vertex-area), rendered as
-  //    splats with and without hole filling, and compared with the mesh reference.
+  // 2. For a mesh: the same surface as a point cloud (one sample per vertex, at least 20,000),
+  //    which the point builders build from.
+  loaded_input pts;
   if (in.is_mesh()) {
     prog.step("sampling the surface into points");
-    const std::size_t n = std::max<std::size_t>(in.mesh.num_vertices(), 20000);
-    loaded_input pts;
-    pts.mesh.vertices = sample_surface(in.mesh, n, 1);
-    report.integer("samples", static_cast<long long>(n));
-    for (const bool holes : {false, true}) {
-      render_options po = o;
-      po.fx.hole_filling = holes;
-      prog.step(holes ? "rendering splats with hole filling" : "rendering splats");
-      t0 = clock_type::now();
-      const image img = render_input(pts, cam, po);
-      const double secs = seconds_since(t0);
-      const std::string png =
-          (fs::path(dir) / (holes ? "points_hole_filled.png" : "points.png")).string();
-      write_png(png, img);
-      json j = error_json(compare_images(ref, img));
-      j.str("png", png).num("seconds", secs);
-      report.object(holes ? "points_hole_filled" : "points", j);
-    }
-    // Shadows and shading cost: one more image with the shadow pass.
-    render_options so = o;
-    so.fx.shadows = true;
-    prog.step("rendering with shadows");
-    t0 = clock_type::now();
-    const image shadowed = render_input(in, cam, so);
-    const std::string png = (fs::path(dir) / "reference_shadows.png").string();
-    write_png(png, shadowed);
-    json j;
-    j.str("png", png).num("seconds", seconds_since(t0));
-    report.object("shadows", j);
+    pts.mesh.vertices = sample_surface(in.mesh, demo_samples(in.mesh), 1);
+    report.integer("samples", static_cast<long long>(pts.mesh.num_vertices()));
+    report.merge(demo_splats(in, pts, cam, o, ref, dir, prog));
   }
-  // 3. The point-octree (Pajarola 2003) over the points, drawn at τ = 1, 4, 16 px.
-  {
-    prog.step("building the point-octree");
-    const point_cloud cloud =
-        in.is_mesh()
-            ? sample_surface(in.mesh, std::max<std::size_t>(in.mesh.num_vertices(), 20000), 1)
-            : in.mesh.vertices;
-    json oj;
-    with_point_set(cloud, name, [&](const auto& pts) {
-      const auto t = build_point_octree(pts);
-      using tree = std::decay_t<decltype(t)>;
-      oj.integer("nodes", static_cast<long long>(t.nodes().size()));
-      oj.num("build_seconds", t.stats().seconds);
-      oj.num("bytes_per_point_file",
-             static_cast<double>(t.file_bytes()) / static_cast<double>(t.samples().size()));
-      const view v(cam, t.origin());
-      render_options lo = o;
-      lo.fx.colour = tree::attrs.colour && o.fx.colour;
-      for (const float tol : {1.0f, 4.0f, 16.0f}) {
-        prog.step("rendering the point-octree at " + std::to_string(static_cast<int>(tol)) + " px");
-        const traverse_options topt{.tolerance_px = tol,
-                                    .backface_cull = true,
-                                    .cull_volume = traverse_options::volume::view_cone};
-        traverse_stats st;
-        const auto start = clock_type::now();
-        const image img = render<tree::attrs>(
-            v, lo, [&](auto& sink) { st = traverse(t, v, topt, sink, point_octree_policy{}); });
-        const double secs = seconds_since(start);
-        const std::string png =
-            (fs::path(dir) / ("point_octree_tau" + std::to_string(static_cast<int>(tol)) + ".png"))
-                .string();
-        write_png(png, img);
-        json j = error_json(compare_images(ref, img));
-        j.str("png", png).num("seconds", secs).integer("splats", static_cast<long long>(st.splats));
-        oj.object("tau_" + std::to_string(static_cast<int>(tol)), j);
-      }
-      return 0;
-    });
-    report.object("point_octree", oj);
+  // 3. Every builder this version has, built with its defaults (the point builders from the
+  //    points, the mesh builders from the mesh), drawn from the same camera at its demo
+  //    tolerances and compared with the full-detail reference.
+  const build_input mesh_in(in, name);
+  const build_input points_in =
+      in.is_mesh() ? build_input(std::move(pts), name + " (sampled points)") : mesh_in;
+  std::vector<std::vector<sheet_tile>> sheet;
+  std::vector<demo_row> table;
+  json builders;
+  for (const method_entry& m : methods()) {
+    if (!m.build) continue;
+    sheet.emplace_back();
+    builders.object(m.name, demo_method(m, m.builds_from_mesh ? mesh_in : points_in, cam, va, ref,
+                                        dir, prog, sheet.back(), table));
   }
+  report.object("builders", builders);
+  const std::string sheet_png = (fs::path(dir) / "contact_sheet.png").string();
+  prog.step("writing the contact sheet");
+  write_png(sheet_png, contact_sheet(sheet));
+  report.str("contact_sheet_png", sheet_png);
   if (as_json) {
     std::cout << report.text() << "\n";
   } else {
     std::cout << "pbrlod demo: " << name << " (" << in.mesh.num_vertices() << " points, "
-              << in.mesh.num_faces() << " faces) -> " << dir << "/\n"
-              << report.text() << "\n";
+              << in.mesh.num_faces() << " faces) -> " << dir << "/\n";
+    print_demo_table(table);
+    std::cout << "contact sheet: " << sheet_png << "\n";
   }
   return 0;
 }

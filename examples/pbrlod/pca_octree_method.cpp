@@ -3,12 +3,10 @@
 // Build time: the file holds no timings (its bytes depend only on the input and the options),
 // so build_seconds and kmeans_seconds are reported by `build --json`; `stats` of a file reports
 // them as null with "timings":"absent (not stored in the file)".
-#include <iostream>
+#include <limits>
 
+#include "lod.hpp"
 #include "pbr_lod/builders/pca_octree.hpp"
-#include "pbr_lod/raster/png.hpp"
-#include "pbr_lod/raster/rasterizer.hpp"
-#include "tool.hpp"
 
 namespace pbrlod_tool {
 namespace {
@@ -71,90 +69,77 @@ json pca_stats_json(const Tree& t, const std::string& path) {
   return j;
 }
 
-template <class F>
-auto with_pca(const std::string& path, F&& f) {
-  if (peek_lod(path).flags & 1u) return f(pca_octree<with_normals_colours>::load(path));
-  return f(pca_octree<with_normals>::load(path));
-}
+/// What the PCA octree contributes to a frame: --tolerance is the generated points' size in
+/// pixels (§4), --seed their random stream; shadows and hole filling are not compiled in.
+struct pca_method {
+  template <class Tree>
+  std::pair<vec3d, double> input_bounds(const Tree& t) const {
+    return {t.origin(), t.input_radius()};  // recorded at build: frames like the input
+  }
+  template <class Tree>
+  frame draw(const Tree& t, const camera& cam, const view_args& va, float tolerance,
+             std::uint64_t seed) const {
+    const view v(cam, t.origin());
+    const render_options o = lod_render_options(va, Tree::attrs.colour);
+    const traverse_options topt{.tolerance_px = tolerance, .backface_cull = o.fx.backface_cull};
+    pca_octree_policy policy;
+    policy.render.seed = seed;
+    policy.render.point_px = std::max(1.0f, tolerance);
+    constexpr effects compiled{.shading = true, .colour = true, .backface_cull = true};
+    frame f = draw_frame<compiled>(t, v, o, topt, policy);
+    f.extra.integer("seed", static_cast<long long>(seed));
+    f.extra.integer("nodes_drawn",
+                    static_cast<long long>(f.st.emitted_nodes + f.st.emitted_leaves));
+    return f;
+  }
+  template <class Tree>
+  json stats(const Tree& t, const std::string& path) const {
+    return pca_stats_json(t, path);
+  }
+  template <class Tree>
+  void save(const Tree& t, const std::string& path) const {
+    t.save(path);
+  }
+  template <class Tree>
+  std::size_t file_bytes(const Tree& t) const {
+    return t.file_bytes();
+  }
+  template <class Tree>
+  std::size_t samples(const Tree& t) const {
+    return t.stats().input_points;
+  }
+};
 
-int build(const build_request& r) {
-  const auto opt = pca_options(r.params, interactive(r.as_json));
-  read_report report;
-  const point_cloud cloud = read_points(r.input, &report);
-  for (const auto& w : report.warnings) std::cerr << "warning: " << w << "\n";
-  const auto go = [&](const auto& t) {
-    t.save(r.output);
-    std::cout << (r.as_json ? "" : "wrote " + r.output + ": ") << pca_stats_json(t, r.output).text()
-              << "\n";
-    return 0;
-  };
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool on_terminal) {
+  const auto opt = pca_options(items, on_terminal);
+  const point_cloud& cloud = in.get().mesh.vertices;
   // Only normals and colours matter to this builder: four instantiations of the thin wrapper.
   const attributes have = cloud.present();
-  if (have.colour && have.normal)
-    return go(build_pca_octree(point_set<with_normals_colours>::from(cloud, r.input), opt));
-  if (have.colour)
-    return go(build_pca_octree(point_set<attributes{.colour = true}>::from(cloud, r.input), opt));
-  if (have.normal) return go(build_pca_octree(point_set<with_normals>::from(cloud, r.input), opt));
-  return go(build_pca_octree(point_set<positions_only>::from(cloud, r.input), opt));
+  const auto go = [&]<attributes A>() {
+    return make_lod(pca_method{}, build_pca_octree(point_set<A>::from(cloud, in.name()), opt));
+  };
+  if (have.colour && have.normal) return go.template operator()<with_normals_colours>();
+  if (have.colour) return go.template operator()<attributes{.colour = true}>();
+  if (have.normal) return go.template operator()<with_normals>();
+  return go.template operator()<positions_only>();
 }
 
-int render_lod(const render_request& r) {
-  return with_pca(r.input, [&](const auto& t) {
-    using tree = std::decay_t<decltype(t)>;
-    // Frame the input's bounds, as `render INPUT` does.
-    point_cloud bounds;
-    bounds.origin = t.origin();
-    const float rad = static_cast<float>(t.input_radius());
-    bounds.positions = {vec3f(-rad, 0, 0), vec3f(rad, 0, 0)};
-    const camera cam = make_camera(bounds, r.view);
-    const view v(cam, t.origin());
-    const render_options o = lod_render_options(r.view, tree::attrs.colour);
-    const traverse_options topt{.tolerance_px = r.tolerance, .backface_cull = o.fx.backface_cull};
-    pca_octree_policy policy;
-    policy.render.seed = r.seed;
-    policy.render.point_px = std::max(1.0f, r.tolerance);  // --tolerance = point size (§4)
-    traverse_stats st;
-    const auto t0 = clock_type::now();
-    // Effects a generated-point cloud uses; shadows and hole filling are not compiled in here.
-    constexpr effects compiled{.shading = true, .colour = true, .backface_cull = true};
-    const image img = render<tree::attrs, compiled>(
-        v, o, [&](auto& sink) { st = traverse(t, v, topt, sink, policy); });
-    const double frame_s = seconds_since(t0);
-    write_png(r.output, img);
-    if (r.as_json) {
-      json j;
-      j.str("input", r.input).str("output", r.output).str("method", "pca-octree");
-      j.num("tolerance_px", r.tolerance).str("effects", o.fx.to_string());
-      j.integer("seed", static_cast<long long>(r.seed));
-      j.integer("width", img.width).integer("height", img.height);
-      j.integer("nodes_visited", static_cast<long long>(st.visited));
-      j.integer("nodes_drawn", static_cast<long long>(st.emitted_nodes + st.emitted_leaves));
-      j.integer("culled_frustum", static_cast<long long>(st.culled_frustum));
-      j.integer("culled_backface", static_cast<long long>(st.culled_backface));
-      j.integer("points", static_cast<long long>(st.points));
-      j.integer("covered_pixels", static_cast<long long>(img.covered_count()));
-      j.num("frame_seconds", frame_s);
-      std::cout << j.text() << "\n";
-    } else {
-      std::cout << "wrote " << r.output << ": " << st.points << " generated points from "
-                << st.emitted_nodes + st.emitted_leaves << " nodes, seed " << r.seed << " ("
-                << frame_s << " s)\n";
-    }
-    return 0;
-  });
-}
-
-int stats(const std::string& path, bool as_json) {
-  return with_pca(path, [&](const auto& t) {
-    std::cout << (as_json ? "" : path + ": ") << pca_stats_json(t, path).text() << "\n";
-    return 0;
-  });
+std::unique_ptr<lod> load(const std::string& path) {
+  if (peek_lod(path).flags & 1u)
+    return make_lod(pca_method{}, pca_octree<with_normals_colours>::load(path));
+  return make_lod(pca_method{}, pca_octree<with_normals>::load(path));
 }
 
 }  // namespace
 
 method_entry pca_octree_method() {
-  return {"pca-octree", "Kalaiah & Varshney 2003", "PBRLODSG", &build, &render_lod, &stats};
+  return {.name = "pca-octree",
+          .paper = "Kalaiah & Varshney 2003",
+          .magic = "PBRLODSG",
+          .build = &build,
+          .load = &load,
+          .demo_tolerances = {4, 2, 1}};
 }
 
 }  // namespace pbrlod_tool

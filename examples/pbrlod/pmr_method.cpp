@@ -6,13 +6,10 @@
 // `stats` reads it from there (null when that file is absent, e.g. for a copied .lod).
 #include <cmath>
 #include <fstream>
-#include <iostream>
 #include <sstream>
 
+#include "lod.hpp"
 #include "pbr_lod/builders/pmr.hpp"
-#include "pbr_lod/raster/png.hpp"
-#include "pbr_lod/raster/rasterizer.hpp"
-#include "tool.hpp"
 
 namespace pbrlod_tool {
 namespace {
@@ -58,8 +55,48 @@ json pmr_stats_json(const pmr_hierarchy& h, const std::string& path, double buil
   return j;
 }
 
-int build(const build_request& r) {
-  params m(r.params);
+/// What PMR contributes to a frame (§3): every leaf the frustum keeps, its level from the pixel
+/// size at its nearest corner with factor = --tolerance, then points or umbrella triangles. It
+/// keeps the build time, which the file does not hold: save() writes it beside the file.
+struct pmr_method_traits {
+  double build_seconds = std::nan("");
+
+  std::pair<vec3d, double> input_bounds(const pmr_hierarchy& h) const {
+    return bounds_of(h.origin(), h.positions());  // every input point is in the hierarchy
+  }
+  frame draw(const pmr_hierarchy& h, const camera& cam, const view_args& va, float tolerance,
+             std::uint64_t /*seed*/) const {
+    const view v(cam, h.origin());
+    const render_options o = lod_render_options(va, false);
+    traverse_options topt;
+    topt.tolerance_px = tolerance;
+    std::vector<std::uint32_t> used(h.leaf_count(), 0);
+    pmr_policy policy;
+    policy.levels_used = &used;
+    frame f = draw_frame(h, v, o, topt, policy);
+    std::vector<std::size_t> hist(h.levels(), 0);
+    for (const auto u : used) ++hist[u];
+    f.extra.raw("leaves_per_level", list(hist));
+    return f;
+  }
+  json stats(const pmr_hierarchy& h, const std::string& path) const {
+    return pmr_stats_json(h, path, build_seconds);
+  }
+  void save(const pmr_hierarchy& h, const std::string& path) const {
+    h.save(path);
+    if (std::isfinite(build_seconds)) {
+      std::ofstream t(timing_path(path));
+      t.precision(10);
+      t << build_seconds << "\n";
+    }
+  }
+  std::size_t file_bytes(const pmr_hierarchy& h) const { return h.file_bytes(); }
+  std::size_t samples(const pmr_hierarchy& h) const { return h.positions().size(); }
+};
+
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool on_terminal) {
+  params m(items);
   pmr_options o;
   o.max_leaf_points = static_cast<std::uint32_t>(m.integer("leaf_points", 10000, 8, 1 << 24));
   o.neighbour_margin = static_cast<float>(m.number("margin", o.neighbour_margin, 0, 2));
@@ -70,78 +107,32 @@ int build(const build_request& r) {
     o.rho.push_back(static_cast<float>(step * static_cast<double>(i)));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   m.finish("pmr", "leaf_points, margin, levels, rho_step, threads");
-  const loaded_input in = load(r.input);
-  o.progress = progress_callback("pmr", interactive(r.as_json));
-  const pmr_hierarchy h = build_pmr(in.mesh.vertices, o);
-  h.save(r.output);
-  const double seconds = h.stats().build_seconds;
-  {
-    std::ofstream t(timing_path(r.output));
-    t.precision(10);
-    t << seconds << "\n";
-  }
-  std::cout << (r.as_json ? "" : "wrote " + r.output + ": ")
-            << pmr_stats_json(h, r.output, seconds).text() << "\n";
-  return 0;
+  o.progress = progress_callback("pmr", on_terminal);
+  pmr_hierarchy h = build_pmr(in.get().mesh.vertices, o);
+  pmr_method_traits method;
+  method.build_seconds = h.stats().build_seconds;
+  return make_lod(method, std::move(h));
 }
 
-int render_lod(const render_request& r) {
-  const pmr_hierarchy h = pmr_hierarchy::load(r.input);
-  point_cloud bounds;
-  bounds.origin = h.origin();
-  bounds.positions = h.positions();
-  const camera cam = make_camera(bounds, r.view);
-  const view v(cam, h.origin());
-  const render_options o = lod_render_options(r.view, false);
-  // §3: every leaf the frustum keeps, its level from the pixel size at its nearest corner with
-  // factor = --tolerance, then points or umbrella triangles.
-  traverse_options topt;
-  topt.tolerance_px = r.tolerance;
-  std::vector<std::uint32_t> used(h.leaf_count(), 0);
-  pmr_policy policy;
-  policy.levels_used = &used;
-  traverse_stats st;
-  const auto t0 = clock_type::now();
-  const image img = render<pmr_hierarchy::attrs>(
-      v, o, [&](auto& sink) { st = traverse(h, v, topt, sink, policy); });
-  const double frame_s = seconds_since(t0);
-  write_png(r.output, img);
-  std::vector<std::size_t> hist(h.levels(), 0);
-  for (const auto u : used) ++hist[u];
-  if (r.as_json) {
-    json j;
-    j.str("input", r.input).str("output", r.output).str("method", "pmr");
-    j.num("factor", r.tolerance).str("effects", o.fx.to_string());
-    j.integer("width", img.width).integer("height", img.height);
-    j.integer("leaves_drawn", static_cast<long long>(st.emitted_leaves));
-    j.integer("culled_frustum", static_cast<long long>(st.culled_frustum));
-    j.raw("leaves_per_level", list(hist));
-    j.integer("points", static_cast<long long>(st.points));
-    j.integer("triangles", static_cast<long long>(st.triangles));
-    j.num("frame_seconds", frame_s);
-    std::cout << j.text() << "\n";
-  } else {
-    std::cout << "wrote " << r.output << ": " << st.points << " points and " << st.triangles
-              << " triangles at factor " << r.tolerance << " (" << frame_s << " s)\n";
-  }
-  return 0;
-}
-
-int stats(const std::string& path, bool as_json) {
-  const pmr_hierarchy h = pmr_hierarchy::load(path);
-  double seconds = std::nan("");
+std::unique_ptr<lod> load(const std::string& path) {
+  pmr_method_traits method;
   if (std::ifstream t(timing_path(path)); t) {
     double s = 0;
-    if (t >> s) seconds = s;
+    if (t >> s) method.build_seconds = s;
   }
-  std::cout << (as_json ? "" : path + ": ") << pmr_stats_json(h, path, seconds).text() << "\n";
-  return 0;
+  return make_lod(method, pmr_hierarchy::load(path));
 }
 
 }  // namespace
 
 method_entry pmr_method() {
-  return {"pmr", "Dey & Hudson 2002", "PBRLODPM", &build, &render_lod, &stats};
+  return {.name = "pmr",
+          .paper = "Dey & Hudson 2002",
+          .magic = "PBRLODPM",
+          .build = &build,
+          .load = &load,
+          .demo_tolerances = {8, 3, 1},
+          .tolerance_key = "factor"};
 }
 
 }  // namespace pbrlod_tool

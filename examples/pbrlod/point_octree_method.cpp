@@ -1,11 +1,8 @@
 // pbrlod — the point-octree (Pajarola 2003): build, render and stats of its .lod files.
-#include <iostream>
 #include <limits>
 
+#include "lod.hpp"
 #include "pbr_lod/builders/point_octree.hpp"
-#include "pbr_lod/raster/png.hpp"
-#include "pbr_lod/raster/rasterizer.hpp"
-#include "tool.hpp"
 
 namespace pbrlod_tool {
 namespace {
@@ -62,91 +59,71 @@ json octree_stats_json(const Tree& t, const std::string& path) {
   return j;
 }
 
-template <class F>
-auto with_octree(const std::string& path, F&& f) {
-  if (peek_lod(path).flags & 1u)
-    return f(point_octree<point_octree_attributes(attributes{.colour = true})>::load(path));
-  return f(point_octree<point_octree_attributes(positions_only)>::load(path));
-}
-
-int build(const build_request& r) {
-  auto opt = octree_options(r.params, interactive(r.as_json));
-  read_report report;
-  const point_cloud cloud = read_points(r.input, &report);
-  if (!opt.viewpoint) opt.viewpoint = cloud.sensor;  // a PCD's scanner, unless overridden
-  for (const auto& w : report.warnings) std::cerr << "warning: " << w << "\n";
-  return with_point_set(cloud, r.input, [&](const auto& pts) {
-    const auto t = build_point_octree(pts, opt);
-    t.save(r.output);
-    const json j = octree_stats_json(t, r.output);
-    if (r.as_json)
-      std::cout << j.text() << "\n";
-    else
-      std::cout << "wrote " << r.output << ": " << j.text() << "\n";
-    return 0;
-  });
-}
-
-int render_lod(const render_request& r) {
-  return with_octree(r.input, [&](const auto& t) {
-    using tree = std::decay_t<decltype(t)>;
-    // Camera around the root's bounding sphere, in world coordinates.
-    point_cloud bounds;
-    bounds.origin = t.origin();
-    bounds.positions = t.samples().positions;
-    const camera cam = make_camera(bounds, r.view);
+/// What the point-octree contributes to a frame: the view-cone culling of §6 and back-face
+/// culling by normal cones when the effects ask for it.
+struct octree_method {
+  template <class Tree>
+  std::pair<vec3d, double> input_bounds(const Tree& t) const {
+    return bounds_of(t.origin(), t.samples().positions);  // the samples are the input points
+  }
+  template <class Tree>
+  frame draw(const Tree& t, const camera& cam, const view_args& va, float tolerance,
+             std::uint64_t /*seed*/) const {
     const view v(cam, t.origin());
-    const render_options o = lod_render_options(r.view, tree::attrs.colour);
-    const traverse_options topt{.tolerance_px = r.tolerance,
+    const render_options o = lod_render_options(va, Tree::attrs.colour);
+    const traverse_options topt{.tolerance_px = tolerance,
                                 .backface_cull = o.fx.backface_cull,
                                 .cull_volume = traverse_options::volume::view_cone};
-    traverse_stats st;
-    const auto t0 = clock_type::now();
-    const image img = render<tree::attrs>(
-        v, o, [&](auto& sink) { st = traverse(t, v, topt, sink, point_octree_policy{}); });
-    const double frame_s = seconds_since(t0);  // LOD selection + rasterisation, one pass
-    write_png(r.output, img);
-    if (r.as_json) {
-      json j;
-      j.str("input", r.input).str("output", r.output).str("method", "point-octree");
-      j.num("tolerance_px", r.tolerance).str("effects", o.fx.to_string());
-      j.integer("width", img.width).integer("height", img.height);
-      j.integer("nodes_visited", static_cast<long long>(st.visited));
-      j.integer("culled_frustum", static_cast<long long>(st.culled_frustum));
-      j.integer("culled_backface", static_cast<long long>(st.culled_backface));
-      j.integer("splats", static_cast<long long>(st.splats));
-      j.num("fraction_drawn",
-            static_cast<double>(st.splats) / static_cast<double>(t.samples().size()));
-      j.num("frame_seconds", frame_s);
-      std::cout << j.text() << "\n";
-    } else {
-      std::cout << "wrote " << r.output << ": " << st.splats << " splats of " << t.samples().size()
-                << " samples at tolerance " << r.tolerance << " px (" << frame_s << " s)\n";
-    }
-    return 0;
+    frame f = draw_frame(t, v, o, topt, point_octree_policy{});
+    f.extra.num("fraction_drawn",
+                static_cast<double>(f.st.splats) / static_cast<double>(t.samples().size()));
+    return f;
+  }
+  template <class Tree>
+  json stats(const Tree& t, const std::string& path) const {
+    return octree_stats_json(t, path);
+  }
+  template <class Tree>
+  void save(const Tree& t, const std::string& path) const {
+    t.save(path);
+  }
+  template <class Tree>
+  std::size_t file_bytes(const Tree& t) const {
+    return t.file_bytes();
+  }
+  template <class Tree>
+  std::size_t samples(const Tree& t) const {
+    return t.samples().size();
+  }
+};
+
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool on_terminal) {
+  auto opt = octree_options(items, on_terminal);
+  const point_cloud& cloud = in.get().mesh.vertices;
+  if (!opt.viewpoint) opt.viewpoint = cloud.sensor;  // a PCD's scanner, unless overridden
+  return with_point_set(cloud, in.name(), [&](const auto& pts) {
+    return make_lod(octree_method{}, build_point_octree(pts, opt));
   });
 }
 
-int stats(const std::string& path, bool as_json) {
-  return with_octree(path, [&](const auto& t) {
-    if (as_json) {
-      std::cout << octree_stats_json(t, path).text() << "\n";
-    } else {
-      const double n = static_cast<double>(t.samples().size());
-      std::cout << path << ": point-octree, " << t.nodes().size() << " nodes (" << t.stats().leaves
-                << " leaves) over " << t.samples().size() << " samples, "
-                << static_cast<double>(t.file_bytes()) / n << " bytes/point in the file, "
-                << static_cast<double>(t.memory_bytes()) / n << " in memory, built in "
-                << t.stats().seconds << " s\n";
-    }
-    return 0;
-  });
+std::unique_ptr<lod> load(const std::string& path) {
+  if (peek_lod(path).flags & 1u)
+    return make_lod(octree_method{},
+                    point_octree<point_octree_attributes(attributes{.colour = true})>::load(path));
+  return make_lod(octree_method{},
+                  point_octree<point_octree_attributes(positions_only)>::load(path));
 }
 
 }  // namespace
 
 method_entry point_octree_method() {
-  return {"point-octree", "Pajarola 2003", "PBRLODPO", &build, &render_lod, &stats};
+  return {.name = "point-octree",
+          .paper = "Pajarola 2003",
+          .magic = "PBRLODPO",
+          .build = &build,
+          .load = &load,
+          .demo_tolerances = {16, 4, 1}};
 }
 
 }  // namespace pbrlod_tool

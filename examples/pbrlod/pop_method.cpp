@@ -1,12 +1,9 @@
 // pbrlod — POP, triangle-leaf bounding-sphere trees (Chen & Nguyen 2001): build, render, stats.
 #include <cmath>
-#include <iostream>
 #include <limits>
 
+#include "lod.hpp"
 #include "pbr_lod/builders/pop.hpp"
-#include "pbr_lod/raster/png.hpp"
-#include "pbr_lod/raster/rasterizer.hpp"
-#include "tool.hpp"
 
 namespace pbrlod_tool {
 namespace {
@@ -44,14 +41,49 @@ json pop_stats_json(const Tree& t, const std::string& path) {
   return j;
 }
 
-template <class F>
-auto with_pop(const std::string& path, F&& f) {
-  if (peek_lod(path).flags & 1u) return f(pop_tree<with_normals_colours>::load(path));
-  return f(pop_tree<with_normals>::load(path));
-}
+/// What POP contributes to a frame: the paper's splat size from eye-space z (§3.3), back-face
+/// culling by normal cones, and with hole filling §3.4's visibility splatting (one-pixel points
+/// + screen-space reconstruction).
+struct pop_method_traits {
+  template <class Tree>
+  std::pair<vec3d, double> input_bounds(const Tree& t) const {
+    return bounds_of(t.origin(), t.positions());  // the mesh's vertices
+  }
+  template <class Tree>
+  frame draw(const Tree& t, const camera& cam, const view_args& va, float tolerance,
+             std::uint64_t /*seed*/) const {
+    const view v(cam, t.origin());
+    render_options o = lod_render_options(va, Tree::attrs.colour);
+    const traverse_options topt{
+        .tolerance_px = tolerance, .metric = projection_metric::eye_z, .backface_cull = true};
+    pop_policy policy;
+    if (o.fx.hole_filling) {
+      policy.points = pop_point_mode::visibility;
+      o.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(tolerance)));
+    }
+    return draw_frame(t, v, o, topt, policy);
+  }
+  template <class Tree>
+  json stats(const Tree& t, const std::string& path) const {
+    return pop_stats_json(t, path);
+  }
+  template <class Tree>
+  void save(const Tree& t, const std::string& path) const {
+    t.save(path);
+  }
+  template <class Tree>
+  std::size_t file_bytes(const Tree& t) const {
+    return t.file_bytes();
+  }
+  template <class Tree>
+  std::size_t samples(const Tree& t) const {
+    return t.positions().size();
+  }
+};
 
-int build(const build_request& r) {
-  params m(r.params);
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool /*on_terminal*/) {
+  params m(items);
   pop_options o;
   o.max_leaf_triangles = static_cast<std::uint32_t>(m.integer("leaf_triangles", 4, 1, 4));
   o.spheres = m.choice("spheres", "paper", {"paper", "exact"}) == "exact" ? pop_sphere_rule::exact
@@ -63,74 +95,31 @@ int build(const build_request& r) {
                     : pop_adjacency::edge_sort;
   o.quantise_nodes = m.choice("nodes", "quantised", {"quantised", "float"}) == "quantised";
   m.finish("pop", "leaf_triangles, spheres, normal_bits, threads, adjacency, nodes");
-  const loaded_input in = load(r.input);
-  if (!in.is_mesh())
-    throw InvalidArgument(r.input + ": POP builds from a triangle mesh (its leaves are triangles)");
-  const auto go = [&](const auto& t) {
-    t.save(r.output);
-    std::cout << (r.as_json ? "" : "wrote " + r.output + ": ") << pop_stats_json(t, r.output).text()
-              << "\n";
-    return 0;
-  };
-  if (pop_mesh_has_colour(in.mesh)) return go(build_pop<with_normals_colours>(in.mesh, o));
-  return go(build_pop<with_normals>(in.mesh, o));
+  const triangle_mesh& mesh = in.get().mesh;
+  if (mesh.faces.empty())
+    throw InvalidArgument(in.name() +
+                          ": POP builds from a triangle mesh (its leaves are triangles)");
+  if (pop_mesh_has_colour(mesh))
+    return make_lod(pop_method_traits{}, build_pop<with_normals_colours>(mesh, o));
+  return make_lod(pop_method_traits{}, build_pop<with_normals>(mesh, o));
 }
 
-int render_lod(const render_request& r) {
-  return with_pop(r.input, [&](const auto& t) {
-    using tree = std::decay_t<decltype(t)>;
-    point_cloud bounds;
-    bounds.origin = t.origin();
-    bounds.positions = t.positions();
-    const camera cam = make_camera(bounds, r.view);
-    const view v(cam, t.origin());
-    render_options o = lod_render_options(r.view, tree::attrs.colour);
-    // The paper's splat size from eye-space z (§3.3), its back-face culling by normal cones.
-    const traverse_options topt{
-        .tolerance_px = r.tolerance, .metric = projection_metric::eye_z, .backface_cull = true};
-    pop_policy policy;
-    if (o.fx.hole_filling) {
-      // §3.4: visibility splatting (one-pixel points) + screen-space reconstruction.
-      policy.points = pop_point_mode::visibility;
-      o.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(r.tolerance)));
-    }
-    traverse_stats st;
-    const auto t0 = clock_type::now();
-    const image img =
-        render<tree::attrs>(v, o, [&](auto& sink) { st = traverse(t, v, topt, sink, policy); });
-    const double frame_s = seconds_since(t0);
-    write_png(r.output, img);
-    if (r.as_json) {
-      json j;
-      j.str("input", r.input).str("output", r.output).str("method", "pop");
-      j.num("tolerance_px", r.tolerance).str("effects", o.fx.to_string());
-      j.integer("width", img.width).integer("height", img.height);
-      j.integer("nodes_visited", static_cast<long long>(st.visited));
-      j.integer("culled_frustum", static_cast<long long>(st.culled_frustum));
-      j.integer("culled_backface", static_cast<long long>(st.culled_backface));
-      j.integer("points", static_cast<long long>(st.points));
-      j.integer("triangles", static_cast<long long>(st.triangles));
-      j.num("frame_seconds", frame_s);
-      std::cout << j.text() << "\n";
-    } else {
-      std::cout << "wrote " << r.output << ": " << st.points << " points and " << st.triangles
-                << " triangles at threshold " << r.tolerance << " px (" << frame_s << " s)\n";
-    }
-    return 0;
-  });
-}
-
-int stats(const std::string& path, bool as_json) {
-  return with_pop(path, [&](const auto& t) {
-    std::cout << (as_json ? "" : path + ": ") << pop_stats_json(t, path).text() << "\n";
-    return 0;
-  });
+std::unique_ptr<lod> load(const std::string& path) {
+  if (peek_lod(path).flags & 1u)
+    return make_lod(pop_method_traits{}, pop_tree<with_normals_colours>::load(path));
+  return make_lod(pop_method_traits{}, pop_tree<with_normals>::load(path));
 }
 
 }  // namespace
 
 method_entry pop_method() {
-  return {"pop", "Chen & Nguyen 2001", "PBRLODPP", &build, &render_lod, &stats};
+  return {.name = "pop",
+          .paper = "Chen & Nguyen 2001",
+          .magic = "PBRLODPP",
+          .builds_from_mesh = true,
+          .build = &build,
+          .load = &load,
+          .demo_tolerances = {8, 3, 1}};
 }
 
 }  // namespace pbrlod_tool

@@ -1,13 +1,11 @@
 // pbrlod — ρ-grid packed point trees (Duguet & Drettakis 2004): build, render and stats.
-#include <iostream>
+#include <filesystem>
 #include <limits>
 
+#include "lod.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/builders/rho_grid_hierarchy.hpp"
 #include "pbr_lod/raster/one_pass_shadows.hpp"
-#include "pbr_lod/raster/png.hpp"
-#include "pbr_lod/raster/rasterizer.hpp"
-#include "tool.hpp"
 
 namespace pbrlod_tool {
 namespace {
@@ -37,101 +35,106 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   return j;
 }
 
-int build(const build_request& r) {
-  params m(r.params);
+/// What the ρ-grid contributes to a frame: the §4.1 traversal policy (s = the tolerance) and,
+/// with shadows and normals, the paper's one-pass shadows (§4.2): children front to back from
+/// the light, shaded through raster/one_pass_shadows.hpp. It keeps the layout its file is
+/// written in.
+struct rho_method {
+  rho_grid_layout layout = rho_grid_layout::is;
+  std::string layout_name;       ///< empty for a loaded file (the stats then omit it)
+  std::size_t loaded_bytes = 0;  ///< a loaded file's size
+
+  template <int R>
+  std::pair<vec3d, double> input_bounds(const rho_grid<R>& g) const {
+    return {g.input_centre(), g.input_radius()};  // recorded at build: frames like the input
+  }
+  template <int R>
+  frame draw(const rho_grid<R>& g, const camera& cam, const view_args& va, float tolerance,
+             std::uint64_t /*seed*/) const {
+    const view v(cam, g.origin());
+    render_options o = lod_render_options(va, g.has_materials());
+    o.fx.shading = o.fx.shading && g.has_normals();
+    const bool one_pass = o.fx.shadows && g.has_normals();
+    const traverse_options t{.tolerance_px = tolerance};
+    frame f = with_rho_grid_hierarchy(g, [&](const auto& h) {
+      constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+      if constexpr (A.normal) {
+        if (one_pass) {
+          const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
+          frame one;
+          one.fx = o.fx;
+          const auto t0 = clock_type::now();
+          one.img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<R>(g, v, &order), &one.st);
+          one.seconds = seconds_since(t0);
+          return one;
+        }
+      }
+      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v));
+    });
+    f.extra.boolean("one_pass_shadows", one_pass);
+    return f;
+  }
+  template <int R>
+  json stats(const rho_grid<R>& g, const std::string& path) const {
+    json j = grid_stats_json(g, path);
+    if (!layout_name.empty()) j.str("layout", layout_name);
+    return j;
+  }
+  template <int R>
+  void save(const rho_grid<R>& g, const std::string& path) const {
+    g.save(path, layout);
+  }
+  template <int R>
+  std::size_t file_bytes(const rho_grid<R>& g) const {
+    return loaded_bytes ? loaded_bytes : g.serialise(layout).size();
+  }
+  template <int R>
+  std::size_t samples(const rho_grid<R>& g) const {
+    return g.stats().samples;
+  }
+};
+
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool on_terminal) {
+  params m(items);
   const int rho = static_cast<int>(m.integer("rho", 3, 2, 5));
   rho_grid_options o;
   o.depth = static_cast<int>(m.integer("depth", 6, 1, 40));
   o.normal_bits = static_cast<int>(m.integer("normal_bits", 13, 0, 16));
   o.material_bits = static_cast<int>(m.integer("material_bits", 3, 0, 8));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
-  const std::string layout_name = m.choice("layout", "is", {"is", "nis", "compressed"});
-  const auto layout = layout_name == "is"    ? rho_grid_layout::is
-                      : layout_name == "nis" ? rho_grid_layout::nis
-                                             : rho_grid_layout::compressed;
+  rho_method method;
+  method.layout_name = m.choice("layout", "is", {"is", "nis", "compressed"});
+  method.layout = method.layout_name == "is"    ? rho_grid_layout::is
+                  : method.layout_name == "nis" ? rho_grid_layout::nis
+                                                : rho_grid_layout::compressed;
   m.finish("rho-grid", "rho, depth, normal_bits, material_bits, threads, layout");
-  o.progress = progress_callback("rho-grid", interactive(r.as_json));
-  const loaded_input in = load(r.input);
+  o.progress = progress_callback("rho-grid", on_terminal);
+  const loaded_input& li = in.get();
   return visit_rho(rho, [&]<int R>() {
-    const auto g =
-        in.is_mesh() ? build_rho_grid<R>(in.mesh, o) : build_rho_grid<R>(in.mesh.vertices, o);
-    g.save(r.output, layout);
-    json j = grid_stats_json(g, r.output);
-    j.str("layout", layout_name);
-    std::cout << (r.as_json ? "" : "wrote " + r.output + ": ") << j.text() << "\n";
-    return 0;
+    return make_lod(method, li.is_mesh() ? build_rho_grid<R>(li.mesh, o)
+                                         : build_rho_grid<R>(li.mesh.vertices, o));
   });
 }
 
-/// One frame of g through the common traversal with the §4.1 policy (s = the tolerance); with
-/// shadows and normals, the paper's one-pass shadows (§4.2): children front to back from the
-/// light, shaded through raster/one_pass_shadows.hpp.
-template <int R>
-image draw_grid(const rho_grid<R>& g, const view& v, const render_options& o, float tolerance,
-                bool one_pass, traverse_stats& st) {
-  const traverse_options t{.tolerance_px = tolerance};
-  return with_rho_grid_hierarchy(g, [&](const auto& h) {
-    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
-    if constexpr (A.normal) {
-      if (one_pass) {
-        const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
-        return render_one_pass_shadows(h, v, o, t, rho_grid_policy<R>(g, v, &order), &st);
-      }
-    }
-    return render<A>(v, o,
-                     [&](auto& sink) { st = traverse(h, v, t, sink, rho_grid_policy<R>(g, v)); });
-  });
-}
-
-int render_lod(const render_request& r) {
-  return visit_rho(rho_grid_file_rho(r.input), [&]<int R>() {
-    const auto g = rho_grid<R>::load(r.input);
-    // Framed like the input: the grid records the input's bounding sphere.
-    const camera cam = make_camera(g.input_centre(), g.input_radius(), r.view);
-    const view v(cam, g.origin());
-    render_options o = lod_render_options(r.view, g.has_materials());
-    o.fx.shading = o.fx.shading && g.has_normals();
-    const bool one_pass = o.fx.shadows && g.has_normals();
-    traverse_stats st;
-    const auto t0 = clock_type::now();
-    const image img = draw_grid(g, v, o, r.tolerance, one_pass, st);
-    const double frame_s = seconds_since(t0);
-    write_png(r.output, img);
-    // splats: inner cells drawn at s pixels (the splat condition of §4.1); points: leaves.
-    if (r.as_json) {
-      json j;
-      j.str("input", r.input).str("output", r.output).str("method", "rho-grid");
-      j.num("tolerance_px", r.tolerance).str("effects", o.fx.to_string());
-      j.boolean("one_pass_shadows", one_pass);
-      j.integer("width", img.width).integer("height", img.height);
-      j.integer("cells_visited", static_cast<long long>(st.visited));
-      j.integer("culled", static_cast<long long>(st.culled_frustum));
-      j.integer("splats", static_cast<long long>(st.emitted_nodes));
-      j.integer("points", static_cast<long long>(st.emitted_leaves));
-      j.num("frame_seconds", frame_s);
-      std::cout << j.text() << "\n";
-    } else {
-      std::cout << "wrote " << r.output << ": " << st.emitted_nodes << " splats and "
-                << st.emitted_leaves << " points at s = " << r.tolerance << " px (" << frame_s
-                << " s)\n";
-    }
-    return 0;
-  });
-}
-
-int stats(const std::string& path, bool as_json) {
-  return visit_rho(rho_grid_file_rho(path), [&]<int R>() {
-    const auto g = rho_grid<R>::load(path);
-    const json j = grid_stats_json(g, path);
-    std::cout << (as_json ? "" : path + ": ") << j.text() << "\n";
-    return 0;
+std::unique_ptr<lod> load(const std::string& path) {
+  return visit_rho(rho_grid_file_rho(path), [&]<int R>() -> std::unique_ptr<lod> {
+    rho_method method;
+    method.loaded_bytes = std::filesystem::file_size(path);
+    return make_lod(method, rho_grid<R>::load(path));
   });
 }
 
 }  // namespace
 
 method_entry rho_grid_method() {
-  return {"rho-grid", "Duguet & Drettakis 2004", "PBRLODRG", &build, &render_lod, &stats};
+  return {.name = "rho-grid",
+          .paper = "Duguet & Drettakis 2004",
+          .magic = "PBRLODRG",
+          .builds_from_mesh = true,
+          .build = &build,
+          .load = &load,
+          .demo_tolerances = {8, 3, 1}};
 }
 
 }  // namespace pbrlod_tool

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -73,6 +74,11 @@ class json {
   json& raw(const std::string& k, const std::string& v) {
     key(k);
     out_ += v;
+    return *this;
+  }
+  /// Appends the fields of another object (after this one's).
+  json& merge(const json& other) {
+    if (!other.out_.empty()) out_ += (out_.empty() ? "" : ",") + other.out_;
     return *this;
   }
   [[nodiscard]] std::string text() const { return "{" + out_ + "}"; }
@@ -203,26 +209,39 @@ class params {
 std::function<bool(double)> progress_callback(const std::string& what, bool on_terminal);
 
 // ---- build methods
-struct build_request {
-  std::string input, output;
-  std::vector<std::string> params;
-  bool as_json = false;
+class lod;  // lod.hpp: a built or loaded hierarchy behind one interface
+
+/// The input of a build: a file, read on first use (after the method has checked its
+/// parameters, so a bad --param fails before a long read), or a scene already in memory.
+class build_input {
+ public:
+  explicit build_input(std::string path) : name_(std::move(path)) {}
+  build_input(loaded_input in, std::string name) : name_(std::move(name)), in_(std::move(in)) {}
+  [[nodiscard]] const std::string& name() const { return name_; }
+  /// Reads the file once (throws as load()).
+  [[nodiscard]] const loaded_input& get() const {
+    if (!in_) in_ = load(name_);
+    return *in_;
+  }
+
+ private:
+  std::string name_;
+  mutable std::optional<loaded_input> in_;
 };
-struct render_request {
-  std::string input, output;
-  view_args view;
-  float tolerance = 1;
-  bool as_json = false;
-  /// --seed: the random stream of methods that generate points (pca-octree); others ignore it.
-  std::uint64_t seed = 1;
-};
+
 /// One builder as the tool sees it. A method without build is listed but not available.
 struct method_entry {
   std::string name, paper;
-  std::string magic;  ///< the 8 bytes its .lod files start with
-  int (*build)(const build_request&) = nullptr;
-  int (*render)(const render_request&) = nullptr;
-  int (*stats)(const std::string& path, bool as_json) = nullptr;
+  std::string magic;              ///< the 8 bytes its .lod files start with
+  bool builds_from_mesh = false;  ///< the demo gives it the mesh, not the sampled points
+  /// Checks the --param items, then reads the input and builds. Throws InvalidArgument naming
+  /// a bad parameter or an input the method cannot build from.
+  std::unique_ptr<lod> (*build)(const std::vector<std::string>& params, const build_input& in,
+                                bool on_terminal) = nullptr;
+  /// Reads one of its .lod files (throws IoError / FormatError).
+  std::unique_ptr<lod> (*load)(const std::string& path) = nullptr;
+  std::vector<float> demo_tolerances;          ///< what `demo` draws, coarse to fine
+  std::string tolerance_key = "tolerance_px";  ///< the --tolerance field in `render --json`
 };
 const std::vector<method_entry>& methods();
 
