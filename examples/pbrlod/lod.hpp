@@ -61,8 +61,9 @@ class lod {
   [[nodiscard]] virtual std::size_t samples() const = 0;
 };
 
-/// lod over a hierarchy H and a method M that knows how to draw, save and describe it. M may
-/// hold state of its own (the ρ-grid's file layout, PMR's build time).
+/// lod over a hierarchy H and a method M that knows how to frame, draw and describe it (and to
+/// save it and count its file bytes, where H's own save() / file_bytes() do not do). M may hold
+/// state of its own (the ρ-grid's file layout, PMR's build time).
 template <class M, class H>
 class lod_of final : public lod {
  public:
@@ -75,8 +76,18 @@ class lod_of final : public lod {
     return m_.draw(h_, cam, va, tolerance, seed);
   }
   [[nodiscard]] json stats(const std::string& path) const override { return m_.stats(h_, path); }
-  void save(const std::string& path) const override { m_.save(h_, path); }
-  [[nodiscard]] std::size_t file_bytes() const override { return m_.file_bytes(h_); }
+  void save(const std::string& path) const override {
+    if constexpr (requires { m_.save(h_, path); })
+      m_.save(h_, path);
+    else
+      h_.save(path);
+  }
+  [[nodiscard]] std::size_t file_bytes() const override {
+    if constexpr (requires { m_.file_bytes(h_); })
+      return m_.file_bytes(h_);
+    else
+      return h_.file_bytes();
+  }
   [[nodiscard]] std::size_t samples() const override { return m_.samples(h_); }
 
  private:

@@ -97,14 +97,6 @@ struct pca_method {
     return pca_stats_json(t, path);
   }
   template <class Tree>
-  void save(const Tree& t, const std::string& path) const {
-    t.save(path);
-  }
-  template <class Tree>
-  std::size_t file_bytes(const Tree& t) const {
-    return t.file_bytes();
-  }
-  template <class Tree>
   std::size_t samples(const Tree& t) const {
     return t.stats().input_points;
   }

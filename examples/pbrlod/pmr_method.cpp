@@ -90,7 +90,6 @@ struct pmr_method_traits {
       t << build_seconds << "\n";
     }
   }
-  std::size_t file_bytes(const pmr_hierarchy& h) const { return h.file_bytes(); }
   std::size_t samples(const pmr_hierarchy& h) const { return h.positions().size(); }
 };
 

@@ -68,14 +68,6 @@ struct pop_method_traits {
     return pop_stats_json(t, path);
   }
   template <class Tree>
-  void save(const Tree& t, const std::string& path) const {
-    t.save(path);
-  }
-  template <class Tree>
-  std::size_t file_bytes(const Tree& t) const {
-    return t.file_bytes();
-  }
-  template <class Tree>
   std::size_t samples(const Tree& t) const {
     return t.positions().size();
   }
