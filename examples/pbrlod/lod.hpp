@@ -4,6 +4,7 @@
 // metric, culling, policy) and its stats fields.
 #pragma once
 
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
@@ -12,6 +13,7 @@
 
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/traverse/sink.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 #include "tool.hpp"
 
@@ -24,21 +26,45 @@ struct frame {
   image img;
   traverse_stats st;
   double seconds = 0;
+  /// LOD selection alone (a traversal into a counting sink), when the request asked for it.
+  double traverse_seconds = std::numeric_limits<double>::quiet_NaN();
   effects fx;
   json extra;
 };
+
+/// What one frame is drawn from.
+struct frame_request {
+  camera cam;
+  view_args view;  ///< its effects list; the camera is already made
+  /// Pixels for most methods; PMR's factor; the PCA octree's point size.
+  float tolerance = 1;
+  std::uint64_t seed = 1;  ///< methods that generate points
+  /// Also time LOD selection alone (one more traversal, into a counting sink).
+  bool time_traversal = false;
+};
+
+/// Times a traversal of h into a counting sink: LOD selection without rasterisation.
+template <class H, class Policy>
+double traversal_seconds(const H& h, const view& v, const traverse_options& t,
+                         const Policy& policy) {
+  counting_sink<H::attrs> counts;
+  const auto t0 = clock_type::now();
+  (void)traverse(h, v, t, counts, policy);
+  return seconds_since(t0);
+}
 
 /// The frame of h through traverse() with the method's options and policy, timed as one pass.
 /// `Compiled` narrows the effects compiled in (a method that never shadows, say).
 template <effects Compiled = all_effects, class H, class Policy>
 frame draw_frame(const H& h, const view& v, const render_options& o, const traverse_options& t,
-                 const Policy& policy) {
+                 const Policy& policy, bool time_traversal) {
   frame f;
   f.fx = o.fx;
   const auto t0 = clock_type::now();
   f.img =
       render<H::attrs, Compiled>(v, o, [&](auto& sink) { f.st = traverse(h, v, t, sink, policy); });
   f.seconds = seconds_since(t0);
+  if (time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, policy);
   return f;
 }
 
@@ -49,10 +75,8 @@ class lod {
   /// The world-space bounding sphere of the input it was built from: `render` frames it as it
   /// frames the input itself, so an input and its hierarchy share a camera.
   [[nodiscard]] virtual std::pair<vec3d, double> input_bounds() const = 0;
-  /// One frame at `tolerance` (pixels for most methods; PMR's factor, the PCA octree's point
-  /// size), with the effects of `va.effects_list`. `seed`: methods that generate points.
-  [[nodiscard]] virtual frame draw(const camera& cam, const view_args& va, float tolerance,
-                                   std::uint64_t seed) const = 0;
+  /// One frame, with the effects of `r.view.effects_list`.
+  [[nodiscard]] virtual frame draw(const frame_request& r) const = 0;
   /// `stats --json` and `build --json` fields.
   [[nodiscard]] virtual json stats(const std::string& path) const = 0;
   virtual void save(const std::string& path) const = 0;
@@ -71,10 +95,7 @@ class lod_of final : public lod {
   [[nodiscard]] std::pair<vec3d, double> input_bounds() const override {
     return m_.input_bounds(h_);
   }
-  [[nodiscard]] frame draw(const camera& cam, const view_args& va, float tolerance,
-                           std::uint64_t seed) const override {
-    return m_.draw(h_, cam, va, tolerance, seed);
-  }
+  [[nodiscard]] frame draw(const frame_request& r) const override { return m_.draw(h_, r); }
   [[nodiscard]] json stats(const std::string& path) const override { return m_.stats(h_, path); }
   void save(const std::string& path) const override {
     if constexpr (requires { m_.save(h_, path); })

@@ -109,7 +109,11 @@ int render_hierarchy(const std::string& input, const view_args& va, float tolera
   const method_entry& m = lod_method(input);
   const auto l = m.load(input);
   const auto [centre, radius] = l->input_bounds();
-  const frame f = l->draw(make_camera(centre, radius, va), va, tolerance, seed);
+  const frame f = l->draw({.cam = make_camera(centre, radius, va),
+                           .view = va,
+                           .tolerance = tolerance,
+                           .seed = seed,
+                           .time_traversal = false});
   write_png(output, f.img);
   if (as_json) {
     json j;
@@ -293,7 +297,8 @@ json demo_method(const method_entry& m, const build_input& in, const camera& cam
   for (const float tol : m.demo_tolerances) {
     const std::string setting = setting_text(m, tol);
     prog.step("rendering " + m.name + " at " + setting);
-    const frame f = l->draw(cam, va, tol, 1);
+    const frame f =
+        l->draw({.cam = cam, .view = va, .tolerance = tol, .seed = 1, .time_traversal = false});
     const image_error e = compare_images(ref, f.img);
     const std::string png =
         (fs::path(dir) / (m.name + "_" + fixed(tol, tol == std::floor(tol) ? 0 : 1) + ".png"))

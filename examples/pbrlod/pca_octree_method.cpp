@@ -77,17 +77,16 @@ struct pca_method {
     return {t.origin(), t.input_radius()};  // recorded at build: frames like the input
   }
   template <class Tree>
-  frame draw(const Tree& t, const camera& cam, const view_args& va, float tolerance,
-             std::uint64_t seed) const {
-    const view v(cam, t.origin());
-    const render_options o = lod_render_options(va, Tree::attrs.colour);
-    const traverse_options topt{.tolerance_px = tolerance, .backface_cull = o.fx.backface_cull};
+  frame draw(const Tree& t, const frame_request& r) const {
+    const view v(r.cam, t.origin());
+    const render_options o = lod_render_options(r.view, Tree::attrs.colour);
+    const traverse_options topt{.tolerance_px = r.tolerance, .backface_cull = o.fx.backface_cull};
     pca_octree_policy policy;
-    policy.render.seed = seed;
-    policy.render.point_px = std::max(1.0f, tolerance);
+    policy.render.seed = r.seed;
+    policy.render.point_px = std::max(1.0f, r.tolerance);
     constexpr effects compiled{.shading = true, .colour = true, .backface_cull = true};
-    frame f = draw_frame<compiled>(t, v, o, topt, policy);
-    f.extra.integer("seed", static_cast<long long>(seed));
+    frame f = draw_frame<compiled>(t, v, o, topt, policy, r.time_traversal);
+    f.extra.integer("seed", static_cast<long long>(r.seed));
     f.extra.integer("nodes_drawn",
                     static_cast<long long>(f.st.emitted_nodes + f.st.emitted_leaves));
     return f;

@@ -64,16 +64,15 @@ struct pmr_method_traits {
   std::pair<vec3d, double> input_bounds(const pmr_hierarchy& h) const {
     return bounds_of(h.origin(), h.positions());  // every input point is in the hierarchy
   }
-  frame draw(const pmr_hierarchy& h, const camera& cam, const view_args& va, float tolerance,
-             std::uint64_t /*seed*/) const {
-    const view v(cam, h.origin());
-    const render_options o = lod_render_options(va, false);
+  frame draw(const pmr_hierarchy& h, const frame_request& r) const {
+    const view v(r.cam, h.origin());
+    const render_options o = lod_render_options(r.view, false);
     traverse_options topt;
-    topt.tolerance_px = tolerance;
+    topt.tolerance_px = r.tolerance;
     std::vector<std::uint32_t> used(h.leaf_count(), 0);
     pmr_policy policy;
     policy.levels_used = &used;
-    frame f = draw_frame(h, v, o, topt, policy);
+    frame f = draw_frame(h, v, o, topt, policy, r.time_traversal);
     std::vector<std::size_t> hist(h.levels(), 0);
     for (const auto u : used) ++hist[u];
     f.extra.raw("leaves_per_level", list(hist));

@@ -67,14 +67,13 @@ struct octree_method {
     return bounds_of(t.origin(), t.samples().positions);  // the samples are the input points
   }
   template <class Tree>
-  frame draw(const Tree& t, const camera& cam, const view_args& va, float tolerance,
-             std::uint64_t /*seed*/) const {
-    const view v(cam, t.origin());
-    const render_options o = lod_render_options(va, Tree::attrs.colour);
-    const traverse_options topt{.tolerance_px = tolerance,
+  frame draw(const Tree& t, const frame_request& r) const {
+    const view v(r.cam, t.origin());
+    const render_options o = lod_render_options(r.view, Tree::attrs.colour);
+    const traverse_options topt{.tolerance_px = r.tolerance,
                                 .backface_cull = o.fx.backface_cull,
                                 .cull_volume = traverse_options::volume::view_cone};
-    frame f = draw_frame(t, v, o, topt, point_octree_policy{});
+    frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r.time_traversal);
     f.extra.num("fraction_drawn",
                 static_cast<double>(f.st.splats) / static_cast<double>(t.samples().size()));
     return f;

@@ -50,18 +50,17 @@ struct pop_method_traits {
     return bounds_of(t.origin(), t.positions());  // the mesh's vertices
   }
   template <class Tree>
-  frame draw(const Tree& t, const camera& cam, const view_args& va, float tolerance,
-             std::uint64_t /*seed*/) const {
-    const view v(cam, t.origin());
-    render_options o = lod_render_options(va, Tree::attrs.colour);
+  frame draw(const Tree& t, const frame_request& r) const {
+    const view v(r.cam, t.origin());
+    render_options o = lod_render_options(r.view, Tree::attrs.colour);
     const traverse_options topt{
-        .tolerance_px = tolerance, .metric = projection_metric::eye_z, .backface_cull = true};
+        .tolerance_px = r.tolerance, .metric = projection_metric::eye_z, .backface_cull = true};
     pop_policy policy;
     if (o.fx.hole_filling) {
       policy.points = pop_point_mode::visibility;
-      o.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(tolerance)));
+      o.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(r.tolerance)));
     }
-    return draw_frame(t, v, o, topt, policy);
+    return draw_frame(t, v, o, topt, policy, r.time_traversal);
   }
   template <class Tree>
   json stats(const Tree& t, const std::string& path) const {

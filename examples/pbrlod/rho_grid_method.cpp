@@ -49,13 +49,12 @@ struct rho_method {
     return {g.input_centre(), g.input_radius()};  // recorded at build: frames like the input
   }
   template <int R>
-  frame draw(const rho_grid<R>& g, const camera& cam, const view_args& va, float tolerance,
-             std::uint64_t /*seed*/) const {
-    const view v(cam, g.origin());
-    render_options o = lod_render_options(va, g.has_materials());
+  frame draw(const rho_grid<R>& g, const frame_request& r) const {
+    const view v(r.cam, g.origin());
+    render_options o = lod_render_options(r.view, g.has_materials());
     o.fx.shading = o.fx.shading && g.has_normals();
     const bool one_pass = o.fx.shadows && g.has_normals();
-    const traverse_options t{.tolerance_px = tolerance};
+    const traverse_options t{.tolerance_px = r.tolerance};
     frame f = with_rho_grid_hierarchy(g, [&](const auto& h) {
       constexpr attributes A = std::decay_t<decltype(h)>::attrs;
       if constexpr (A.normal) {
@@ -66,10 +65,12 @@ struct rho_method {
           const auto t0 = clock_type::now();
           one.img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<R>(g, v, &order), &one.st);
           one.seconds = seconds_since(t0);
+          if (r.time_traversal)
+            one.traverse_seconds = traversal_seconds(h, v, t, rho_grid_policy<R>(g, v, &order));
           return one;
         }
       }
-      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v));
+      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v), r.time_traversal);
     });
     f.extra.boolean("one_pass_shadows", one_pass);
     return f;

@@ -1,5 +1,5 @@
-// pbr_lod — image metrics (RMSE, PSNR, hole fraction) and the Hausdorff distance between point
-// sets (exact nearest neighbours through core/knn.hpp).
+// pbr_lod — image metrics (RMSE, PSNR, hole fraction, SSIM) and the Hausdorff distance between
+// point sets (exact nearest neighbours through core/knn.hpp).
 #include "pbr_lod/raster/metrics.hpp"
 
 #include <algorithm>
@@ -43,6 +43,38 @@ image_error compare_images(const image& reference, const image& test) {
 
 namespace {
 
+/// Separable Gaussian blur (σ = 1.5, radius 5) with the weights renormalised where the window
+/// leaves the image, so a constant image stays constant up to the border.
+std::vector<double> gaussian_blur(const std::vector<double>& in, int w, int h) {
+  constexpr int radius = 5;
+  double k[2 * radius + 1];
+  for (int i = -radius; i <= radius; ++i) k[i + radius] = std::exp(-0.5 * i * i / (1.5 * 1.5));
+  const auto pass = [&](const std::vector<double>& src, bool horizontal) {
+    std::vector<double> dst(src.size());
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        double sum = 0, wsum = 0;
+        for (int i = -radius; i <= radius; ++i) {
+          const int xx = horizontal ? x + i : x, yy = horizontal ? y : y + i;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          sum +=
+              k[i + radius] * src[static_cast<std::size_t>(yy) * std::size_t(w) + std::size_t(xx)];
+          wsum += k[i + radius];
+        }
+        dst[static_cast<std::size_t>(y) * std::size_t(w) + std::size_t(x)] = sum / wsum;
+      }
+    return dst;
+  };
+  return pass(pass(in, true), false);
+}
+
+std::vector<double> luminance(const image& img) {
+  std::vector<double> y(img.size());
+  for (std::size_t i = 0; i < y.size(); ++i)
+    y[i] = 0.299 * img.colour[i].r + 0.587 * img.colour[i].g + 0.114 * img.colour[i].b;
+  return y;
+}
+
 /// max and mean over `from` of the distance to the nearest point of `to`.
 std::pair<double, double> one_sided(const std::vector<vec3f>& from, const knn_index& to) {
   double mx = 0, sum = 0;
@@ -55,6 +87,34 @@ std::pair<double, double> one_sided(const std::vector<vec3f>& from, const knn_in
 }
 
 }  // namespace
+
+double ssim(const image& reference, const image& test) {
+  (void)compare_images(reference, test);  // the same size and buffer checks
+  const int w = reference.width, h = reference.height;
+  const std::vector<double> a = luminance(reference), b = luminance(test);
+  std::vector<double> aa(a.size()), bb(a.size()), ab(a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    aa[i] = a[i] * a[i];
+    bb[i] = b[i] * b[i];
+    ab[i] = a[i] * b[i];
+  }
+  const auto ma = gaussian_blur(a, w, h), mb = gaussian_blur(b, w, h);
+  const auto saa = gaussian_blur(aa, w, h), sbb = gaussian_blur(bb, w, h),
+             sab = gaussian_blur(ab, w, h);
+  constexpr double c1 = (0.01 * 255) * (0.01 * 255), c2 = (0.03 * 255) * (0.03 * 255);
+  double sum = 0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    if (!reference.covered(i) && !test.covered(i)) continue;
+    const double va = std::max(0.0, saa[i] - ma[i] * ma[i]);
+    const double vb = std::max(0.0, sbb[i] - mb[i] * mb[i]);
+    const double cov = sab[i] - ma[i] * mb[i];
+    sum += (2 * ma[i] * mb[i] + c1) * (2 * cov + c2) /
+           ((ma[i] * ma[i] + mb[i] * mb[i] + c1) * (va + vb + c2));
+    ++n;
+  }
+  return n ? sum / double(n) : 1.0;
+}
 
 hausdorff_result hausdorff(const point_cloud& a, const point_cloud& b) {
   if (a.empty() || b.empty())

@@ -1,6 +1,7 @@
 // Image metrics, Hausdorff distance and PNG files.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -67,6 +68,77 @@ TEST(Metrics, KnownDifferences) {
   const image_error f = compare_images(ref, test);
   EXPECT_NEAR(f.rmse, 50.0832640, 1e-6);
   EXPECT_NEAR(f.psnr, 14.136951, 1e-5);
+}
+
+// SSIM: 1 for identical images; for two uniform greys a and b (no structure, σ = 0) eq. 13
+// reduces to (2ab + C1) / (a² + b² + C1), worked out by hand for 100 vs 120.
+TEST(Metrics, SsimIdenticalAndUniform) {
+  std::mt19937 rng(3);
+  image a(24, 20);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    a.colour[i] = {static_cast<std::uint8_t>(rng() & 255), static_cast<std::uint8_t>(rng() & 255),
+                   static_cast<std::uint8_t>(rng() & 255)};
+    a.depth[i] = 1;
+  }
+  EXPECT_NEAR(ssim(a, a), 1.0, 1e-12);
+  EXPECT_NEAR(ssim(uniform(16, 16, {100, 100, 100}), uniform(16, 16, {120, 120, 120})),
+              0.9836109249983688, 1e-9);
+}
+
+// Structure counts: a checkerboard against its inverse has the same local means but covariance
+// −σ², so SSIM ≈ −1; noise added to an image lowers SSIM, more noise lowers it more.
+TEST(Metrics, SsimStructureAndNoise) {
+  image board(32, 32), inverse(32, 32);
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) {
+      const std::uint8_t v = ((x + y) & 1) ? 255 : 0;
+      board.colour[board.index(x, y)] = {v, v, v};
+      inverse.colour[inverse.index(x, y)] = {static_cast<std::uint8_t>(255 - v),
+                                             static_cast<std::uint8_t>(255 - v),
+                                             static_cast<std::uint8_t>(255 - v)};
+      board.depth[board.index(x, y)] = inverse.depth[inverse.index(x, y)] = 1;
+    }
+  EXPECT_LT(ssim(board, inverse), -0.9);
+  image smooth(32, 32);
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) {
+      const auto v = static_cast<std::uint8_t>(4 * x + 2 * y);
+      smooth.colour[smooth.index(x, y)] = {v, v, v};
+      smooth.depth[smooth.index(x, y)] = 1;
+    }
+  const auto noisy = [&](int amplitude) {
+    image n = smooth;
+    std::mt19937 rng(7);
+    for (auto& c : n.colour) {
+      const int d = static_cast<int>(rng() % (2 * amplitude + 1)) - amplitude;
+      const auto v = static_cast<std::uint8_t>(std::clamp(c.r + d, 0, 255));
+      c = {v, v, v};
+    }
+    return n;
+  };
+  const double s4 = ssim(smooth, noisy(4)), s32 = ssim(smooth, noisy(32));
+  EXPECT_LT(s4, 1.0);
+  EXPECT_LT(s32, s4 - 0.1);
+}
+
+// Pixels background in both images do not take part: a frame with one covered block compares
+// like the block alone.
+TEST(Metrics, SsimIgnoresCommonBackground) {
+  image a(40, 40), b(40, 40);
+  for (int y = 10; y < 30; ++y)
+    for (int x = 10; x < 30; ++x) {
+      a.colour[a.index(x, y)] = {100, 100, 100};
+      b.colour[b.index(x, y)] = {120, 120, 120};
+      a.depth[a.index(x, y)] = b.depth[b.index(x, y)] = 1;
+    }
+  // With the black background inside the windows near the block's edge the value differs from
+  // the uniform case, but it stays below 1 and the background itself adds no 1s.
+  const double s = ssim(a, b);
+  EXPECT_LT(s, 0.99);
+  EXPECT_GT(s, 0.9);
+  image a0 = a, b0 = b;
+  for (std::size_t i = 0; i < a0.size(); ++i) a0.depth[i] = b0.depth[i] = 1;  // all covered
+  EXPECT_GT(ssim(a0, b0), s);  // the equal background now counts as perfect pixels
 }
 
 TEST(Metrics, SizeMismatchThrows) {

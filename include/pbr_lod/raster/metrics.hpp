@@ -27,6 +27,14 @@ struct image_error {
 /// image: rmse 0, psnr +inf.
 [[nodiscard]] image_error compare_images(const image& reference, const image& test);
 
+/// Mean structural similarity (Wang, Bovik, Sheikh & Simoncelli 2004, eq. 13) of the luminance
+/// (Y = 0.299 R + 0.587 G + 0.114 B) of the two images: local means, variances and covariance
+/// under an 11×11 Gaussian window (σ = 1.5, renormalised at the borders), C1 = (0.01·255)²,
+/// C2 = (0.03·255)², averaged over the pixels covered in either image (as compare_images) — 1
+/// for identical images; background pixels take part with their stored colour. Nothing covered
+/// in either image: 1. Same size, else InvalidArgument.
+[[nodiscard]] double ssim(const image& reference, const image& test);
+
 /// One-sided and symmetric Hausdorff distances between two point clouds (world units).
 struct hausdorff_result {
   double a_to_b_max = 0;  ///< max over points of a of the distance to the nearest point of b
