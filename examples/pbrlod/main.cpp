@@ -8,6 +8,7 @@
 //   pbrlod stats  OUT.lod|INPUT [--json]
 //   pbrlod compare A.png B.png [--json]
 //   pbrlod demo   [INPUT] [-o DIR] [--json]
+//   pbrlod sweep  [INPUT...] [-o DIR] [--size small|full] [--check] [--json]
 //
 // Exit codes: 0 success, 1 bad input or failure (message on stderr), 2 usage error or a method
 // that this version does not have.
@@ -26,6 +27,7 @@
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "pbr_lod/version.hpp"
+#include "sweep.hpp"
 #include "tool.hpp"
 
 namespace pbrlod_tool {
@@ -489,6 +491,23 @@ int main(int argc, char** argv) {
   demo->add_option("-o,--output", demo_dir, "folder for the images")->capture_default_str();
   demo->add_flag("--json", as_json, "print one JSON object");
 
+  std::vector<std::string> sweep_inputs;
+  std::string sweep_dir = "pbrlod-sweep", sweep_size = "small";
+  bool sweep_check = false;
+  auto* sweep = app.add_subcommand(
+      "sweep", "every builder over the same inputs, views and tolerances: sweep.csv, sweep.json");
+  sweep->add_option("inputs", sweep_inputs,
+                    "mesh or point cloud files (default: the generated scene; with --size full "
+                    "the scans in PBR_LOD_DATA and a large generated scene)");
+  sweep->add_option("-o,--output", sweep_dir, "folder for the results")->capture_default_str();
+  sweep->add_option("--size", sweep_size, "small (seconds: 3 views, 128 px) or full")
+      ->check(CLI::IsMember({"small", "full"}))
+      ->capture_default_str();
+  sweep->add_flag("--check", sweep_check,
+                  "exit 1 when a builder has no rows or a series' error grows as its tolerance "
+                  "tightens");
+  sweep->add_flag("--json", as_json, "print one JSON object");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*build) return cmd_build(method, build_input, build_output, params, as_json);
@@ -496,6 +515,7 @@ int main(int argc, char** argv) {
     if (*stats) return cmd_stats(stats_input, as_json);
     if (*compare) return cmd_compare(cmp_a, cmp_b, as_json);
     if (*demo) return cmd_demo(demo_input, demo_dir, as_json);
+    if (*sweep) return cmd_sweep(sweep_inputs, sweep_dir, sweep_size, sweep_check, as_json);
   } catch (const pbr_lod::Error& e) {
     std::cerr << "pbrlod: " << e.what() << "\n";
     return 1;

@@ -1,0 +1,316 @@
+// pbrlod sweep — what accuracy costs in time: every builder over the same inputs, views and
+// tolerances, one row per (builder, input, setting, tolerance, view), written as CSV and JSON.
+//
+// Each frame's image error is taken against the same hierarchy drawn at tolerance 0 from the
+// same view (its finest cut: every leaf, the same samples, splat model and effects), so psnr and
+// holes measure what LOD costs and nothing else; psnr_input compares with the input's own
+// full-detail render (the mesh, or every point as a splat), which adds the builder's
+// resampling and splat model on top.
+#include "sweep.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include "lod.hpp"
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/reference.hpp"
+#include "pbr_lod/version.hpp"
+
+namespace pbrlod_tool {
+namespace {
+namespace fs = std::filesystem;
+
+struct sweep_input {
+  std::string name;
+  loaded_input data;
+};
+
+struct sweep_plan {
+  std::vector<sweep_input> inputs;
+  std::vector<std::pair<std::string, std::string>> views;  ///< name, "AZ,EL,DIST"
+  std::string size;                                        ///< WxH
+  std::vector<float> tolerances;                           ///< coarse to fine
+  int repeats = 1;                                         ///< frames timed: the median
+};
+
+struct sweep_row {
+  std::string builder, input, setting = "default", view;
+  float tolerance = 0;
+  double build_seconds = 0, frame_seconds = 0, traverse_seconds = 0, raster_seconds = 0;
+  std::size_t points = 0, splats = 0, triangles = 0;
+  double psnr = 0, holes = 0, ssim = 0, psnr_input = 0, holes_input = 0;
+  std::size_t file_bytes = 0;
+  double bytes_per_input_point = 0, bytes_per_sample = 0;
+};
+
+/// The inputs of a sweep: the files named, else the generated scene (small) or the real scans
+/// in PBR_LOD_DATA and a generated multi-million-point scene (full).
+std::vector<sweep_input> sweep_inputs(const std::vector<std::string>& files, bool full) {
+  std::vector<sweep_input> in;
+  for (const auto& f : files) in.push_back({fs::path(f).filename().string(), load(f)});
+  if (!in.empty()) return in;
+  if (!full) {
+    loaded_input scene;
+    scene.mesh = make_demo_scene(20);
+    in.push_back({"generated-scene-small", std::move(scene)});
+    return in;
+  }
+  const char* env = std::getenv("PBR_LOD_DATA");
+  if (!env || !fs::exists(fs::path(env) / "bun_zipper.ply"))
+    throw InvalidArgument(
+        "sweep --size full: name the INPUT files, or set PBR_LOD_DATA to the shared data folder");
+  for (const char* f : {"bun_zipper.ply", "happy_vrip_res3.ply", "cow.obj",
+                        "milk_cartoon_all_small_clorox.pcd", "1.2-with-color.las"}) {
+    const fs::path p = fs::path(env) / f;
+    if (fs::exists(p)) in.push_back({p.filename().string(), load(p.string())});
+  }
+  loaded_input scene;
+  scene.mesh = make_demo_scene(450);  // ≈ 2 M triangles, ≈ 1 M vertices
+  in.push_back({"generated-scene-large", std::move(scene)});
+  return in;
+}
+
+sweep_plan make_plan(const std::vector<std::string>& files, const std::string& size) {
+  if (size != "small" && size != "full")
+    throw InvalidArgument("sweep --size: expected small or full, got '" + size + "'");
+  const bool full = size == "full";
+  sweep_plan p;
+  p.inputs = sweep_inputs(files, full);
+  for (const char* d : {"near", "mid", "far"}) {
+    const std::string dist = std::string(d) == "near" ? "1.5" : std::string(d) == "mid" ? "3" : "8";
+    for (const int az : full ? std::vector<int>{30, 120, 210, 300} : std::vector<int>{30})
+      p.views.emplace_back(std::string(d) + "-az" + std::to_string(az),
+                           std::to_string(az) + ",20," + dist);
+  }
+  p.size = full ? "512x512" : "128x128";
+  p.tolerances = full ? std::vector<float>{32, 16, 8, 4, 2, 1} : std::vector<float>{16, 4, 1};
+  p.repeats = full ? 3 : 1;
+  return p;
+}
+
+/// The median-time frame of `repeats` draws (the image and counts are the same each time).
+frame timed_frame(const lod& l, frame_request r, int repeats) {
+  r.time_traversal = true;
+  std::vector<frame> frames;
+  for (int i = 0; i < repeats; ++i) frames.push_back(l.draw(r));
+  std::sort(frames.begin(), frames.end(),
+            [](const frame& a, const frame& b) { return a.seconds < b.seconds; });
+  std::vector<double> trav;
+  for (const auto& f : frames) trav.push_back(f.traverse_seconds);
+  std::sort(trav.begin(), trav.end());
+  frame f = std::move(frames[frames.size() / 2]);
+  f.traverse_seconds = trav[trav.size() / 2];
+  return f;
+}
+
+/// The input's own full-detail render: the mesh's triangles, or every point as a splat.
+image input_reference(const loaded_input& in, const camera& cam, const view_args& va) {
+  render_options o = lod_render_options(va, !in.mesh.vertices.colours.empty());
+  o.fx.shading = in.is_mesh() || !in.mesh.vertices.normals.empty();
+  return in.is_mesh() ? render_reference(in.mesh, cam, o)
+                      : render_reference(in.mesh.vertices, cam, o);
+}
+
+/// One builder over one input: built once with its defaults, then for each view its finest cut
+/// (the reference) and a frame per tolerance.
+void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_plan& plan,
+                   const std::vector<image>& input_refs, progress& prog,
+                   std::vector<sweep_row>& rows, std::vector<std::string>& skipped) {
+  // Point builders take the mesh's vertices (with their normals and colours).
+  loaded_input points;
+  const bool as_mesh = m.builds_from_mesh || !in.data.is_mesh();
+  if (!as_mesh) points.mesh.vertices = in.data.mesh.vertices;
+  const build_input bi(as_mesh ? in.data : points, in.name);
+  prog.step("building " + m.name + " from " + in.name);
+  const auto t0 = clock_type::now();
+  std::unique_ptr<lod> l;
+  try {
+    l = m.build({}, bi, false);
+  } catch (const InvalidArgument& e) {
+    skipped.push_back(m.name + " on " + in.name + ": " + e.what());
+    return;
+  }
+  const double build_s = seconds_since(t0);
+  const double n_in = static_cast<double>(in.data.mesh.num_vertices());
+  for (std::size_t vi = 0; vi < plan.views.size(); ++vi) {
+    view_args va;
+    va.view = plan.views[vi].second;
+    va.size = plan.size;
+    const camera cam = make_camera(in.data.mesh.vertices, va);
+    const frame_request base{.cam = cam, .view = va, .tolerance = 0, .seed = 1};
+    const image finest = l->draw(base).img;
+    for (const float tol : plan.tolerances) {
+      prog.step(m.name + " " + in.name + " " + plan.views[vi].first + " tolerance " +
+                std::to_string(tol).substr(0, 4));
+      frame_request r = base;
+      r.tolerance = tol;
+      const frame f = timed_frame(*l, r, plan.repeats);
+      const image_error e = compare_images(finest, f.img);
+      const image_error ei = compare_images(input_refs[vi], f.img);
+      sweep_row row;
+      row.builder = m.name;
+      row.input = in.name;
+      row.view = plan.views[vi].first;
+      row.tolerance = tol;
+      row.build_seconds = build_s;
+      row.frame_seconds = f.seconds;
+      row.traverse_seconds = f.traverse_seconds;
+      row.raster_seconds = std::max(0.0, f.seconds - f.traverse_seconds);
+      row.points = f.st.points;
+      row.splats = f.st.splats;
+      row.triangles = f.st.triangles;
+      row.psnr = e.psnr;
+      row.holes = e.hole_fraction;
+      row.ssim = ssim(finest, f.img);
+      row.psnr_input = ei.psnr;
+      row.holes_input = ei.hole_fraction;
+      row.file_bytes = l->file_bytes();
+      row.bytes_per_input_point = static_cast<double>(row.file_bytes) / n_in;
+      row.bytes_per_sample =
+          static_cast<double>(row.file_bytes) / static_cast<double>(l->samples());
+      rows.push_back(row);
+    }
+  }
+}
+
+const char* const csv_header =
+    "builder,input,setting,tolerance,view,build_seconds,frame_seconds,traverse_seconds,"
+    "raster_seconds,points,splats,triangles,primitives,psnr,holes,ssim,psnr_input,holes_input,"
+    "file_bytes,bytes_per_input_point,bytes_per_sample";
+
+std::string number(double v) {
+  if (!std::isfinite(v)) return v > 0 ? "inf" : "nan";
+  std::ostringstream o;
+  o.precision(8);
+  o << v;
+  return o.str();
+}
+
+std::string csv_line(const sweep_row& r) {
+  std::ostringstream o;
+  o << r.builder << ',' << r.input << ',' << r.setting << ',' << number(r.tolerance) << ','
+    << r.view << ',' << number(r.build_seconds) << ',' << number(r.frame_seconds) << ','
+    << number(r.traverse_seconds) << ',' << number(r.raster_seconds) << ',' << r.points << ','
+    << r.splats << ',' << r.triangles << ',' << r.points + r.splats + r.triangles << ','
+    << number(r.psnr) << ',' << number(r.holes) << ',' << number(r.ssim) << ','
+    << number(r.psnr_input) << ',' << number(r.holes_input) << ',' << r.file_bytes << ','
+    << number(r.bytes_per_input_point) << ',' << number(r.bytes_per_sample);
+  return o.str();
+}
+
+json row_json(const sweep_row& r) {
+  json j;
+  j.str("builder", r.builder).str("input", r.input).str("setting", r.setting);
+  j.num("tolerance", r.tolerance).str("view", r.view);
+  j.num("build_seconds", r.build_seconds).num("frame_seconds", r.frame_seconds);
+  j.num("traverse_seconds", r.traverse_seconds).num("raster_seconds", r.raster_seconds);
+  j.integer("points", static_cast<long long>(r.points));
+  j.integer("splats", static_cast<long long>(r.splats));
+  j.integer("triangles", static_cast<long long>(r.triangles));
+  j.num("psnr", r.psnr).num("holes", r.holes).num("ssim", r.ssim);
+  j.num("psnr_input", r.psnr_input).num("holes_input", r.holes_input);
+  j.integer("file_bytes", static_cast<long long>(r.file_bytes));
+  j.num("bytes_per_input_point", r.bytes_per_input_point);
+  j.num("bytes_per_sample", r.bytes_per_sample);
+  return j;
+}
+
+/// --check: every builder produced rows for every input it can build from, and in every
+/// (builder, input, view) series the error does not grow as the tolerance tightens (PSNR may
+/// drop by at most `slack_db` from one step to the next finer one: a finer cut can move a
+/// splat's edge by a pixel). Returns the problems found.
+std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
+                                    const std::vector<std::string>& skipped) {
+  constexpr double slack_db = 1.0;
+  std::vector<std::string> problems;
+  for (const method_entry& m : methods()) {
+    if (!m.build) continue;
+    const bool has_rows = std::any_of(rows.begin(), rows.end(),
+                                      [&](const sweep_row& r) { return r.builder == m.name; });
+    const bool was_skipped = std::any_of(skipped.begin(), skipped.end(), [&](const auto& s) {
+      return s.rfind(m.name + " on ", 0) == 0;
+    });
+    if (!has_rows && !was_skipped) problems.push_back(m.name + ": no rows");
+  }
+  std::map<std::string, std::vector<const sweep_row*>> series;
+  for (const auto& r : rows) series[r.builder + " " + r.input + " " + r.view].push_back(&r);
+  for (auto& [key, s] : series) {
+    std::sort(s.begin(), s.end(),
+              [](const sweep_row* a, const sweep_row* b) { return a->tolerance > b->tolerance; });
+    for (std::size_t i = 1; i < s.size(); ++i)
+      if (s[i]->psnr < s[i - 1]->psnr - slack_db)
+        problems.push_back(key + ": PSNR falls from " + number(s[i - 1]->psnr) + " dB at " +
+                           number(s[i - 1]->tolerance) + " to " + number(s[i]->psnr) + " dB at " +
+                           number(s[i]->tolerance));
+  }
+  return problems;
+}
+
+}  // namespace
+
+int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
+              const std::string& size, bool check, bool as_json) {
+  const sweep_plan plan = make_plan(inputs, size);
+  fs::create_directories(dir);
+  progress prog(as_json);
+  std::vector<sweep_row> rows;
+  std::vector<std::string> skipped;
+  for (const sweep_input& in : plan.inputs) {
+    std::vector<image> refs;
+    for (const auto& [name, spec] : plan.views) {
+      view_args va;
+      va.view = spec;
+      va.size = plan.size;
+      prog.step("reference of " + in.name + " " + name);
+      refs.push_back(input_reference(in.data, make_camera(in.data.mesh.vertices, va), va));
+    }
+    for (const method_entry& m : methods())
+      if (m.build) sweep_builder(m, in, plan, refs, prog, rows, skipped);
+  }
+  const std::string csv = (fs::path(dir) / "sweep.csv").string();
+  const std::string js = (fs::path(dir) / "sweep.json").string();
+  {
+    std::ofstream o(csv);
+    o << csv_header << "\n";
+    for (const auto& r : rows) o << csv_line(r) << "\n";
+    if (!o) throw IoError(csv + ": cannot write");
+  }
+  std::string row_list, skip_list;
+  for (const auto& r : rows) row_list += (row_list.empty() ? "" : ",") + row_json(r).text();
+  for (const auto& s : skipped) {
+    json q;
+    q.str("why", s);
+    skip_list += (skip_list.empty() ? "" : ",") + q.text();
+  }
+  json report;
+  report.str("pbr_lod", version()).str("size", size).str("image_size", plan.size);
+  report.integer("hardware_threads", std::thread::hardware_concurrency());
+  report.integer("repeats", plan.repeats);
+  report.raw("skipped", "[" + skip_list + "]").raw("rows", "[" + row_list + "]");
+  {
+    std::ofstream o(js);
+    o << report.text() << "\n";
+    if (!o) throw IoError(js + ": cannot write");
+  }
+  const auto problems = check ? check_rows(rows, skipped) : std::vector<std::string>{};
+  for (const auto& p : problems) std::cerr << "sweep --check: " << p << "\n";
+  json summary;
+  summary.str("csv", csv).str("json", js).integer("rows", static_cast<long long>(rows.size()));
+  summary.integer("skipped", static_cast<long long>(skipped.size()));
+  summary.integer("problems", static_cast<long long>(problems.size()));
+  std::cout << (as_json ? "" : "pbrlod sweep: ") << summary.text() << "\n";
+  if (!as_json)
+    for (const auto& s : skipped) std::cout << "  skipped " << s << "\n";
+  return problems.empty() ? 0 : 1;
+}
+
+}  // namespace pbrlod_tool
