@@ -9,25 +9,32 @@
 #include "sweep.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <thread>
 
 #include "lod.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/peers/cgal_simplify.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "pbr_lod/version.hpp"
+#include "svg_chart.hpp"
 
 namespace pbrlod_tool {
 namespace {
 namespace fs = std::filesystem;
+
+std::string number(double v);
 
 struct sweep_input {
   std::string name;
@@ -87,7 +94,7 @@ sweep_plan make_plan(const std::vector<std::string>& files, const std::string& s
   p.inputs = sweep_inputs(files, full);
   for (const char* d : {"near", "mid", "far"}) {
     const std::string dist = std::string(d) == "near" ? "1.5" : std::string(d) == "mid" ? "3" : "8";
-    for (const int az : full ? std::vector<int>{30, 120, 210, 300} : std::vector<int>{30})
+    for (const int az : full ? std::vector<int>{30, 210} : std::vector<int>{30})
       p.views.emplace_back(std::string(d) + "-az" + std::to_string(az),
                            std::to_string(az) + ",20," + dist);
   }
@@ -182,6 +189,132 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
   }
 }
 
+/// A peer: the LOD a user would build today instead — a pyramid of simplified point sets, one
+/// level per setting, each drawn whole through the same rasteriser.
+struct peer_entry {
+  std::string name;
+  std::vector<float> settings;  ///< coarse to fine
+  point_cloud (*level)(const point_cloud& in, float setting, double diagonal);
+};
+
+const std::vector<peer_entry>& peer_table() {
+  static const std::vector<peer_entry> table = {
+      // grid_simplify_point_set: `setting` cells across the bounding-box diagonal.
+      {"cgal-grid",
+       {32, 64, 128, 256},
+       [](const point_cloud& c, float cells, double diagonal) {
+         return peers::grid_simplify(c, diagonal / cells);
+       }},
+      // hierarchy_simplify_point_set: clusters of at most `setting` points, variation ≤ 1/3.
+      {"cgal-hierarchy",
+       {128, 32, 8, 2},
+       [](const point_cloud& c, float size, double /*diagonal*/) {
+         return peers::hierarchy_simplify(c, static_cast<unsigned>(size));
+       }},
+  };
+  return table;
+}
+
+/// The level with a splat disk per point (radius = the reference's factor × k-NN spacing, as
+/// render_reference would compute per frame), so a frame times drawing, not the k-NN search.
+/// Without normals the disks have no plane: render_reference computes the radii per frame.
+point_cloud with_disks(point_cloud c, const render_options& o) {
+  if (c.normals.empty() || c.size() < 2) return c;
+  const std::vector<float> spacing = knn_spacing(c.positions, std::max(o.reference_knn, 1));
+  float fallback = 0;
+  for (const float x : spacing) fallback = std::max(fallback, x);
+  c.axis_u.resize(c.size());
+  c.axis_v.resize(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const float r = o.reference_radius_factor * (spacing[i] > 0 ? spacing[i] : fallback);
+    const vec3f n = c.normals[i];
+    const vec3f t = n.squaredNorm() > 0 ? any_orthogonal(n) : vec3f::UnitX();
+    c.axis_u[i] = t * r;
+    c.axis_v[i] = n.squaredNorm() > 0 ? vec3f(n.normalized().cross(t) * r) : vec3f::UnitY() * r;
+  }
+  return c;
+}
+
+double diagonal_of(const point_cloud& c) {
+  vec3f lo = vec3f::Constant(std::numeric_limits<float>::infinity()), hi = -lo;
+  for (const auto& p : c.positions) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return c.empty() ? 1.0 : std::max(1e-30, static_cast<double>((hi - lo).norm()));
+}
+
+/// The median time of `repeats` renders of a level (the image is the same each time).
+std::pair<image, double> timed_render(const point_cloud& c, const camera& cam,
+                                      const render_options& o, int repeats) {
+  std::vector<double> t;
+  image img;
+  for (int i = 0; i < repeats; ++i) {
+    const auto t0 = clock_type::now();
+    img = render_reference(c, cam, o);
+    t.push_back(seconds_since(t0));
+  }
+  std::sort(t.begin(), t.end());
+  return {std::move(img), t[t.size() / 2]};
+}
+
+/// One peer over one input (a mesh gives its vertices): the full cloud drawn the same way is
+/// its finest level, the reference of its psnr.
+void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan& plan,
+                const std::vector<image>& input_refs, progress& prog,
+                std::vector<sweep_row>& rows) {
+  const point_cloud& all = in.data.mesh.vertices;
+  std::vector<camera> cams;
+  std::vector<render_options> opts;
+  for (const auto& v : plan.views) {
+    view_args va;
+    va.view = v.second;
+    va.size = plan.size;
+    cams.push_back(make_camera(all, va));
+    render_options o = lod_render_options(va, !all.colours.empty());
+    o.fx.shading = !all.normals.empty();
+    opts.push_back(o);
+  }
+  const point_cloud finest = with_disks(all, opts[0]);
+  std::vector<image> finest_img;
+  for (std::size_t vi = 0; vi < cams.size(); ++vi)
+    finest_img.push_back(render_reference(finest, cams[vi], opts[vi]));
+  const double diagonal = diagonal_of(all);
+  for (const float setting : peer.settings) {
+    prog.step(peer.name + " " + in.name + " level " + number(setting));
+    const auto t0 = clock_type::now();
+    const point_cloud level = with_disks(peer.level(all, setting, diagonal), opts[0]);
+    const double build_s = seconds_since(t0);
+    // Stored as the input stores its points; the disks are derived at load, not stored.
+    const std::size_t bpp = all.present().bytes_per_point();
+    const std::size_t bytes = level.size() * bpp;
+    for (std::size_t vi = 0; vi < cams.size(); ++vi) {
+      const auto [img, secs] = timed_render(level, cams[vi], opts[vi], plan.repeats);
+      const image_error e = compare_images(finest_img[vi], img);
+      const image_error ei = compare_images(input_refs[vi], img);
+      sweep_row row;
+      row.builder = peer.name;
+      row.input = in.name;
+      row.setting = "level";
+      row.view = plan.views[vi].first;
+      row.tolerance = setting;
+      row.build_seconds = build_s;
+      row.frame_seconds = row.raster_seconds = secs;
+      row.traverse_seconds = 0;
+      (level.normals.empty() ? row.points : row.splats) = level.size();
+      row.psnr = e.psnr;
+      row.holes = e.hole_fraction;
+      row.ssim = ssim(finest_img[vi], img);
+      row.psnr_input = ei.psnr;
+      row.holes_input = ei.hole_fraction;
+      row.file_bytes = bytes;
+      row.bytes_per_input_point = static_cast<double>(bytes) / static_cast<double>(all.size());
+      row.bytes_per_sample = static_cast<double>(bpp);
+      rows.push_back(row);
+    }
+  }
+}
+
 const char* const csv_header =
     "builder,input,setting,tolerance,view,build_seconds,frame_seconds,traverse_seconds,"
     "raster_seconds,points,splats,triangles,primitives,psnr,holes,ssim,psnr_input,holes_input,"
@@ -225,7 +358,8 @@ json row_json(const sweep_row& r) {
 }
 
 /// --check: every builder produced rows for every input it can build from, and in every
-/// (builder, input, view) series the error does not grow as the tolerance tightens (PSNR may
+/// (builder or peer, input, view) series the error does not grow from one setting to the next
+/// finer one (PSNR may
 /// drop by at most `slack_db` from one step to the next finer one: a finer cut can move a
 /// splat's edge by a pixel). Returns the problems found.
 std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
@@ -243,9 +377,7 @@ std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
   }
   std::map<std::string, std::vector<const sweep_row*>> series;
   for (const auto& r : rows) series[r.builder + " " + r.input + " " + r.view].push_back(&r);
-  for (auto& [key, s] : series) {
-    std::sort(s.begin(), s.end(),
-              [](const sweep_row* a, const sweep_row* b) { return a->tolerance > b->tolerance; });
+  for (auto& [key, s] : series) {  // rows are in coarse-to-fine order
     for (std::size_t i = 1; i < s.size(); ++i)
       if (s[i]->psnr < s[i - 1]->psnr - slack_db)
         problems.push_back(key + ": PSNR falls from " + number(s[i - 1]->psnr) + " dB at " +
@@ -253,6 +385,126 @@ std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
                            number(s[i]->tolerance));
   }
   return problems;
+}
+
+/// The mean over views of one (builder, input, tolerance): a point of the charts. PSNR of an
+/// identical frame (+inf) counts as 60 dB.
+struct setting_mean {
+  std::string builder, input;
+  float tolerance = 0;
+  double frame_ms = 0, psnr = 0, psnr_input = 0, bytes_per_input_point = 0;
+  int n = 0;
+};
+
+std::vector<setting_mean> setting_means(const std::vector<sweep_row>& rows) {
+  constexpr double cap = 60;
+  std::vector<setting_mean> out;
+  for (const auto& r : rows) {
+    auto it = std::find_if(out.begin(), out.end(), [&](const setting_mean& m) {
+      return m.builder == r.builder && m.input == r.input && m.tolerance == r.tolerance;
+    });
+    if (it == out.end()) {
+      out.push_back({r.builder, r.input, r.tolerance});
+      it = out.end() - 1;
+    }
+    it->frame_ms += 1e3 * r.frame_seconds;
+    it->psnr += std::min(r.psnr, cap);
+    it->psnr_input += std::min(r.psnr_input, cap);
+    it->bytes_per_input_point = r.bytes_per_input_point;
+    ++it->n;
+  }
+  for (auto& m : out) {
+    m.frame_ms /= m.n;
+    m.psnr /= m.n;
+    m.psnr_input /= m.n;
+  }
+  return out;
+}
+
+std::string file_stem(const std::string& s) {
+  std::string o;
+  for (const char c : s) o += std::isalnum(static_cast<unsigned char>(c)) || c == '-' ? c : '_';
+  return o;
+}
+
+void write_text(const fs::path& p, const std::string& text) {
+  std::ofstream o(p);
+  o << text;
+  if (!o) throw IoError(p.string() + ": cannot write");
+}
+
+/// One series per `key` value (builder or input) of the means that pass `keep`, in order.
+template <class Key, class Keep, class Point>
+std::vector<chart_series> series_by(const std::vector<setting_mean>& means, Key key, Keep keep,
+                                    Point point) {
+  std::vector<chart_series> out;
+  for (const auto& m : means) {
+    if (!keep(m)) continue;
+    auto it = std::find_if(out.begin(), out.end(),
+                           [&](const chart_series& s) { return s.name == key(m); });
+    if (it == out.end()) {
+      out.push_back({key(m), {}, false});
+      it = out.end() - 1;
+    }
+    it->points.push_back(point(m));
+  }
+  return out;
+}
+
+/// The report's pictures: per builder, LOD error against frame time (one line per input); per
+/// input, every builder and peer against frame time (with the Pareto front) and against bytes
+/// per input point. Returns the files written.
+std::vector<std::string> write_charts(const std::vector<sweep_row>& rows, const fs::path& dir) {
+  const auto means = setting_means(rows);
+  std::vector<std::string> builders, inputs, files;
+  for (const auto& m : means) {
+    if (std::find(builders.begin(), builders.end(), m.builder) == builders.end())
+      builders.push_back(m.builder);
+    if (std::find(inputs.begin(), inputs.end(), m.input) == inputs.end()) inputs.push_back(m.input);
+  }
+  const auto by_input = [](const setting_mean& m) { return m.input; };
+  const auto by_builder = [](const setting_mean& m) { return m.builder; };
+  for (const auto& b : builders) {
+    chart c{b + ": what LOD costs (mean over views)",
+            "frame time, ms",
+            "PSNR against its finest cut, dB (identical = 60)",
+            true,
+            {}};
+    c.series = series_by(
+        means, by_input, [&](const setting_mean& m) { return m.builder == b; },
+        [](const setting_mean& m) {
+          return std::pair{m.frame_ms, m.psnr};
+        });
+    files.push_back((dir / ("chart_" + file_stem(b) + ".svg")).string());
+    write_text(files.back(), to_svg(c));
+  }
+  for (const auto& in : inputs) {
+    const auto here = [&](const setting_mean& m) { return m.input == in; };
+    chart t{in + ": image error against frame time",
+            "frame time, ms",
+            "PSNR against the input's full-detail render, dB",
+            true,
+            {}};
+    t.series = series_by(means, by_builder, here, [](const setting_mean& m) {
+      return std::pair{m.frame_ms, m.psnr_input};
+    });
+    std::vector<std::pair<double, double>> all;
+    for (const auto& s : t.series) all.insert(all.end(), s.points.begin(), s.points.end());
+    t.series.push_back({"Pareto front", pareto_front(all), true});
+    files.push_back((dir / ("pareto_time_" + file_stem(in) + ".svg")).string());
+    write_text(files.back(), to_svg(t));
+    chart bytes{in + ": image error against storage",
+                "file bytes per input point",
+                "PSNR against the input's full-detail render, dB",
+                true,
+                {}};
+    bytes.series = series_by(means, by_builder, here, [](const setting_mean& m) {
+      return std::pair{m.bytes_per_input_point, m.psnr_input};
+    });
+    files.push_back((dir / ("bytes_" + file_stem(in) + ".svg")).string());
+    write_text(files.back(), to_svg(bytes));
+  }
+  return files;
 }
 
 }  // namespace
@@ -275,6 +527,7 @@ int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
     }
     for (const method_entry& m : methods())
       if (m.build) sweep_builder(m, in, plan, refs, prog, rows, skipped);
+    for (const peer_entry& p : peer_table()) sweep_peer(p, in, plan, refs, prog, rows);
   }
   const std::string csv = (fs::path(dir) / "sweep.csv").string();
   const std::string js = (fs::path(dir) / "sweep.json").string();
@@ -301,10 +554,12 @@ int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
     o << report.text() << "\n";
     if (!o) throw IoError(js + ": cannot write");
   }
+  const auto charts = write_charts(rows, dir);
   const auto problems = check ? check_rows(rows, skipped) : std::vector<std::string>{};
   for (const auto& p : problems) std::cerr << "sweep --check: " << p << "\n";
   json summary;
   summary.str("csv", csv).str("json", js).integer("rows", static_cast<long long>(rows.size()));
+  summary.integer("charts", static_cast<long long>(charts.size()));
   summary.integer("skipped", static_cast<long long>(skipped.size()));
   summary.integer("problems", static_cast<long long>(problems.size()));
   std::cout << (as_json ? "" : "pbrlod sweep: ") << summary.text() << "\n";
