@@ -1,12 +1,17 @@
 #!/usr/bin/env bash
 # Installs what pbr_lod needs on Debian 12 (bookworm) from Debian's packages. Idempotent: it only
 # calls apt-get when a package is missing. Uses sudo when not run as root.
+#
+#   install-deps.sh           what the library, its tests, benchmarks and the tool need
+#   install-deps.sh --peers   also PCL (libpcl-dev, ~380 packages), for the optional PCL peers
+#                             of `pbrlod sweep` (PBR_LOD_PEERS; scripts/test.sh asks for them)
 set -euo pipefail
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
 )
+[ "${1:-}" = "--peers" ] && packages+=(libpcl-dev)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -27,7 +27,7 @@ phase() {  # phase NAME — prints how long the previous phase took, then starts
   return 0
 }
 phase "install dependencies"
-bash scripts/install-deps.sh
+bash scripts/install-deps.sh --peers  # with PCL, for the sweep's PCL peers
 jobs="${JOBS:-$(nproc)}"
 data="${PBR_LOD_DATA:-$root/../shared/data}"
 if [ ! -f "$data/bun_zipper.ply" ]; then

@@ -25,6 +25,9 @@
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/peers/cgal_simplify.hpp"
+#ifdef PBR_LOD_HAVE_PCL_PEERS
+#include "pbr_lod/peers/pcl_simplify.hpp"
+#endif
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "pbr_lod/version.hpp"
@@ -189,6 +192,15 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
   }
 }
 
+/// The peers this build lacks, and why (the sweep's report says so).
+std::vector<std::string> peers_not_built() {
+#ifdef PBR_LOD_HAVE_PCL_PEERS
+  return {};
+#else
+  return {"pcl-voxel-grid", "pcl-octree"};
+#endif
+}
+
 /// A peer: the LOD a user would build today instead — a pyramid of simplified point sets, one
 /// level per setting, each drawn whole through the same rasteriser.
 struct peer_entry {
@@ -211,6 +223,20 @@ const std::vector<peer_entry>& peer_table() {
        [](const point_cloud& c, float size, double /*diagonal*/) {
          return peers::hierarchy_simplify(c, static_cast<unsigned>(size));
        }},
+#ifdef PBR_LOD_HAVE_PCL_PEERS
+      // pcl::VoxelGrid: leaves of the diagonal / `setting`, one centroid each.
+      {"pcl-voxel-grid",
+       {32, 64, 128, 256},
+       [](const point_cloud& c, float cells, double diagonal) {
+         return peers::pcl_voxel_grid(c, diagonal / cells);
+       }},
+      // pcl::octree::OctreePointCloudVoxelCentroid at resolution diagonal / `setting`.
+      {"pcl-octree",
+       {32, 64, 128, 256},
+       [](const point_cloud& c, float cells, double diagonal) {
+         return peers::pcl_octree_centroids(c, diagonal / cells);
+       }},
+#endif
   };
   return table;
 }
@@ -548,6 +574,13 @@ int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
   report.str("pbr_lod", version()).str("size", size).str("image_size", plan.size);
   report.integer("hardware_threads", std::thread::hardware_concurrency());
   report.integer("repeats", plan.repeats);
+  std::string missing;
+  for (const auto& p : peers_not_built()) missing += (missing.empty() ? "\"" : ",\"") + p + "\"";
+  report.raw("peers_not_built", "[" + missing + "]");
+  if (!missing.empty())
+    report.str("peers_not_built_why",
+               "PCL was not found when pbr_lod was configured (PBR_LOD_PEERS=AUTO; "
+               "scripts/install-deps.sh installs libpcl-dev)");
   report.raw("skipped", "[" + skip_list + "]").raw("rows", "[" + row_list + "]");
   {
     std::ofstream o(js);
@@ -563,8 +596,11 @@ int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
   summary.integer("skipped", static_cast<long long>(skipped.size()));
   summary.integer("problems", static_cast<long long>(problems.size()));
   std::cout << (as_json ? "" : "pbrlod sweep: ") << summary.text() << "\n";
-  if (!as_json)
+  if (!as_json) {
     for (const auto& s : skipped) std::cout << "  skipped " << s << "\n";
+    for (const auto& p : peers_not_built())
+      std::cout << "  peer " << p << " not built: PCL was not found when pbr_lod was configured\n";
+  }
   return problems.empty() ? 0 : 1;
 }
 

@@ -1,0 +1,24 @@
+// pbr_lod — PCL's level-of-detail tools as peers: a VoxelGrid pyramid and an octree's voxel
+// centroids per depth, which `pbrlod sweep` measures beside the builders (docs/accuracy.md).
+//
+// Optional: these live in the library pbr_lod::peers_pcl, built only when PCL is found
+// (CMake option PBR_LOD_PEERS=AUTO|ON|OFF), so pbr_lod itself never depends on PCL. PCL stays
+// out of this header.
+#pragma once
+
+#include "pbr_lod/core/point_set.hpp"
+
+namespace pbr_lod::peers {
+
+/// pcl::VoxelGrid with cubic leaves of side `leaf`: one point per occupied voxel, the centroid
+/// of its points; normals are averaged and renormalised, colours averaged. Throws
+/// InvalidArgument for leaf ≤ 0 or not finite (and for a grid too fine for PCL's 32-bit voxel
+/// index, which PCL would only warn about).
+[[nodiscard]] point_cloud pcl_voxel_grid(const point_cloud& in, double leaf);
+
+/// pcl::octree::OctreePointCloudVoxelCentroid with voxels of side `resolution`: the centroid
+/// of each occupied leaf voxel (attributes averaged as pcl_voxel_grid). Throws InvalidArgument
+/// for resolution ≤ 0 or not finite.
+[[nodiscard]] point_cloud pcl_octree_centroids(const point_cloud& in, double resolution);
+
+}  // namespace pbr_lod::peers
