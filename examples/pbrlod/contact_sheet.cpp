@@ -69,8 +69,18 @@ constexpr glyph font[] = {
     {'?', {".###.", "#...#", "....#", "...#.", "..#..", ".....", "..#.."}},
     {'_', {".....", ".....", ".....", ".....", ".....", ".....", "#####"}},
 };
-constexpr int glyph_w = 5, glyph_h = 7, scale = 2, advance = (glyph_w + 1) * scale,
-              line_h = (glyph_h + 3) * scale, margin = 6;
+constexpr int glyph_w = 5, glyph_h = 7, margin = 6;
+
+/// The font's size: twice its pixels under tiles wide enough for 25 such characters, else
+/// once, so that a label line fits under small tiles too.
+struct font_scale {
+  int scale;
+  [[nodiscard]] int advance() const { return (glyph_w + 1) * scale; }
+  [[nodiscard]] int line_height() const { return (glyph_h + 3) * scale; }
+};
+font_scale scale_for(int tile_width) {
+  return {tile_width >= 25 * (glyph_w + 1) * 2 ? 2 : 1};
+}
 
 const glyph& find_glyph(char c) {
   const char u = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
@@ -81,9 +91,13 @@ const glyph& find_glyph(char c) {
   return font[0];
 }
 
-void draw_text(image& img, int x0, int y0, const std::string& s, rgb8 ink) {
+/// Draws s from (x0, y0), clipped at x_end.
+void draw_text(image& img, int x0, int y0, int x_end, const std::string& s, rgb8 ink,
+               font_scale f) {
+  const int scale = f.scale;
   int x = x0;
   for (const char c : s) {
+    if (x + glyph_w * scale > x_end) break;
     if (c != ' ') {
       const glyph& g = find_glyph(c);
       for (int r = 0; r < glyph_h; ++r)
@@ -97,15 +111,11 @@ void draw_text(image& img, int x0, int y0, const std::string& s, rgb8 ink) {
             }
         }
     }
-    x += advance;
+    x += f.advance();
   }
 }
 
 }  // namespace
-
-int label_width(std::size_t n) {
-  return static_cast<int>(n) * advance;
-}
 
 image shrink(const image& src, int factor) {
   if (factor < 1) throw pbr_lod::InvalidArgument("shrink: the factor must be at least 1");
@@ -142,7 +152,9 @@ image contact_sheet(const std::vector<std::vector<sheet_tile>>& rows) {
       lines = std::max(lines, t.lines.size());
     }
   }
-  const int cell_w = tile_w + margin, cell_h = tile_h + static_cast<int>(lines) * line_h + margin;
+  const font_scale f = scale_for(tile_w);
+  const int cell_w = tile_w + margin,
+            cell_h = tile_h + static_cast<int>(lines) * f.line_height() + margin;
   image sheet(cols * cell_w + margin, static_cast<int>(rows.size()) * cell_h + margin,
               rgb8{255, 255, 255});
   std::fill(sheet.depth.begin(), sheet.depth.end(), 0.0f);  // opaque: PNG alpha marks coverage
@@ -155,8 +167,8 @@ image contact_sheet(const std::vector<std::vector<sheet_tile>>& rows) {
         for (int x = 0; x < tile_w; ++x)
           sheet.colour[sheet.index(x0 + x, y0 + y)] = t.img.colour[t.img.index(x, y)];
       for (std::size_t l = 0; l < t.lines.size(); ++l)
-        draw_text(sheet, x0, y0 + tile_h + scale * 2 + static_cast<int>(l) * line_h, t.lines[l],
-                  rgb8{0, 0, 0});
+        draw_text(sheet, x0, y0 + tile_h + 2 * f.scale + static_cast<int>(l) * f.line_height(),
+                  x0 + tile_w, t.lines[l], rgb8{0, 0, 0}, f);
     }
   return sheet;
 }

@@ -14,15 +14,13 @@ struct sheet_tile {
 };
 
 /// The tiles row by row (rows may differ in length), each with its label lines under it, on a
-/// white background. Labels use a built-in 5×7 bitmap font drawn at twice its size (upper case;
-/// lower case is drawn as upper case; characters it lacks are drawn as '?').
+/// white background. Labels use a built-in 5×7 bitmap font (upper case; lower case is drawn as
+/// upper case; characters it lacks as '?'), at twice its size under tiles of 300 pixels or
+/// more, clipped at the tile's width.
 [[nodiscard]] pbr_lod::image contact_sheet(const std::vector<std::vector<sheet_tile>>& rows);
 
 /// The colour image shrunk by an integer factor (box filter; depth is kept where any source
 /// pixel was covered). factor ≥ 1.
 [[nodiscard]] pbr_lod::image shrink(const pbr_lod::image& src, int factor);
-
-/// Pixels a label line of n characters takes: the width of the font at the sheet's scale.
-[[nodiscard]] int label_width(std::size_t n);
 
 }  // namespace pbrlod_tool

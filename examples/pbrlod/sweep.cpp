@@ -20,6 +20,7 @@
 #include <sstream>
 #include <thread>
 
+#include "contact_sheet.hpp"
 #include "lod.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
@@ -29,6 +30,7 @@
 #include "pbr_lod/peers/pcl_simplify.hpp"
 #endif
 #include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/png.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "pbr_lod/version.hpp"
 #include "svg_chart.hpp"
@@ -61,6 +63,24 @@ struct sweep_row {
   std::size_t file_bytes = 0;
   double bytes_per_input_point = 0, bytes_per_sample = 0;
 };
+
+/// A frame kept for the contact sheet at matched frame time (the "mid" view of each input).
+struct tile_candidate {
+  std::string builder, input;
+  float tolerance = 0;
+  double seconds = 0, psnr_input = 0;
+  image img;
+};
+
+/// Everything a sweep produces.
+struct sweep_results {
+  std::vector<sweep_row> rows;
+  std::vector<std::string> skipped;
+  std::vector<tile_candidate> tiles;
+};
+
+/// The view whose frames go on the contact sheet.
+constexpr std::size_t sheet_view = 1;
 
 /// The inputs of a sweep: the files named, else the generated scene (small) or the real scans
 /// in PBR_LOD_DATA and a generated multi-million-point scene (full).
@@ -133,8 +153,7 @@ image input_reference(const loaded_input& in, const camera& cam, const view_args
 /// One builder over one input: built once with its defaults, then for each view its finest cut
 /// (the reference) and a frame per tolerance.
 void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_plan& plan,
-                   const std::vector<image>& input_refs, progress& prog,
-                   std::vector<sweep_row>& rows, std::vector<std::string>& skipped) {
+                   const std::vector<image>& input_refs, progress& prog, sweep_results& out) {
   // Point builders take the mesh's vertices (with their normals and colours).
   loaded_input points;
   const bool as_mesh = m.builds_from_mesh || !in.data.is_mesh();
@@ -146,7 +165,7 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
   try {
     l = m.build({}, bi, false);
   } catch (const InvalidArgument& e) {
-    skipped.push_back(m.name + " on " + in.name + ": " + e.what());
+    out.skipped.push_back(m.name + " on " + in.name + ": " + e.what());
     return;
   }
   const double build_s = seconds_since(t0);
@@ -187,7 +206,8 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
       row.bytes_per_input_point = static_cast<double>(row.file_bytes) / n_in;
       row.bytes_per_sample =
           static_cast<double>(row.file_bytes) / static_cast<double>(l->samples());
-      rows.push_back(row);
+      out.rows.push_back(row);
+      if (vi == sheet_view) out.tiles.push_back({m.name, in.name, tol, f.seconds, ei.psnr, f.img});
     }
   }
 }
@@ -287,8 +307,7 @@ std::pair<image, double> timed_render(const point_cloud& c, const camera& cam,
 /// One peer over one input (a mesh gives its vertices): the full cloud drawn the same way is
 /// its finest level, the reference of its psnr.
 void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan& plan,
-                const std::vector<image>& input_refs, progress& prog,
-                std::vector<sweep_row>& rows) {
+                const std::vector<image>& input_refs, progress& prog, sweep_results& out) {
   const point_cloud& all = in.data.mesh.vertices;
   std::vector<camera> cams;
   std::vector<render_options> opts;
@@ -336,7 +355,8 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
       row.file_bytes = bytes;
       row.bytes_per_input_point = static_cast<double>(bytes) / static_cast<double>(all.size());
       row.bytes_per_sample = static_cast<double>(bpp);
-      rows.push_back(row);
+      out.rows.push_back(row);
+      if (vi == sheet_view) out.tiles.push_back({peer.name, in.name, setting, secs, ei.psnr, img});
     }
   }
 }
@@ -533,6 +553,89 @@ std::vector<std::string> write_charts(const std::vector<sweep_row>& rows, const 
   return files;
 }
 
+/// The contact sheet at matched frame time: per input (a row), each builder's and peer's frame
+/// of the sheet view whose time is nearest (in ratio) to the median time of all of them.
+image matched_time_sheet(const std::vector<tile_candidate>& tiles, int shrink_by) {
+  std::vector<std::string> inputs;
+  for (const auto& t : tiles)
+    if (std::find(inputs.begin(), inputs.end(), t.input) == inputs.end()) inputs.push_back(t.input);
+  std::vector<std::vector<sheet_tile>> sheet;
+  for (const auto& in : inputs) {
+    std::vector<double> times;
+    for (const auto& t : tiles)
+      if (t.input == in) times.push_back(std::max(t.seconds, 1e-9));
+    std::nth_element(times.begin(), times.begin() + static_cast<std::ptrdiff_t>(times.size() / 2),
+                     times.end());
+    const double target = times[times.size() / 2];
+    std::map<std::string, const tile_candidate*> best;  // by builder, first seen first
+    std::vector<std::string> order;
+    for (const auto& t : tiles) {
+      if (t.input != in) continue;
+      const auto gap = [&](const tile_candidate* c) {
+        return std::abs(std::log(std::max(c->seconds, 1e-9) / target));
+      };
+      auto& b = best[t.builder];
+      if (!b) order.push_back(t.builder);
+      if (!b || gap(&t) < gap(b)) b = &t;
+    }
+    sheet.emplace_back();
+    for (const auto& name : order) {
+      const tile_candidate& t = *best[name];
+      sheet.back().push_back(
+          {shrink(t.img, shrink_by),
+           {name + " " + number(t.tolerance), number(1e3 * t.seconds).substr(0, 6) + " ms",
+            number(t.psnr_input).substr(0, 5) + " dB", t.input.substr(0, 20)}});
+    }
+  }
+  return contact_sheet(sheet);
+}
+
+void write_csv(const std::string& path, const std::vector<sweep_row>& rows) {
+  std::ofstream o(path);
+  o << csv_header << "\n";
+  for (const auto& r : rows) o << csv_line(r) << "\n";
+  if (!o) throw IoError(path + ": cannot write");
+}
+
+void write_json(const std::string& path, const sweep_plan& plan, const std::string& size,
+                const sweep_results& res) {
+  std::string row_list, skip_list, missing;
+  for (const auto& r : res.rows) row_list += (row_list.empty() ? "" : ",") + row_json(r).text();
+  for (const auto& s : res.skipped) {
+    json q;
+    q.str("why", s);
+    skip_list += (skip_list.empty() ? "" : ",") + q.text();
+  }
+  for (const auto& p : peers_not_built()) missing += (missing.empty() ? "\"" : ",\"") + p + "\"";
+  json report;
+  report.str("pbr_lod", version()).str("size", size).str("image_size", plan.size);
+  report.integer("hardware_threads", std::thread::hardware_concurrency());
+  report.integer("repeats", plan.repeats);
+  report.raw("peers_not_built", "[" + missing + "]");
+  if (!missing.empty())
+    report.str("peers_not_built_why",
+               "PCL was not found when pbr_lod was configured (PBR_LOD_PEERS=AUTO; "
+               "scripts/install-deps.sh installs libpcl-dev)");
+  report.raw("skipped", "[" + skip_list + "]").raw("rows", "[" + row_list + "]");
+  write_text(path, report.text() + "\n");
+}
+
+/// Every builder and peer over one input, with the input's own references per view.
+void sweep_input_file(const sweep_input& in, const sweep_plan& plan, progress& prog,
+                      sweep_results& out) {
+  std::vector<image> refs;
+  for (const auto& [name, spec] : plan.views) {
+    view_args va;
+    va.view = spec;
+    va.size = plan.size;
+    prog.step("reference of " + in.name + " " + name);
+    refs.push_back(input_reference(in.data, make_camera(in.data.mesh.vertices, va), va));
+  }
+  for (const method_entry& m : methods())
+    if (m.build) sweep_builder(m, in, plan, refs, prog, out);
+  for (const peer_entry& p : peer_table()) sweep_peer(p, in, plan, refs, prog, out);
+}
+
 }  // namespace
 
 int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
@@ -540,64 +643,26 @@ int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
   const sweep_plan plan = make_plan(inputs, size);
   fs::create_directories(dir);
   progress prog(as_json);
-  std::vector<sweep_row> rows;
-  std::vector<std::string> skipped;
-  for (const sweep_input& in : plan.inputs) {
-    std::vector<image> refs;
-    for (const auto& [name, spec] : plan.views) {
-      view_args va;
-      va.view = spec;
-      va.size = plan.size;
-      prog.step("reference of " + in.name + " " + name);
-      refs.push_back(input_reference(in.data, make_camera(in.data.mesh.vertices, va), va));
-    }
-    for (const method_entry& m : methods())
-      if (m.build) sweep_builder(m, in, plan, refs, prog, rows, skipped);
-    for (const peer_entry& p : peer_table()) sweep_peer(p, in, plan, refs, prog, rows);
-  }
+  sweep_results res;
+  for (const sweep_input& in : plan.inputs) sweep_input_file(in, plan, prog, res);
   const std::string csv = (fs::path(dir) / "sweep.csv").string();
   const std::string js = (fs::path(dir) / "sweep.json").string();
-  {
-    std::ofstream o(csv);
-    o << csv_header << "\n";
-    for (const auto& r : rows) o << csv_line(r) << "\n";
-    if (!o) throw IoError(csv + ": cannot write");
-  }
-  std::string row_list, skip_list;
-  for (const auto& r : rows) row_list += (row_list.empty() ? "" : ",") + row_json(r).text();
-  for (const auto& s : skipped) {
-    json q;
-    q.str("why", s);
-    skip_list += (skip_list.empty() ? "" : ",") + q.text();
-  }
-  json report;
-  report.str("pbr_lod", version()).str("size", size).str("image_size", plan.size);
-  report.integer("hardware_threads", std::thread::hardware_concurrency());
-  report.integer("repeats", plan.repeats);
-  std::string missing;
-  for (const auto& p : peers_not_built()) missing += (missing.empty() ? "\"" : ",\"") + p + "\"";
-  report.raw("peers_not_built", "[" + missing + "]");
-  if (!missing.empty())
-    report.str("peers_not_built_why",
-               "PCL was not found when pbr_lod was configured (PBR_LOD_PEERS=AUTO; "
-               "scripts/install-deps.sh installs libpcl-dev)");
-  report.raw("skipped", "[" + skip_list + "]").raw("rows", "[" + row_list + "]");
-  {
-    std::ofstream o(js);
-    o << report.text() << "\n";
-    if (!o) throw IoError(js + ": cannot write");
-  }
-  const auto charts = write_charts(rows, dir);
-  const auto problems = check ? check_rows(rows, skipped) : std::vector<std::string>{};
+  const std::string sheet = (fs::path(dir) / "contact_sheet.png").string();
+  write_csv(csv, res.rows);
+  write_json(js, plan, size, res);
+  const auto charts = write_charts(res.rows, dir);
+  write_png(sheet, matched_time_sheet(res.tiles, plan.size == "512x512" ? 2 : 1));
+  const auto problems = check ? check_rows(res.rows, res.skipped) : std::vector<std::string>{};
   for (const auto& p : problems) std::cerr << "sweep --check: " << p << "\n";
   json summary;
-  summary.str("csv", csv).str("json", js).integer("rows", static_cast<long long>(rows.size()));
+  summary.str("csv", csv).str("json", js).str("contact_sheet", sheet);
+  summary.integer("rows", static_cast<long long>(res.rows.size()));
   summary.integer("charts", static_cast<long long>(charts.size()));
-  summary.integer("skipped", static_cast<long long>(skipped.size()));
+  summary.integer("skipped", static_cast<long long>(res.skipped.size()));
   summary.integer("problems", static_cast<long long>(problems.size()));
   std::cout << (as_json ? "" : "pbrlod sweep: ") << summary.text() << "\n";
   if (!as_json) {
-    for (const auto& s : skipped) std::cout << "  skipped " << s << "\n";
+    for (const auto& s : res.skipped) std::cout << "  skipped " << s << "\n";
     for (const auto& p : peers_not_built())
       std::cout << "  peer " << p << " not built: PCL was not found when pbr_lod was configured\n";
   }

@@ -3,7 +3,7 @@
 #include "pbr_lod/peers/pcl_simplify.hpp"
 
 #include <pcl/filters/voxel_grid.h>
-#include <pcl/octree/octree_pointcloud_voxelcentroid.h>
+#include <pcl/octree/octree_pointcloud_pointvector.h>
 #include <pcl/point_types.h>
 
 #include <cmath>
@@ -31,7 +31,7 @@ pcl_cloud::Ptr to_pcl(const point_cloud& in) {
     const vec3f n = in.normals.empty() ? vec3f::Zero() : in.normals[i];
     p.normal_x = n.x(), p.normal_y = n.y(), p.normal_z = n.z();
     const rgb8 c = in.colours.empty() ? rgb8{} : in.colours[i];
-    p.r = c.r, p.g = c.g, p.b = c.b;
+    p.r = c.r, p.g = c.g, p.b = c.b, p.a = 255;
   }
   return out;
 }
@@ -79,13 +79,37 @@ point_cloud pcl_octree_centroids(const point_cloud& in, double resolution) {
   check_size("pcl_octree_centroids", resolution);
   in.validate("pcl_octree_centroids: input");
   if (in.empty()) return from_pcl(pcl_cloud{}, in);
-  pcl::octree::OctreePointCloudVoxelCentroid<pcl_point> octree(resolution);
-  octree.setInputCloud(to_pcl(in));
+  // The octree's leaves hold point indices; the mean of each leaf's points is taken here, not
+  // by OctreePointCloudVoxelCentroid, whose centroid container sums PointT with PCL's point
+  // arithmetic and so adds the packed RGB field as a float (wrong colours for RGB types).
+  auto xyz = pcl::PointCloud<pcl::PointXYZ>::Ptr(new pcl::PointCloud<pcl::PointXYZ>);
+  xyz->resize(in.size());
+  for (std::size_t i = 0; i < in.size(); ++i)
+    (*xyz)[i] = {in.positions[i].x(), in.positions[i].y(), in.positions[i].z()};
+  pcl::octree::OctreePointCloudPointVector<pcl::PointXYZ> octree(resolution);
+  octree.setInputCloud(xyz);
   octree.addPointsFromInputCloud();
-  pcl::octree::OctreePointCloudVoxelCentroid<pcl_point>::AlignedPointTVector centroids;
-  octree.getVoxelCentroids(centroids);
   pcl_cloud out;
-  out.insert(out.end(), centroids.begin(), centroids.end());
+  for (auto it = octree.leaf_depth_begin(); it != octree.leaf_depth_end(); ++it) {
+    const auto& indices = it.getLeafContainer().getPointIndicesVector();
+    if (indices.empty()) continue;
+    vec3d p = vec3d::Zero(), n = vec3d::Zero(), c = vec3d::Zero();
+    for (const auto i : indices) {
+      const auto k = static_cast<std::size_t>(i);
+      p += in.positions[k].cast<double>();
+      if (!in.normals.empty()) n += in.normals[k].cast<double>();
+      if (!in.colours.empty()) c += vec3d(in.colours[k].r, in.colours[k].g, in.colours[k].b);
+    }
+    const double m = static_cast<double>(indices.size());
+    pcl_point q;
+    q.x = static_cast<float>(p.x() / m), q.y = static_cast<float>(p.y() / m),
+    q.z = static_cast<float>(p.z() / m);
+    q.normal_x = static_cast<float>(n.x()), q.normal_y = static_cast<float>(n.y()),
+    q.normal_z = static_cast<float>(n.z());
+    const auto channel = [&](double v) { return static_cast<std::uint8_t>(std::lround(v / m)); };
+    q.r = channel(c.x()), q.g = channel(c.y()), q.b = channel(c.z());
+    out.push_back(q);
+  }
   return from_pcl(out, in);
 }
 

@@ -82,6 +82,15 @@ TEST(PclPeers, OctreeCentroidsOfSingletonVoxelsAreThePoints) {
     EXPECT_NEAR(std::get<1>(a[i]), std::get<1>(b[i]), 1e-5f);
     EXPECT_NEAR(std::get<2>(a[i]), std::get<2>(b[i]), 1e-5f);
   }
+  // Each singleton voxel keeps its point's colour.
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    std::size_t nearest = 0;
+    for (std::size_t i = 1; i < in.size(); ++i)
+      if ((in.positions[i] - out.positions[k]).squaredNorm() <
+          (in.positions[nearest] - out.positions[k]).squaredNorm())
+        nearest = i;
+    EXPECT_EQ(out.colours[k], in.colours[nearest]) << k;
+  }
   // Coarser voxels merge points.
   EXPECT_LT(pcl_octree_centroids(in, 2.0).size(), in.size());
 }

@@ -1,5 +1,5 @@
-// pbr_lod — PCL's level-of-detail tools as peers: a VoxelGrid pyramid and an octree's voxel
-// centroids per depth, which `pbrlod sweep` measures beside the builders (docs/accuracy.md).
+// pbr_lod — PCL's level-of-detail tools as peers: a VoxelGrid pyramid and an octree's leaf
+// means at a resolution, which `pbrlod sweep` measures beside the builders (docs/accuracy.md).
 //
 // Optional: these live in the library pbr_lod::peers_pcl, built only when PCL is found
 // (CMake option PBR_LOD_PEERS=AUTO|ON|OFF), so pbr_lod itself never depends on PCL. PCL stays
@@ -16,9 +16,9 @@ namespace pbr_lod::peers {
 /// index, which PCL would only warn about).
 [[nodiscard]] point_cloud pcl_voxel_grid(const point_cloud& in, double leaf);
 
-/// pcl::octree::OctreePointCloudVoxelCentroid with voxels of side `resolution`: the centroid
-/// of each occupied leaf voxel (attributes averaged as pcl_voxel_grid). Throws InvalidArgument
-/// for resolution ≤ 0 or not finite.
+/// A PCL octree (pcl::octree::OctreePointCloudPointVector) with leaf voxels of side
+/// `resolution`: one point per occupied leaf, the mean of its points (normals renormalised,
+/// colours averaged). Throws InvalidArgument for resolution ≤ 0 or not finite.
 [[nodiscard]] point_cloud pcl_octree_centroids(const point_cloud& in, double resolution);
 
 }  // namespace pbr_lod::peers
