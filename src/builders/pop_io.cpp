@@ -129,41 +129,51 @@ void save_pop_data(const pop_data& d, const std::string& path) {
   save_file_bytes(path, w.bytes);
 }
 
-pop_data load_pop_data(const std::string& path, bool colour) {
-  const std::vector<unsigned char> bytes = load_file_bytes(path);
-  byte_reader r{bytes, 0, path};
+namespace {
+/// What the header says about the rest of the file.
+struct pop_file_head {
+  bool colour = false, qn = false;
+  int bits = 0;
+  std::uint64_t nv = 0, nf = 0, nn = 0, size = 0;
+  vec3f root_centre = vec3f::Zero();  // quantised nodes only
+  float root_radius = 0;
+};
+
+/// The header: magic, version, flags, counts against the file size, the checksum, then d's
+/// scalar fields and stats. Throws FormatError on anything unexpected.
+pop_file_head read_pop_head(byte_reader& r, const std::vector<unsigned char>& bytes,
+                            const std::string& path, bool colour, pop_data& d) {
+  pop_file_head h;
+  h.colour = colour;
   read_head(r, pop_format, 2);  // 1: float node records; 2: timings in the file
   const auto flags = r.get<std::uint32_t>("flags");
   if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
   check_colour_flag((flags & 1u) != 0, colour, path, "pop_tree");
-  const bool qn = (flags & 2u) != 0;
-  const auto bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
-  if (bits < normal_quantizer::min_bits || bits > normal_quantizer::max_bits)
-    throw FormatError(path + ": normal bits " + std::to_string(bits) + " outside 6..24");
+  h.qn = (flags & 2u) != 0;
+  h.bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
+  if (h.bits < normal_quantizer::min_bits || h.bits > normal_quantizer::max_bits)
+    throw FormatError(path + ": normal bits " + std::to_string(h.bits) + " outside 6..24");
   const auto rule = r.get<std::uint32_t>("sphere rule");
   if (rule > 1) throw FormatError(path + ": unknown sphere rule " + std::to_string(rule));
   const auto adjacency = r.get<std::uint32_t>("adjacency");
   if (adjacency > 1) throw FormatError(path + ": unknown adjacency " + std::to_string(adjacency));
-  const auto nv = r.get<std::uint64_t>("vertex count");
-  const auto nf = r.get<std::uint64_t>("face count");
-  const auto nn = r.get<std::uint64_t>("node count");
-  const std::uint64_t vb = vertex_bytes(bits, colour), nb = node_bytes(bits, colour, qn);
-  const std::uint64_t size = bytes.size();
+  const auto nv = h.nv = r.get<std::uint64_t>("vertex count");
+  const auto nf = h.nf = r.get<std::uint64_t>("face count");
+  const auto nn = h.nn = r.get<std::uint64_t>("node count");
+  const std::uint64_t vb = vertex_bytes(h.bits, colour), nb = node_bytes(h.bits, colour, h.qn);
+  const std::uint64_t size = h.size = bytes.size();
   if (nv == 0 || nf == 0 || nn == 0 || nv >= none || nf >= none || nn >= none || nv > size / vb ||
       nf > size / face_bytes || nn > size / nb ||
-      header_bytes + (qn ? root_bytes : 0) + nv * vb + nf * face_bytes + nn * nb + 8 != size)
+      header_bytes + (h.qn ? root_bytes : 0) + nv * vb + nf * face_bytes + nn * nb + 8 != size)
     throw FormatError(path + ": " + std::to_string(nv) + " vertices, " + std::to_string(nf) +
                       " faces and " + std::to_string(nn) + " nodes do not match the file size " +
                       std::to_string(size));
   if (!checksum_matches(bytes)) throw FormatError(path + ": checksum mismatch (corrupt file)");
 
-  const auto shared_quant = normal_quantizer::shared(bits);
-  const normal_quantizer& quant = *shared_quant;
-  pop_data d;
-  d.normal_bits = bits;
+  d.normal_bits = h.bits;
   d.spheres = static_cast<pop_sphere_rule>(rule);
   d.adjacency = static_cast<pop_adjacency>(adjacency);
-  d.quantised_nodes = qn;
+  d.quantised_nodes = h.qn;
   for (int k = 0; k < 3; ++k) d.origin[k] = r.get<double>("origin");
   if (!all_finite(d.origin)) throw FormatError(path + ": origin is not finite");
   for (int k = 0; k < 3; ++k) d.q_min[k] = r.get_finite("quantisation origin", 0);
@@ -173,36 +183,42 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   d.stats.nonmanifold_edges = r.get<std::uint64_t>("stats");
   d.stats.degenerate_faces = r.get<std::uint64_t>("stats");
   d.stats.contained_inner = r.get<std::uint64_t>("stats");
-  vec3f root_centre = vec3f::Zero();
-  float root_radius = 0;
-  if (qn) {
-    root_centre = r.get_vec("root centre", 0);
-    root_radius = r.get_finite("root radius", 0);
-    if (!(root_radius >= 0) || !std::isfinite(root_radius * 2))
-      throw FormatError(path + ": root radius " + std::to_string(root_radius) +
+  if (h.qn) {
+    h.root_centre = r.get_vec("root centre", 0);
+    h.root_radius = r.get_finite("root radius", 0);
+    if (!(h.root_radius >= 0) || !std::isfinite(h.root_radius * 2))
+      throw FormatError(path + ": root radius " + std::to_string(h.root_radius) +
                         " is negative or too large");
   }
+  return h;
+}
 
-  const auto check_code = [&](std::uint32_t c, const char* what, std::size_t i) {
-    if (!quant.valid(c))
-      throw FormatError(path + ": " + what + " " + std::to_string(i) + " has normal code " +
-                        std::to_string(c) + " outside the " + std::to_string(quant.size()) +
-                        "-entry table");
-  };
+void check_code(const normal_quantizer& quant, const std::string& path, std::uint32_t c,
+                const char* what, std::size_t i) {
+  if (!quant.valid(c))
+    throw FormatError(path + ": " + what + " " + std::to_string(i) + " has normal code " +
+                      std::to_string(c) + " outside the " + std::to_string(quant.size()) +
+                      "-entry table");
+}
+
+/// Vertices (dequantised, finite, valid normal codes) and faces (indices below the count).
+void read_pop_mesh(byte_reader& r, const pop_file_head& h, const normal_quantizer& quant,
+                   const std::string& path, pop_data& d) {
+  const std::uint64_t nv = h.nv, nf = h.nf;
   resize_fresh(d.vertex_q, nv, 1);
   resize_fresh(d.positions, nv, 1);
   resize_fresh(d.vertex_normal_codes, nv, 1);
   resize_fresh(d.normals, nv, 1);
-  if (colour) resize_fresh(d.colours, nv, 1);
+  if (h.colour) resize_fresh(d.colours, nv, 1);
   for (std::size_t i = 0; i < nv; ++i) {
     for (auto& q : d.vertex_q[i]) q = r.get<std::uint16_t>("vertex");
     d.positions[i] = dequantise(d.vertex_q[i], d.q_min, d.q_step);
     if (!all_finite(d.positions[i]))
       throw FormatError(path + ": vertex " + std::to_string(i) + " is not finite");
-    d.vertex_normal_codes[i] = r.get_code(bits, "vertex normal");
-    check_code(d.vertex_normal_codes[i], "vertex", i);
+    d.vertex_normal_codes[i] = r.get_code(h.bits, "vertex normal");
+    check_code(quant, path, d.vertex_normal_codes[i], "vertex", i);
     d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
-    if (colour) d.colours[i] = r.get<rgb8>("vertex colour");
+    if (h.colour) d.colours[i] = r.get<rgb8>("vertex colour");
   }
   resize_fresh(d.faces, nf, 1);
   for (std::size_t i = 0; i < nf; ++i)
@@ -212,6 +228,14 @@ pop_data load_pop_data(const std::string& path, bool colour) {
         throw FormatError(path + ": face " + std::to_string(i) + " references vertex " +
                           std::to_string(v) + ", but there are " + std::to_string(nv));
     }
+}
+
+/// The node records. Quantised records leave the spheres (relative to the parent) and `first`
+/// (implied by the breadth-first order) to link_quantised_nodes() and check_pop_tree().
+void read_pop_nodes(byte_reader& r, const pop_file_head& h, const normal_quantizer& quant,
+                    const std::string& path, pop_data& d) {
+  const std::uint64_t nn = h.nn;
+  const bool qn = h.qn, colour = h.colour;
   resize_fresh(d.nodes, nn, 1);
   resize_fresh(d.node_normal_codes, nn, 1);
   if (qn) resize_fresh(d.node_sphere_codes, nn, 1);
@@ -225,8 +249,8 @@ pop_data load_pop_data(const std::string& path, bool colour) {
           throw FormatError(path + ": node " + std::to_string(i) + " has sphere code " +
                             std::to_string(code) + " with a level above 12");
       d.node_sphere_codes[i] = code;
-      d.node_normal_codes[i] = r.get_code(bits, "node normal");
-      check_code(d.node_normal_codes[i], "node", i);
+      d.node_normal_codes[i] = r.get_code(h.bits, "node normal");
+      check_code(quant, path, d.node_normal_codes[i], "node", i);
       nd.normal = quant.decode(d.node_normal_codes[i]);
       const auto packed = r.get<std::uint8_t>("node flags");
       if (packed & 0xe0u)
@@ -236,13 +260,13 @@ pop_data load_pop_data(const std::string& path, bool colour) {
       nd.count = static_cast<std::uint8_t>(((packed >> 2) & 3u) + 1u);
       nd.leaf = static_cast<std::uint8_t>((packed >> 4) & 1u);
       if (colour) d.node_colours[i] = from565(r.get<std::uint16_t>("node colour"));
-      continue;  // spheres and first: below, once the parents are known
+      continue;
     }
     for (int k = 0; k < 3; ++k) nd.centre[k] = r.get_finite("node centre", i);
     nd.radius = r.get_finite("node radius", i);
     nd.cone_angle = r.get_finite("node cone", i);
-    d.node_normal_codes[i] = r.get_code(bits, "node normal");
-    check_code(d.node_normal_codes[i], "node", i);
+    d.node_normal_codes[i] = r.get_code(h.bits, "node normal");
+    check_code(quant, path, d.node_normal_codes[i], "node", i);
     nd.normal = quant.decode(d.node_normal_codes[i]);
     nd.first = r.get<std::uint32_t>("node first");
     nd.count = r.get<std::uint8_t>("node count");
@@ -253,33 +277,41 @@ pop_data load_pop_data(const std::string& path, bool colour) {
       throw FormatError(path + ": node " + std::to_string(i) +
                         " has a negative radius, a cone outside [0, π] or a bad leaf flag");
   }
-  if (qn) {
-    // Breadth first with contiguous children: an inner node's first child follows the children
-    // of the inner nodes before it, a leaf's first face the faces of the leaves before it.
-    std::uint64_t next_child = 1, next_face = 0;
-    for (std::size_t i = 0; i < nn; ++i) {
-      auto& nd = d.nodes[i];
-      if (nd.leaf) {
-        nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_face, none));
-        next_face += nd.count;
-      } else {
-        nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_child, none));
-        next_child += nd.count;
-      }
+}
+
+/// Quantised records: breadth first with contiguous children, an inner node's first child
+/// follows the children of the inner nodes before it, a leaf's first face the faces of the
+/// leaves before it.
+void link_quantised_nodes(const pop_file_head& h, const std::string& path, pop_data& d) {
+  std::uint64_t next_child = 1, next_face = 0;
+  for (std::size_t i = 0; i < h.nn; ++i) {
+    auto& nd = d.nodes[i];
+    if (nd.leaf) {
+      nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_face, none));
+      next_face += nd.count;
+    } else {
+      nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_child, none));
+      next_child += nd.count;
     }
-    if (next_child != nn || next_face != nf)
-      throw FormatError(path + ": the node counts give " + std::to_string(next_child) +
-                        " nodes and " + std::to_string(next_face) + " faces, the file has " +
-                        std::to_string(nn) + " and " + std::to_string(nf));
   }
-  // The tree: breadth first, children after their parent, every node reached once, leaves
-  // partitioning the faces. Anything else is a corrupt file, not something to traverse.
+  if (next_child != h.nn || next_face != h.nf)
+    throw FormatError(path + ": the node counts give " + std::to_string(next_child) +
+                      " nodes and " + std::to_string(next_face) + " faces, the file has " +
+                      std::to_string(h.nn) + " and " + std::to_string(h.nf));
+}
+
+/// The tree: breadth first, children after their parent, every node reached once, leaves
+/// partitioning the faces. Anything else is a corrupt file, not something to traverse. Sets
+/// parents, depths, quantised spheres (a parent's before its children's) and the tree stats.
+void check_pop_tree(const pop_file_head& h, const std::string& path, pop_data& d) {
+  const std::uint64_t nn = h.nn, nf = h.nf;
+  const bool qn = h.qn;
   std::vector<char> reached(nn, 0), face_seen(nf, 0);
   reached[0] = 1;
   auto& st = d.stats;
   if (qn) {
-    d.nodes[0].centre = root_centre;
-    d.nodes[0].radius = root_radius;
+    d.nodes[0].centre = h.root_centre;
+    d.nodes[0].radius = h.root_radius;
   }
   for (std::size_t i = 0; i < nn; ++i) {
     auto& nd = d.nodes[i];
@@ -322,10 +354,23 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   }
   for (std::size_t k = 0; k < nf; ++k)
     if (!face_seen[k]) throw FormatError(path + ": face " + std::to_string(k) + " is in no leaf");
-  st.vertices = nv;
-  st.triangles = nf;
-  st.nodes = nn;
-  set_file_stats(d, size);
+}
+}  // namespace
+
+pop_data load_pop_data(const std::string& path, bool colour) {
+  const std::vector<unsigned char> bytes = load_file_bytes(path);
+  byte_reader r{bytes, 0, path};
+  pop_data d;
+  const pop_file_head h = read_pop_head(r, bytes, path, colour, d);
+  const auto shared_quant = normal_quantizer::shared(h.bits);
+  read_pop_mesh(r, h, *shared_quant, path, d);
+  read_pop_nodes(r, h, *shared_quant, path, d);
+  if (h.qn) link_quantised_nodes(h, path, d);
+  check_pop_tree(h, path, d);
+  d.stats.vertices = h.nv;
+  d.stats.triangles = h.nf;
+  d.stats.nodes = h.nn;
+  set_file_stats(d, h.size);
   return d;
 }
 
