@@ -1,7 +1,14 @@
-// pbr_lod — the POP builder and file format (Chen & Nguyen 2001; see builders/pop.hpp for the
-// section-by-section map). The triangle adjacency that groups triangles into leaves (§3.5)
-// comes from a parallel sorted-edge pass or, selectable, OpenMesh's halfedge structure; OpenMesh
-// stays in this file.
+// pbr_lod — the POP builder. This work is based on:
+//   B. Chen, M. X. Nguyen, "POP: A Hybrid Point and Polygon Rendering System for Large Data",
+//   IEEE Visualization 2001 (section-by-section map in builders/pop.hpp and docs/pop.md).
+// build_pop_data() runs the paper's steps as named stages of pop_build_state, in order:
+//   prepare()            §3.5  vertices quantised to 16 bits; leaves = ≤ 4 edge-adjacent triangles
+//   colour_vertices/faces §3.1 per-triangle colour (texel average or vertex average)
+//   leaf_keys(), partition_leaves(), lay_out_nodes()  §3.1 topology: median splits, 4-ary tree
+//   spheres_and_cones()  §3.1  bounding spheres, averaged normals/colours, normal cones, bottom up
+//   quantise_spheres()   §3.5  QSplat-style sphere codes, top down
+// The file format is in pop_io.cpp. The triangle adjacency comes from a parallel sorted-edge
+// pass or, selectable, OpenMesh's halfedge structure; OpenMesh stays in this file.
 
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/System/omstream.hh>
@@ -29,17 +36,17 @@
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/io/texture.hpp"
+#include "pop_internal.hpp"
 
 namespace pbr_lod::detail {
 
+using namespace pop_internal;
+
 namespace {
 
-constexpr std::uint32_t none = std::numeric_limits<std::uint32_t>::max();
 /// Three u32 per face: the adjacency's neighbours, and the same type as pop_data::faces, so the
 /// adjacency's storage is recycled for the faces in leaf order once the grouping is done.
 using face_slots = std::array<std::uint32_t, 3>;
-
-void set_file_stats(pop_data& d, std::size_t size);  // with the file format, below
 
 /// f(lo, hi) over contiguous pieces of at least 2048 indices, 8 per thread, handed out one at a
 /// time (core/parallel.hpp): every caller's work is element by element, and more pieces than
@@ -48,186 +55,6 @@ constexpr std::size_t pieces_per_thread = 8, min_piece = 2048;
 template <class F>
 void for_pieces(std::size_t n, unsigned threads, F&& f) {
   detail::parallel_pieces(n, threads, pieces_per_thread * threads, min_piece, f);
-}
-
-/// The smallest float ≥ x (x ≥ 0): stored radii never shrink below what was computed in double.
-float round_up(double x) {
-  float f = static_cast<float>(x);
-  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
-
-// ---- QSplat-style node quantisation (§3.5; pop_options::quantise_nodes) ----------------------
-// A child's centre is its parent's centre plus the parent's radius times one of 13 offsets per
-// axis, (i − 6)/6 for i = 0..12; its radius is the parent's times (j + 1)/13, j = 0..12. Code 6
-// on every axis with j = 12 is the parent's sphere itself (offset 0, factor exactly 1), which
-// holds any child: every node has a valid code. The float expressions below are the only ones
-// build and load use, so both derive bit-identical spheres.
-constexpr std::uint16_t sphere_code_parent = 6 | 6 << 4 | 6 << 8 | 12 << 12;
-// The levels as tables: the same correctly rounded float quotients, without a division per use
-// (quantise_sphere() tried up to eight centres, each with four of them).
-constexpr std::array<float, 16> centre_levels = [] {
-  std::array<float, 16> t{};
-  for (int i = 0; i < 16; ++i) t[static_cast<std::size_t>(i)] = static_cast<float>(i - 6) / 6.0f;
-  return t;
-}();
-constexpr std::array<float, 16> radius_levels = [] {
-  std::array<float, 16> t{};
-  for (int j = 0; j < 16; ++j) t[static_cast<std::size_t>(j)] = static_cast<float>(j + 1) / 13.0f;
-  return t;
-}();
-float centre_level(unsigned i) {
-  return centre_levels[i & 15u];
-}
-float radius_level(unsigned j) {
-  return radius_levels[j & 15u];
-}
-void dequantise_sphere(const vec3f& pc, float pr, std::uint16_t code, vec3f& c, float& r) {
-  for (unsigned k = 0; k < 3; ++k)
-    c[static_cast<int>(k)] = pc[static_cast<int>(k)] + pr * centre_level((code >> (4 * k)) & 15u);
-  r = pr * radius_level(code >> 12);
-}
-/// The code whose sphere holds (c, r) and lies inside the parent (pc, pr), with the smallest
-/// radius among the centre codes tried; checked in double on the dequantised float values, so
-/// the stored sphere is conservative however the float arithmetic rounds. The nearest centre
-/// code is tried first (radius levels are pr/13 apart, so it almost always gives the smallest
-/// radius); the other corners of the centre's grid cell only when it fails; the parent's sphere
-/// when all do.
-std::uint16_t quantise_sphere(const vec3f& pc, float pr, const vec3f& c, float r) {
-  if (!(pr > 0)) return sphere_code_parent;
-  const vec3d cd = c.cast<double>(), pcd = pc.cast<double>();
-  // A radius above 12/13 of the parent's fits no level below 12 (pr·(j + 1)/13 ≤ 12/13·pr), and
-  // level 12 (pr itself) fits only at the parent's own centre: every other centre code lies
-  // ≥ pr/6 off it (≥ pr/7 after float rounding while |pc| ≤ 2¹⁶·pr), leaving at most 6/7·pr of
-  // room. The loop below would return the parent's code whatever it tried (7.6 % of the nodes
-  // of the 2 M-triangle grid, a third of its tries).
-  if (static_cast<double>(r) > (12.0 / 13.0) * (1 + 1e-6) * static_cast<double>(pr) &&
-      pcd.cwiseAbs().maxCoeff() <= 65536.0 * static_cast<double>(pr))
-    return sphere_code_parent;
-  // Per axis, the two centre codes in the order they are tried (nearest first) and, for each,
-  // the squared distances along that axis from the coded centre to the child's centre and to
-  // the parent's: every try below then sums three of them (as Eigen's norm() does, x + y then
-  // + z, so the results are those of the vector expressions, bit for bit).
-  std::array<std::array<unsigned, 2>, 3> cand{};
-  std::array<std::array<double, 2>, 3> to_child{}, to_parent{};
-  for (int k = 0; k < 3; ++k) {
-    const auto ks = static_cast<std::size_t>(k);
-    // Without a branch: which of floor(t) and ceil(t) is nearer is a coin toss, and its
-    // mispredictions kept each node from overlapping the next. std::max, then std::min:
-    // std::clamp's value for a finite t, as maxsd and minsd.
-    const double t = std::min(std::max(6.0 + 6.0 * (cd[k] - pcd[k]) / pr, 0.0), 12.0);
-    const auto lo = static_cast<unsigned>(t);                   // floor: t ≥ 0
-    const unsigned up = static_cast<double>(lo) < t ? 1u : 0u;  // ceil(t) = lo + up
-    const unsigned far_half = t - lo > 0.5 ? 1u : 0u;           // ceil(t) is the nearer
-    cand[ks] = {lo + far_half, lo + (up & (far_half ^ 1u))};    // nearest first
-  }
-  const auto distances = [&](std::size_t s) {
-    for (int k = 0; k < 3; ++k) {
-      const auto ks = static_cast<std::size_t>(k);
-      // dequantise_sphere()'s centre coordinate, in float as there
-      const float q = pc[k] + pr * centre_level(cand[ks][s]);
-      const double dc = cd[k] - static_cast<double>(q), dp = static_cast<double>(q) - pcd[k];
-      to_child[ks][s] = dc * dc;
-      to_parent[ks][s] = dp * dp;
-    }
-  };
-  // The smallest radius level j with pr·level(j) ≥ need: levels grow with j, so the two walks
-  // below end there from any first guess (13·need/pr, by a multiplication instead of a division).
-  const double guess_scale = 13.0 / static_cast<double>(pr);
-  // Try m: bit k of m picks axis k's candidate. The code, or `none_held` (no code has 15 in a
-  // field).
-  constexpr std::uint16_t none_held = 0xFFFF;
-  const auto attempt = [&](unsigned m) -> std::uint16_t {
-    const unsigned sx = m & 1u, sy = (m >> 1) & 1u, sz = (m >> 2) & 1u;
-    const double need =
-        std::sqrt(to_child[0][sx] + to_child[1][sy] + to_child[2][sz]) + static_cast<double>(r);
-    const double room =
-        static_cast<double>(pr) - std::sqrt(to_parent[0][sx] + to_parent[1][sy] + to_parent[2][sz]);
-    if (need > room) return none_held;  // no level is both ≥ need and ≤ room
-    const double g = need * guess_scale;
-    unsigned j = g >= 12.0 ? 12u : g > 0.0 ? static_cast<unsigned>(g) : 0u;
-    while (j < 12 && static_cast<double>(pr * radius_level(j)) < need) ++j;
-    while (j > 0 && static_cast<double>(pr * radius_level(j - 1)) >= need) --j;
-    const double rq = static_cast<double>(pr * radius_level(j));
-    if (rq < need || rq > room) return none_held;
-    return static_cast<std::uint16_t>(cand[0][sx] | cand[1][sy] << 4 | cand[2][sz] << 8 | j << 12);
-  };
-  // The nearest code first, before the other candidates are set up: it holds 82 % of the
-  // Buddha's nodes.
-  distances(0);
-  if (const std::uint16_t code = attempt(0); code != none_held) return code;
-  distances(1);
-  for (unsigned m = 1; m < 8; ++m)
-    if (const std::uint16_t code = attempt(m); code != none_held) return code;
-  return sphere_code_parent;
-}
-/// 2-bit normal cones (QSplat): half-angles asin(1/16), asin(4/16), asin(9/16), π (no culling);
-/// a cone is rounded up to the next level.
-float cone_level(unsigned k) {
-  static const std::array<float, 4> levels = {
-      round_up(std::asin(1.0 / 16)), round_up(std::asin(4.0 / 16)), round_up(std::asin(9.0 / 16)),
-      std::numbers::pi_v<float>};
-  return levels[k];
-}
-/// The smallest level k with angle ≤ level(k), or 3: the levels grow, so k is the number of
-/// levels below the angle, counted without a branch.
-unsigned cone_code(float angle) {
-  unsigned k = 0;
-  for (unsigned i = 0; i < 3; ++i) k += cone_level(i) < angle ? 1u : 0u;
-  return k;
-}
-/// Quantised cones from cosines, without acos. The stored cone of a node is the smallest level
-/// k with acos(c) + 1e-6 ≤ level(k) for the cosine c of its widest face (leaf), or with
-/// acos(c_j) + level(code_j) + 1e-6 ≤ level(k) for every child j (inner node), as the angles
-/// would give (round_up() to float cannot cross a float level). acos is decreasing, so each
-/// test is c ≥ cos(level(k) − 1e-6) or c_j ≥ cos(level(k) − level(code_j) − 1e-6); a negative
-/// angle there means no cosine passes. The thresholds are raised by 1e-12, so a cosine within
-/// rounding of one gets the larger level (still a bounding cone), never a smaller one. Level 3
-/// (π) holds everything.
-struct cone_thresholds {
-  std::array<double, 3> face;
-  std::array<std::array<double, 4>, 3> child;  // [k][code of the child's cone]
-};
-const cone_thresholds& cone_table() {
-  static const cone_thresholds t = [] {
-    cone_thresholds c{};
-    const auto threshold = [](double angle) { return angle < 0 ? 2.0 : std::cos(angle) + 1e-12; };
-    for (unsigned k = 0; k < 3; ++k) {
-      c.face[k] = threshold(static_cast<double>(cone_level(k)) - 1e-6);
-      for (unsigned j = 0; j < 4; ++j)
-        c.child[k][j] = threshold(static_cast<double>(cone_level(k)) -
-                                  static_cast<double>(cone_level(j)) - 1e-6);
-    }
-    return c;
-  }();
-  return t;
-}
-/// RGB 565 (QSplat's 16-bit colour): encode keeps the top bits, decode replicates them, so
-/// encode(decode(x)) == x.
-std::uint16_t rgb565(rgb8 c) {
-  return static_cast<std::uint16_t>((c.r >> 3) << 11 | (c.g >> 2) << 5 | (c.b >> 3));
-}
-rgb8 from565(std::uint16_t v) {
-  const unsigned r = (v >> 11) & 31u, g = (v >> 5) & 63u, b = v & 31u;
-  return {static_cast<std::uint8_t>(r << 3 | r >> 2), static_cast<std::uint8_t>(g << 2 | g >> 4),
-          static_cast<std::uint8_t>(b << 3 | b >> 2)};
-}
-
-/// clamp(lround(s), 0, 65535) without the library call (a visible part of the vertex pass):
-/// the same value for every double s, NaN included (0). Below 65535 the truncation is exact and
-/// s − ⌊s⌋ is exact, so halves round away from zero as lround does.
-std::uint16_t round_to_u16(double s) {
-  if (!(s > 0)) return 0;
-  if (s >= 65535) return 65535;
-  const auto i = static_cast<std::uint32_t>(s);
-  return static_cast<std::uint16_t>(i + (s - static_cast<double>(i) >= 0.5 ? 1u : 0u));
-}
-/// Vertex position from its 16-bit code (§3.5). The same expression in build and load, so a
-/// loaded tree holds bit-identical positions.
-vec3f dequantise(const std::array<std::uint16_t, 3>& q, const vec3f& mn, const vec3f& step) {
-  return {mn.x() + static_cast<float>(q[0]) * step.x(),
-          mn.y() + static_cast<float>(q[1]) * step.y(),
-          mn.z() + static_cast<float>(q[2]) * step.z()};
 }
 
 /// cos of the angle between unit vectors a and b, measured in double and clamped to [−1, 1].
@@ -816,19 +643,121 @@ void select_rank(split_key* a, std::size_t n, std::size_t m) {
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
-// Build
+// Build: build_pop_data() runs the stages below in the paper's order, on one pop_build_state.
 // ---------------------------------------------------------------------------------------------
 
-pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool colour) {
+namespace {
+
+/// The tree's shape before it has geometry: node i covers leaves [lo, hi) of the sorted split
+/// keys; `first`/`count` are its children (count 0: a leaf).
+struct topo {
+  std::uint32_t lo, hi, first = 0, count = 0, parent = none;
+  std::uint16_t depth = 0;
+};
+using node_ranges = std::vector<std::pair<std::size_t, std::size_t>>;
+
+/// Per-worker counts of the bottom-up pass (one cache line each: no false sharing).
+struct alignas(64) counts {
+  std::size_t contained = 0, degenerate = 0;
+};
+/// What node_geometry() hands to normal_cone(): a leaf's face normals; fdeg bit j: face j is
+/// degenerate.
+struct pending {
+  std::array<vec3f, 4> fn;
+  std::uint8_t fdeg;
+};
+/// Nodes are done in blocks of `block`: the geometry of the whole block, then its normal encodes
+/// back to back, which do not depend on each other, so they overlap in the pipeline (bench_core:
+/// BM_Encode, independent encodes, against BM_EncodeLatency, a chain of them); through
+/// encode(span, span), which also loads their candidate cells first (−5 %).
+constexpr std::size_t block = 32;
+
+/// Where a range of sorted leaves splits: the partition and the topology must agree exactly.
+std::uint32_t mid_of(std::uint32_t lo, std::uint32_t hi) {
+  return lo + (hi - lo) / 2;
+}
+
+/// The state the stages share: the input, the options, the output under construction and the
+/// intermediate arrays one stage hands to the next.
+struct pop_build_state {
   using clock = std::chrono::steady_clock;
-  const auto t0 = clock::now();
+
+  const triangle_mesh& mesh;
+  const pop_options& opt;
+  const bool colour;
+  std::shared_ptr<const normal_quantizer> shared_quant;
+  const normal_quantizer& quant;
+  const bool textured, qn, exact;
+  const unsigned threads;
+  const std::size_t nv, nf;
+  const std::vector<vec3f>& P;
+
+  pop_data d;
+  // prepare(): the leaves as CSR groups of faces, and the adjacency (becomes d.faces).
+  scratch_vector<std::uint32_t> gstart, gfaces;
+  std::vector<face_slots> nbr;
+  double adjacency_seconds = 0;
+  // colour_faces()
+  std::vector<rgb8> face_colour;
+  texture tex;
+  // leaf_keys(), partition_leaves()
+  std::size_t n_leaves = 0;
+  scratch_vector<split_key> perm;
+  scratch_vector<topo> tn;
+  node_ranges levels;  // node ranges by depth
+  // lay_out_nodes(): a leaf's group's members start at gfaces[leaf_members[i]]
+  scratch_vector<std::uint32_t> leaf_members;
+  // spheres_and_cones(), reused by quantise_spheres()
+  std::size_t split_level = 0, roots_begin = 0, roots = 0;
+  std::vector<node_ranges> subtrees;
+
+  pop_build_state(const triangle_mesh& m, const pop_options& o, bool c)
+      : mesh(m),
+        opt(o),
+        colour(c),
+        shared_quant(normal_quantizer::shared(o.normal_bits)),
+        quant(*shared_quant),
+        textured(!m.face_texcoords.empty() && !m.texture_path.empty()),
+        qn(o.quantise_nodes),
+        exact(o.spheres == pop_sphere_rule::exact),
+        threads(o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency())),
+        nv(m.num_vertices()),
+        nf(m.num_faces()),
+        P(m.vertices.positions) {}
+
+  void prepare();
+  void quantise_vertices(std::size_t lo, std::size_t hi, bool estimate,
+                         const std::vector<vec3d>& normal_sum);
+  void colour_vertices();
+  void colour_faces();
+  void leaf_keys();
+  std::uint32_t split(std::uint32_t lo, std::uint32_t hi);
+  void partition(std::uint32_t lo, std::uint32_t hi);
+  void build_topology();
+  void partition_leaves();
+  void lay_out_nodes();
+  void leaf4_geometry(const std::array<std::uint32_t, 3>* tri, vec3d& x, double& r, vec3d& nsum,
+                      rgb_sum& csum, const std::uint32_t* members, counts& acc, pending& out,
+                      pop_node& nd) const;
+  void node_geometry(std::size_t i, counts& acc, pending& out, vec3f& nsum_out);
+  void normal_cone(std::size_t i, std::uint32_t code, const pending& in);
+  void gather(std::size_t i);
+  void bottom_up(std::size_t a, std::size_t b, counts& acc);
+  void subtree_levels(std::size_t root, node_ranges& out) const;
+  void spheres_and_cones();
+  void top_down(std::size_t i);
+  void quantise_spheres();
+  void finish_stats(clock::time_point t0, clock::time_point t_prep, clock::time_point t1);
+};
+
+/// The checks build_pop_data() makes before any work (InvalidArgument on each).
+void check_pop_input(const triangle_mesh& mesh, const pop_options& opt, bool colour) {
   if (opt.max_leaf_triangles < 1 || opt.max_leaf_triangles > 4)
     throw InvalidArgument("build_pop: max_leaf_triangles must be 1..4, got " +
                           std::to_string(opt.max_leaf_triangles));
   if (opt.spheres != pop_sphere_rule::paper && opt.spheres != pop_sphere_rule::exact)
     throw InvalidArgument("build_pop: unknown sphere rule");
-  const auto shared_quant = normal_quantizer::shared(opt.normal_bits);  // throws on bad bits
-  const normal_quantizer& quant = *shared_quant;
+  (void)normal_quantizer::shared(opt.normal_bits);  // throws on bad bits
   mesh.validate("build_pop");
   if (mesh.faces.empty()) throw InvalidArgument("build_pop: the mesh has no triangles");
   if (mesh.faces.size() >= none || mesh.num_vertices() >= none)
@@ -842,34 +771,23 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     throw InvalidArgument(
         "build_pop: colours requested but the mesh has neither vertex colours nor a texture "
         "(build pop_tree<with_normals> instead)");
-  const unsigned threads =
-      opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
+}
 
-  pop_data d;
-  d.origin = mesh.vertices.origin;
-  d.normal_bits = opt.normal_bits;
-  d.spheres = opt.spheres;
-  d.adjacency = opt.adjacency;
-  d.quantised_nodes = opt.quantise_nodes;
-  const bool qn = opt.quantise_nodes;
-  const std::size_t nv = mesh.num_vertices(), nf = mesh.num_faces();
-  const auto& P = mesh.vertices.positions;
+// ---- Stage 1 (§3.5): vertices quantised, leaves grouped from the adjacency -------------------
 
-  // Leaves (§3.5) and vertices. The edge adjacency and the grouping read only the faces, the
-  // vertex pass (§3.5 quantisation, normals) only the vertices, so they run side by side. The
-  // grouping is sequential and comes last on the adjacency side, so the work is shared out in
-  // pieces to keep it short: the thread that runs the adjacency side (task 0) sorts the edges,
-  // then takes bucket pieces; the vertex side (task 1) sums the area-weighted normals, then takes
-  // bucket pieces while there are any, else vertex pieces; once every bucket is done task 0
-  // groups the faces and then takes the vertex pieces left. Other tasks (threads > 2) take
-  // whatever is ready. No task waits for another that may not have started (only for bucket
-  // pieces already taken), so the tasks may run in any order, on any number of threads. Each
-  // piece's writes are its own: the output is the same for any `threads`.
-  scratch_vector<std::uint32_t> gstart, gfaces;
-  double adjacency_seconds = 0;
-  std::vector<face_slots> nbr;  // becomes d.faces below (same size: nf × 3 u32)
+/// The edge adjacency and the grouping read only the faces, the vertex pass (§3.5 quantisation,
+/// normals) only the vertices, so they run side by side. The grouping is sequential and comes
+/// last on the adjacency side, so the work is shared out in pieces to keep it short: the thread
+/// that runs the adjacency side (task 0) sorts the edges, then takes bucket pieces; the vertex
+/// side (task 1) sums the area-weighted normals, then takes bucket pieces while there are any,
+/// else vertex pieces; once every bucket is done task 0 groups the faces and then takes the
+/// vertex pieces left. Other tasks (threads > 2) take whatever is ready. No task waits for
+/// another that may not have started (only for bucket pieces already taken), so the tasks may
+/// run in any order, on any number of threads. Each piece's writes are its own: the output is
+/// the same for any `threads`.
+void pop_build_state::prepare() {
   const bool by_edges = opt.adjacency == pop_adjacency::edge_sort;
-  // The same pieces as for_pieces() above, over the vertices (the buckets are by vertex).
+  // The same pieces as for_pieces(), over the vertices (the buckets are by vertex).
   const std::size_t vertex_pieces =
       piece_count(nv, threads, pieces_per_thread * threads, min_piece);
   const std::size_t bucket_pieces = by_edges ? vertex_pieces : 0;
@@ -896,35 +814,6 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     if (estimate) normal_sum = area_weighted_normal_sums(mesh);
     normals_ready.store(true, std::memory_order_release);
   };
-  // §3.5 vertices quantised to 16 bits per axis over the bounding box (Deering; QSplat).
-  const auto vertex_piece = [&](std::size_t piece) {
-    const auto [lo, hi] = piece_range(nv, vertex_pieces, piece);
-    for (std::size_t i = lo; i < hi; ++i) {
-      std::array<std::uint16_t, 3> q{};
-      for (int k = 0; k < 3; ++k) {
-        const double s =
-            d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
-        q[static_cast<std::size_t>(k)] = round_to_u16(s);
-      }
-      d.vertex_q[i] = q;
-      d.positions[i] = dequantise(q, d.q_min, d.q_step);
-    }
-    // The normals in runs (the encoder then overlaps its table loads).
-    constexpr std::size_t run = 256;
-    std::array<vec3f, run> unit;
-    for (std::size_t a = lo; a < hi; a += run) {
-      const std::size_t m = std::min(run, hi - a);
-      std::span<const vec3f> in;
-      if (estimate) {  // the mesh has no normals (no offset into its empty array)
-        for (std::size_t k = 0; k < m; ++k) unit[k] = unit_or_zero(normal_sum[a + k]);
-        in = std::span<const vec3f>(unit.data(), m);
-      } else {
-        in = std::span<const vec3f>(mesh.vertices.normals.data() + a, m);
-      }
-      quant.encode(in, std::span(d.vertex_normal_codes.data() + a, m));
-      for (std::size_t i = a; i < a + m; ++i) d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
-    }
-  };
   // One piece of either kind, if one is ready: true when it did one.
   const auto take_bucket = [&] {
     if (!sorted.load(std::memory_order_acquire)) return false;
@@ -943,7 +832,8 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     if (!normals_ready.load(std::memory_order_acquire)) return false;
     const std::size_t v = next_vertex.fetch_add(1, std::memory_order_relaxed);
     if (v >= vertex_pieces) return false;
-    vertex_piece(v);
+    const auto [lo, hi] = piece_range(nv, vertex_pieces, v);
+    quantise_vertices(lo, hi, estimate, normal_sum);
     return true;
   };
   const auto adjacency_side = [&] {
@@ -981,57 +871,90 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
       while (take_bucket() || take_vertex()) {
       }
   });
+  n_leaves = gstart.size() - 1;
+}
 
-  // Colours: vertex colours, or with a texture the texel under each corner averaged per vertex.
-  std::vector<rgb8> face_colour;
-  texture tex;
-  if (colour) {
-    if (textured) {
-      tex.img = read_png_texture(mesh.texture_path);
-      if (tex.img.width <= 0 || tex.img.height <= 0)
-        throw FormatError(mesh.texture_path + ": empty texture");
-      for (std::size_t f = 0; f < nf; ++f)
-        for (const auto& uv : mesh.face_texcoords[f])
-          if (!all_finite(uv))
-            throw InvalidArgument("build_pop: face " + std::to_string(f) +
-                                  " has a non-finite texture coordinate");
-      std::vector<rgb_sum> acc(nv);
-      for (std::size_t f = 0; f < nf; ++f)
-        for (std::size_t k = 0; k < 3; ++k) {
-          const vec2d t = tex.texel(mesh.face_texcoords[f][k]);
-          acc[mesh.faces[f][k]].add(tex.at(t.x(), t.y()));
-        }
-      d.colours.resize(nv);
-      for (std::size_t i = 0; i < nv; ++i) d.colours[i] = acc[i].n > 0 ? acc[i].mean() : rgb8{};
-    } else {
-      d.colours = mesh.vertices.colours;
+/// §3.5: vertices [lo, hi) quantised to 16 bits per axis over the bounding box (Deering;
+/// QSplat), their normals encoded and decoded.
+void pop_build_state::quantise_vertices(std::size_t lo, std::size_t hi, bool estimate,
+                                        const std::vector<vec3d>& normal_sum) {
+  for (std::size_t i = lo; i < hi; ++i) {
+    std::array<std::uint16_t, 3> q{};
+    for (int k = 0; k < 3; ++k) {
+      const double s =
+          d.q_step[k] > 0 ? (static_cast<double>(P[i][k]) - d.q_min[k]) / d.q_step[k] : 0.0;
+      q[static_cast<std::size_t>(k)] = round_to_u16(s);
     }
-    face_colour.resize(nf);
+    d.vertex_q[i] = q;
+    d.positions[i] = dequantise(q, d.q_min, d.q_step);
   }
+  // The normals in runs (the encoder then overlaps its table loads).
+  constexpr std::size_t run = 256;
+  std::array<vec3f, run> unit;
+  for (std::size_t a = lo; a < hi; a += run) {
+    const std::size_t m = std::min(run, hi - a);
+    std::span<const vec3f> in;
+    if (estimate) {  // the mesh has no normals (no offset into its empty array)
+      for (std::size_t k = 0; k < m; ++k) unit[k] = unit_or_zero(normal_sum[a + k]);
+      in = std::span<const vec3f>(unit.data(), m);
+    } else {
+      in = std::span<const vec3f>(mesh.vertices.normals.data() + a, m);
+    }
+    quant.encode(in, std::span(d.vertex_normal_codes.data() + a, m));
+    for (std::size_t i = a; i < a + m; ++i) d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
+  }
+}
 
-  // Per triangle colour (§3.1). The triangles' normals and spheres are computed where they are
-  // used, in the bottom-up pass over the leaves (each triangle is in exactly one leaf): no
-  // per-face arrays (the double centres and radii alone were 64 MB for 2 M triangles).
-  if (colour)
-    for_pieces(nf, threads, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t f = lo; f < hi; ++f) {
-        if (textured) {
-          face_colour[f] = tex.average(mesh.face_texcoords[f]);
-        } else {
-          rgb_sum s;
-          for (auto i : mesh.faces[f]) s.add(d.colours[i]);
-          face_colour[f] = s.mean();
-        }
+// ---- Stage 2 (§3.1): colours ----------------------------------------------------------------
+
+/// Vertex colours, or with a texture the texel under each corner averaged per vertex.
+void pop_build_state::colour_vertices() {
+  if (textured) {
+    tex.img = read_png_texture(mesh.texture_path);
+    if (tex.img.width <= 0 || tex.img.height <= 0)
+      throw FormatError(mesh.texture_path + ": empty texture");
+    for (std::size_t f = 0; f < nf; ++f)
+      for (const auto& uv : mesh.face_texcoords[f])
+        if (!all_finite(uv))
+          throw InvalidArgument("build_pop: face " + std::to_string(f) +
+                                " has a non-finite texture coordinate");
+    std::vector<rgb_sum> acc(nv);
+    for (std::size_t f = 0; f < nf; ++f)
+      for (std::size_t k = 0; k < 3; ++k) {
+        const vec2d t = tex.texel(mesh.face_texcoords[f][k]);
+        acc[mesh.faces[f][k]].add(tex.at(t.x(), t.y()));
       }
-    });
-  std::vector<vec3d>().swap(normal_sum);
-  const auto t_prep = clock::now();
-  const std::size_t n_leaves = gstart.size() - 1;
-  const auto t_adj = clock::now();
+    d.colours.resize(nv);
+    for (std::size_t i = 0; i < nv; ++i) d.colours[i] = acc[i].n > 0 ? acc[i].mean() : rgb8{};
+  } else {
+    d.colours = mesh.vertices.colours;
+  }
+}
 
-  // Split key of a leaf: the mean of its triangles' corners, stored with the leaf's index so
-  // that the splits below run over one contiguous array (no indirection through a permutation).
-  scratch_vector<split_key> perm;
+/// Per triangle colour (§3.1: the average of the texels inside it, or of its vertices'). The
+/// triangles' normals and spheres are computed where they are used, in the bottom-up pass over
+/// the leaves (each triangle is in exactly one leaf): no per-face arrays (the double centres and
+/// radii alone were 64 MB for 2 M triangles).
+void pop_build_state::colour_faces() {
+  face_colour.resize(nf);
+  for_pieces(nf, threads, [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t f = lo; f < hi; ++f) {
+      if (textured) {
+        face_colour[f] = tex.average(mesh.face_texcoords[f]);
+      } else {
+        rgb_sum s;
+        for (auto i : mesh.faces[f]) s.add(d.colours[i]);
+        face_colour[f] = s.mean();
+      }
+    }
+  });
+}
+
+// ---- Stage 3 (§3.1 topology, QSplat): median splits over the leaves --------------------------
+
+/// Split key of a leaf: the mean of its triangles' corners, stored with the leaf's index so
+/// that the splits run over one contiguous array (no indirection through a permutation).
+void pop_build_state::leaf_keys() {
   resize_fresh(perm, n_leaves, threads);
   for_pieces(n_leaves, threads, [&](std::size_t lo, std::size_t hi) {
     for (std::size_t g = lo; g < hi; ++g) {
@@ -1043,83 +966,84 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
                  static_cast<std::uint32_t>(g)};
     }
   });
+}
 
-  // Topology (§3.1, QSplat): a node over leaves [lo, hi) of `perm` is split at the median of
-  // the longest axis of its keys' box, and each half again: up to four children. The 4-ary tree
-  // is therefore the binary median-split tree with every other level merged, and where each
-  // split falls (lo + (hi − lo)/2) depends only on lo and hi. So `perm` is ordered first, by a
-  // depth-first recursive binary partition (subtrees in parallel; cache-friendly), and the
-  // breadth-first node list is then derived from the ranges alone. The order of `perm` does not
-  // depend on how the work is scheduled, nor on the selection algorithm: each split selects by a
-  // total order (key, leaf id), so the set of leaves in each half is unique, and below a single
-  // leaf there is nothing to order.
-  // Where a range splits: the partition below and the topology after it must agree exactly.
-  const auto mid_of = [](std::uint32_t lo, std::uint32_t hi) { return lo + (hi - lo) / 2; };
-  const auto split = [&](std::uint32_t lo, std::uint32_t hi) {
-    // The box of the keys, in the order-preserving integers (the same extremes as in float).
-    std::array<std::uint32_t, 3> mn{~0u, ~0u, ~0u}, mx{0u, 0u, 0u};
-    for (std::uint32_t i = lo; i < hi; ++i)
-      for (std::size_t k = 0; k < 3; ++k) {
-        mn[k] = std::min(mn[k], perm[i].k[k]);
-        mx[k] = std::max(mx[k], perm[i].k[k]);
-      }
-    vec3f e;
-    for (std::size_t k = 0; k < 3; ++k)
-      e[static_cast<int>(k)] = from_ordered_bits(mx[k]) - from_ordered_bits(mn[k]);
-    const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
-    const std::uint32_t mid = mid_of(lo, hi);
-    if (axis == 0)
-      select_rank<0>(perm.data() + lo, hi - lo, mid - lo);
-    else if (axis == 1)
-      select_rank<1>(perm.data() + lo, hi - lo, mid - lo);
-    else
-      select_rank<2>(perm.data() + lo, hi - lo, mid - lo);
-    return mid;
-  };
-  const auto partition = [&](const auto& self, std::uint32_t lo, std::uint32_t hi) -> void {
-    if (hi - lo <= 1) return;
-    const std::uint32_t m = split(lo, hi);
-    self(self, lo, m);
-    self(self, m, hi);
-  };
-  // The top levels one at a time, each level's ranges as tasks on the pool, until there are
-  // enough ranges to share out (8 per thread) or they are small; then each range's subtree as
-  // one task. The ranges of a level are disjoint, so the order they are done in does not matter.
-  struct topo {
-    std::uint32_t lo, hi, first = 0, count = 0, parent = none;
-    std::uint16_t depth = 0;
-  };
-  scratch_vector<topo> tn;
-  std::vector<std::pair<std::size_t, std::size_t>> levels;  // node ranges by depth
-  // The breadth-first node list depends on the number of leaves alone (where each range
-  // splits), not on the order of `perm`: it is built beside the partition's first level, which
-  // leaves the other threads idle (below), or after the partition with one thread.
-  const auto build_topology = [&] {
-    reserve_huge(tn, 2 * n_leaves);
-    tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
-    for (std::size_t a = 0; a < tn.size();) {
-      const std::size_t b = tn.size();
-      levels.emplace_back(a, b);
-      for (std::size_t i = a; i < b; ++i) {
-        const std::uint32_t lo = tn[i].lo, hi = tn[i].hi;
-        if (hi - lo <= 1) continue;
-        const std::uint32_t m = mid_of(lo, hi);
-        std::array<std::uint32_t, 5> cut{};
-        std::uint32_t k = 0;
-        cut[k++] = lo;
-        if (m - lo >= 2) cut[k++] = mid_of(lo, m);
-        cut[k++] = m;
-        if (hi - m >= 2) cut[k++] = mid_of(m, hi);
-        cut[k] = hi;  // k parts: cut[0..k]
-        tn[i].first = static_cast<std::uint32_t>(tn.size());
-        tn[i].count = k;
-        const auto depth = static_cast<std::uint16_t>(tn[i].depth + 1);
-        for (std::uint32_t j = 0; j < k; ++j)
-          tn.push_back({cut[j], cut[j + 1], 0, 0, static_cast<std::uint32_t>(i), depth});
-      }
-      a = b;
+/// Orders perm[lo, hi) about its median on the longest axis of its keys' box; returns where.
+std::uint32_t pop_build_state::split(std::uint32_t lo, std::uint32_t hi) {
+  // The box of the keys, in the order-preserving integers (the same extremes as in float).
+  std::array<std::uint32_t, 3> mn{~0u, ~0u, ~0u}, mx{0u, 0u, 0u};
+  for (std::uint32_t i = lo; i < hi; ++i)
+    for (std::size_t k = 0; k < 3; ++k) {
+      mn[k] = std::min(mn[k], perm[i].k[k]);
+      mx[k] = std::max(mx[k], perm[i].k[k]);
     }
-  };
+  vec3f e;
+  for (std::size_t k = 0; k < 3; ++k)
+    e[static_cast<int>(k)] = from_ordered_bits(mx[k]) - from_ordered_bits(mn[k]);
+  const int axis = (e.x() >= e.y() && e.x() >= e.z()) ? 0 : (e.y() >= e.z() ? 1 : 2);
+  const std::uint32_t mid = mid_of(lo, hi);
+  if (axis == 0)
+    select_rank<0>(perm.data() + lo, hi - lo, mid - lo);
+  else if (axis == 1)
+    select_rank<1>(perm.data() + lo, hi - lo, mid - lo);
+  else
+    select_rank<2>(perm.data() + lo, hi - lo, mid - lo);
+  return mid;
+}
+
+/// The depth-first recursive binary partition of perm[lo, hi).
+void pop_build_state::partition(std::uint32_t lo, std::uint32_t hi) {
+  if (hi - lo <= 1) return;
+  const std::uint32_t m = split(lo, hi);
+  partition(lo, m);
+  partition(m, hi);
+}
+
+/// The breadth-first node list. It depends on the number of leaves alone (where each range
+/// splits), not on the order of `perm`.
+void pop_build_state::build_topology() {
+  reserve_huge(tn, 2 * n_leaves);
+  tn.push_back({0, static_cast<std::uint32_t>(n_leaves)});
+  for (std::size_t a = 0; a < tn.size();) {
+    const std::size_t b = tn.size();
+    levels.emplace_back(a, b);
+    for (std::size_t i = a; i < b; ++i) {
+      const std::uint32_t lo = tn[i].lo, hi = tn[i].hi;
+      if (hi - lo <= 1) continue;
+      const std::uint32_t m = mid_of(lo, hi);
+      std::array<std::uint32_t, 5> cut{};
+      std::uint32_t k = 0;
+      cut[k++] = lo;
+      if (m - lo >= 2) cut[k++] = mid_of(lo, m);
+      cut[k++] = m;
+      if (hi - m >= 2) cut[k++] = mid_of(m, hi);
+      cut[k] = hi;  // k parts: cut[0..k]
+      tn[i].first = static_cast<std::uint32_t>(tn.size());
+      tn[i].count = k;
+      const auto depth = static_cast<std::uint16_t>(tn[i].depth + 1);
+      for (std::uint32_t j = 0; j < k; ++j)
+        tn.push_back({cut[j], cut[j + 1], 0, 0, static_cast<std::uint32_t>(i), depth});
+    }
+    a = b;
+  }
+}
+
+/// A node over leaves [lo, hi) of `perm` is split at the median of the longest axis of its
+/// keys' box, and each half again: up to four children. The 4-ary tree is therefore the binary
+/// median-split tree with every other level merged, and where each split falls
+/// (lo + (hi − lo)/2) depends only on lo and hi. So `perm` is ordered first, by a depth-first
+/// recursive binary partition (subtrees in parallel; cache-friendly), and the breadth-first node
+/// list is then derived from the ranges alone. The order of `perm` does not depend on how the
+/// work is scheduled, nor on the selection algorithm: each split selects by a total order (key,
+/// leaf id), so the set of leaves in each half is unique, and below a single leaf there is
+/// nothing to order.
+///
+/// The top levels are split one at a time, each level's ranges as tasks on the pool, until there
+/// are enough ranges to share out (8 per thread) or they are small; then each range's subtree as
+/// one task. The ranges of a level are disjoint, so the order they are done in does not matter.
+/// The topology is built beside the partition's first level, which leaves the other threads
+/// idle, or after the partition with one thread.
+void pop_build_state::partition_leaves() {
   bool topology_built = false;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges{
       {0, static_cast<std::uint32_t>(n_leaves)}};
@@ -1142,357 +1066,344 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     for (const auto& [lo, hi] : ranges) small = small || hi - lo < 4096;
     if (small) break;
   }
-  parallel_tasks(ranges.size(), threads, [&](std::size_t t, unsigned) {
-    partition(partition, ranges[t].first, ranges[t].second);
-  });
+  parallel_tasks(ranges.size(), threads,
+                 [&](std::size_t t, unsigned) { partition(ranges[t].first, ranges[t].second); });
   if (!topology_built) build_topology();
   if (levels.size() > 65535) throw InvalidArgument("build_pop: tree deeper than 65535 levels");
+}
 
-  // Faces in leaf order; leaves point at their range. Two parallel passes over fixed blocks of
-  // nodes: faces per block, then (after a prefix sum) the records and the faces themselves.
+/// The node records, and each leaf's range of faces in leaf order. Two parallel passes over
+/// fixed blocks of nodes: faces per block, then (after a prefix sum) the records; the faces
+/// themselves are copied by the bottom-up pass (gather()).
+void pop_build_state::lay_out_nodes() {
   const std::size_t nn = tn.size();
   resize_fresh(d.nodes, nn, threads);
   // The adjacency (nf × 3 u32, huge pages) is dead after the grouping: its storage takes the
-  // faces (every entry is overwritten below), instead of 24 MB of fresh, zeroed pages.
+  // faces (every entry is overwritten by gather()), instead of 24 MB of fresh, zeroed pages.
   d.faces.swap(nbr);
   std::vector<face_slots>().swap(nbr);
   if (d.faces.size() != nf) d.faces.resize(nf);
   // A leaf's group's members start at gfaces[leaf_members[i]] (one dependent load fewer than
   // through the group's index in the bottom-up pass, where each is a likely cache miss).
-  scratch_vector<std::uint32_t> leaf_members;
   resize_fresh(leaf_members, nn, threads);
-  {
-    const std::size_t blocks = std::max<std::size_t>(1, std::min<std::size_t>(threads, nn / 4096));
-    std::vector<std::uint32_t> block_faces(blocks + 1, 0);
-    const auto block_lo = [&](std::size_t t) { return nn * t / blocks; };
-    const auto group_of = [&](std::size_t i) { return perm[tn[i].lo].id; };
-    detail::parallel_chunks(blocks, threads, 1, [&](std::size_t b0, std::size_t b1) {
-      for (std::size_t t = b0; t < b1; ++t) {
-        std::uint32_t sum = 0;
-        for (std::size_t i = block_lo(t); i < block_lo(t + 1); ++i)
-          if (tn[i].count == 0) sum += gstart[group_of(i) + 1] - gstart[group_of(i)];
-        block_faces[t + 1] = sum;
-      }
-    });
-    for (std::size_t t = 0; t < blocks; ++t) block_faces[t + 1] += block_faces[t];
-    detail::parallel_chunks(blocks, threads, 1, [&](std::size_t b0, std::size_t b1) {
-      for (std::size_t t = b0; t < b1; ++t) {
-        std::uint32_t next = block_faces[t];
-        for (std::size_t i = block_lo(t); i < block_lo(t + 1); ++i) {
-          auto& nd = d.nodes[i];
-          nd.parent = tn[i].parent;
-          nd.depth = tn[i].depth;
-          if (tn[i].count == 0) {
-            const std::uint32_t g = group_of(i);
-            leaf_members[i] = gstart[g];
-            nd.leaf = 1;
-            nd.first = next;
-            nd.count = static_cast<std::uint8_t>(gstart[g + 1] - gstart[g]);
-            next += nd.count;  // the faces themselves are copied by the bottom-up pass
-          } else {
-            leaf_members[i] = none;
-            nd.first = tn[i].first;
-            nd.count = static_cast<std::uint8_t>(tn[i].count);
-          }
+  const std::size_t blocks = std::max<std::size_t>(1, std::min<std::size_t>(threads, nn / 4096));
+  std::vector<std::uint32_t> block_faces(blocks + 1, 0);
+  const auto block_lo = [&](std::size_t t) { return nn * t / blocks; };
+  const auto group_of = [&](std::size_t i) { return perm[tn[i].lo].id; };
+  detail::parallel_chunks(blocks, threads, 1, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t t = b0; t < b1; ++t) {
+      std::uint32_t sum = 0;
+      for (std::size_t i = block_lo(t); i < block_lo(t + 1); ++i)
+        if (tn[i].count == 0) sum += gstart[group_of(i) + 1] - gstart[group_of(i)];
+      block_faces[t + 1] = sum;
+    }
+  });
+  for (std::size_t t = 0; t < blocks; ++t) block_faces[t + 1] += block_faces[t];
+  detail::parallel_chunks(blocks, threads, 1, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t t = b0; t < b1; ++t) {
+      std::uint32_t next = block_faces[t];
+      for (std::size_t i = block_lo(t); i < block_lo(t + 1); ++i) {
+        auto& nd = d.nodes[i];
+        nd.parent = tn[i].parent;
+        nd.depth = tn[i].depth;
+        if (tn[i].count == 0) {
+          const std::uint32_t g = group_of(i);
+          leaf_members[i] = gstart[g];
+          nd.leaf = 1;
+          nd.first = next;
+          nd.count = static_cast<std::uint8_t>(gstart[g + 1] - gstart[g]);
+          next += nd.count;
+        } else {
+          leaf_members[i] = none;
+          nd.first = tn[i].first;
+          nd.count = static_cast<std::uint8_t>(tn[i].count);
         }
       }
-    });
-  }
+    }
+  });
   if (colour) resize_fresh(d.node_colours, nn, threads);
   resize_fresh(d.node_normal_codes, nn, threads);
+}
 
-  // Bottom-up (children before parents) and, with quantised nodes, top-down (parents before
-  // children). Work units are the subtrees below the first level with at least 64 nodes per
-  // thread, handed out one at a time (their sizes differ: leaves sit at different depths), each
-  // done level by level inside itself while its records are in cache; the few levels above them
-  // run on this thread. In the breadth-first layout the nodes of one subtree at one level are a
-  // contiguous range. A node's values depend only on its children's (bottom-up) or its parent's
-  // (top-down), so the output does not depend on the schedule.
-  struct alignas(64) counts {
-    std::size_t contained = 0, degenerate = 0;
+// ---- Stage 4 (§3.1): bounding spheres, normals, colours and normal cones, bottom up ----------
+
+/// A leaf of four triangles (most leaves): the general leaf loop of node_geometry() with the
+/// four triangles as lanes (lanes.hpp; the same bits), the corners measured by lanes too.
+void pop_build_state::leaf4_geometry(const std::array<std::uint32_t, 3>* tri, vec3d& x, double& r,
+                                     vec3d& nsum, rgb_sum& csum, const std::uint32_t* members,
+                                     counts& acc, pending& out, pop_node& nd) const {
+  using namespace lanes;
+  for (std::size_t j = 0; j < 4; ++j) {
+    for (auto v : tri[j]) nsum += d.normals[v].cast<double>();
+    if (colour) csum.add(face_colour[members[j]]);
+  }
+  const auto coord = [&](std::size_t m, int k) {
+    return make(static_cast<double>(d.positions[tri[0][m]][k]),
+                static_cast<double>(d.positions[tri[1][m]][k]),
+                static_cast<double>(d.positions[tri[2][m]][k]),
+                static_cast<double>(d.positions[tri[3][m]][k]));
   };
-  std::vector<counts> per_worker(threads);
-  const bool exact = opt.spheres == pop_sphere_rule::exact;
-  // A node's work is split in two: its sphere, colour and normal sum (geometry(), which keeps
-  // the leaf's face normals for the cone), then the encode of the sum, its decode and the cone
-  // (orient()). Nodes are done in blocks of `block`: the geometry of the whole block, then its
-  // encodes back to back, which do not depend on each other, so they overlap in the pipeline
-  // (bench_core: BM_Encode, independent encodes, against BM_EncodeLatency, a chain of them);
-  // through encode(span, span), which also loads their candidate cells first (−5 %).
-  constexpr std::size_t block = 32;
-  struct pending {
-    std::array<vec3f, 4> fn;  // a leaf's face normals; fdeg bit j: face j is degenerate
-    std::uint8_t fdeg;
-  };
-  // A leaf of four triangles (most leaves): geometry()'s loop over the triangles with the four
-  // as lanes (lanes.hpp; the same bits), the corners measured by lanes too.
-  const auto leaf4 = [&](const std::array<std::uint32_t, 3>* tri, vec3d& x, double& r, vec3d& nsum,
-                         rgb_sum& csum, const std::uint32_t* members, counts& acc, pending& out,
-                         pop_node& nd) {
-    using namespace lanes;
-    for (std::size_t j = 0; j < 4; ++j) {
-      for (auto v : tri[j]) nsum += d.normals[v].cast<double>();
-      if (colour) csum.add(face_colour[members[j]]);
-    }
-    const auto coord = [&](std::size_t m, int k) {
-      return make(static_cast<double>(d.positions[tri[0][m]][k]),
-                  static_cast<double>(d.positions[tri[1][m]][k]),
-                  static_cast<double>(d.positions[tri[2][m]][k]),
-                  static_cast<double>(d.positions[tri[3][m]][k]));
-    };
-    const v3 a = {coord(0, 0), coord(0, 1), coord(0, 2)},
-             b = {coord(1, 0), coord(1, 1), coord(1, 2)},
-             c = {coord(2, 0), coord(2, 1), coord(2, 2)};
-    // Geometric normals (zero and `degenerate` when the cross product vanishes).
-    const v3 e1 = b - a, e2 = c - a;
-    const v3 n = cross(e1, e2);
-    const d4 n2 = dot(n, n);
-    const d4 len = lanes::sqrt(n2);
-    const m4 fine = (len > 0) & finite(len);
-    const v3 unit = {n.x / len, n.y / len, n.z / len};
-    out.fdeg = 0;
+  const v3 a = {coord(0, 0), coord(0, 1), coord(0, 2)}, b = {coord(1, 0), coord(1, 1), coord(1, 2)},
+           c = {coord(2, 0), coord(2, 1), coord(2, 2)};
+  // Geometric normals (zero and `degenerate` when the cross product vanishes).
+  const v3 e1 = b - a, e2 = c - a;
+  const v3 n = cross(e1, e2);
+  const d4 n2 = dot(n, n);
+  const d4 len = lanes::sqrt(n2);
+  const m4 fine = (len > 0) & finite(len);
+  const v3 unit = {n.x / len, n.y / len, n.z / len};
+  out.fdeg = 0;
+  for (int j = 0; j < 4; ++j) {
+    const bool deg = !fine[j];
+    out.fn[static_cast<std::size_t>(j)] =
+        deg ? vec3f::Zero()
+            : vec3f(static_cast<float>(unit.x[j]), static_cast<float>(unit.y[j]),
+                    static_cast<float>(unit.z[j]));
+    out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
+    acc.degenerate += deg ? 1 : 0;
+  }
+  if (exact) {  // smallest sphere of the leaf's corners
+    std::array<vec3d, 12> corner;
+    std::array<double, 12> zero{};
     for (int j = 0; j < 4; ++j) {
-      const bool deg = !fine[j];
-      out.fn[static_cast<std::size_t>(j)] =
-          deg ? vec3f::Zero()
-              : vec3f(static_cast<float>(unit.x[j]), static_cast<float>(unit.y[j]),
-                      static_cast<float>(unit.z[j]));
-      out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
-      acc.degenerate += deg ? 1 : 0;
+      corner[3 * static_cast<std::size_t>(j)] = lane(a, j);
+      corner[3 * static_cast<std::size_t>(j) + 1] = lane(b, j);
+      corner[3 * static_cast<std::size_t>(j) + 2] = lane(c, j);
     }
-    if (exact) {  // smallest sphere of the leaf's corners
-      std::array<vec3d, 12> corner;
-      std::array<double, 12> zero{};
-      for (int j = 0; j < 4; ++j) {
-        corner[3 * static_cast<std::size_t>(j)] = lane(a, j);
-        corner[3 * static_cast<std::size_t>(j) + 1] = lane(b, j);
-        corner[3 * static_cast<std::size_t>(j) + 2] = lane(c, j);
-      }
-      min_sphere_of_spheres(corner.data(), zero.data(), 12, x, r);
-    } else {  // the paper's rules over the triangles' spheres
-      v3 cc4;
-      d4 cr2;
-      triangle_circle_sq4(a, b, c, e1, e2, n, n2, cc4, cr2);
-      std::array<vec3d, 4> cc;
-      std::array<double, 4> cr;
-      for (int j = 0; j < 4; ++j) {
-        cc[static_cast<std::size_t>(j)] = lane(cc4, j);
-        cr[static_cast<std::size_t>(j)] = std::sqrt(cr2[j]);
-      }
-      paper_sphere(cc.data(), cr.data(), 4, x, r);
+    min_sphere_of_spheres(corner.data(), zero.data(), 12, x, r);
+  } else {  // the paper's rules over the triangles' spheres
+    v3 cc4;
+    d4 cr2;
+    triangle_circle_sq4(a, b, c, e1, e2, n, n2, cc4, cr2);
+    std::array<vec3d, 4> cc;
+    std::array<double, 4> cr;
+    for (int j = 0; j < 4; ++j) {
+      cc[static_cast<std::size_t>(j)] = lane(cc4, j);
+      cr[static_cast<std::size_t>(j)] = std::sqrt(cr2[j]);
     }
-    // finalise_points() over the twelve corners: the largest squared distance from the stored
-    // centre (a maximum, so in any order), one root.
-    nd.centre = x.cast<float>();
-    const vec3d xc = as_stored(nd.centre);
-    const v3 o = {splat(xc.x()), splat(xc.y()), splat(xc.z())};
-    const v3 da = a - o, db = b - o, dc = c - o;
-    const d4 far4 = max(max(dot(da, da), dot(db, db)), dot(dc, dc));
-    const double far2 = std::max(std::max(far4[0], far4[1]), std::max(far4[2], far4[3]));
-    nd.radius = round_up(std::max(std::isfinite(r) ? r : 0.0, std::sqrt(far2)));
-  };
-  const auto geometry = [&](std::size_t i, counts& acc, pending& out, vec3f& nsum_out) {
-    std::array<vec3d, 12> cc, corner;
-    std::array<double, 12> cr;
-    auto& fn = out.fn;
-    out.fdeg = 0;
-    auto& nd = d.nodes[i];
-    vec3d x;
-    double r = 0;
-    vec3d nsum = vec3d::Zero();
-    rgb_sum csum;
-    std::size_t m = 0;
-    if (nd.leaf) {
-      // The leaf's triangles, its group's faces, are at d.faces[first, first + count) (gather()).
-      const std::size_t nt = nd.count;
-      std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
-      const std::uint32_t* members = gfaces.data() + leaf_members[i];
-      if (nt == 4) {
-        leaf4(tri, x, r, nsum, csum, members, acc, out, nd);
-      } else {
-        for (std::size_t j = 0; j < nt; ++j) {
-          const auto& F = tri[j];
-          for (auto v : F) nsum += d.normals[v].cast<double>();
-          if (colour) csum.add(face_colour[members[j]]);
-          // Geometric normal (zero and `degenerate` when the cross product vanishes).
-          // The corners from registers, not from the array they are stored to (reading back a
-          // vector written as two halves stalled the store forwarding).
-          const vec3d a = d.positions[F[0]].cast<double>(), b = d.positions[F[1]].cast<double>(),
-                      c = d.positions[F[2]].cast<double>();
-          vec3d* p = corner.data() + 3 * j;
-          p[0] = a;
-          p[1] = b;
-          p[2] = c;
-          const vec3d e1 = b - a, e2 = c - a;
-          const vec3d n = e1.cross(e2);
-          const double n2 = n.squaredNorm();
-          const double len = std::sqrt(n2);  // n.norm()
-          const bool deg = !(len > 0 && std::isfinite(len));
-          fn[j] = deg ? vec3f::Zero() : vec3f((n / len).cast<float>());
-          out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
-          acc.degenerate += deg ? 1 : 0;
-          // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
-          if (nt == 1 || !exact) triangle_circle(a, b, c, e1, e2, n, n2, cc[j], cr[j]);
-        }
-        if (nt == 1) {
-          x = cc[0];
-          r = cr[0];
-        } else if (exact) {  // smallest sphere of the leaf's corners
-          for (std::size_t k = 0; k < 3 * nt; ++k) cr[k] = 0;
-          min_sphere_of_spheres(corner.data(), cr.data(), 3 * nt, x, r);
-        } else {  // the paper's rules over the triangles' spheres
-          paper_sphere(cc.data(), cr.data(), nt, x, r);
-        }
-        // Every corner, measured from the stored centre.
-        finalise_points(x, r, corner.data(), 3 * nt, nd.centre, nd.radius);
-      }
-      if (!(nsum.squaredNorm() > 0))
-        for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
-    } else {
-      for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
-        const auto& ch = d.nodes[c];
-        cc[m] = ch.centre.cast<double>();
-        cr[m++] = ch.radius;
-        nsum += ch.normal.cast<double>();
-        if (colour) csum.add(d.node_colours[c]);
-      }
-      if (exact)
-        min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
-      else
-        acc.contained += paper_sphere(cc.data(), cr.data(), m, x, r) ? 1 : 0;
-      finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
-    }
-    nsum_out = nsum.cast<float>();
-    if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
-  };
-  // Normal (§3.1: averages), quantised; the cone is measured about the decoded axis.
-  const auto orient = [&](std::size_t i, std::uint32_t code, const pending& in) {
-    auto& nd = d.nodes[i];
-    const auto& fn = in.fn;
-    d.node_normal_codes[i] = code;
-    nd.normal = quant.decode(code);
-    // The cosines the cone is measured by: to the leaf's non-degenerate face normals (only the
-    // smallest matters: the widest face), or to each child's axis.
-    const std::size_t nc = nd.count;
-    double min_cos = 2;
-    std::array<double, 4> cs;
-    if (nd.leaf) {
-      for (std::size_t j = 0; j < nc; ++j)
-        if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
-    } else {
-      for (std::size_t j = 0; j < nc; ++j)
-        cs[j] = clamped_cos(nd.normal, d.nodes[nd.first + j].normal);
-    }
-    if (qn) {  // the level straight from the cosines (cone_table())
-      // The thresholds fall as the level grows (face[k]; child[k][c] is 2 while the level is
-      // below the child's, then falls), so the levels that fail come first: the smallest level
-      // that holds is the number that fail, counted without a branch on the cosines.
-      const auto& table = cone_table();
-      unsigned k = 0;
-      if (nd.leaf) {
-        for (unsigned level = 0; level < 3; ++level) k += min_cos < table.face[level] ? 1u : 0u;
-      } else {
-        std::array<unsigned, 4> cc;
-        for (std::size_t j = 0; j < nc; ++j) cc[j] = cone_code(d.nodes[nd.first + j].cone_angle);
-        for (unsigned level = 0; level < 3; ++level) {
-          bool holds = true;
-          for (std::size_t j = 0; j < nc; ++j) holds = holds & (cs[j] >= table.child[level][cc[j]]);
-          k += holds ? 0u : 1u;
-        }
-      }
-      nd.cone_angle = cone_level(k);
-      return;
-    }
-    double cone = 0;
-    if (nd.leaf) {
-      // The largest angle to a face normal is the acos of the smallest cosine (acos is
-      // monotone): one acos per leaf instead of one per triangle.
-      if (min_cos <= 1) cone = std::acos(min_cos);
-    } else {
-      // max over children of acos(cos to the child's axis) + the child's cone. Children with
-      // the same cone (quantised cones have four levels) need one acos, of their smallest
-      // cosine; a child with an unbounded cone (π) makes this one unbounded without any.
-      std::array<float, 4> ca;
-      bool unbounded = false;
-      for (std::size_t j = 0; j < nc; ++j) {
-        ca[j] = d.nodes[nd.first + j].cone_angle;
-        unbounded = unbounded || ca[j] >= std::numbers::pi_v<float>;
-      }
-      if (unbounded) {
-        cone = std::numbers::pi;  // the result is clamped to π below
-      } else {
-        for (std::size_t j = 0; j < nc; ++j) {
-          bool seen = false;
-          for (std::size_t k = 0; k < j; ++k) seen = seen || ca[k] == ca[j];
-          if (seen) continue;
-          double smallest = cs[j];
-          for (std::size_t k = j + 1; k < nc; ++k)
-            if (ca[k] == ca[j]) smallest = std::min(smallest, cs[k]);
-          cone = std::max(cone, std::acos(smallest) + static_cast<double>(ca[j]));
-        }
-      }
-    }
-    nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
-  };
-  // A leaf's triangles, its group's faces, to d.faces[first, first + count). Done for a block of
-  // nodes before their geometry(): each face is a chain of three likely cache misses (group
-  // start, member, face), and in a short loop of their own the chains of many leaves overlap
-  // (Buddha −1.5 to −3 %; a pass over the whole tree instead cost a second miss per face).
-  const auto gather = [&](std::size_t i) {
-    const auto& nd = d.nodes[i];
-    if (!nd.leaf) return;
+    paper_sphere(cc.data(), cr.data(), 4, x, r);
+  }
+  // finalise_points() over the twelve corners: the largest squared distance from the stored
+  // centre (a maximum, so in any order), one root.
+  nd.centre = x.cast<float>();
+  const vec3d xc = as_stored(nd.centre);
+  const v3 o = {splat(xc.x()), splat(xc.y()), splat(xc.z())};
+  const v3 da = a - o, db = b - o, dc = c - o;
+  const d4 far4 = max(max(dot(da, da), dot(db, db)), dot(dc, dc));
+  const double far2 = std::max(std::max(far4[0], far4[1]), std::max(far4[2], far4[3]));
+  nd.radius = round_up(std::max(std::isfinite(r) ? r : 0.0, std::sqrt(far2)));
+}
+
+/// Node i's sphere (§3.1: a leaf's from its triangles' circles, an inner node's from its
+/// children's spheres), colour and normal sum; keeps a leaf's face normals for normal_cone().
+void pop_build_state::node_geometry(std::size_t i, counts& acc, pending& out, vec3f& nsum_out) {
+  std::array<vec3d, 12> cc, corner;
+  std::array<double, 12> cr;
+  auto& fn = out.fn;
+  out.fdeg = 0;
+  auto& nd = d.nodes[i];
+  vec3d x;
+  double r = 0;
+  vec3d nsum = vec3d::Zero();
+  rgb_sum csum;
+  std::size_t m = 0;
+  if (nd.leaf) {
+    // The leaf's triangles, its group's faces, are at d.faces[first, first + count) (gather()).
+    const std::size_t nt = nd.count;
     std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
     const std::uint32_t* members = gfaces.data() + leaf_members[i];
-    for (std::size_t j = 0; j < nd.count; ++j) tri[j] = mesh.faces[members[j]];
-  };
-  // Nodes [a, b) of one level (their children are done).
-  const auto bottom_up = [&](std::size_t a, std::size_t b, counts& acc) {
-    std::array<pending, block> p;
-    std::array<vec3f, block> nsum;
-    std::array<std::uint32_t, block> code;
-    for (std::size_t lo = a; lo < b; lo += block) {
-      const std::size_t n = std::min(block, b - lo);
-      for (std::size_t k = 0; k < n; ++k) gather(lo + k);
-      for (std::size_t k = 0; k < n; ++k) geometry(lo + k, acc, p[k], nsum[k]);
-      quant.encode(std::span(nsum.data(), n), std::span(code.data(), n));
-      for (std::size_t k = 0; k < n; ++k) orient(lo + k, code[k], p[k]);
+    if (nt == 4) {
+      leaf4_geometry(tri, x, r, nsum, csum, members, acc, out, nd);
+    } else {
+      for (std::size_t j = 0; j < nt; ++j) {
+        const auto& F = tri[j];
+        for (auto v : F) nsum += d.normals[v].cast<double>();
+        if (colour) csum.add(face_colour[members[j]]);
+        // Geometric normal (zero and `degenerate` when the cross product vanishes).
+        // The corners from registers, not from the array they are stored to (reading back a
+        // vector written as two halves stalled the store forwarding).
+        const vec3d a = d.positions[F[0]].cast<double>(), b = d.positions[F[1]].cast<double>(),
+                    c = d.positions[F[2]].cast<double>();
+        vec3d* p = corner.data() + 3 * j;
+        p[0] = a;
+        p[1] = b;
+        p[2] = c;
+        const vec3d e1 = b - a, e2 = c - a;
+        const vec3d n = e1.cross(e2);
+        const double n2 = n.squaredNorm();
+        const double len = std::sqrt(n2);  // n.norm()
+        const bool deg = !(len > 0 && std::isfinite(len));
+        fn[j] = deg ? vec3f::Zero() : vec3f((n / len).cast<float>());
+        out.fdeg = static_cast<std::uint8_t>(out.fdeg | unsigned{deg} << j);
+        acc.degenerate += deg ? 1 : 0;
+        // The triangle's sphere (§3.1): needed unless the exact rule takes the corners.
+        if (nt == 1 || !exact) triangle_circle(a, b, c, e1, e2, n, n2, cc[j], cr[j]);
+      }
+      if (nt == 1) {
+        x = cc[0];
+        r = cr[0];
+      } else if (exact) {  // smallest sphere of the leaf's corners
+        for (std::size_t k = 0; k < 3 * nt; ++k) cr[k] = 0;
+        min_sphere_of_spheres(corner.data(), cr.data(), 3 * nt, x, r);
+      } else {  // the paper's rules over the triangles' spheres
+        paper_sphere(cc.data(), cr.data(), nt, x, r);
+      }
+      // Every corner, measured from the stored centre.
+      finalise_points(x, r, corner.data(), 3 * nt, nd.centre, nd.radius);
     }
-  };
-  const auto top_down = [&](std::size_t i) {
-    auto& nd = d.nodes[i];
-    const auto& pa = d.nodes[nd.parent];
-    const std::uint16_t code = quantise_sphere(pa.centre, pa.radius, nd.centre, nd.radius);
-    d.node_sphere_codes[i] = code;
-    dequantise_sphere(pa.centre, pa.radius, code, nd.centre, nd.radius);
-  };
-  std::size_t split_level = levels.size();
+    if (!(nsum.squaredNorm() > 0))
+      for (std::size_t j = 0; j < nt; ++j) nsum += fn[j].cast<double>();
+  } else {
+    for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+      const auto& ch = d.nodes[c];
+      cc[m] = ch.centre.cast<double>();
+      cr[m++] = ch.radius;
+      nsum += ch.normal.cast<double>();
+      if (colour) csum.add(d.node_colours[c]);
+    }
+    if (exact)
+      min_sphere_of_spheres(cc.data(), cr.data(), m, x, r);
+    else
+      acc.contained += paper_sphere(cc.data(), cr.data(), m, x, r) ? 1 : 0;
+    finalise(x, r, cc.data(), cr.data(), m, nd.centre, nd.radius);
+  }
+  nsum_out = nsum.cast<float>();
+  if (colour) d.node_colours[i] = qn ? from565(rgb565(csum.mean())) : csum.mean();
+}
+
+/// Node i's normal (§3.1: the average, quantised to `code`) and its normal cone, measured about
+/// the decoded axis: over a leaf's face normals, or over the children's cones.
+void pop_build_state::normal_cone(std::size_t i, std::uint32_t code, const pending& in) {
+  auto& nd = d.nodes[i];
+  const auto& fn = in.fn;
+  d.node_normal_codes[i] = code;
+  nd.normal = quant.decode(code);
+  // The cosines the cone is measured by: to the leaf's non-degenerate face normals (only the
+  // smallest matters: the widest face), or to each child's axis.
+  const std::size_t nc = nd.count;
+  double min_cos = 2;
+  std::array<double, 4> cs;
+  if (nd.leaf) {
+    for (std::size_t j = 0; j < nc; ++j)
+      if (!(in.fdeg >> j & 1u)) min_cos = std::min(min_cos, clamped_cos(nd.normal, fn[j]));
+  } else {
+    for (std::size_t j = 0; j < nc; ++j)
+      cs[j] = clamped_cos(nd.normal, d.nodes[nd.first + j].normal);
+  }
+  if (qn) {  // the level straight from the cosines (cone_table())
+    // The thresholds fall as the level grows (face[k]; child[k][c] is 2 while the level is
+    // below the child's, then falls), so the levels that fail come first: the smallest level
+    // that holds is the number that fail, counted without a branch on the cosines.
+    const auto& table = cone_table();
+    unsigned k = 0;
+    if (nd.leaf) {
+      for (unsigned level = 0; level < 3; ++level) k += min_cos < table.face[level] ? 1u : 0u;
+    } else {
+      std::array<unsigned, 4> cc;
+      for (std::size_t j = 0; j < nc; ++j) cc[j] = cone_code(d.nodes[nd.first + j].cone_angle);
+      for (unsigned level = 0; level < 3; ++level) {
+        bool holds = true;
+        for (std::size_t j = 0; j < nc; ++j) holds = holds & (cs[j] >= table.child[level][cc[j]]);
+        k += holds ? 0u : 1u;
+      }
+    }
+    nd.cone_angle = cone_level(k);
+    return;
+  }
+  double cone = 0;
+  if (nd.leaf) {
+    // The largest angle to a face normal is the acos of the smallest cosine (acos is
+    // monotone): one acos per leaf instead of one per triangle.
+    if (min_cos <= 1) cone = std::acos(min_cos);
+  } else {
+    // max over children of acos(cos to the child's axis) + the child's cone. Children with
+    // the same cone (quantised cones have four levels) need one acos, of their smallest
+    // cosine; a child with an unbounded cone (π) makes this one unbounded without any.
+    std::array<float, 4> ca;
+    bool unbounded = false;
+    for (std::size_t j = 0; j < nc; ++j) {
+      ca[j] = d.nodes[nd.first + j].cone_angle;
+      unbounded = unbounded || ca[j] >= std::numbers::pi_v<float>;
+    }
+    if (unbounded) {
+      cone = std::numbers::pi;  // the result is clamped to π below
+    } else {
+      for (std::size_t j = 0; j < nc; ++j) {
+        bool seen = false;
+        for (std::size_t k = 0; k < j; ++k) seen = seen || ca[k] == ca[j];
+        if (seen) continue;
+        double smallest = cs[j];
+        for (std::size_t k = j + 1; k < nc; ++k)
+          if (ca[k] == ca[j]) smallest = std::min(smallest, cs[k]);
+        cone = std::max(cone, std::acos(smallest) + static_cast<double>(ca[j]));
+      }
+    }
+  }
+  nd.cone_angle = std::min(std::numbers::pi_v<float>, round_up(cone + 1e-6));
+}
+
+/// A leaf's triangles, its group's faces, to d.faces[first, first + count). Done for a block of
+/// nodes before their node_geometry(): each face is a chain of three likely cache misses (group
+/// start, member, face), and in a short loop of their own the chains of many leaves overlap
+/// (Buddha −1.5 to −3 %; a pass over the whole tree instead cost a second miss per face).
+void pop_build_state::gather(std::size_t i) {
+  const auto& nd = d.nodes[i];
+  if (!nd.leaf) return;
+  std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
+  const std::uint32_t* members = gfaces.data() + leaf_members[i];
+  for (std::size_t j = 0; j < nd.count; ++j) tri[j] = mesh.faces[members[j]];
+}
+
+/// Nodes [a, b) of one level (their children are done), in blocks of `block`.
+void pop_build_state::bottom_up(std::size_t a, std::size_t b, counts& acc) {
+  std::array<pending, block> p;
+  std::array<vec3f, block> nsum;
+  std::array<std::uint32_t, block> code;
+  for (std::size_t lo = a; lo < b; lo += block) {
+    const std::size_t n = std::min(block, b - lo);
+    for (std::size_t k = 0; k < n; ++k) gather(lo + k);
+    for (std::size_t k = 0; k < n; ++k) node_geometry(lo + k, acc, p[k], nsum[k]);
+    quant.encode(std::span(nsum.data(), n), std::span(code.data(), n));
+    for (std::size_t k = 0; k < n; ++k) normal_cone(lo + k, code[k], p[k]);
+  }
+}
+
+/// The node ranges of the subtree below `root`, level by level from the root's.
+void pop_build_state::subtree_levels(std::size_t root, node_ranges& out) const {
+  const std::size_t nn = d.nodes.size();
+  out.assign(1, {root, root + 1});
+  for (;;) {
+    const auto [a, b] = out.back();
+    std::size_t lo = nn, hi = 0;
+    for (std::size_t i = a; i < b; ++i)
+      if (!d.nodes[i].leaf) {
+        lo = std::min<std::size_t>(lo, d.nodes[i].first);
+        hi = std::max<std::size_t>(hi, d.nodes[i].first + d.nodes[i].count);
+      }
+    if (hi == 0) return;
+    out.emplace_back(lo, hi);
+  }
+}
+
+/// Bottom-up (children before parents). Work units are the subtrees below the first level with
+/// at least 64 nodes per thread, handed out one at a time (their sizes differ: leaves sit at
+/// different depths), each done level by level inside itself while its records are in cache;
+/// the few levels above them run on this thread. In the breadth-first layout the nodes of one
+/// subtree at one level are a contiguous range. A node's values depend only on its children's,
+/// so the output does not depend on the schedule.
+void pop_build_state::spheres_and_cones() {
+  std::vector<counts> per_worker(threads);
+  split_level = levels.size();
   for (std::size_t li = 0; li < levels.size(); ++li)
     if (levels[li].second - levels[li].first >= 64 * std::size_t{threads}) {
       split_level = li;
       break;
     }
-  // The node ranges of the subtree below `root`, level by level from the root's.
-  const auto subtree_levels = [&](std::size_t root,
-                                  std::vector<std::pair<std::size_t, std::size_t>>& out) {
-    out.assign(1, {root, root + 1});
-    for (;;) {
-      const auto [a, b] = out.back();
-      std::size_t lo = nn, hi = 0;
-      for (std::size_t i = a; i < b; ++i)
-        if (!d.nodes[i].leaf) {
-          lo = std::min<std::size_t>(lo, d.nodes[i].first);
-          hi = std::max<std::size_t>(hi, d.nodes[i].first + d.nodes[i].count);
-        }
-      if (hi == 0) return;
-      out.emplace_back(lo, hi);
-    }
-  };
   // split_level == levels.size() (a small tree): no subtrees, every level on this thread.
-  const std::size_t roots_begin = split_level < levels.size() ? levels[split_level].first : nn;
-  const std::size_t roots =
-      split_level < levels.size() ? levels[split_level].second - roots_begin : 0;
+  roots_begin = split_level < levels.size() ? levels[split_level].first : d.nodes.size();
+  roots = split_level < levels.size() ? levels[split_level].second - roots_begin : 0;
   // Each subtree's ranges, found by the bottom-up task and walked again top-down.
-  std::vector<std::vector<std::pair<std::size_t, std::size_t>>> subtrees(roots);
+  subtrees.resize(roots);
   parallel_tasks(roots, threads, [&](std::size_t t, unsigned w) {
     auto& sub = subtrees[t];
     subtree_levels(roots_begin + t, sub);
@@ -1505,26 +1416,39 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
     d.stats.contained_inner += c.contained;
     d.stats.degenerate_faces += c.degenerate;
   }
+}
 
-  // Quantised spheres, top down (a parent's quantised sphere before its children's). The exact
-  // sphere of each node is replaced by the smallest coded sphere that holds it and lies inside
-  // the parent's: by induction every stored sphere holds its subtree, and children stay inside
-  // parents (the coherent traversal and culling rely on both).
-  if (qn) {
-    resize_fresh(d.node_sphere_codes, nn, threads, sphere_code_parent);
-    for (std::size_t li = 1; li < split_level; ++li)
-      for (std::size_t i = levels[li].first; i < levels[li].second; ++i) top_down(i);
-    parallel_tasks(roots, threads, [&](std::size_t t, unsigned) {
-      for (const auto& [a, b] : subtrees[t])
-        for (std::size_t i = a; i < b; ++i) top_down(i);
-    });
-  }
+// ---- Stage 5 (§3.5): quantised spheres, top down ---------------------------------------------
 
-  const auto t1 = clock::now();
+void pop_build_state::top_down(std::size_t i) {
+  auto& nd = d.nodes[i];
+  const auto& pa = d.nodes[nd.parent];
+  const std::uint16_t code = quantise_sphere(pa.centre, pa.radius, nd.centre, nd.radius);
+  d.node_sphere_codes[i] = code;
+  dequantise_sphere(pa.centre, pa.radius, code, nd.centre, nd.radius);
+}
+
+/// A parent's quantised sphere before its children's: the exact sphere of each node is replaced
+/// by the smallest coded sphere that holds it and lies inside the parent's, so by induction
+/// every stored sphere holds its subtree, and children stay inside parents (the coherent
+/// traversal and culling rely on both). The same subtrees as spheres_and_cones(); a node
+/// depends only on its parent, so the output does not depend on the schedule.
+void pop_build_state::quantise_spheres() {
+  resize_fresh(d.node_sphere_codes, d.nodes.size(), threads, sphere_code_parent);
+  for (std::size_t li = 1; li < split_level; ++li)
+    for (std::size_t i = levels[li].first; i < levels[li].second; ++i) top_down(i);
+  parallel_tasks(roots, threads, [&](std::size_t t, unsigned) {
+    for (const auto& [a, b] : subtrees[t])
+      for (std::size_t i = a; i < b; ++i) top_down(i);
+  });
+}
+
+void pop_build_state::finish_stats(clock::time_point t0, clock::time_point t_prep,
+                                   clock::time_point t1) {
   auto& st = d.stats;
   st.vertices = nv;
   st.triangles = nf;
-  st.nodes = nn;
+  st.nodes = d.nodes.size();
   for (const auto& nd : d.nodes) {
     if (nd.leaf) {
       ++st.leaves;
@@ -1534,342 +1458,38 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   }
   st.prepare_seconds = std::chrono::duration<double>(t_prep - t0).count();
   st.adjacency_seconds = adjacency_seconds;
-  st.tree_seconds = std::chrono::duration<double>(t1 - t_adj).count();
+  st.tree_seconds = std::chrono::duration<double>(t1 - t_prep).count();
   st.build_seconds = std::chrono::duration<double>(t1 - t0).count();
   st.has_timings = true;
   set_file_stats(d, pop_file_bytes(d));
-  return d;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Storage (§3.5). Little-endian file, version 3:
-//   header   "PBRLODPP" | u32 version | u32 flags (1 = colour, 2 = quantised nodes)
-//            | u32 normal_bits | u32 sphere rule | u32 adjacency
-//            | u64 vertices | u64 faces | u64 nodes | f64 origin[3] | f32 q_min[3] | f32 q_step[3]
-//            | build stats: u64 isolated, non-manifold edges, degenerate, contained_inner
-//            | quantised nodes only: f32 root centre[3], f32 root radius
-//   vertices u16 q[3] | normal code (u16 when normal_bits ≤ 16, else u32) | [u8 rgb[3]]
-//   faces    u32 v[3]                          (in leaf order)
-//   nodes    quantised (QSplat-style, breadth first; first child / first face, parent and depth
-//            are derived from the counts):
-//              u16 sphere code (4 bits each: centre x, y, z offset, radius; levels 0..12;
-//              relative to the parent) | normal code | u8 (bits 0–1 cone level, 2–3 count − 1,
-//              4 leaf; 5–7 zero) | [u16 RGB 565]
-//            float: f32 centre[3] | f32 radius | f32 cone | normal code | u32 first | u8 count
-//              | u8 leaf | [u8 rgb[3]]
-//   trailer  u64 FNV-1a of every byte before it
-// Versions 1 (float nodes, fewer stats) and 2 (the build's timings, so no two builds compared
-// equal) are rejected: rebuild the file.
-// ---------------------------------------------------------------------------------------------
-namespace {
-constexpr file_format pop_format{"POP", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'P'}, 3};
-constexpr std::size_t header_bytes = 8 + 4 * 5 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 4;
-constexpr std::size_t root_bytes = 16;
-
-std::size_t code_bytes(int bits) {
-  return bits <= 16 ? 2 : 4;
-}
-std::size_t vertex_bytes(int bits, bool colour) {
-  return 6 + code_bytes(bits) + (colour ? 3 : 0);
-}
-constexpr std::size_t face_bytes = 12;
-std::size_t node_bytes(int bits, bool colour, bool quantised) {
-  if (quantised) return 2 + code_bytes(bits) + 1 + (colour ? 2 : 0);
-  return 12 + 4 + 4 + code_bytes(bits) + 4 + 1 + 1 + (colour ? 3 : 0);
 }
 
 }  // namespace
 
-std::size_t pop_file_bytes(const pop_data& d) {
-  const bool colour = !d.node_colours.empty();
-  return header_bytes + (d.quantised_nodes ? root_bytes : 0) +
-         d.positions.size() * vertex_bytes(d.normal_bits, colour) + d.faces.size() * face_bytes +
-         d.nodes.size() * node_bytes(d.normal_bits, colour, d.quantised_nodes) + 8;
-}
+pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool colour) {
+  using clock = pop_build_state::clock;
+  const auto t0 = clock::now();
+  check_pop_input(mesh, opt, colour);
+  pop_build_state s(mesh, opt, colour);
+  s.d.origin = mesh.vertices.origin;
+  s.d.normal_bits = opt.normal_bits;
+  s.d.spheres = opt.spheres;
+  s.d.adjacency = opt.adjacency;
+  s.d.quantised_nodes = opt.quantise_nodes;
 
-namespace {
-void set_file_stats(pop_data& d, std::size_t size) {
-  auto& st = d.stats;
-  const bool colour = !d.node_colours.empty();
-  st.file_bytes = size;
-  st.vertex_file_bytes = d.positions.size() * vertex_bytes(d.normal_bits, colour);
-  st.face_file_bytes = d.faces.size() * face_bytes;
-  st.node_file_bytes = d.nodes.size() * node_bytes(d.normal_bits, colour, d.quantised_nodes);
-  st.bytes_per_vertex = static_cast<double>(size) / static_cast<double>(d.positions.size());
-  st.bytes_per_triangle = static_cast<double>(size) / static_cast<double>(d.faces.size());
-}
-}  // namespace
-
-void save_pop_data(const pop_data& d, const std::string& path) {
-  const bool colour = !d.node_colours.empty();
-  const bool qn = d.quantised_nodes;
-  const int bits = d.normal_bits;
-  byte_writer w;
-  w.bytes.reserve(pop_file_bytes(d));
-  write_head(w, pop_format);
-  w.put(static_cast<std::uint32_t>((colour ? 1u : 0u) | (qn ? 2u : 0u)));
-  w.put(static_cast<std::uint32_t>(bits));
-  w.put(static_cast<std::uint32_t>(d.spheres));
-  w.put(static_cast<std::uint32_t>(d.adjacency));
-  w.put(static_cast<std::uint64_t>(d.positions.size()));
-  w.put(static_cast<std::uint64_t>(d.faces.size()));
-  w.put(static_cast<std::uint64_t>(d.nodes.size()));
-  for (int k = 0; k < 3; ++k) w.put(d.origin[k]);
-  for (int k = 0; k < 3; ++k) w.put(d.q_min[k]);
-  for (int k = 0; k < 3; ++k) w.put(d.q_step[k]);
-  w.put(static_cast<std::uint64_t>(d.stats.isolated_faces));
-  w.put(static_cast<std::uint64_t>(d.stats.nonmanifold_edges));
-  w.put(static_cast<std::uint64_t>(d.stats.degenerate_faces));
-  w.put(static_cast<std::uint64_t>(d.stats.contained_inner));
-  if (qn) {
-    for (int k = 0; k < 3; ++k) w.put(d.nodes[0].centre[k]);
-    w.put(d.nodes[0].radius);
+  s.prepare();  // §3.5 vertex quantisation; leaves from the adjacency
+  if (colour) {
+    s.colour_vertices();  // §3.1 colours
+    s.colour_faces();
   }
-  for (std::size_t i = 0; i < d.positions.size(); ++i) {
-    for (auto q : d.vertex_q[i]) w.put(q);
-    w.put_code(d.vertex_normal_codes[i], bits);
-    if (colour) w.put(d.colours[i]);
-  }
-  for (const auto& f : d.faces)
-    for (auto v : f) w.put(v);
-  for (std::size_t i = 0; i < d.nodes.size(); ++i) {
-    const auto& nd = d.nodes[i];
-    if (qn) {
-      w.put(d.node_sphere_codes[i]);
-      w.put_code(d.node_normal_codes[i], bits);
-      w.put(static_cast<std::uint8_t>(cone_code(nd.cone_angle) | (nd.count - 1u) << 2 |
-                                      (nd.leaf ? 16u : 0u)));
-      if (colour) w.put(rgb565(d.node_colours[i]));
-      continue;
-    }
-    for (int k = 0; k < 3; ++k) w.put(nd.centre[k]);
-    w.put(nd.radius);
-    w.put(nd.cone_angle);
-    w.put_code(d.node_normal_codes[i], bits);
-    w.put(nd.first);
-    w.put(nd.count);
-    w.put(nd.leaf);
-    if (colour) w.put(d.node_colours[i]);
-  }
-  append_checksum(w);
-  save_file_bytes(path, w.bytes);
-}
-
-pop_data load_pop_data(const std::string& path, bool colour) {
-  const std::vector<unsigned char> bytes = load_file_bytes(path);
-  byte_reader r{bytes, 0, path};
-  read_head(r, pop_format, 2);  // 1: float node records; 2: timings in the file
-  const auto flags = r.get<std::uint32_t>("flags");
-  if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
-  check_colour_flag((flags & 1u) != 0, colour, path, "pop_tree");
-  const bool qn = (flags & 2u) != 0;
-  const auto bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
-  if (bits < normal_quantizer::min_bits || bits > normal_quantizer::max_bits)
-    throw FormatError(path + ": normal bits " + std::to_string(bits) + " outside 6..24");
-  const auto rule = r.get<std::uint32_t>("sphere rule");
-  if (rule > 1) throw FormatError(path + ": unknown sphere rule " + std::to_string(rule));
-  const auto adjacency = r.get<std::uint32_t>("adjacency");
-  if (adjacency > 1) throw FormatError(path + ": unknown adjacency " + std::to_string(adjacency));
-  const auto nv = r.get<std::uint64_t>("vertex count");
-  const auto nf = r.get<std::uint64_t>("face count");
-  const auto nn = r.get<std::uint64_t>("node count");
-  const std::uint64_t vb = vertex_bytes(bits, colour), nb = node_bytes(bits, colour, qn);
-  const std::uint64_t size = bytes.size();
-  if (nv == 0 || nf == 0 || nn == 0 || nv >= none || nf >= none || nn >= none || nv > size / vb ||
-      nf > size / face_bytes || nn > size / nb ||
-      header_bytes + (qn ? root_bytes : 0) + nv * vb + nf * face_bytes + nn * nb + 8 != size)
-    throw FormatError(path + ": " + std::to_string(nv) + " vertices, " + std::to_string(nf) +
-                      " faces and " + std::to_string(nn) + " nodes do not match the file size " +
-                      std::to_string(size));
-  if (!checksum_matches(bytes)) throw FormatError(path + ": checksum mismatch (corrupt file)");
-
-  const auto shared_quant = normal_quantizer::shared(bits);
-  const normal_quantizer& quant = *shared_quant;
-  pop_data d;
-  d.normal_bits = bits;
-  d.spheres = static_cast<pop_sphere_rule>(rule);
-  d.adjacency = static_cast<pop_adjacency>(adjacency);
-  d.quantised_nodes = qn;
-  for (int k = 0; k < 3; ++k) d.origin[k] = r.get<double>("origin");
-  if (!all_finite(d.origin)) throw FormatError(path + ": origin is not finite");
-  for (int k = 0; k < 3; ++k) d.q_min[k] = r.get_finite("quantisation origin", 0);
-  for (int k = 0; k < 3; ++k) d.q_step[k] = r.get_finite("quantisation step", 0);
-  if ((d.q_step.array() < 0).any()) throw FormatError(path + ": negative quantisation step");
-  d.stats.isolated_faces = r.get<std::uint64_t>("stats");
-  d.stats.nonmanifold_edges = r.get<std::uint64_t>("stats");
-  d.stats.degenerate_faces = r.get<std::uint64_t>("stats");
-  d.stats.contained_inner = r.get<std::uint64_t>("stats");
-  vec3f root_centre = vec3f::Zero();
-  float root_radius = 0;
-  if (qn) {
-    root_centre = r.get_vec("root centre", 0);
-    root_radius = r.get_finite("root radius", 0);
-    if (!(root_radius >= 0) || !std::isfinite(root_radius * 2))
-      throw FormatError(path + ": root radius " + std::to_string(root_radius) +
-                        " is negative or too large");
-  }
-
-  const auto check_code = [&](std::uint32_t c, const char* what, std::size_t i) {
-    if (!quant.valid(c))
-      throw FormatError(path + ": " + what + " " + std::to_string(i) + " has normal code " +
-                        std::to_string(c) + " outside the " + std::to_string(quant.size()) +
-                        "-entry table");
-  };
-  resize_fresh(d.vertex_q, nv, 1);
-  resize_fresh(d.positions, nv, 1);
-  resize_fresh(d.vertex_normal_codes, nv, 1);
-  resize_fresh(d.normals, nv, 1);
-  if (colour) resize_fresh(d.colours, nv, 1);
-  for (std::size_t i = 0; i < nv; ++i) {
-    for (auto& q : d.vertex_q[i]) q = r.get<std::uint16_t>("vertex");
-    d.positions[i] = dequantise(d.vertex_q[i], d.q_min, d.q_step);
-    if (!all_finite(d.positions[i]))
-      throw FormatError(path + ": vertex " + std::to_string(i) + " is not finite");
-    d.vertex_normal_codes[i] = r.get_code(bits, "vertex normal");
-    check_code(d.vertex_normal_codes[i], "vertex", i);
-    d.normals[i] = quant.decode(d.vertex_normal_codes[i]);
-    if (colour) d.colours[i] = r.get<rgb8>("vertex colour");
-  }
-  resize_fresh(d.faces, nf, 1);
-  for (std::size_t i = 0; i < nf; ++i)
-    for (auto& v : d.faces[i]) {
-      v = r.get<std::uint32_t>("face");
-      if (v >= nv)
-        throw FormatError(path + ": face " + std::to_string(i) + " references vertex " +
-                          std::to_string(v) + ", but there are " + std::to_string(nv));
-    }
-  resize_fresh(d.nodes, nn, 1);
-  resize_fresh(d.node_normal_codes, nn, 1);
-  if (qn) resize_fresh(d.node_sphere_codes, nn, 1);
-  if (colour) resize_fresh(d.node_colours, nn, 1);
-  for (std::size_t i = 0; i < nn; ++i) {
-    auto& nd = d.nodes[i];
-    if (qn) {
-      const auto code = r.get<std::uint16_t>("node sphere");
-      for (unsigned k = 0; k < 4; ++k)
-        if (((code >> (4 * k)) & 15u) > 12u)
-          throw FormatError(path + ": node " + std::to_string(i) + " has sphere code " +
-                            std::to_string(code) + " with a level above 12");
-      d.node_sphere_codes[i] = code;
-      d.node_normal_codes[i] = r.get_code(bits, "node normal");
-      check_code(d.node_normal_codes[i], "node", i);
-      nd.normal = quant.decode(d.node_normal_codes[i]);
-      const auto packed = r.get<std::uint8_t>("node flags");
-      if (packed & 0xe0u)
-        throw FormatError(path + ": node " + std::to_string(i) + " has unknown flag bits " +
-                          std::to_string(packed));
-      nd.cone_angle = cone_level(packed & 3u);
-      nd.count = static_cast<std::uint8_t>(((packed >> 2) & 3u) + 1u);
-      nd.leaf = static_cast<std::uint8_t>((packed >> 4) & 1u);
-      if (colour) d.node_colours[i] = from565(r.get<std::uint16_t>("node colour"));
-      continue;  // spheres and first: below, once the parents are known
-    }
-    for (int k = 0; k < 3; ++k) nd.centre[k] = r.get_finite("node centre", i);
-    nd.radius = r.get_finite("node radius", i);
-    nd.cone_angle = r.get_finite("node cone", i);
-    d.node_normal_codes[i] = r.get_code(bits, "node normal");
-    check_code(d.node_normal_codes[i], "node", i);
-    nd.normal = quant.decode(d.node_normal_codes[i]);
-    nd.first = r.get<std::uint32_t>("node first");
-    nd.count = r.get<std::uint8_t>("node count");
-    nd.leaf = r.get<std::uint8_t>("node leaf");
-    if (colour) d.node_colours[i] = r.get<rgb8>("node colour");
-    if (nd.radius < 0 || nd.cone_angle < 0 || nd.cone_angle > std::numbers::pi_v<float> ||
-        nd.leaf > 1)
-      throw FormatError(path + ": node " + std::to_string(i) +
-                        " has a negative radius, a cone outside [0, π] or a bad leaf flag");
-  }
-  if (qn) {
-    // Breadth first with contiguous children: an inner node's first child follows the children
-    // of the inner nodes before it, a leaf's first face the faces of the leaves before it.
-    std::uint64_t next_child = 1, next_face = 0;
-    for (std::size_t i = 0; i < nn; ++i) {
-      auto& nd = d.nodes[i];
-      if (nd.leaf) {
-        nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_face, none));
-        next_face += nd.count;
-      } else {
-        nd.first = static_cast<std::uint32_t>(std::min<std::uint64_t>(next_child, none));
-        next_child += nd.count;
-      }
-    }
-    if (next_child != nn || next_face != nf)
-      throw FormatError(path + ": the node counts give " + std::to_string(next_child) +
-                        " nodes and " + std::to_string(next_face) + " faces, the file has " +
-                        std::to_string(nn) + " and " + std::to_string(nf));
-  }
-  // The tree: breadth first, children after their parent, every node reached once, leaves
-  // partitioning the faces. Anything else is a corrupt file, not something to traverse.
-  std::vector<char> reached(nn, 0), face_seen(nf, 0);
-  reached[0] = 1;
-  auto& st = d.stats;
-  if (qn) {
-    d.nodes[0].centre = root_centre;
-    d.nodes[0].radius = root_radius;
-  }
-  for (std::size_t i = 0; i < nn; ++i) {
-    auto& nd = d.nodes[i];
-    if (!reached[i])
-      throw FormatError(path + ": node " + std::to_string(i) + " is not reachable from the root");
-    if (qn && i > 0) {  // the parent (an earlier node) has its sphere
-      const auto& pa = d.nodes[nd.parent];
-      dequantise_sphere(pa.centre, pa.radius, d.node_sphere_codes[i], nd.centre, nd.radius);
-      if (!all_finite(nd.centre))
-        throw FormatError(path + ": node " + std::to_string(i) + " has a non-finite centre");
-    }
-    const std::uint64_t end = std::uint64_t{nd.first} + nd.count;
-    if (nd.leaf) {
-      if (nd.count < 1 || nd.count > 4 || end > nf)
-        throw FormatError(path + ": leaf " + std::to_string(i) + " has faces [" +
-                          std::to_string(nd.first) + ", " + std::to_string(end) +
-                          "), expected 1..4 faces below " + std::to_string(nf));
-      for (std::uint64_t k = nd.first; k < end; ++k) {
-        if (face_seen[k])
-          throw FormatError(path + ": face " + std::to_string(k) + " belongs to two leaves");
-        face_seen[k] = 1;
-      }
-      ++st.leaves;
-      ++st.leaves_by_size[nd.count - 1u];
-    } else {
-      if (nd.count < 2 || nd.count > 4 || nd.first <= i || end > nn)
-        throw FormatError(path + ": node " + std::to_string(i) + " has children [" +
-                          std::to_string(nd.first) + ", " + std::to_string(end) +
-                          "), expected 2..4 children after it and below " + std::to_string(nn));
-      if (nd.depth >= 65535) throw FormatError(path + ": tree deeper than 65535 levels");
-      for (std::uint64_t k = nd.first; k < end; ++k) {
-        if (reached[k])
-          throw FormatError(path + ": node " + std::to_string(k) + " has two parents");
-        reached[k] = 1;
-        d.nodes[k].parent = static_cast<std::uint32_t>(i);
-        d.nodes[k].depth = static_cast<std::uint16_t>(nd.depth + 1);
-      }
-    }
-    st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
-  }
-  for (std::size_t k = 0; k < nf; ++k)
-    if (!face_seen[k]) throw FormatError(path + ": face " + std::to_string(k) + " is in no leaf");
-  st.vertices = nv;
-  st.triangles = nf;
-  st.nodes = nn;
-  set_file_stats(d, size);
-  return d;
-}
-
-bool operator==(const pop_data& a, const pop_data& b) {
-  // The build's timings are not part of the hierarchy (the file does not hold them).
-  const auto untimed = [](pop_build_stats s) {
-    s.has_timings = false;
-    s.build_seconds = s.prepare_seconds = s.adjacency_seconds = s.tree_seconds = 0;
-    return s;
-  };
-  return a.origin == b.origin && a.positions == b.positions && a.normals == b.normals &&
-         a.colours == b.colours && a.faces == b.faces && a.nodes == b.nodes &&
-         a.node_colours == b.node_colours && a.vertex_q == b.vertex_q && a.q_min == b.q_min &&
-         a.q_step == b.q_step && a.vertex_normal_codes == b.vertex_normal_codes &&
-         a.node_normal_codes == b.node_normal_codes && a.normal_bits == b.normal_bits &&
-         a.spheres == b.spheres && a.adjacency == b.adjacency &&
-         a.quantised_nodes == b.quantised_nodes && a.node_sphere_codes == b.node_sphere_codes &&
-         untimed(a.stats) == untimed(b.stats);
+  const auto t_prep = clock::now();
+  s.leaf_keys();  // §3.1 topology
+  s.partition_leaves();
+  s.lay_out_nodes();
+  s.spheres_and_cones();                         // §3.1 spheres, normals, cones, bottom up
+  if (opt.quantise_nodes) s.quantise_spheres();  // §3.5, top down
+  s.finish_stats(t0, t_prep, clock::now());
+  return std::move(s.d);
 }
 
 }  // namespace pbr_lod::detail

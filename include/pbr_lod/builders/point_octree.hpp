@@ -310,6 +310,7 @@ struct point_octree_policy : default_policy {
 }  // namespace pbr_lod
 
 #include "pbr_lod/builders/detail/point_octree_impl.hpp"
+#include "pbr_lod/builders/detail/point_octree_io.hpp"
 
 namespace pbr_lod {
 // The builder and the file code are compiled once, in src/builders/point_octree_instances.cpp,

@@ -32,7 +32,7 @@
 //               QSplat), normals to a q-bit table, face index lists, leaf → face range; node
 //               records QSplat-quantised relative to the parent (13 levels per centre axis and
 //               radius, rounded outwards; 2-bit cones; RGB 565); save()/load() of a versioned,
-//               validated file ("PBRLODPP" v2).
+//               validated file ("PBRLODPP" v3; src/builders/pop_io.cpp).
 //
 // Layout: a flat node array in breadth-first order. An inner node's children are contiguous
 // [first, first + count), 2..4 of them, all after it; a leaf's triangles are faces()[first,
@@ -291,10 +291,10 @@ class pop_tree {
   // ---- storage (§3.5)
   /// Writes the versioned file; throws IoError. load(save(t)) == t exactly.
   void save(const std::string& path) const { detail::save_pop_data(d_, path); }
-  /// Reads and validates a file written by save(): magic "PBRLODPP", version (2; version 1 files
-  /// are rejected with a FormatError saying to rebuild), attribute set,
-  /// every count and index against the file size and the tree, finite values, a checksum.
-  /// Throws IoError (cannot read) or FormatError naming the element at fault.
+  /// Reads and validates a file written by save(): magic "PBRLODPP", version (3; versions 1 and 2
+  /// are rejected with a FormatError saying to rebuild), attribute set, every count and index
+  /// against the file size and the tree, finite values, a checksum. Throws IoError (cannot read) or
+  /// FormatError naming the element at fault.
   [[nodiscard]] static pop_tree load(const std::string& path) {
     pop_tree t;
     t.d_ = detail::load_pop_data(path, A.colour);

@@ -1,4 +1,14 @@
-// pbr_lod — point-octree builder and file format (implementation of builders/point_octree.hpp).
+// pbr_lod — the point-octree builder (implementation of builders/point_octree.hpp). This work is
+// based on:
+//   R. Pajarola, "Efficient Level-of-Details for Point Based Rendering", CGIM 2003.
+// point_octree_builder::run() estimates normals and ellipses where the input has none (§4 end),
+// quantises them (§5), then build() makes each node through named stages:
+//   octant_pass()           §3, Fig. 3   split rule (octant about p̄_c), sphere radius, cone
+//   node_centre_and_cone()  §3           representative sample: p̄_c, n̄_c, normal cone, colour
+//   finish_leaf()           EQ 1–3, 5–6  covariance of the samples, bounding ellipse, sphere
+//   scatter_by_octant(), child_inputs(), build_children()   §3 "divide S_c into the subsets S_i"
+//   finish_inner()          EQ 4, 5–6    covariances merged bottom up, bounding ellipse, sphere
+// fit_ellipse() is EQ 5–6 with Fig. 6b's scale; the file format is in point_octree_io.hpp.
 #pragma once
 
 #include <algorithm>
@@ -8,18 +18,17 @@
 #include <cmath>
 #include <cstring>
 #include <exception>
-#include <fstream>
 #include <limits>
 #include <memory>
 #include <numbers>
 #include <numeric>
+#include <optional>
 #include <span>
 #include <thread>
 #include <utility>
 
 #include <Eigen/Eigenvalues>
 
-#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/covariance.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
@@ -373,21 +382,15 @@ struct point_octree_builder {
     return std::sqrt(std::max(u.squaredNorm(), v.squaredNorm()));
   }
 
-  /// Builds node `ni` of L from `inp`, recursing into its children; returns its summary.
-  summary build(local& L, std::uint32_t ni, const input& inp, bool parallel) {
-    if (cancel.load(std::memory_order_relaxed)) return {};
+  /// Stage 1 (§3, Fig. 3): one linear pass over the node's samples — the octant of each about
+  /// the split point p̄_c (the split rule), the children's sums, the sphere radius about p̄_c and
+  /// the cone about n̄_c. Ranges longer than a block run block by block — in parallel near the
+  /// root — and combine the blocks' sums in block order, so the tree does not depend on the
+  /// thread count. `parts` gets the per-block sums when there is more than one block.
+  pass_sums octant_pass(const input& inp, const vec3f& nbar, bool can_split, unsigned workers,
+                        std::vector<pass_sums>& parts) {
     const std::uint32_t first = inp.first, count = inp.count;
     const vec3d m = inp.mean;
-    const double nlen = inp.normal_sum.norm();
-    const bool normal_valid = nlen > 1e-6 * count;
-    const vec3f nbar =
-        normal_valid ? vec3f((inp.normal_sum / nlen).template cast<float>()) : vec3f::UnitZ();
-
-    // One linear pass (§3): octant of each sample about the split point p̄_c, the children's
-    // sums, the sphere radius about p̄_c and the cone about n̄_c. Ranges longer than a block run
-    // block by block — in parallel near the root — and combine the blocks' sums in block order,
-    // so the tree does not depend on the thread count.
-    const bool can_split = count > opt.leaf_size && inp.depth < opt.max_depth;
     const auto scan = [&](std::uint32_t lo, std::uint32_t hi, pass_sums& ps) {
       for (std::uint32_t k = lo; k < hi; ++k) {
         const vec3d p = in.positions[k].template cast<double>();
@@ -405,9 +408,7 @@ struct point_octree_builder {
       }
     };
     const std::uint32_t blocks = (count + block - 1) / block;
-    const unsigned workers = parallel ? threads : 1;
     pass_sums all;
-    std::vector<pass_sums> parts;  // per block, when there is more than one
     if (blocks <= 1) {
       scan(first, first + count, all);
     } else {
@@ -420,60 +421,69 @@ struct point_octree_builder {
       });
       for (const auto& ps : parts) all += ps;
     }
-    const auto& cnt = all.cnt;
-    const auto &psum = all.psum, &nsum = all.nsum, &csum = all.csum;
-    const double r2 = all.r2;
-    const float min_dot = all.min_dot;
-    int nonempty = 0;
-    for (auto c : cnt) nonempty += c > 0;
+    return all;
+  }
 
+  /// Stage 2 (§3): the node's representative sample — centre p̄_c, normal n̄_c, the normal cone
+  /// from the pass's smallest cosine, the mean colour. Axes and radius come with the ellipse.
+  node node_centre_and_cone(local& L, std::uint32_t ni, const input& inp, const vec3f& nbar,
+                            bool normal_valid, float min_dot) const {
     node nd{};
-    nd.centre = m.template cast<float>();
+    nd.centre = inp.mean.template cast<float>();
     nd.normal = nbar;
     nd.cone_angle = normal_valid ? std::acos(std::clamp(min_dot, -1.0f, 1.0f)) + 1e-6f
                                  : std::numbers::pi_v<float>;
     nd.cone_angle = std::min(nd.cone_angle, std::numbers::pi_v<float>);
     nd.depth = static_cast<std::uint8_t>(std::min<std::uint32_t>(inp.depth, 255));
     if constexpr (A.colour) {
-      const vec3d cavg = inp.colour_sum / count;
+      const vec3d cavg = inp.colour_sum / inp.count;
       L.colours[ni] = {static_cast<std::uint8_t>(std::lround(cavg.x())),
                        static_cast<std::uint8_t>(std::lround(cavg.y())),
                        static_cast<std::uint8_t>(std::lround(cavg.z()))};
     }
+    return nd;
+  }
+
+  /// Stage 3a (EQ 1–3, EQ 5–6): a leaf's covariance from its samples, its ellipse over the
+  /// corners of their disks, its bounding sphere over the same disks.
+  summary finish_leaf(local& L, std::uint32_t ni, node& nd, const input& inp, float radius,
+                      bool normal_valid) {
+    const std::uint32_t first = inp.first, count = inp.count;
     summary s;
-    float radius = static_cast<float>(std::sqrt(r2));
-
-    if (!can_split || nonempty < 2) {
-      // Leaf (also when every sample coincides: no split separates duplicates).
-      nd.leaf = 1;
-      nd.first = first;
-      nd.count = count;
-      for (std::uint32_t k = first; k < first + count; ++k) add_sample(s, k);
-      fit_ellipse(nd, q ? &L.codes[ni] : nullptr, s, normal_valid, [&](auto&& visit) {
-        for (std::uint32_t k = first; k < first + count; ++k) {
-          const vec3f &p = in.positions[k], &u = in.axis_u[k], &v = in.axis_v[k];
-          visit(p + u + v);
-          visit(p + u - v);
-          visit(p - u + v);
-          visit(p - u - v);
-        }
-      });
+    nd.leaf = 1;
+    nd.first = first;
+    nd.count = count;
+    for (std::uint32_t k = first; k < first + count; ++k) add_sample(s, k);
+    fit_ellipse(nd, q ? &L.codes[ni] : nullptr, s, normal_valid, [&](auto&& visit) {
       for (std::uint32_t k = first; k < first + count; ++k) {
-        radius = std::max(
-            radius, (in.positions[k] - nd.centre).norm() + extent(in.axis_u[k], in.axis_v[k]));
+        const vec3f &p = in.positions[k], &u = in.axis_u[k], &v = in.axis_v[k];
+        visit(p + u + v);
+        visit(p + u - v);
+        visit(p - u + v);
+        visit(p - u - v);
       }
-      nd.radius = std::max(radius, extent(nd.axis_u, nd.axis_v)) * (1 + 1e-6f);
-      L.nodes[ni] = nd;
-      done.fetch_add(count, std::memory_order_relaxed);
-      return s;
+    });
+    for (std::uint32_t k = first; k < first + count; ++k) {
+      radius = std::max(radius,
+                        (in.positions[k] - nd.centre).norm() + extent(in.axis_u[k], in.axis_v[k]));
     }
+    nd.radius = std::max(radius, extent(nd.axis_u, nd.axis_v)) * (1 + 1e-6f);
+    L.nodes[ni] = nd;
+    done.fetch_add(count, std::memory_order_relaxed);
+    return s;
+  }
 
-    // Scatter the samples by octant (a counting sort), children contiguous in octant order.
+  /// Stage 3b (§3, "divide S_c into the subsets S_i"): the samples scattered by octant (a
+  /// counting sort), children contiguous in octant order; returns each octant's start.
+  std::array<std::uint32_t, 8> scatter_by_octant(const input& inp, const pass_sums& all,
+                                                 const std::vector<pass_sums>& parts,
+                                                 unsigned workers) {
+    const std::uint32_t first = inp.first, count = inp.count;
     std::array<std::uint32_t, 8> start{};
     std::uint32_t acc = first;
     for (int o = 0; o < 8; ++o) {
       start[static_cast<std::size_t>(o)] = acc;
-      acc += cnt[static_cast<std::size_t>(o)];
+      acc += all.cnt[static_cast<std::size_t>(o)];
     }
     // Where each block's samples of each octant go: the octant's start plus the counts of the
     // blocks before it.
@@ -497,66 +507,76 @@ struct point_octree_builder {
     scatter_all(in.axis_v, scratch3);
     if constexpr (A.colour) scatter_all(in.colours, scratch_rgb);
     if (in_codes) scatter_all(*in_codes, scratch_code);
-    const auto first_child = static_cast<std::uint32_t>(L.nodes.size());
-    nd.leaf = 0;
-    nd.first = first_child;
-    nd.count = static_cast<std::uint32_t>(nonempty);
-    L.nodes.resize(L.nodes.size() + static_cast<std::size_t>(nonempty));
-    if constexpr (A.colour) L.colours.resize(L.nodes.size());
-    if (q) L.codes.resize(L.nodes.size());
+    return start;
+  }
 
+  /// Stage 3c (Fig. 3, top down): the children's inputs, their averages from the pass's sums.
+  static std::vector<input> child_inputs(const input& inp, const pass_sums& all,
+                                         const std::array<std::uint32_t, 8>& start) {
     std::vector<input> kids;
-    for (int o = 0; o < 8; ++o) {
-      const auto c = cnt[static_cast<std::size_t>(o)];
+    for (std::size_t o = 0; o < 8; ++o) {
+      const auto c = all.cnt[o];
       if (c == 0) continue;
-      kids.push_back({start[static_cast<std::size_t>(o)], c, psum[static_cast<std::size_t>(o)] / c,
-                      nsum[static_cast<std::size_t>(o)], csum[static_cast<std::size_t>(o)],
-                      inp.depth + 1});
+      kids.push_back({start[o], c, all.psum[o] / c, all.nsum[o], all.csum[o], inp.depth + 1});
     }
+    return kids;
+  }
+
+  /// Stage 3d: the children's subtrees, as nodes first_child + j of L; their summaries, or
+  /// nothing when cancelled.
+  std::optional<std::vector<summary>> build_children(local& L, std::uint32_t first_child,
+                                                     const std::vector<input>& kids, bool parallel,
+                                                     unsigned workers, std::uint32_t count) {
     std::vector<summary> sums(kids.size());
-    if (parallel && kids.size() > 1) {
-      // Each child subtree in its own node array, spliced in below. `workers` threads take the
-      // children largest first (the old one-thread-per-child oversubscribed 2 cores fourfold);
-      // the calling thread reports progress meanwhile. Which thread builds a subtree does not
-      // change it.
-      std::vector<local> locals(kids.size());
-      std::vector<std::size_t> order(kids.size());
-      std::iota(order.begin(), order.end(), std::size_t{0});
-      std::stable_sort(order.begin(), order.end(),
-                       [&](std::size_t a, std::size_t b) { return kids[a].count > kids[b].count; });
-      for (std::size_t j = 0; j < kids.size(); ++j) {
-        reserve(locals[j], node_estimate(kids[j].count));
-        locals[j].nodes.resize(1);
-        if constexpr (A.colour) locals[j].colours.resize(1);
-        if (q) locals[j].codes.resize(1);
-      }
-      // The subtrees as tasks on the pool (core/parallel.hpp), largest first. The calling thread
-      // reports progress between the subtrees it builds and inside them (below); a pool thread
-      // never calls the user's callback.
-      std::vector<std::exception_ptr> errors(kids.size());
-      parallel_tasks(order.size(), workers, [&](std::size_t i, unsigned) {
-        const std::size_t j = order[i];
-        try {
-          if (!cancel.load(std::memory_order_relaxed))
-            sums[j] = build(locals[j], 0, kids[j], false);
-        } catch (...) {
-          errors[j] = std::current_exception();
-          cancel.store(true);
-        }
-        if (std::this_thread::get_id() == caller) report();
-      });
-      for (const auto& e : errors)
-        if (e) std::rethrow_exception(e);
-      if (cancel.load(std::memory_order_relaxed)) return {};
-      splice(L, first_child, locals, workers);
-    } else {
+    if (!(parallel && kids.size() > 1)) {
       for (std::size_t j = 0; j < kids.size(); ++j) {
         sums[j] = build(L, first_child + static_cast<std::uint32_t>(j), kids[j], false);
         // Large nodes only: a few dozen reports per subtree, not a clock read per node.
         if (parallel || (count >= 65536 && std::this_thread::get_id() == caller)) report();
       }
+      return sums;
     }
-    if (cancel.load(std::memory_order_relaxed)) return {};
+    // Each child subtree in its own node array, spliced in below. `workers` threads take the
+    // children largest first (the old one-thread-per-child oversubscribed 2 cores fourfold);
+    // the calling thread reports progress meanwhile. Which thread builds a subtree does not
+    // change it.
+    std::vector<local> locals(kids.size());
+    std::vector<std::size_t> order(kids.size());
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return kids[a].count > kids[b].count; });
+    for (std::size_t j = 0; j < kids.size(); ++j) {
+      reserve(locals[j], node_estimate(kids[j].count));
+      locals[j].nodes.resize(1);
+      if constexpr (A.colour) locals[j].colours.resize(1);
+      if (q) locals[j].codes.resize(1);
+    }
+    // The subtrees as tasks on the pool (core/parallel.hpp), largest first. The calling thread
+    // reports progress between the subtrees it builds and inside them (below); a pool thread
+    // never calls the user's callback.
+    std::vector<std::exception_ptr> errors(kids.size());
+    parallel_tasks(order.size(), workers, [&](std::size_t i, unsigned) {
+      const std::size_t j = order[i];
+      try {
+        if (!cancel.load(std::memory_order_relaxed)) sums[j] = build(locals[j], 0, kids[j], false);
+      } catch (...) {
+        errors[j] = std::current_exception();
+        cancel.store(true);
+      }
+      if (std::this_thread::get_id() == caller) report();
+    });
+    for (const auto& e : errors)
+      if (e) std::rethrow_exception(e);
+    if (cancel.load(std::memory_order_relaxed)) return std::nullopt;
+    splice(L, first_child, locals, workers);
+    return sums;
+  }
+
+  /// Stage 4 (EQ 4, EQ 5–6, bottom up): an inner node's covariance merged from its children's,
+  /// its ellipse over the corners of theirs, its bounding sphere over their spheres.
+  summary finish_inner(local& L, std::uint32_t ni, node& nd, std::uint32_t first_child,
+                       const std::vector<summary>& sums, float radius, bool normal_valid) {
+    summary s;
     for (const auto& c : sums) add_summary(s, c);
     fit_ellipse(nd, q ? &L.codes[ni] : nullptr, s, normal_valid, [&](auto&& visit) {
       for (std::uint32_t j = 0; j < nd.count; ++j) {
@@ -574,6 +594,43 @@ struct point_octree_builder {
     nd.radius = std::max(radius, extent(nd.axis_u, nd.axis_v)) * (1 + 1e-6f);
     L.nodes[ni] = nd;
     return s;
+  }
+
+  /// Builds node `ni` of L from `inp`, recursing into its children; returns its summary. The
+  /// stages above, in order: the pass, the node's centre and cone, then either the leaf or the
+  /// split into children and the inner node.
+  summary build(local& L, std::uint32_t ni, const input& inp, bool parallel) {
+    if (cancel.load(std::memory_order_relaxed)) return {};
+    const std::uint32_t count = inp.count;
+    const double nlen = inp.normal_sum.norm();
+    const bool normal_valid = nlen > 1e-6 * count;
+    const vec3f nbar =
+        normal_valid ? vec3f((inp.normal_sum / nlen).template cast<float>()) : vec3f::UnitZ();
+    const bool can_split = count > opt.leaf_size && inp.depth < opt.max_depth;
+    const unsigned workers = parallel ? threads : 1;
+    std::vector<pass_sums> parts;  // per block, when there is more than one
+    const pass_sums all = octant_pass(inp, nbar, can_split, workers, parts);
+    int nonempty = 0;
+    for (auto c : all.cnt) nonempty += c > 0;
+
+    node nd = node_centre_and_cone(L, ni, inp, nbar, normal_valid, all.min_dot);
+    const float radius = static_cast<float>(std::sqrt(all.r2));
+    // A leaf also when every sample coincides: no split separates duplicates.
+    if (!can_split || nonempty < 2) return finish_leaf(L, ni, nd, inp, radius, normal_valid);
+
+    const auto start = scatter_by_octant(inp, all, parts, workers);
+    const auto first_child = static_cast<std::uint32_t>(L.nodes.size());
+    nd.leaf = 0;
+    nd.first = first_child;
+    nd.count = static_cast<std::uint32_t>(nonempty);
+    L.nodes.resize(L.nodes.size() + static_cast<std::size_t>(nonempty));
+    if constexpr (A.colour) L.colours.resize(L.nodes.size());
+    if (q) L.codes.resize(L.nodes.size());
+
+    const auto sums =
+        build_children(L, first_child, child_inputs(inp, all, start), parallel, workers, count);
+    if (!sums || cancel.load(std::memory_order_relaxed)) return {};
+    return finish_inner(L, ni, nd, first_child, *sums, radius, normal_valid);
   }
 
   /// Room for the nodes of n samples without regrowing: ≈ 0.4 per sample at leaf size 8
@@ -820,251 +877,12 @@ point_octree<point_octree_attributes(In)> build_point_octree(const point_set<In>
   return detail::point_octree_builder<point_octree_attributes(In)>::run(points, opt);
 }
 
-// ---------------------------------------------------------------------------------------------
-// Storage (§5, Table 2). Little-endian file:
-//   header  "PBRLODPO" | u32 version | u32 flags (1 colour, 2 quantised) | u32 normal_bits
-//           | u64 nodes | u64 samples | f64 origin[3] | u64 input points
-//           (version 1 also held the build's timings: no two builds compared equal)
-//   nodes   f32 centre[3], f32 radius, f32 cone, u32 first, u32 count, u8 leaf, u8 depth,
-//           then quantised: u16/u32 normal code, u16/u32 axis code, f32 a, f32 b
-//                  or float: f32 normal[3], f32 axis_u[3], f32 axis_v[3]
-//           [u8 rgb[3]]
-//   samples f32 position[3], then the same normal/axis block as nodes, [u8 rgb[3]]
-//   trailer u64 FNV-1a of every byte before it
-// ---------------------------------------------------------------------------------------------
-namespace detail {
-
-inline constexpr file_format point_octree_format{
-    "point-octree", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'O'}, 2};
-
-template <attributes A>
-struct point_octree_io {
-  using tree = point_octree<A>;
-
-  static std::size_t orientation_bytes(int bits) {
-    return bits > 0 ? 2 * (bits <= 16 ? 2u : 4u) + 8 : 36;
-  }
-  static std::size_t node_bytes(int bits) {
-    return 12 + 4 + 4 + 4 + 4 + 1 + 1 + orientation_bytes(bits) + (A.colour ? 3 : 0);
-  }
-  static std::size_t sample_bytes(int bits) {
-    return 12 + orientation_bytes(bits) + (A.colour ? 3 : 0);
-  }
-  static constexpr std::size_t header_bytes = 8 + 4 * 3 + 8 * 2 + 8 * 3 + 8;
-
-  using code_t = typename tree::orientation_code;
-  static void put_orientation(byte_writer& w, int bits, const code_t* code, const vec3f& n,
-                              const vec3f& u, const vec3f& v) {
-    if (bits > 0) {
-      w.put_code(code->normal, bits);
-      w.put_code(code->axis, bits);
-      w.put(code->a);
-      w.put(code->b);
-    } else {
-      w.put_vec(n);
-      w.put_vec(u);
-      w.put_vec(v);
-    }
-  }
-
-  static std::vector<unsigned char> serialise(const tree& t) {
-    byte_writer w;
-    w.bytes.reserve(t.file_bytes());
-    write_head(w, point_octree_format);
-    w.put(static_cast<std::uint32_t>((A.colour ? 1u : 0u) | (t.normal_bits_ > 0 ? 2u : 0u)));
-    w.put(static_cast<std::uint32_t>(t.normal_bits_));
-    w.put(static_cast<std::uint64_t>(t.nodes_.size()));
-    w.put(static_cast<std::uint64_t>(t.samples_.size()));
-    w.put(t.samples_.origin.x());
-    w.put(t.samples_.origin.y());
-    w.put(t.samples_.origin.z());
-    w.put(static_cast<std::uint64_t>(t.stats_.input_points));
-    const int bits = t.normal_bits_;
-    for (std::size_t i = 0; i < t.nodes_.size(); ++i) {
-      const auto& nd = t.nodes_[i];
-      w.put_vec(nd.centre);
-      w.put(nd.radius);
-      w.put(nd.cone_angle);
-      w.put(nd.first);
-      w.put(nd.count);
-      w.put(nd.leaf);
-      w.put(nd.depth);
-      put_orientation(w, bits, bits ? &t.node_codes_[i] : nullptr, nd.normal, nd.axis_u, nd.axis_v);
-      if constexpr (A.colour) w.put(t.node_colours_[i]);
-    }
-    const auto& s = t.samples_;
-    for (std::size_t i = 0; i < s.size(); ++i) {
-      w.put_vec(s.positions[i]);
-      put_orientation(w, bits, bits ? &t.sample_codes_[i] : nullptr, s.normals[i], s.axis_u[i],
-                      s.axis_v[i]);
-      if constexpr (A.colour) w.put(s.colours[i]);
-    }
-    append_checksum(w);
-    return w.bytes;
-  }
-
-  static void get_orientation(byte_reader& r, const normal_quantizer* q, code_t* code, vec3f& n,
-                              vec3f& u, vec3f& v, std::size_t element) {
-    if (q) {
-      code->normal = r.get_code(q->bits(), "normal code");
-      code->axis = r.get_code(q->bits(), "axis code");
-      if (!q->valid(code->normal) || !q->valid(code->axis))
-        throw FormatError(r.path + ": element " + std::to_string(element) +
-                          " has a normal code beyond the " + std::to_string(q->size()) +
-                          "-entry table");
-      const float a = r.get_finite("axis length", element),
-                  b = r.get_finite("axis length", element);
-      if (a < 0 || b < 0)
-        throw FormatError(r.path + ": negative axis length in element " + std::to_string(element));
-      code->a = a;
-      code->b = b;
-      vec3f e1, e2;
-      axes_from_codes(*q, code->normal, code->axis, n, e1, e2);
-      u = e1 * a;
-      v = e2 * b;
-    } else {
-      n = r.get_vec("normal", element);
-      u = r.get_vec("axis_u", element);
-      v = r.get_vec("axis_v", element);
-    }
-  }
-
-  static tree load(const std::string& path) {
-    const std::vector<unsigned char> bytes = load_file_bytes(path);
-    byte_reader r{bytes, 0, path};
-    read_head(r, point_octree_format, 1);  // version 1 stored the build's timings
-    const auto flags = r.get<std::uint32_t>("flags");
-    check_colour_flag((flags & 1u) != 0, A.colour, path, "point_octree");
-    if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
-    const auto bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
-    if (((flags & 2u) != 0) != (bits > 0) || bits < 0 || (bits > 0 && (bits < 6 || bits > 24)))
-      throw FormatError(path + ": inconsistent normal quantisation (" + std::to_string(bits) +
-                        " bits)");
-    const auto n_nodes = r.get<std::uint64_t>("node count");
-    const auto n_samples = r.get<std::uint64_t>("sample count");
-    const std::size_t expect = header_bytes;
-    // Validate the counts against the file size before allocating anything.
-    const std::uint64_t nb = node_bytes(bits), sb = sample_bytes(bits);
-    if (n_nodes == 0 || n_samples == 0 || n_nodes > bytes.size() / nb ||
-        n_samples > bytes.size() / sb || expect + n_nodes * nb + n_samples * sb + 8 != bytes.size())
-      throw FormatError(path + ": " + std::to_string(n_nodes) + " nodes and " +
-                        std::to_string(n_samples) + " samples need " +
-                        std::to_string(expect + n_nodes * nb + n_samples * sb + 8) +
-                        " bytes, the file has " + std::to_string(bytes.size()));
-    if (!checksum_matches(bytes)) throw FormatError(path + ": checksum mismatch (corrupt file)");
-
-    tree t;
-    t.normal_bits_ = bits;
-    std::shared_ptr<const normal_quantizer> q;  // one table per process, not one per load
-    if (bits > 0) q = normal_quantizer::shared(bits);
-    auto& s = t.samples_;
-    s.origin.x() = r.get<double>("origin");
-    s.origin.y() = r.get<double>("origin");
-    s.origin.z() = r.get<double>("origin");
-    if (!all_finite(s.origin)) throw FormatError(path + ": origin is not finite");
-    t.stats_.input_points = r.get<std::uint64_t>("stats");
-    t.nodes_.resize(n_nodes);
-    if constexpr (A.colour) t.node_colours_.resize(n_nodes);
-    if (q) t.node_codes_.resize(n_nodes);
-    for (std::size_t i = 0; i < n_nodes; ++i) {
-      auto& nd = t.nodes_[i];
-      nd.centre = r.get_vec("node centre", i);
-      nd.radius = r.get_finite("node radius", i);
-      nd.cone_angle = r.get_finite("node cone", i);
-      nd.first = r.get<std::uint32_t>("node first");
-      nd.count = r.get<std::uint32_t>("node count");
-      nd.leaf = r.get<std::uint8_t>("node leaf");
-      nd.depth = r.get<std::uint8_t>("node depth");
-      get_orientation(r, q.get(), q ? &t.node_codes_[i] : nullptr, nd.normal, nd.axis_u, nd.axis_v,
-                      i);
-      if constexpr (A.colour) t.node_colours_[i] = r.get<rgb8>("node colour");
-      if (nd.radius < 0 || nd.cone_angle < 0 || nd.leaf > 1)
-        throw FormatError(path + ": node " + std::to_string(i) +
-                          " has a negative radius/cone or a bad leaf flag");
-    }
-    s.resize(n_samples);
-    if (q) t.sample_codes_.resize(n_samples);
-    for (std::size_t i = 0; i < n_samples; ++i) {
-      s.positions[i] = r.get_vec("sample position", i);
-      get_orientation(r, q.get(), q ? &t.sample_codes_[i] : nullptr, s.normals[i], s.axis_u[i],
-                      s.axis_v[i], i);
-      if constexpr (A.colour) s.colours[i] = r.get<rgb8>("sample colour");
-    }
-    validate_tree(t, path);
-    t.derive_selection();
-    t.stats_.nodes = n_nodes;
-    for (const auto& nd : t.nodes_) {
-      t.stats_.leaves += nd.leaf;
-      t.stats_.max_depth = std::max<std::size_t>(t.stats_.max_depth, nd.depth);
-    }
-    return t;
-  }
-
-  /// Children come after their parent and every node is reached once; leaves partition the
-  /// samples. Anything else is a corrupt file, not something to traverse.
-  static void validate_tree(const tree& t, const std::string& path) {
-    const std::size_t n = t.nodes_.size();
-    std::vector<char> reached(n, 0);
-    std::vector<char> sample_seen(t.samples_.size(), 0);
-    reached[0] = 1;
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto& nd = t.nodes_[i];
-      if (!reached[i])
-        throw FormatError(path + ": node " + std::to_string(i) + " is not reachable from the root");
-      const std::uint64_t end = static_cast<std::uint64_t>(nd.first) + nd.count;
-      if (nd.leaf) {
-        if (nd.count == 0 || end > t.samples_.size())
-          throw FormatError(path + ": leaf " + std::to_string(i) +
-                            " references samples beyond the file's " +
-                            std::to_string(t.samples_.size()));
-        for (std::uint64_t k = nd.first; k < end; ++k) {
-          if (sample_seen[k])
-            throw FormatError(path + ": sample " + std::to_string(k) + " belongs to two leaves");
-          sample_seen[k] = 1;
-        }
-      } else {
-        if (nd.count == 0 || nd.count > 8 || nd.first <= i || end > n)
-          throw FormatError(path + ": node " + std::to_string(i) + " has children [" +
-                            std::to_string(nd.first) + ", " + std::to_string(end) +
-                            "), expected 1..8 children after it and below " + std::to_string(n));
-        for (std::uint64_t k = nd.first; k < end; ++k) {
-          if (reached[k])
-            throw FormatError(path + ": node " + std::to_string(k) + " has two parents");
-          reached[k] = 1;
-        }
-      }
-    }
-    for (std::size_t k = 0; k < sample_seen.size(); ++k)
-      if (!sample_seen[k])
-        throw FormatError(path + ": sample " + std::to_string(k) + " is in no leaf");
-  }
-};
-
-}  // namespace detail
-
-template <attributes A>
-std::size_t point_octree<A>::file_bytes() const {
-  using io = detail::point_octree_io<A>;
-  return io::header_bytes + nodes_.size() * io::node_bytes(normal_bits_) +
-         samples_.size() * io::sample_bytes(normal_bits_) + 8;
-}
-
 template <attributes A>
 std::size_t point_octree<A>::memory_bytes() const {
   return nodes_.size() * sizeof(node) + (A.colour ? nodes_.size() * sizeof(rgb8) : 0) +
          samples_.size() * point_set<A>::bytes_per_point() +
          (node_codes_.size() + sample_codes_.size()) * sizeof(orientation_code) +
          selection_.size() * sizeof(selection_record);
-}
-
-template <attributes A>
-void point_octree<A>::save(const std::string& path) const {
-  detail::save_file_bytes(path, detail::point_octree_io<A>::serialise(*this));
-}
-
-template <attributes A>
-point_octree<A> point_octree<A>::load(const std::string& path) {
-  return detail::point_octree_io<A>::load(path);
 }
 
 template <attributes A>
