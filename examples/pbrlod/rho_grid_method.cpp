@@ -17,7 +17,7 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   const auto& st = g.stats();
   json j;
   j.str("file", path).str("method", "rho-grid");
-  j.integer("rho", R).integer("depth", g.depth()).integer("sigma", g.sigma());
+  j.integer("rho", R).integer("level", g.level()).integer("sigma", g.sigma());
   j.integer("normal_bits", g.normal_bits()).integer("material_bits", g.material_bits());
   j.integer("samples", static_cast<long long>(st.samples));
   j.integer("inner_cells", static_cast<long long>(st.inner_cells));
@@ -38,10 +38,15 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
 }
 
 int build(const build_request& r) {
+  for (const std::string& p : r.params)
+    if (p.starts_with("depth="))
+      throw InvalidArgument(
+          "rho-grid: --param depth=N was renamed: use --param level=N-1 (the paper's level; "
+          "oct/7 is rho=2 level=7, a 256^3 grid)");
   params m(r.params);
   const int rho = static_cast<int>(m.integer("rho", 3, 2, 5));
   rho_grid_options o;
-  o.depth = static_cast<int>(m.integer("depth", 6, 1, 40));
+  o.level = static_cast<int>(m.integer("level", 5, 0, 39));
   o.normal_bits = static_cast<int>(m.integer("normal_bits", 13, 0, 16));
   o.material_bits = static_cast<int>(m.integer("material_bits", 3, 0, 8));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
@@ -49,7 +54,7 @@ int build(const build_request& r) {
   const auto layout = layout_name == "is"    ? rho_grid_layout::is
                       : layout_name == "nis" ? rho_grid_layout::nis
                                              : rho_grid_layout::compressed;
-  m.finish("rho-grid", "rho, depth, normal_bits, material_bits, threads, layout");
+  m.finish("rho-grid", "rho, level, normal_bits, material_bits, threads, layout");
   o.progress = progress_callback("rho-grid", interactive(r.as_json));
   const loaded_input in = load(r.input);
   return visit_rho(rho, [&]<int R>() {

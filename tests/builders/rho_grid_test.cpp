@@ -215,7 +215,7 @@ void check_plane_codes() {
   // Extend the z range to the x/y range so the cube matches the intended grid.
   pc.positions.emplace_back(float(0.5 / m), float(0.5 / m), float(0.5 / m));
   pc.positions.emplace_back(float(0.5 / m), float(0.5 / m), float(1 - 0.5 / m));
-  const auto g = build_rho_grid<Rho>(pc, {.depth = k, .normal_bits = 0, .material_bits = 0});
+  const auto g = build_rho_grid<Rho>(pc, {.level = k - 1, .normal_bits = 0, .material_bits = 0});
   // Leaves: the m² plane cells plus the 2 corner points' cells (distinct from the plane unless
   // m is small); inner cells carry ρ² children except along the corner paths.
   const double expect = std::pow(double(Rho), 2 * k) + 2;
@@ -238,26 +238,26 @@ TEST(RhoGridTable1, PlaneMatchesEquation3) {
 // of a non-empty cell is at most that far), and every point of a dense surface sampling falls in
 // a non-empty leaf (no false empties).
 template <int Rho>
-void check_mesh_structure(int depth) {
+void check_mesh_structure(int leaf_depth) {
   const auto& mesh = bunny_small();
-  const auto g = build_rho_grid<Rho>(mesh, {.depth = depth, .keep_sample_points = true});
+  const auto g = build_rho_grid<Rho>(mesh, {.level = leaf_depth - 1, .keep_sample_points = true});
   ASSERT_EQ(g.sample_points().size(), g.cell_count());
   const auto pos = decode_positions(g);
   std::set<std::array<std::uint32_t, 3>> leaves;
   for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
     const auto& [l, p] = pos[c];
-    EXPECT_EQ(l < depth, !g.is_leaf(c));
-    EXPECT_GE(c, g.level_begin(l));
-    EXPECT_LT(c, g.level_begin(l + 1));
+    EXPECT_EQ(l < leaf_depth, !g.is_leaf(c));
+    EXPECT_GE(c, g.depth_begin(l));
+    EXPECT_LT(c, g.depth_begin(l + 1));
     const double s = g.cell_side(l);
     const vec3d centre((p[0] + 0.5) * s, (p[1] + 0.5) * s, (p[2] + 0.5) * s);
     EXPECT_LE((g.sample_points()[c].template cast<double>() - centre).norm(),
               0.5 * std::sqrt(3.0) * s * (1 + 1e-5))
         << "cell " << c;
-    if (l == depth) leaves.insert(p);
+    if (l == leaf_depth) leaves.insert(p);
   }
   const auto surface = sample_surface(mesh, 20000, 3);
-  const double leaf = g.cell_side(depth);
+  const double leaf = g.cell_side(leaf_depth);
   for (std::size_t i = 0; i < surface.size(); ++i) {
     const vec3d r = surface.world(i) - g.origin();
     std::array<std::uint32_t, 3> p;
@@ -276,7 +276,7 @@ TEST(RhoGridStructure, CodesDecodeToTheCellsBuilt) {
 // distance to the nearest triangle (brute force, double) is ≤ 1e-6 of the box.
 TEST(RhoGridSampling, EverySampleLiesOnTheSurface) {
   const auto& mesh = bunny_small();
-  const auto g = build_rho_grid<3>(mesh, {.depth = 4, .keep_sample_points = true});
+  const auto g = build_rho_grid<3>(mesh, {.level = 3, .keep_sample_points = true});
   const double tol = 1e-6 * g.cube_side();
   double worst = 0;
   for (std::size_t c = 0; c < g.cell_count(); c += 3)
@@ -289,7 +289,7 @@ TEST(RhoGridSampling, EverySampleLiesOnTheSurface) {
 // and a cell's sample is its own input point nearest to the centre (so it lies in the cell).
 TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
   const auto pc = sample_surface(make_demo_scene(16), 5000, 11);
-  const auto g = build_rho_grid<3>(pc, {.depth = 4, .keep_sample_points = true});
+  const auto g = build_rho_grid<3>(pc, {.level = 3, .keep_sample_points = true});
   const double leaf = g.cell_side(4);
   std::set<std::array<std::uint32_t, 3>> occupied;
   const double m = std::pow(3.0, 4);
@@ -302,7 +302,7 @@ TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
   }
   const auto pos = decode_positions(g);
   std::set<std::array<std::uint32_t, 3>> leaves;
-  for (std::uint32_t c = g.level_begin(4); c < g.cell_count(); ++c) {
+  for (std::uint32_t c = g.depth_begin(4); c < g.cell_count(); ++c) {
     leaves.insert(std::get<1>(pos[c]));
     const auto& p = std::get<1>(pos[c]);
     const vec3d s = g.sample_points()[c].cast<double>();
@@ -321,18 +321,18 @@ TEST(RhoGridAttributes, SigmaFollowsTheScene) {
   point_cloud pc = sample_surface(make_demo_scene(8), 500, 2);
   pc.normals.clear();
   pc.colours.clear();
-  const auto g0 = build_rho_grid<2>(pc, {.depth = 4});
+  const auto g0 = build_rho_grid<2>(pc, {.level = 3});
   EXPECT_EQ(g0.sigma(), 0);
   EXPECT_EQ(g0.memory_bytes(), g0.inner_count() * (sizeof(detail::child_code<2>) + 4));
   pc.materials.assign(pc.size(), 5);
-  const auto g3 = build_rho_grid<2>(pc, {.depth = 4});
+  const auto g3 = build_rho_grid<2>(pc, {.level = 3});
   EXPECT_EQ(g3.sigma(), 3);
   for (std::uint32_t c = 0; c < g3.cell_count(); ++c) EXPECT_EQ(g3.material(c), 5u);
   const auto gm =
-      build_rho_grid<3>(bunny_small(), {.depth = 2, .normal_bits = 0, .material_bits = 0});
+      build_rho_grid<3>(bunny_small(), {.level = 1, .normal_bits = 0, .material_bits = 0});
   EXPECT_EQ(gm.sigma(), 0);
   pc.materials.assign(pc.size(), 9);  // needs 4 bits
-  EXPECT_THROW((void)build_rho_grid<2>(pc, {.depth = 2}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<2>(pc, {.level = 1}), InvalidArgument);
 }
 
 // The quantised normal of a cell is the surface normal at its sample: the area-weighted vertex
@@ -341,7 +341,7 @@ TEST(RhoGridAttributes, SigmaFollowsTheScene) {
 // brute force may pick the neighbouring triangle (the interpolated normal is continuous there).
 TEST(RhoGridAttributes, NormalsMatchTheSurface) {
   const auto& mesh = bunny_small();
-  const auto g = build_rho_grid<3>(mesh, {.depth = 3, .keep_sample_points = true});
+  const auto g = build_rho_grid<3>(mesh, {.level = 2, .keep_sample_points = true});
   const normal_quantizer q(13);
   const auto vn = area_weighted_normals(mesh);
   double worst = 0;
@@ -404,7 +404,7 @@ void check_round_trip(const rho_grid<Rho>& g) {
   const auto back = rho_grid<Rho>::parse(is);
   EXPECT_TRUE(back == g);
   // Payload size is exactly the §3.2 count; the file adds a fixed header and checksum.
-  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
+  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.leaf_depth() + 1) * 8 + 8;
   EXPECT_EQ(is.size(), header + (g.payload_bits(rho_grid_layout::is) + 7) / 8 + 8);
   const auto nis = g.serialise(rho_grid_layout::nis);
   EXPECT_EQ(nis.size(), header + (g.payload_bits(rho_grid_layout::nis) + 7) / 8 + 8);
@@ -418,11 +418,11 @@ void check_round_trip(const rho_grid<Rho>& g) {
 }
 
 TEST(RhoGridStreams, NisAndIsRoundTrip) {
-  check_round_trip(build_rho_grid<2>(bunny_small(), {.depth = 5}));
-  check_round_trip(build_rho_grid<3>(bunny_small(), {.depth = 3}));
-  check_round_trip(build_rho_grid<4>(bunny_small(), {.depth = 2, .normal_bits = 9}));
-  check_round_trip(build_rho_grid<5>(bunny_small(), {.depth = 2, .normal_bits = 0}));
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  check_round_trip(build_rho_grid<2>(bunny_small(), {.level = 4}));
+  check_round_trip(build_rho_grid<3>(bunny_small(), {.level = 2}));
+  check_round_trip(build_rho_grid<4>(bunny_small(), {.level = 1, .normal_bits = 9}));
+  check_round_trip(build_rho_grid<5>(bunny_small(), {.level = 1, .normal_bits = 0}));
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   const auto path = (std::filesystem::temp_directory_path() / "pbr_lod_rho_grid_test.lod").string();
   g.save(path, rho_grid_layout::nis);
   EXPECT_EQ(rho_grid_file_rho(path), 3);
@@ -435,7 +435,7 @@ TEST(RhoGridStreams, NisAndIsRoundTrip) {
 // Every truncation, a flipped bit anywhere (checksum), and structural lies with a valid
 // checksum (a changed count, a childhood code with a bit removed) are FormatErrors.
 TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 2});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 1});
   for (auto layout : {rho_grid_layout::nis, rho_grid_layout::is}) {
     const auto bytes = g.serialise(layout);
     std::mt19937 rng(3);
@@ -485,8 +485,8 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
 // Two builds of the same mesh, at 1 and 2 threads, write the same bytes in every layout (the file
 // holds no timings); a loaded grid says it has none.
 TEST(RhoGridStream, FilesAreDeterministic) {
-  const auto a = build_rho_grid<3>(bunny_small(), {.depth = 4, .threads = 1});
-  const auto b = build_rho_grid<3>(bunny_small(), {.depth = 4, .threads = 2});
+  const auto a = build_rho_grid<3>(bunny_small(), {.level = 3, .threads = 1});
+  const auto b = build_rho_grid<3>(bunny_small(), {.level = 3, .threads = 2});
   EXPECT_TRUE(a.stats().has_timings);
   for (const auto layout : {rho_grid_layout::nis, rho_grid_layout::is}) {
     const auto x = a.serialise(layout), y = b.serialise(layout);
@@ -501,7 +501,7 @@ TEST(RhoGridStream, FilesAreDeterministic) {
 // by the first cell of the level after next. Its size is 32 bits + code + 16 bits per inner cell
 // and 16 bits per leaf.
 TEST(RhoGridInCore, ChildTableIsContiguous) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   std::uint32_t expect = 1;
   for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
     EXPECT_EQ(g.first_child(c), expect);
@@ -574,10 +574,11 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
   EXPECT_DOUBLE_EQ(back.stats().bits_per_sample_incore, g.stats().bits_per_sample_incore);
   // The reported sizes are those of the file: header + both streams + checksum.
   const auto cs = g.coded_size();
-  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
+  const std::size_t header =
+      8 + 6 * 4 + 8 * 8 + std::size_t(g.leaf_depth() + 1) * 8 + 2 * 4 + 2 * 8;
   EXPECT_EQ(cs.file_bytes, bytes.size());
   EXPECT_EQ(header + cs.geometry_bytes + cs.attribute_bytes + 8, bytes.size());
-  EXPECT_EQ(cs.geometry_bytes == 0, g.depth() == 0);
+  EXPECT_EQ(cs.geometry_bytes == 0, g.leaf_depth() == 0);
   EXPECT_EQ(cs.attribute_bytes == 0, g.sigma() == 0);
   // Every context model and predictor decodes to the same tree.
   for (auto gm :
@@ -589,16 +590,16 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
                       g, {.geometry = gm, .attributes = am})) == g);
 }
 
-// Synthetic cases: one point (one path, depth 4), a depth-0 grid (root only, no geometry
+// Synthetic cases: one point (one path, level 3), a level −1 grid (root only, no geometry
 // stream), a full grid (every leaf occupied: the coder must learn "always 1"), a cloud without
 // normals (σ = 0: no attribute stream) and one with materials; and the bunny at ρ = 2..5.
 TEST(RhoGridCompressed, RoundTripIsExact) {
   point_cloud one;
   one.positions = {vec3f(1, 2, 3)};
   one.normals = {vec3f(0, 0, -1)};
-  check_compressed_round_trip(build_rho_grid<3>(one, {.depth = 4}), "one point");
-  check_compressed_round_trip(build_rho_grid<2>(one, {.depth = 0}), "depth 0");
-  point_cloud full;  // one point at the centre of each of the 8³ cells of a depth-3 octree
+  check_compressed_round_trip(build_rho_grid<3>(one, {.level = 3}), "one point");
+  check_compressed_round_trip(build_rho_grid<2>(one, {.level = -1}), "level -1 (root only)");
+  point_cloud full;  // one point at the centre of each of the 8³ cells of an oct/2 octree
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-1, 1);
   for (int z = 0; z < 8; ++z)
@@ -608,25 +609,25 @@ TEST(RhoGridCompressed, RoundTripIsExact) {
         full.normals.push_back(vec3f(u(rng), u(rng), u(rng)).normalized());
         full.materials.push_back(std::uint8_t(rng() % 8));
       }
-  const auto gf = build_rho_grid<2>(full, {.depth = 3});
+  const auto gf = build_rho_grid<2>(full, {.level = 2});
   ASSERT_EQ(gf.leaf_count(), 512u);
   ASSERT_TRUE(gf.has_materials());
   check_compressed_round_trip(gf, "full grid with materials");
   point_cloud bare = full;
   bare.normals.clear();
   bare.materials.clear();
-  const auto gb = build_rho_grid<4>(bare, {.depth = 2});
+  const auto gb = build_rho_grid<4>(bare, {.level = 1});
   ASSERT_EQ(gb.sigma(), 0);
   check_compressed_round_trip(gb, "sigma 0");
-  check_compressed_round_trip(build_rho_grid<2>(bunny_small(), {.depth = 6}), "bunny rho 2");
-  check_compressed_round_trip(build_rho_grid<3>(bunny_small(), {.depth = 4}), "bunny rho 3");
-  check_compressed_round_trip(build_rho_grid<4>(bunny_small(), {.depth = 3, .normal_bits = 9}),
+  check_compressed_round_trip(build_rho_grid<2>(bunny_small(), {.level = 5}), "bunny rho 2");
+  check_compressed_round_trip(build_rho_grid<3>(bunny_small(), {.level = 3}), "bunny rho 3");
+  check_compressed_round_trip(build_rho_grid<4>(bunny_small(), {.level = 2, .normal_bits = 9}),
                               "bunny rho 4");
   check_compressed_round_trip(
-      build_rho_grid<5>(bunny_small(), {.depth = 2, .normal_bits = 16, .material_bits = 0}),
+      build_rho_grid<5>(bunny_small(), {.level = 1, .normal_bits = 16, .material_bits = 0}),
       "bunny rho 5");
   // save/load keeps the layout's contract too.
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   const auto path = (std::filesystem::temp_directory_path() / "pbr_lod_rho_grid_c.lod").string();
   g.save(path, rho_grid_layout::compressed);
   EXPECT_EQ(rho_grid_file_rho(path), 3);
@@ -635,12 +636,12 @@ TEST(RhoGridCompressed, RoundTripIsExact) {
   std::filesystem::remove(path);
 }
 
-// The targets on the real bunny (bun_zipper, octree depth 7, 56 k samples): geometry
+// The targets on the real bunny (bun_zipper, oct/6, 56 k samples): geometry
 // ≤ 2 bits per sample (Botsch 2002 reports ~2), attributes of every cell well under the IS
 // stream's 13·(1 + inner/leaf) ≈ 17.3 bits. Each context refinement must pay for itself.
 TEST(RhoGridCompressed, BunnyMeetsTheTargets) {
   static const triangle_mesh bunny = read_mesh(test::data_file("bun_zipper.ply"));
-  const auto g = build_rho_grid<2>(bunny, {.depth = 7});
+  const auto g = build_rho_grid<2>(bunny, {.level = 6});
   const auto cs = g.coded_size();
   EXPECT_LE(cs.bits_per_sample_geometry, 2.0);
   EXPECT_LT(cs.bits_per_sample_attributes, 13.0);
@@ -664,7 +665,7 @@ TEST(RhoGridCompressed, BunnyMeetsTheTargets) {
 // coded byte either fails validation (counts, ranges, exact stream length) or decodes to some
 // other valid tree — never a crash or an out-of-bounds read (run under ASan).
 TEST(RhoGridCompressed, TruncatedOrCorruptStreamsAreErrors) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   const auto bytes = g.serialise(rho_grid_layout::compressed);
   std::mt19937 rng(3);
   expect_cuts_and_flips_throw(bytes, 32, rng);
@@ -745,29 +746,29 @@ void check_valid(const rho_grid<Rho>& g, std::size_t leaves) {
 TEST(RhoGridDegenerate, LadderOfDegenerateInputs) {
   point_cloud one;
   one.positions = {vec3f(1, 2, 3)};
-  check_valid(build_rho_grid<3>(one, {.depth = 4}), 1);  // one point: one path of k cells
+  check_valid(build_rho_grid<3>(one, {.level = 3}), 1);  // one point: one path of k cells
   point_cloud dup;
   dup.positions.assign(50, vec3f(-1, 0, 1));
   dup.normals.assign(50, vec3f(0, 1, 0));
-  check_valid(build_rho_grid<2>(dup, {.depth = 6}), 1);  // duplicates: one cell per level
+  check_valid(build_rho_grid<2>(dup, {.level = 5}), 1);  // duplicates: one cell per level
   point_cloud line;
   for (int i = 0; i < 100; ++i) line.positions.emplace_back(float(i), 0.f, 0.f);
   // 100 collinear points spread over the cube's x axis: 3^4 = 81 leaf columns, all occupied.
-  check_valid(build_rho_grid<3>(line, {.depth = 4}), 81);
+  check_valid(build_rho_grid<3>(line, {.level = 3}), 81);
   // Zero-area triangles only (collinear and repeated vertices): built from the vertices.
   triangle_mesh flat;
   flat.vertices.positions = {vec3f(0, 0, 0), vec3f(1, 0, 0), vec3f(2, 0, 0), vec3f(1, 0, 0)};
   flat.faces = {{0, 1, 2}, {1, 3, 1}};
-  check_valid(build_rho_grid<2>(flat, {.depth = 3}), 3);
+  check_valid(build_rho_grid<2>(flat, {.level = 2}), 3);
   // A mesh with one good and one zero-area triangle: the degenerate one is skipped.
   triangle_mesh mixed;
   mixed.vertices.positions = {vec3f(0, 0, 0), vec3f(1, 0, 0), vec3f(0, 1, 0), vec3f(2, 0, 0)};
   mixed.faces = {{0, 1, 2}, {0, 1, 3}};
-  const auto gm = build_rho_grid<2>(mixed, {.depth = 4});
+  const auto gm = build_rho_grid<2>(mixed, {.level = 3});
   check_valid(gm, gm.leaf_count());
   EXPECT_GT(gm.leaf_count(), 16u);
   EXPECT_THROW((void)build_rho_grid<3>(point_cloud{}, {}), InvalidArgument);
-  EXPECT_THROW((void)build_rho_grid<3>(one, {.depth = 99}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<3>(one, {.level = 98}), InvalidArgument);
   EXPECT_THROW((void)build_rho_grid<3>(one, {.normal_bits = 3}), InvalidArgument);
   point_cloud nan = one;
   nan.positions[0].x() = std::numeric_limits<float>::quiet_NaN();
@@ -781,8 +782,8 @@ TEST(RhoGridDegenerate, FarFromTheOriginBuildsTheSameTree) {
   triangle_mesh near = bunny_small();
   triangle_mesh far = near;
   far.vertices.origin += vec3d(1e7, -2e7, 1e7);
-  const auto a = build_rho_grid<3>(near, {.depth = 3});
-  const auto b = build_rho_grid<3>(far, {.depth = 3});
+  const auto a = build_rho_grid<3>(near, {.level = 2});
+  const auto b = build_rho_grid<3>(far, {.level = 2});
   EXPECT_EQ(a.cell_count(), b.cell_count());
   for (std::uint32_t c = 0; c < a.inner_count(); ++c) ASSERT_TRUE(a.code(c) == b.code(c));
   EXPECT_NEAR((b.origin() - a.origin() - vec3d(1e7, -2e7, 1e7)).norm(), 0, 1e-6);
@@ -797,7 +798,7 @@ TEST(RhoGridDegenerate, FarFromTheOriginBuildsTheSameTree) {
 // each child's bounding sphere lies inside its parent's, and the generic traversal with the
 // default policy at tolerance 0 and no culling emits every leaf once and nothing else.
 TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 4});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 3});
   const rho_grid_hierarchy<3, with_normals> h(g);
   std::vector<int> reached(g.cell_count(), 0);
   std::vector<rho_grid_cell> stack{h.root()};
@@ -808,7 +809,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
     const sphere ps = h.bounding_sphere(n);
     std::size_t count = 0;
     for (const rho_grid_cell c : h.children(n)) {
-      ASSERT_EQ(c.level, n.level + 1);
+      ASSERT_EQ(c.depth, n.depth + 1);
       ++reached[c.cell];
       const sphere cs = h.bounding_sphere(c);
       EXPECT_LE((cs.centre - ps.centre).norm() + cs.radius, ps.radius * (1 + 1e-5f));
@@ -827,7 +828,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
   // Asking for attributes the grid does not store is an error, not garbage.
   point_cloud bare;
   bare.positions = {vec3f(0, 0, 0), vec3f(1, 1, 1)};
-  const auto gb = build_rho_grid<2>(bare, {.depth = 2});
+  const auto gb = build_rho_grid<2>(bare, {.level = 1});
   EXPECT_THROW((void)(rho_grid_hierarchy<2, with_normals>(gb)), InvalidArgument);
 }
 
@@ -835,7 +836,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
 // where a test is within rounding of equality (bounded here to 0.1 % of the cells), and the
 // images agree to the same degree.
 TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
-  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.depth = 5});
+  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   for (float s : {1.0f, 2.0f, 4.0f}) {
     for (double dist : {1.2, 2.5, 6.0}) {
       const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
@@ -869,10 +870,10 @@ TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
 // reaches the leaves; s = 4 draws fewer cells than s = 1; culling drops cells behind the viewer
 // and off screen (a camera looking away draws nothing).
 TEST(RhoGridRender, SplatConditionAndCulling) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 5});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
-  // At distance 8 (radii) a depth-4 cell spans ≤ 2.2 px (conservatively): s = 4 stops there,
-  // s = 1 goes on to the leaves.
+  // At distance 8 (radii) a cell at depth 4 (level 3) spans ≤ 2.2 px (conservatively): s = 4 stops
+  // there, s = 1 goes on to the leaves.
   const auto count = [&](double dist, float s, double az = 30) {
     const camera cam = camera::orbit(c, 0.5 * g.cube_side(), az, 20, dist, 1, {256, 256});
     return traverse_cells(g, view(cam, g.origin()), s);
@@ -894,7 +895,7 @@ TEST(RhoGridRender, SplatConditionAndCulling) {
 // Conservative bounds: every drawn inner cell's projected cube (its 8 corners, exactly) is at
 // most s pixels wide and tall — the splat condition never under-estimates.
 TEST(RhoGridRender, SplatConditionIsConservative) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 5});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 10, 35, 8, 1, {300, 300});
   const view v(cam, g.origin());
@@ -904,7 +905,7 @@ TEST(RhoGridRender, SplatConditionIsConservative) {
   (void)traverse_cells(g, v, s, &drawn);
   for (const auto& [r, splat] : drawn) {
     if (!splat) continue;
-    const double side = g.cell_side(r.level);
+    const double side = g.cell_side(r.depth);
     float x0 = 1e30f, x1 = -1e30f, y0 = 1e30f, y1 = -1e30f;
     for (int k = 0; k < 8; ++k) {
       const vec3f p((r.pos[0] + (k & 1)) * side, (r.pos[1] + ((k >> 1) & 1)) * side,
@@ -994,7 +995,7 @@ TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
   plane.vertices.positions = {vec3f(-1, -0.3f, -1), vec3f(1, 0.3f - 0.1f, -1), vec3f(1, 0.4f, 1),
                               vec3f(-1, -0.2f, 1)};
   plane.faces = {{0, 1, 2}, {0, 2, 3}};
-  const auto g = build_rho_grid<2>(plane, {.depth = 8});
+  const auto g = build_rho_grid<2>(plane, {.level = 7});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   for (float s : {1.0f, 2.0f, 4.0f, 8.0f}) {
     for (int az : {0, 120, 240}) {
@@ -1015,7 +1016,7 @@ TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
 }
 
 TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
-  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.depth = 5});
+  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   // At 5 radii a leaf spans ~0.6 px: the points close the surface, so neither map leaks.
   const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 5, 1, {256, 256});
