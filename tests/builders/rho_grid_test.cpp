@@ -2,6 +2,7 @@
 // expectation holds.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <map>
@@ -199,34 +200,58 @@ TEST(RhoGridTable1, FormulaReproducesThePaper) {
   EXPECT_LT(rho_grid_cost(3, 16), rho_grid_cost(2, 16));
 }
 
-// A plane aligned with the grid has exactly ρ² non-empty children per inner cell at every level
-// (the paper's assumption), so the measured code bits per leaf equal Eq. 3's (n−1)/n·ρ³/(ρ²−1)
-// exactly. The plane sits mid-cell so it touches no cell face.
+// A plane parallel to a grid face has exactly ρ² non-empty children per inner cell at every
+// depth — the paper's assumption behind Eq. 1 — so Eq. 1 and Eq. 3 hold exactly: n = ρ^(2k)
+// leaves, N = (n − 1)/(ρ² − 1) inner cells, N·ρ³/n = (n−1)/n·ρ³/(ρ²−1) code bits per leaf.
+// The points are m evenly spaced values per axis including both ends (m = ρ^k leaves per side):
+// the cube is their bounding box (enlarged by 1e-9), so i·m/(m−1) puts point i in cell i, one
+// point per cell, none on a cell face except the ends. The plane's z is the cube's centre, so
+// all points share one z layer whichever way that boundary rounds.
 template <int Rho>
 void check_plane_codes() {
-  const int k = 3;
+  const int k = 3;  // leaf depth: level 2
+  const int m = Rho * Rho * Rho;
   point_cloud pc;
-  const double m = std::pow(double(Rho), k);
-  // One point per leaf cell of the plane z = ½ leaf in a grid spanning [0, 1]: the cube is the
-  // bounding box of the points, so place points at the leaf centres of the x/y extremes too.
-  for (int y = 0; y < int(m); ++y)
-    for (int x = 0; x < int(m); ++x)
-      pc.positions.emplace_back(float((x + 0.5) / m), float((y + 0.5) / m), 0.5f);
-  // Extend the z range to the x/y range so the cube matches the intended grid.
-  pc.positions.emplace_back(float(0.5 / m), float(0.5 / m), float(0.5 / m));
-  pc.positions.emplace_back(float(0.5 / m), float(0.5 / m), float(1 - 0.5 / m));
+  for (int y = 0; y < m; ++y)
+    for (int x = 0; x < m; ++x)
+      pc.positions.emplace_back(float(x) / float(m - 1), float(y) / float(m - 1), 0.5f);
   const auto g = build_rho_grid<Rho>(pc, {.level = k - 1, .normal_bits = 0, .material_bits = 0});
-  // Leaves: the m² plane cells plus the 2 corner points' cells (distinct from the plane unless
-  // m is small); inner cells carry ρ² children except along the corner paths.
-  const double expect = std::pow(double(Rho), 2 * k) + 2;
-  EXPECT_EQ(double(g.leaf_count()), expect);
-  const double formula = rho_grid_cost(Rho, 0);
-  EXPECT_NEAR(g.stats().bits_per_sample_nis, formula, 0.25 * formula);
+  const double n = double(m) * m;
+  ASSERT_EQ(double(g.leaf_count()), n);
+  EXPECT_EQ(double(g.inner_count()), (n - 1) / (Rho * Rho - 1));  // Eq. 1
+  for (std::uint32_t c = 0; c < g.inner_count(); ++c) ASSERT_EQ(g.code(c).count(), Rho * Rho);
+  const double eq3 = (n - 1) / n * Rho * Rho * Rho / (Rho * Rho - 1);
+  EXPECT_NEAR(g.stats().bits_per_sample_nis, eq3, 1e-12 * eq3);
+  // Eq. 3's approximation ρ³/(ρ²−1) (Table 1, σ = 0) is off by exactly 1/n of it.
+  EXPECT_NEAR(rho_grid_cost(Rho, 0) - g.stats().bits_per_sample_nis, rho_grid_cost(Rho, 0) / n,
+              1e-12);
 }
 TEST(RhoGridTable1, PlaneMatchesEquation3) {
   check_plane_codes<2>();
   check_plane_codes<3>();
   check_plane_codes<4>();
+}
+
+// The option is the paper's level (Table 2): oct/7 has 256 leaves per side of the cube, tri/4
+// 243 — the two grids whose sample counts the paper reports as nearly equal (Dragon: 158,737 vs
+// 143,077, a ratio of (256/243)²). Level −1 is the cube alone; beyond the 63-bit paths is refused.
+TEST(RhoGridLevels, LevelIsThePapersLevel) {
+  const auto oct7 = build_rho_grid<2>(bunny_small(), {.level = 7});
+  EXPECT_EQ(oct7.level(), 7);
+  EXPECT_EQ(oct7.stats().level, 7);
+  EXPECT_EQ(oct7.leaf_depth(), 8);
+  EXPECT_DOUBLE_EQ(oct7.cube_side() / oct7.cell_side(oct7.leaf_depth()), 256.0);
+  const auto tri4 = build_rho_grid<3>(bunny_small(), {.level = 4});
+  EXPECT_DOUBLE_EQ(tri4.cube_side() / tri4.cell_side(tri4.leaf_depth()), 243.0);
+  const double ratio = double(oct7.leaf_count()) / double(tri4.leaf_count());
+  EXPECT_NEAR(ratio, std::pow(256.0 / 243.0, 2), 0.05);  // both sample the same surface
+  const auto root = build_rho_grid<3>(bunny_small(), {.level = -1});
+  EXPECT_EQ(root.cell_count(), 1u);
+  EXPECT_THROW((void)build_rho_grid<3>(bunny_small(), {.level = -2}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<2>(bunny_small(), {.level = rho_grid_max_level(2) + 1}),
+               InvalidArgument);
+  EXPECT_EQ(rho_grid_max_level(2), 20);  // a leaf path of 21 octree digits: 63 bits
+  EXPECT_EQ(rho_grid_max_level(3), 12);  // 13 digits of 27: 27^13 < 2^63 < 27^14
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -285,6 +310,31 @@ TEST(RhoGridSampling, EverySampleLiesOnTheSurface) {
   EXPECT_LE(worst, tol);
 }
 
+// §3.1: "we sample the object at the point of the object closest to the center of the cell",
+// for inner cells and leaves alike. Brute force over every triangle: the distance from each
+// cell's centre to its sample equals the distance from the centre to the mesh (with the test
+// above, the sample is on the mesh, so it is a closest point). Sampling at a vertex, at the
+// first triangle met or at the parent's sample would each fail this on most cells.
+template <int Rho>
+void check_closest_points(int level) {
+  const auto& mesh = bunny_small();
+  const auto g = build_rho_grid<Rho>(mesh, {.level = level, .keep_sample_points = true});
+  const auto pos = decode_positions(g);
+  const double tol = 1e-6 * g.cube_side();  // float storage of the samples
+  for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
+    const auto& [d, p] = pos[c];
+    const double side = g.cell_side(d);
+    const vec3d centre((p[0] + 0.5) * side, (p[1] + 0.5) * side, (p[2] + 0.5) * side);
+    const double to_sample = (g.sample_points()[c].template cast<double>() - centre).norm();
+    ASSERT_NEAR(to_sample, distance_to_mesh(mesh, g.origin() + centre), tol)
+        << "cell " << c << " at depth " << d;
+  }
+}
+TEST(RhoGridSampling, EverySampleIsTheClosestPointToItsCellCentre) {
+  check_closest_points<2>(3);
+  check_closest_points<3>(2);
+}
+
 // A point cloud: the non-empty leaves are exactly the cells holding input points (brute force),
 // and a cell's sample is its own input point nearest to the centre (so it lies in the cell).
 TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
@@ -333,6 +383,62 @@ TEST(RhoGridAttributes, SigmaFollowsTheScene) {
   EXPECT_EQ(gm.sigma(), 0);
   pc.materials.assign(pc.size(), 9);  // needs 4 bits
   EXPECT_THROW((void)build_rho_grid<2>(pc, {.level = 1}), InvalidArgument);
+}
+
+// §3.1's σ-bit attribute holds a material index (8 materials in 3 bits). A height field as a
+// triangle soup, each triangle with its own three vertices and its own random material: a
+// cell's material must be that of the triangle its sample came from — the triangle closest to
+// the cell centre (brute force; on an edge shared by two triangles either may be the one).
+TEST(RhoGridAttributes, MaterialIsTheSampledTriangles) {
+  std::mt19937 rng(5);  // seeded: the same soup every run; any assignment must pass
+  triangle_mesh soup;
+  std::vector<std::uint8_t> face_material;
+  const int n = 10;
+  const auto at = [&](int i, int j) {
+    const float x = float(i) / n, y = float(j) / n;
+    return vec3f(x, y, 0.15f * std::sin(3 * x) * std::cos(2 * y));
+  };
+  const auto add = [&](vec3f a, vec3f b, vec3f c) {
+    const auto mat = static_cast<std::uint8_t>(rng() % 8);
+    const auto v = static_cast<std::uint32_t>(soup.vertices.positions.size());
+    for (const vec3f& p : {a, b, c}) {
+      soup.vertices.positions.push_back(p);
+      soup.vertices.materials.push_back(mat);
+    }
+    soup.faces.push_back({v, v + 1, v + 2});
+    face_material.push_back(mat);
+  };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      add(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+      add(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+    }
+  const auto g = build_rho_grid<3>(soup, {.level = 2, .material_bits = 3});
+  ASSERT_EQ(g.material_bits(), 3);
+  const auto pos = decode_positions(g);
+  const double tol = 1e-9 * g.cube_side();
+  std::set<std::uint32_t> seen;
+  for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
+    const auto& [d, p] = pos[c];
+    const double side = g.cell_side(d);
+    const vec3d centre =
+        g.origin() + vec3d((p[0] + 0.5) * side, (p[1] + 0.5) * side, (p[2] + 0.5) * side);
+    std::vector<double> dist(soup.faces.size());
+    for (std::size_t f = 0; f < soup.faces.size(); ++f) {
+      const auto& fc = soup.faces[f];
+      dist[f] = (closest_on_triangle(centre, soup.vertices.world(fc[0]), soup.vertices.world(fc[1]),
+                                     soup.vertices.world(fc[2])) -
+                 centre)
+                    .norm();
+    }
+    const double best = *std::ranges::min_element(dist);
+    bool match = false;
+    for (std::size_t f = 0; f < dist.size(); ++f)
+      match |= dist[f] <= best + tol && face_material[f] == g.material(c);
+    EXPECT_TRUE(match) << "cell " << c << " has material " << g.material(c);
+    seen.insert(g.material(c));
+  }
+  EXPECT_EQ(seen.size(), 8u);  // the check saw every material, not one repeated value
 }
 
 // The quantised normal of a cell is the surface normal at its sample: the area-weighted vertex
@@ -497,20 +603,80 @@ TEST(RhoGridStream, FilesAreDeterministic) {
 }
 
 // §3.3: the in-core structure gives random access — the child table of cell c starts at
-// first_child(c), children contiguous, the last child of the last inner cell of a level followed
-// by the first cell of the level after next. Its size is 32 bits + code + 16 bits per inner cell
-// and 16 bits per leaf.
-TEST(RhoGridInCore, ChildTableIsContiguous) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
-  std::uint32_t expect = 1;
-  for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
-    EXPECT_EQ(g.first_child(c), expect);
-    expect += std::uint32_t(g.code(c).count());
+// first_child(c) and holds one cell per set bit of code(c). Reference by geometric containment,
+// from the input alone: the non-empty leaves are the cells holding an input point, a cell at
+// depth d is non-empty when it contains one at d + 1 (position / ρ), cells are numbered breadth
+// first in path order (base-ρ³ digits, coarsest first). Inner cell c's children must then be
+// the cells of depth d + 1 inside it, starting at first_child(c), and bit j of its code set
+// exactly when child j exists. Size: 32 bits + code per inner cell, 16 bits per cell when σ > 0.
+template <int Rho>
+void check_child_table(const point_cloud& pc, int level) {
+  const auto g = build_rho_grid<Rho>(pc, {.level = level});
+  const int k = level + 1;
+  using pos = std::array<std::uint32_t, 3>;
+  const auto path_key = [](const pos& p, int d) {
+    std::uint64_t key = 0;
+    for (int t = d - 1; t >= 0; --t) {
+      std::uint64_t span = 1;
+      for (int i = 0; i < t; ++i) span *= Rho;
+      const auto dg = [&](int a) { return (p[std::size_t(a)] / span) % Rho; };
+      key = key * (Rho * Rho * Rho) + dg(0) + Rho * dg(1) + Rho * Rho * dg(2);
+    }
+    return key;
+  };
+  std::vector<std::vector<pos>> cells(std::size_t(k) + 1);  // per depth, in path order
+  const double leaf = g.cell_side(k);
+  const double per_axis = std::pow(double(Rho), k);
+  std::set<pos> occupied;
+  for (std::size_t i = 0; i < pc.size(); ++i) {
+    const vec3d r = (pc.origin - g.origin()) + pc.positions[i].cast<double>();
+    pos p;
+    for (int a = 0; a < 3; ++a)
+      p[std::size_t(a)] = std::uint32_t(std::clamp(std::floor(r[a] / leaf), 0.0, per_axis - 1));
+    occupied.insert(p);
   }
-  EXPECT_EQ(expect, g.cell_count());
-  EXPECT_EQ(g.memory_bytes(), g.inner_count() * (4 + 4) + g.cell_count() * 2);
+  for (int d = k; d >= 0; --d) {
+    cells[std::size_t(d)].assign(occupied.begin(), occupied.end());
+    std::ranges::sort(cells[std::size_t(d)],
+                      [&](const pos& x, const pos& y) { return path_key(x, d) < path_key(y, d); });
+    std::set<pos> parents;
+    for (const pos& p : occupied) parents.insert({p[0] / Rho, p[1] / Rho, p[2] / Rho});
+    occupied = parents;
+  }
+  std::uint32_t first = 0;  // breadth-first index of the depth's first cell
+  for (int d = 0; d < k; ++d) {
+    const auto& now = cells[std::size_t(d)];
+    const auto& next = cells[std::size_t(d) + 1];
+    const std::uint32_t next_first = first + std::uint32_t(now.size());
+    std::size_t ci = 0;  // children of the cells before this one
+    for (std::size_t i = 0; i < now.size(); ++i) {
+      const std::uint32_t c = first + std::uint32_t(i);
+      ASSERT_LT(c, g.inner_count());
+      EXPECT_EQ(g.first_child(c), next_first + ci) << "cell " << c;
+      for (int j = 0; j < Rho * Rho * Rho; ++j) {
+        const pos child{now[i][0] * Rho + std::uint32_t(j % Rho),
+                        now[i][1] * Rho + std::uint32_t((j / Rho) % Rho),
+                        now[i][2] * Rho + std::uint32_t(j / (Rho * Rho))};
+        const bool exists = ci < next.size() && next[ci] == child;
+        EXPECT_EQ(g.code(c).test(j), exists) << "cell " << c << " child " << j;
+        ci += exists;
+      }
+    }
+    EXPECT_EQ(ci, next.size()) << "depth " << d + 1 << " has cells outside their parents";
+    first = next_first;
+  }
+  EXPECT_EQ(g.inner_count(), first);
+  EXPECT_EQ(g.cell_count(), first + cells[std::size_t(k)].size());
+  EXPECT_EQ(g.memory_bytes(), g.inner_count() * (sizeof(detail::child_code<Rho>) + 4) +
+                                  (g.sigma() > 0 ? g.cell_count() * 2 : 0));
   EXPECT_NEAR(g.stats().bits_per_sample_incore,
               double(g.memory_bytes()) * 8 / double(g.leaf_count()), 1e-9);
+}
+TEST(RhoGridInCore, ChildTableMatchesGeometricContainment) {
+  const point_cloud& pc = bunny_small().vertices;
+  check_child_table<2>(pc, 4);
+  check_child_table<3>(pc, 2);
+  check_child_table<5>(pc, 1);
 }
 
 // ---------------------------------------------------------------------------------------------

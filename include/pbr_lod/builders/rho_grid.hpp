@@ -68,7 +68,7 @@ namespace pbr_lod {
 }
 
 /// Finest level (as the paper numbers levels, rho_grid_options::level) supported for a given ρ:
-/// 61 for ρ = 2, 38 for ρ = 3, 30 for ρ = 4, 26 for ρ = 5.
+/// 20 for ρ = 2, 12 for ρ = 3, 9 for ρ = 4, 8 for ρ = 5.
 [[nodiscard]] constexpr int rho_grid_max_level(int rho) {
   return rho_grid_max_leaf_depth(rho) - 1;
 }
