@@ -13,6 +13,9 @@
 // Points: every point's leaf path is a base-ρ³ number; sorted by it, the cells of every level are
 // runs, so each level is one linear scan (codes from the next digit, sample = the run's point
 // closest to the centre).
+//
+// "Level" in this file is a cell's depth below the cube (0 = the cube, k = the leaves); the
+// option's level, the paper's, is k − 1 (rho_grid.hpp).
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>

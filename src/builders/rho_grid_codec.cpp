@@ -6,6 +6,8 @@
 //   the MPEG G-PCC octree geometry coder (ISO/IEC 23090-9): occupancy bits coded one at a time
 //   with adaptive binary contexts chosen by the parent's face-neighbour occupancy and by the
 //   already-coded neighbours at the child level.
+// "Level" in this file is a cell's depth below the cube (rho_grid::depth_begin), not the
+// option's (the paper's) level.
 //
 // Geometry: level by level, cell by cell in breadth-first (= path) order, each of the ρ³ child
 // bits of a cell's code is range-coded with a context (level, child index j, n6, c3):

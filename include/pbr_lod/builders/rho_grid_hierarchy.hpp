@@ -2,16 +2,16 @@
 // (Duguet & Drettakis 2004, §4, §4.1, §4.2 child order, §5.1).
 //
 // rho_grid_hierarchy<ρ, A> models Hierarchy (traverse/hierarchy.hpp) over a built rho_grid<ρ>:
-// a node is a cell with its level and integer position (positions are implicit in the path),
+// a node is a cell with its depth and integer position (positions are implicit in the path),
 // A ⊆ {normal, colour} is the compile-time attribute set of the primitives (normal = the decoded
 // σ-bit normal, colour = the material's palette colour), and emit() sends one point_prim at the
 // cell centre. Any traversal policy can drive it; rho_grid_policy is the paper's.
 //
 // rho_grid_policy is the paper's Render(cell, centre, level) with Botsch et al.'s transformation
 // factorisation: the homogeneous screen position H = (X, Y, W) of a cell centre is its parent's
-// plus an entry of a per-level displacement table (one vec add per cell, no matrix product) —
+// plus an entry of a per-depth displacement table (one vec add per cell, no matrix product) —
 // the traversal's per-entry state — and the conservative screen bounds of a cell come from a
-// per-level bounds table:
+// per-depth bounds table:
 //   A_x = max over the cube's corners of |ΔX|, A_y likewise, B = max |ΔW|.
 // With E_x = A_x·W + B·|X|, every corner's x = X'/W' lies within E_x / (W·(W − B)) of X/W
 // (while W − B > 0: the cell is wholly in front of the eye). So, all in homogeneous coordinates
