@@ -15,7 +15,7 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   const auto& st = g.stats();
   json j;
   j.str("file", path).str("method", "rho-grid");
-  j.integer("rho", R).integer("depth", g.depth()).integer("sigma", g.sigma());
+  j.integer("rho", R).integer("level", g.level()).integer("sigma", g.sigma());
   j.integer("normal_bits", g.normal_bits()).integer("material_bits", g.material_bits());
   j.integer("samples", static_cast<long long>(st.samples));
   j.integer("inner_cells", static_cast<long long>(st.inner_cells));
@@ -97,10 +97,15 @@ struct rho_method {
 
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool on_terminal) {
+  for (const std::string& p : items)
+    if (p.starts_with("depth="))
+      throw InvalidArgument(
+          "rho-grid: --param depth=N was renamed: use --param level=N-1 (the paper's level; "
+          "oct/7 is rho=2 level=7, a 256^3 grid)");
   params m(items);
   const int rho = static_cast<int>(m.integer("rho", 3, 2, 5));
   rho_grid_options o;
-  o.depth = static_cast<int>(m.integer("depth", 6, 1, 40));
+  o.level = static_cast<int>(m.integer("level", 5, 0, 39));
   o.normal_bits = static_cast<int>(m.integer("normal_bits", 13, 0, 16));
   o.material_bits = static_cast<int>(m.integer("material_bits", 3, 0, 8));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
@@ -109,7 +114,7 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   method.layout = method.layout_name == "is"    ? rho_grid_layout::is
                   : method.layout_name == "nis" ? rho_grid_layout::nis
                                                 : rho_grid_layout::compressed;
-  m.finish("rho-grid", "rho, depth, normal_bits, material_bits, threads, layout");
+  m.finish("rho-grid", "rho, level, normal_bits, material_bits, threads, layout");
   o.progress = progress_callback("rho-grid", on_terminal);
   const loaded_input& li = in.get();
   return visit_rho(rho, [&]<int R>() {

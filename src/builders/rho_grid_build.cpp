@@ -13,6 +13,9 @@
 // Points: every point's leaf path is a base-ρ³ number; sorted by it, the cells of every level are
 // runs, so each level is one linear scan (codes from the next digit, sample = the run's point
 // closest to the centre).
+//
+// "Level" in this file is a cell's depth below the cube (0 = the cube, k = the leaves); the
+// option's level, the paper's, is k − 1 (rho_grid.hpp).
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
@@ -50,11 +53,11 @@ struct frame {
 };
 
 void check_options(const rho_grid_options& o, int rho) {
-  const int maxd = rho_grid_max_depth(rho);
-  if (o.depth < 0 || o.depth > maxd)
-    throw InvalidArgument("rho-grid: depth must lie in [0, " + std::to_string(maxd) +
+  const int maxl = rho_grid_max_level(rho);
+  if (o.level < -1 || o.level > maxl)
+    throw InvalidArgument("rho-grid: level must lie in [-1, " + std::to_string(maxl) +
                           "] for rho = " + std::to_string(rho) + ", got " +
-                          std::to_string(o.depth));
+                          std::to_string(o.level));
   if (o.normal_bits != 0 && (o.normal_bits < normal_quantizer::min_bits || o.normal_bits > 16))
     throw InvalidArgument("rho-grid: normal_bits must be 0 or in [" +
                           std::to_string(normal_quantizer::min_bits) + ", 16], got " +
@@ -126,7 +129,7 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
   c.validate("rho-grid input");
   if (c.empty()) throw InvalidArgument("rho-grid: the input has no points");
   check_options(o, Rho);
-  const int k = o.depth;
+  const int k = o.level + 1;  // leaf depth: the paper's level l is a ρ^(l+1) grid
   const std::size_t n = c.size();
 
   vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
@@ -239,7 +242,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   m.validate("rho-grid input mesh");
   check_options(o, Rho);
   if (m.vertices.empty()) throw InvalidArgument("rho-grid: the input mesh has no vertices");
-  const int k = o.depth;
+  const int k = o.level + 1;  // leaf depth: the paper's level l is a ρ^(l+1) grid
 
   // Frame from the vertices the faces use (all vertices when there are no faces).
   vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;

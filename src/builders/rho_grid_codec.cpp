@@ -6,6 +6,8 @@
 //   the MPEG G-PCC octree geometry coder (ISO/IEC 23090-9): occupancy bits coded one at a time
 //   with adaptive binary contexts chosen by the parent's face-neighbour occupancy and by the
 //   already-coded neighbours at the child level.
+// "Level" in this file is a cell's depth below the cube (rho_grid::depth_begin), not the
+// option's (the paper's) level.
 //
 // Geometry: level by level, cell by cell in breadth-first (= path) order, each of the ρ³ child
 // bits of a cell's code is range-coded with a context (level, child index j, n6, c3):
@@ -254,7 +256,7 @@ void walk_attributes(Coder& rc, const rho_grid<Rho>& g, const rho_coder_options&
   code(0, 0, 0);
   int level = 0;
   for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
-    while (c >= g.level_begin(level + 1)) ++level;
+    while (c >= g.depth_begin(level + 1)) ++level;
     const std::uint32_t first = g.first_child(c), n = std::uint32_t(g.code(c).count());
     for (std::uint32_t k = 0; k < n; ++k)
       code(first + k, level + 1,
@@ -269,7 +271,7 @@ void walk_attributes(Coder& rc, const rho_grid<Rho>& g, const rho_coder_options&
 template <int Rho>
 rho_coded_streams rho_grid_encode(const rho_grid<Rho>& g, const rho_coder_options& options) {
   rho_coded_streams out;
-  const int depth = g.depth();
+  const int depth = g.leaf_depth();
   if (depth > 0) {
     range_encoder rc;
     geometry_model<Rho> m(depth, options.geometry);
@@ -279,7 +281,7 @@ rho_coded_streams rho_grid_encode(const rho_grid<Rho>& g, const rho_coder_option
     walk_geometry<Rho>(depth, options.geometry, nullptr, "",
                        [&](int l, std::size_t ci, int j, int n6, int c3, bool forced) {
                          if (l != last_level || ci != last_ci) {
-                           cell = g.level_begin(l) + std::uint32_t(ci);
+                           cell = g.depth_begin(l) + std::uint32_t(ci);
                            last_level = l;
                            last_ci = ci;
                          }
@@ -305,7 +307,7 @@ void rho_grid_decode(rho_grid<Rho>& g, const unsigned char* geometry, std::size_
                      const std::vector<std::uint64_t>& per_level, const rho_coder_options& options,
                      const std::string& what) {
   using access = rho_grid_access<Rho>;
-  const int depth = g.depth();
+  const int depth = g.leaf_depth();
   auto& codes = access::codes(g);
   std::uint64_t total = 0;
   for (auto n : per_level) total += n;

@@ -2,7 +2,8 @@
 // validation of every length.
 //
 // File layout (little endian):
-//   magic "PBRLODRG", u32 version, u32 ρ, u32 depth k, u32 layout (0 NIS, 1 IS),
+//   magic "PBRLODRG", u32 version, u32 ρ, u32 leaf depth k = level + 1
+//   (rho_grid::leaf_depth), u32 layout (0 NIS, 1 IS),
 //   u32 normal bits, u32 material bits, f64 origin[3], f64 cube side,
 //   f64 input centre[3] (world), f64 input radius (rho_grid::input_centre), u64 cells per level [k
 //   + 1], u64 payload bits, payload bytes ⌈bits/8⌉, u64 FNV-1a of all bytes before it.
@@ -75,7 +76,7 @@ void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_gri
   for (char c : rho_format.magic) h.put(c);
   h.put(rho_format.version);
   h.put(std::uint32_t(Rho));
-  h.put(std::uint32_t(g.depth()));
+  h.put(std::uint32_t(g.leaf_depth()));
   h.put(std::uint32_t(layout));
   h.put(std::uint32_t(g.normal_bits()));
   h.put(std::uint32_t(g.material_bits()));
@@ -87,8 +88,8 @@ void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_gri
   h.put(g.input_centre().y());
   h.put(g.input_centre().z());
   h.put(g.input_radius());
-  for (int l = 0; l <= g.depth(); ++l)
-    h.put(std::uint64_t(g.level_begin(l + 1) - g.level_begin(l)));
+  for (int l = 0; l <= g.leaf_depth(); ++l)
+    h.put(std::uint64_t(g.depth_begin(l + 1) - g.depth_begin(l)));
 }
 
 }  // namespace
@@ -118,7 +119,7 @@ rho_grid_coded_size rho_grid<Rho>::coded_size() const {
   // Read the two stream lengths back from the file just written: the sizes are those of the
   // bytes the decoder reads, never an estimate.
   std::uint64_t gb = 0, ab = 0;
-  const std::size_t lengths = fixed_header_bytes + std::size_t(depth_ + 1) * 8 + 2 * 4;
+  const std::size_t lengths = fixed_header_bytes + std::size_t(leaf_depth_ + 1) * 8 + 2 * 4;
   std::memcpy(&gb, bytes.data() + lengths, 8);
   std::memcpy(&ab, bytes.data() + lengths + 8, 8);
   rho_grid_coded_size s;
@@ -181,10 +182,10 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   if (rho_in != std::uint32_t(Rho))
     throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
                       " grid, a rho=" + std::to_string(Rho) + " grid was expected");
-  const auto depth = r.get<std::uint32_t>("depth");
-  if (depth > std::uint32_t(rho_grid_max_depth(Rho)))
-    throw FormatError(what + ": depth " + std::to_string(depth) + " exceeds the maximum " +
-                      std::to_string(rho_grid_max_depth(Rho)));
+  const auto depth = r.get<std::uint32_t>("leaf depth");
+  if (depth > std::uint32_t(rho_grid_max_leaf_depth(Rho)))
+    throw FormatError(what + ": leaf depth " + std::to_string(depth) + " exceeds the maximum " +
+                      std::to_string(rho_grid_max_leaf_depth(Rho)));
   const auto layout = r.get<std::uint32_t>("layout");
   if (layout > 2) throw FormatError(what + ": unknown layout " + std::to_string(layout));
   const auto nb = r.get<std::uint32_t>("normal bits");

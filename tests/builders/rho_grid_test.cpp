@@ -2,6 +2,7 @@
 // expectation holds.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <map>
@@ -199,34 +200,58 @@ TEST(RhoGridTable1, FormulaReproducesThePaper) {
   EXPECT_LT(rho_grid_cost(3, 16), rho_grid_cost(2, 16));
 }
 
-// A plane aligned with the grid has exactly ρ² non-empty children per inner cell at every level
-// (the paper's assumption), so the measured code bits per leaf equal Eq. 3's (n−1)/n·ρ³/(ρ²−1)
-// exactly. The plane sits mid-cell so it touches no cell face.
+// A plane parallel to a grid face has exactly ρ² non-empty children per inner cell at every
+// depth — the paper's assumption behind Eq. 1 — so Eq. 1 and Eq. 3 hold exactly: n = ρ^(2k)
+// leaves, N = (n − 1)/(ρ² − 1) inner cells, N·ρ³/n = (n−1)/n·ρ³/(ρ²−1) code bits per leaf.
+// The points are m evenly spaced values per axis including both ends (m = ρ^k leaves per side):
+// the cube is their bounding box (enlarged by 1e-9), so i·m/(m−1) puts point i in cell i, one
+// point per cell, none on a cell face except the ends. The plane's z is the cube's centre, so
+// all points share one z layer whichever way that boundary rounds.
 template <int Rho>
 void check_plane_codes() {
-  const int k = 3;
+  const int k = 3;  // leaf depth: level 2
+  const int m = Rho * Rho * Rho;
   point_cloud pc;
-  const double m = std::pow(double(Rho), k);
-  // One point per leaf cell of the plane z = ½ leaf in a grid spanning [0, 1]: the cube is the
-  // bounding box of the points, so place points at the leaf centres of the x/y extremes too.
-  for (int y = 0; y < int(m); ++y)
-    for (int x = 0; x < int(m); ++x)
-      pc.positions.emplace_back(float((x + 0.5) / m), float((y + 0.5) / m), 0.5f);
-  // Extend the z range to the x/y range so the cube matches the intended grid.
-  pc.positions.emplace_back(float(0.5 / m), float(0.5 / m), float(0.5 / m));
-  pc.positions.emplace_back(float(0.5 / m), float(0.5 / m), float(1 - 0.5 / m));
-  const auto g = build_rho_grid<Rho>(pc, {.depth = k, .normal_bits = 0, .material_bits = 0});
-  // Leaves: the m² plane cells plus the 2 corner points' cells (distinct from the plane unless
-  // m is small); inner cells carry ρ² children except along the corner paths.
-  const double expect = std::pow(double(Rho), 2 * k) + 2;
-  EXPECT_EQ(double(g.leaf_count()), expect);
-  const double formula = rho_grid_cost(Rho, 0);
-  EXPECT_NEAR(g.stats().bits_per_sample_nis, formula, 0.25 * formula);
+  for (int y = 0; y < m; ++y)
+    for (int x = 0; x < m; ++x)
+      pc.positions.emplace_back(float(x) / float(m - 1), float(y) / float(m - 1), 0.5f);
+  const auto g = build_rho_grid<Rho>(pc, {.level = k - 1, .normal_bits = 0, .material_bits = 0});
+  const double n = double(m) * m;
+  ASSERT_EQ(double(g.leaf_count()), n);
+  EXPECT_EQ(double(g.inner_count()), (n - 1) / (Rho * Rho - 1));  // Eq. 1
+  for (std::uint32_t c = 0; c < g.inner_count(); ++c) ASSERT_EQ(g.code(c).count(), Rho * Rho);
+  const double eq3 = (n - 1) / n * Rho * Rho * Rho / (Rho * Rho - 1);
+  EXPECT_NEAR(g.stats().bits_per_sample_nis, eq3, 1e-12 * eq3);
+  // Eq. 3's approximation ρ³/(ρ²−1) (Table 1, σ = 0) is off by exactly 1/n of it.
+  EXPECT_NEAR(rho_grid_cost(Rho, 0) - g.stats().bits_per_sample_nis, rho_grid_cost(Rho, 0) / n,
+              1e-12);
 }
 TEST(RhoGridTable1, PlaneMatchesEquation3) {
   check_plane_codes<2>();
   check_plane_codes<3>();
   check_plane_codes<4>();
+}
+
+// The option is the paper's level (Table 2): oct/7 has 256 leaves per side of the cube, tri/4
+// 243 — the two grids whose sample counts the paper reports as nearly equal (Dragon: 158,737 vs
+// 143,077, a ratio of (256/243)²). Level −1 is the cube alone; beyond the 63-bit paths is refused.
+TEST(RhoGridLevels, LevelIsThePapersLevel) {
+  const auto oct7 = build_rho_grid<2>(bunny_small(), {.level = 7});
+  EXPECT_EQ(oct7.level(), 7);
+  EXPECT_EQ(oct7.stats().level, 7);
+  EXPECT_EQ(oct7.leaf_depth(), 8);
+  EXPECT_DOUBLE_EQ(oct7.cube_side() / oct7.cell_side(oct7.leaf_depth()), 256.0);
+  const auto tri4 = build_rho_grid<3>(bunny_small(), {.level = 4});
+  EXPECT_DOUBLE_EQ(tri4.cube_side() / tri4.cell_side(tri4.leaf_depth()), 243.0);
+  const double ratio = double(oct7.leaf_count()) / double(tri4.leaf_count());
+  EXPECT_NEAR(ratio, std::pow(256.0 / 243.0, 2), 0.05);  // both sample the same surface
+  const auto root = build_rho_grid<3>(bunny_small(), {.level = -1});
+  EXPECT_EQ(root.cell_count(), 1u);
+  EXPECT_THROW((void)build_rho_grid<3>(bunny_small(), {.level = -2}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<2>(bunny_small(), {.level = rho_grid_max_level(2) + 1}),
+               InvalidArgument);
+  EXPECT_EQ(rho_grid_max_level(2), 20);  // a leaf path of 21 octree digits: 63 bits
+  EXPECT_EQ(rho_grid_max_level(3), 12);  // 13 digits of 27: 27^13 < 2^63 < 27^14
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -238,26 +263,26 @@ TEST(RhoGridTable1, PlaneMatchesEquation3) {
 // of a non-empty cell is at most that far), and every point of a dense surface sampling falls in
 // a non-empty leaf (no false empties).
 template <int Rho>
-void check_mesh_structure(int depth) {
+void check_mesh_structure(int leaf_depth) {
   const auto& mesh = bunny_small();
-  const auto g = build_rho_grid<Rho>(mesh, {.depth = depth, .keep_sample_points = true});
+  const auto g = build_rho_grid<Rho>(mesh, {.level = leaf_depth - 1, .keep_sample_points = true});
   ASSERT_EQ(g.sample_points().size(), g.cell_count());
   const auto pos = decode_positions(g);
   std::set<std::array<std::uint32_t, 3>> leaves;
   for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
     const auto& [l, p] = pos[c];
-    EXPECT_EQ(l < depth, !g.is_leaf(c));
-    EXPECT_GE(c, g.level_begin(l));
-    EXPECT_LT(c, g.level_begin(l + 1));
+    EXPECT_EQ(l < leaf_depth, !g.is_leaf(c));
+    EXPECT_GE(c, g.depth_begin(l));
+    EXPECT_LT(c, g.depth_begin(l + 1));
     const double s = g.cell_side(l);
     const vec3d centre((p[0] + 0.5) * s, (p[1] + 0.5) * s, (p[2] + 0.5) * s);
     EXPECT_LE((g.sample_points()[c].template cast<double>() - centre).norm(),
               0.5 * std::sqrt(3.0) * s * (1 + 1e-5))
         << "cell " << c;
-    if (l == depth) leaves.insert(p);
+    if (l == leaf_depth) leaves.insert(p);
   }
   const auto surface = sample_surface(mesh, 20000, 3);
-  const double leaf = g.cell_side(depth);
+  const double leaf = g.cell_side(leaf_depth);
   for (std::size_t i = 0; i < surface.size(); ++i) {
     const vec3d r = surface.world(i) - g.origin();
     std::array<std::uint32_t, 3> p;
@@ -276,7 +301,7 @@ TEST(RhoGridStructure, CodesDecodeToTheCellsBuilt) {
 // distance to the nearest triangle (brute force, double) is ≤ 1e-6 of the box.
 TEST(RhoGridSampling, EverySampleLiesOnTheSurface) {
   const auto& mesh = bunny_small();
-  const auto g = build_rho_grid<3>(mesh, {.depth = 4, .keep_sample_points = true});
+  const auto g = build_rho_grid<3>(mesh, {.level = 3, .keep_sample_points = true});
   const double tol = 1e-6 * g.cube_side();
   double worst = 0;
   for (std::size_t c = 0; c < g.cell_count(); c += 3)
@@ -285,11 +310,36 @@ TEST(RhoGridSampling, EverySampleLiesOnTheSurface) {
   EXPECT_LE(worst, tol);
 }
 
+// §3.1: "we sample the object at the point of the object closest to the center of the cell",
+// for inner cells and leaves alike. Brute force over every triangle: the distance from each
+// cell's centre to its sample equals the distance from the centre to the mesh (with the test
+// above, the sample is on the mesh, so it is a closest point). Sampling at a vertex, at the
+// first triangle met or at the parent's sample would each fail this on most cells.
+template <int Rho>
+void check_closest_points(int level) {
+  const auto& mesh = bunny_small();
+  const auto g = build_rho_grid<Rho>(mesh, {.level = level, .keep_sample_points = true});
+  const auto pos = decode_positions(g);
+  const double tol = 1e-6 * g.cube_side();  // float storage of the samples
+  for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
+    const auto& [d, p] = pos[c];
+    const double side = g.cell_side(d);
+    const vec3d centre((p[0] + 0.5) * side, (p[1] + 0.5) * side, (p[2] + 0.5) * side);
+    const double to_sample = (g.sample_points()[c].template cast<double>() - centre).norm();
+    ASSERT_NEAR(to_sample, distance_to_mesh(mesh, g.origin() + centre), tol)
+        << "cell " << c << " at depth " << d;
+  }
+}
+TEST(RhoGridSampling, EverySampleIsTheClosestPointToItsCellCentre) {
+  check_closest_points<2>(3);
+  check_closest_points<3>(2);
+}
+
 // A point cloud: the non-empty leaves are exactly the cells holding input points (brute force),
 // and a cell's sample is its own input point nearest to the centre (so it lies in the cell).
 TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
   const auto pc = sample_surface(make_demo_scene(16), 5000, 11);
-  const auto g = build_rho_grid<3>(pc, {.depth = 4, .keep_sample_points = true});
+  const auto g = build_rho_grid<3>(pc, {.level = 3, .keep_sample_points = true});
   const double leaf = g.cell_side(4);
   std::set<std::array<std::uint32_t, 3>> occupied;
   const double m = std::pow(3.0, 4);
@@ -302,7 +352,7 @@ TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
   }
   const auto pos = decode_positions(g);
   std::set<std::array<std::uint32_t, 3>> leaves;
-  for (std::uint32_t c = g.level_begin(4); c < g.cell_count(); ++c) {
+  for (std::uint32_t c = g.depth_begin(4); c < g.cell_count(); ++c) {
     leaves.insert(std::get<1>(pos[c]));
     const auto& p = std::get<1>(pos[c]);
     const vec3d s = g.sample_points()[c].cast<double>();
@@ -321,18 +371,74 @@ TEST(RhoGridAttributes, SigmaFollowsTheScene) {
   point_cloud pc = sample_surface(make_demo_scene(8), 500, 2);
   pc.normals.clear();
   pc.colours.clear();
-  const auto g0 = build_rho_grid<2>(pc, {.depth = 4});
+  const auto g0 = build_rho_grid<2>(pc, {.level = 3});
   EXPECT_EQ(g0.sigma(), 0);
   EXPECT_EQ(g0.memory_bytes(), g0.inner_count() * (sizeof(detail::child_code<2>) + 4));
   pc.materials.assign(pc.size(), 5);
-  const auto g3 = build_rho_grid<2>(pc, {.depth = 4});
+  const auto g3 = build_rho_grid<2>(pc, {.level = 3});
   EXPECT_EQ(g3.sigma(), 3);
   for (std::uint32_t c = 0; c < g3.cell_count(); ++c) EXPECT_EQ(g3.material(c), 5u);
   const auto gm =
-      build_rho_grid<3>(bunny_small(), {.depth = 2, .normal_bits = 0, .material_bits = 0});
+      build_rho_grid<3>(bunny_small(), {.level = 1, .normal_bits = 0, .material_bits = 0});
   EXPECT_EQ(gm.sigma(), 0);
   pc.materials.assign(pc.size(), 9);  // needs 4 bits
-  EXPECT_THROW((void)build_rho_grid<2>(pc, {.depth = 2}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<2>(pc, {.level = 1}), InvalidArgument);
+}
+
+// §3.1's σ-bit attribute holds a material index (8 materials in 3 bits). A height field as a
+// triangle soup, each triangle with its own three vertices and its own random material: a
+// cell's material must be that of the triangle its sample came from — the triangle closest to
+// the cell centre (brute force; on an edge shared by two triangles either may be the one).
+TEST(RhoGridAttributes, MaterialIsTheSampledTriangles) {
+  std::mt19937 rng(5);  // seeded: the same soup every run; any assignment must pass
+  triangle_mesh soup;
+  std::vector<std::uint8_t> face_material;
+  const int n = 10;
+  const auto at = [&](int i, int j) {
+    const float x = float(i) / n, y = float(j) / n;
+    return vec3f(x, y, 0.15f * std::sin(3 * x) * std::cos(2 * y));
+  };
+  const auto add = [&](vec3f a, vec3f b, vec3f c) {
+    const auto mat = static_cast<std::uint8_t>(rng() % 8);
+    const auto v = static_cast<std::uint32_t>(soup.vertices.positions.size());
+    for (const vec3f& p : {a, b, c}) {
+      soup.vertices.positions.push_back(p);
+      soup.vertices.materials.push_back(mat);
+    }
+    soup.faces.push_back({v, v + 1, v + 2});
+    face_material.push_back(mat);
+  };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      add(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+      add(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+    }
+  const auto g = build_rho_grid<3>(soup, {.level = 2, .material_bits = 3});
+  ASSERT_EQ(g.material_bits(), 3);
+  const auto pos = decode_positions(g);
+  const double tol = 1e-9 * g.cube_side();
+  std::set<std::uint32_t> seen;
+  for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
+    const auto& [d, p] = pos[c];
+    const double side = g.cell_side(d);
+    const vec3d centre =
+        g.origin() + vec3d((p[0] + 0.5) * side, (p[1] + 0.5) * side, (p[2] + 0.5) * side);
+    std::vector<double> dist(soup.faces.size());
+    for (std::size_t f = 0; f < soup.faces.size(); ++f) {
+      const auto& fc = soup.faces[f];
+      dist[f] = (closest_on_triangle(centre, soup.vertices.world(fc[0]), soup.vertices.world(fc[1]),
+                                     soup.vertices.world(fc[2])) -
+                 centre)
+                    .norm();
+    }
+    const double best = *std::ranges::min_element(dist);
+    bool match = false;
+    for (std::size_t f = 0; f < dist.size(); ++f)
+      match |= dist[f] <= best + tol && face_material[f] == g.material(c);
+    EXPECT_TRUE(match) << "cell " << c << " has material " << g.material(c);
+    seen.insert(g.material(c));
+  }
+  EXPECT_EQ(seen.size(), 8u);  // the check saw every material, not one repeated value
 }
 
 // The quantised normal of a cell is the surface normal at its sample: the area-weighted vertex
@@ -341,7 +447,7 @@ TEST(RhoGridAttributes, SigmaFollowsTheScene) {
 // brute force may pick the neighbouring triangle (the interpolated normal is continuous there).
 TEST(RhoGridAttributes, NormalsMatchTheSurface) {
   const auto& mesh = bunny_small();
-  const auto g = build_rho_grid<3>(mesh, {.depth = 3, .keep_sample_points = true});
+  const auto g = build_rho_grid<3>(mesh, {.level = 2, .keep_sample_points = true});
   const normal_quantizer q(13);
   const auto vn = area_weighted_normals(mesh);
   double worst = 0;
@@ -404,7 +510,7 @@ void check_round_trip(const rho_grid<Rho>& g) {
   const auto back = rho_grid<Rho>::parse(is);
   EXPECT_TRUE(back == g);
   // Payload size is exactly the §3.2 count; the file adds a fixed header and checksum.
-  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.depth() + 1) * 8 + 8;
+  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.leaf_depth() + 1) * 8 + 8;
   EXPECT_EQ(is.size(), header + (g.payload_bits(rho_grid_layout::is) + 7) / 8 + 8);
   const auto nis = g.serialise(rho_grid_layout::nis);
   EXPECT_EQ(nis.size(), header + (g.payload_bits(rho_grid_layout::nis) + 7) / 8 + 8);
@@ -418,11 +524,11 @@ void check_round_trip(const rho_grid<Rho>& g) {
 }
 
 TEST(RhoGridStreams, NisAndIsRoundTrip) {
-  check_round_trip(build_rho_grid<2>(bunny_small(), {.depth = 5}));
-  check_round_trip(build_rho_grid<3>(bunny_small(), {.depth = 3}));
-  check_round_trip(build_rho_grid<4>(bunny_small(), {.depth = 2, .normal_bits = 9}));
-  check_round_trip(build_rho_grid<5>(bunny_small(), {.depth = 2, .normal_bits = 0}));
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  check_round_trip(build_rho_grid<2>(bunny_small(), {.level = 4}));
+  check_round_trip(build_rho_grid<3>(bunny_small(), {.level = 2}));
+  check_round_trip(build_rho_grid<4>(bunny_small(), {.level = 1, .normal_bits = 9}));
+  check_round_trip(build_rho_grid<5>(bunny_small(), {.level = 1, .normal_bits = 0}));
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   const auto path = (std::filesystem::temp_directory_path() / "pbr_lod_rho_grid_test.lod").string();
   g.save(path, rho_grid_layout::nis);
   EXPECT_EQ(rho_grid_file_rho(path), 3);
@@ -435,7 +541,7 @@ TEST(RhoGridStreams, NisAndIsRoundTrip) {
 // Every truncation, a flipped bit anywhere (checksum), and structural lies with a valid
 // checksum (a changed count, a childhood code with a bit removed) are FormatErrors.
 TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 2});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 1});
   for (auto layout : {rho_grid_layout::nis, rho_grid_layout::is}) {
     const auto bytes = g.serialise(layout);
     std::mt19937 rng(3);
@@ -485,8 +591,8 @@ TEST(RhoGridStreams, TruncatedOrCorruptStreamsAreErrors) {
 // Two builds of the same mesh, at 1 and 2 threads, write the same bytes in every layout (the file
 // holds no timings); a loaded grid says it has none.
 TEST(RhoGridStream, FilesAreDeterministic) {
-  const auto a = build_rho_grid<3>(bunny_small(), {.depth = 4, .threads = 1});
-  const auto b = build_rho_grid<3>(bunny_small(), {.depth = 4, .threads = 2});
+  const auto a = build_rho_grid<3>(bunny_small(), {.level = 3, .threads = 1});
+  const auto b = build_rho_grid<3>(bunny_small(), {.level = 3, .threads = 2});
   EXPECT_TRUE(a.stats().has_timings);
   for (const auto layout : {rho_grid_layout::nis, rho_grid_layout::is}) {
     const auto x = a.serialise(layout), y = b.serialise(layout);
@@ -497,20 +603,80 @@ TEST(RhoGridStream, FilesAreDeterministic) {
 }
 
 // §3.3: the in-core structure gives random access — the child table of cell c starts at
-// first_child(c), children contiguous, the last child of the last inner cell of a level followed
-// by the first cell of the level after next. Its size is 32 bits + code + 16 bits per inner cell
-// and 16 bits per leaf.
-TEST(RhoGridInCore, ChildTableIsContiguous) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
-  std::uint32_t expect = 1;
-  for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
-    EXPECT_EQ(g.first_child(c), expect);
-    expect += std::uint32_t(g.code(c).count());
+// first_child(c) and holds one cell per set bit of code(c). Reference by geometric containment,
+// from the input alone: the non-empty leaves are the cells holding an input point, a cell at
+// depth d is non-empty when it contains one at d + 1 (position / ρ), cells are numbered breadth
+// first in path order (base-ρ³ digits, coarsest first). Inner cell c's children must then be
+// the cells of depth d + 1 inside it, starting at first_child(c), and bit j of its code set
+// exactly when child j exists. Size: 32 bits + code per inner cell, 16 bits per cell when σ > 0.
+template <int Rho>
+void check_child_table(const point_cloud& pc, int level) {
+  const auto g = build_rho_grid<Rho>(pc, {.level = level});
+  const int k = level + 1;
+  using pos = std::array<std::uint32_t, 3>;
+  const auto path_key = [](const pos& p, int d) {
+    std::uint64_t key = 0;
+    for (int t = d - 1; t >= 0; --t) {
+      std::uint64_t span = 1;
+      for (int i = 0; i < t; ++i) span *= Rho;
+      const auto dg = [&](int a) { return (p[std::size_t(a)] / span) % Rho; };
+      key = key * (Rho * Rho * Rho) + dg(0) + Rho * dg(1) + Rho * Rho * dg(2);
+    }
+    return key;
+  };
+  std::vector<std::vector<pos>> cells(std::size_t(k) + 1);  // per depth, in path order
+  const double leaf = g.cell_side(k);
+  const double per_axis = std::pow(double(Rho), k);
+  std::set<pos> occupied;
+  for (std::size_t i = 0; i < pc.size(); ++i) {
+    const vec3d r = (pc.origin - g.origin()) + pc.positions[i].cast<double>();
+    pos p;
+    for (int a = 0; a < 3; ++a)
+      p[std::size_t(a)] = std::uint32_t(std::clamp(std::floor(r[a] / leaf), 0.0, per_axis - 1));
+    occupied.insert(p);
   }
-  EXPECT_EQ(expect, g.cell_count());
-  EXPECT_EQ(g.memory_bytes(), g.inner_count() * (4 + 4) + g.cell_count() * 2);
+  for (int d = k; d >= 0; --d) {
+    cells[std::size_t(d)].assign(occupied.begin(), occupied.end());
+    std::ranges::sort(cells[std::size_t(d)],
+                      [&](const pos& x, const pos& y) { return path_key(x, d) < path_key(y, d); });
+    std::set<pos> parents;
+    for (const pos& p : occupied) parents.insert({p[0] / Rho, p[1] / Rho, p[2] / Rho});
+    occupied = parents;
+  }
+  std::uint32_t first = 0;  // breadth-first index of the depth's first cell
+  for (int d = 0; d < k; ++d) {
+    const auto& now = cells[std::size_t(d)];
+    const auto& next = cells[std::size_t(d) + 1];
+    const std::uint32_t next_first = first + std::uint32_t(now.size());
+    std::size_t ci = 0;  // children of the cells before this one
+    for (std::size_t i = 0; i < now.size(); ++i) {
+      const std::uint32_t c = first + std::uint32_t(i);
+      ASSERT_LT(c, g.inner_count());
+      EXPECT_EQ(g.first_child(c), next_first + ci) << "cell " << c;
+      for (int j = 0; j < Rho * Rho * Rho; ++j) {
+        const pos child{now[i][0] * Rho + std::uint32_t(j % Rho),
+                        now[i][1] * Rho + std::uint32_t((j / Rho) % Rho),
+                        now[i][2] * Rho + std::uint32_t(j / (Rho * Rho))};
+        const bool exists = ci < next.size() && next[ci] == child;
+        EXPECT_EQ(g.code(c).test(j), exists) << "cell " << c << " child " << j;
+        ci += exists;
+      }
+    }
+    EXPECT_EQ(ci, next.size()) << "depth " << d + 1 << " has cells outside their parents";
+    first = next_first;
+  }
+  EXPECT_EQ(g.inner_count(), first);
+  EXPECT_EQ(g.cell_count(), first + cells[std::size_t(k)].size());
+  EXPECT_EQ(g.memory_bytes(), g.inner_count() * (sizeof(detail::child_code<Rho>) + 4) +
+                                  (g.sigma() > 0 ? g.cell_count() * 2 : 0));
   EXPECT_NEAR(g.stats().bits_per_sample_incore,
               double(g.memory_bytes()) * 8 / double(g.leaf_count()), 1e-9);
+}
+TEST(RhoGridInCore, ChildTableMatchesGeometricContainment) {
+  const point_cloud& pc = bunny_small().vertices;
+  check_child_table<2>(pc, 4);
+  check_child_table<3>(pc, 2);
+  check_child_table<5>(pc, 1);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -574,10 +740,11 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
   EXPECT_DOUBLE_EQ(back.stats().bits_per_sample_incore, g.stats().bits_per_sample_incore);
   // The reported sizes are those of the file: header + both streams + checksum.
   const auto cs = g.coded_size();
-  const std::size_t header = 8 + 6 * 4 + 8 * 8 + std::size_t(g.depth() + 1) * 8 + 2 * 4 + 2 * 8;
+  const std::size_t header =
+      8 + 6 * 4 + 8 * 8 + std::size_t(g.leaf_depth() + 1) * 8 + 2 * 4 + 2 * 8;
   EXPECT_EQ(cs.file_bytes, bytes.size());
   EXPECT_EQ(header + cs.geometry_bytes + cs.attribute_bytes + 8, bytes.size());
-  EXPECT_EQ(cs.geometry_bytes == 0, g.depth() == 0);
+  EXPECT_EQ(cs.geometry_bytes == 0, g.leaf_depth() == 0);
   EXPECT_EQ(cs.attribute_bytes == 0, g.sigma() == 0);
   // Every context model and predictor decodes to the same tree.
   for (auto gm :
@@ -589,16 +756,16 @@ void check_compressed_round_trip(const rho_grid<Rho>& g, const std::string& name
                       g, {.geometry = gm, .attributes = am})) == g);
 }
 
-// Synthetic cases: one point (one path, depth 4), a depth-0 grid (root only, no geometry
+// Synthetic cases: one point (one path, level 3), a level −1 grid (root only, no geometry
 // stream), a full grid (every leaf occupied: the coder must learn "always 1"), a cloud without
 // normals (σ = 0: no attribute stream) and one with materials; and the bunny at ρ = 2..5.
 TEST(RhoGridCompressed, RoundTripIsExact) {
   point_cloud one;
   one.positions = {vec3f(1, 2, 3)};
   one.normals = {vec3f(0, 0, -1)};
-  check_compressed_round_trip(build_rho_grid<3>(one, {.depth = 4}), "one point");
-  check_compressed_round_trip(build_rho_grid<2>(one, {.depth = 0}), "depth 0");
-  point_cloud full;  // one point at the centre of each of the 8³ cells of a depth-3 octree
+  check_compressed_round_trip(build_rho_grid<3>(one, {.level = 3}), "one point");
+  check_compressed_round_trip(build_rho_grid<2>(one, {.level = -1}), "level -1 (root only)");
+  point_cloud full;  // one point at the centre of each of the 8³ cells of an oct/2 octree
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-1, 1);
   for (int z = 0; z < 8; ++z)
@@ -608,25 +775,25 @@ TEST(RhoGridCompressed, RoundTripIsExact) {
         full.normals.push_back(vec3f(u(rng), u(rng), u(rng)).normalized());
         full.materials.push_back(std::uint8_t(rng() % 8));
       }
-  const auto gf = build_rho_grid<2>(full, {.depth = 3});
+  const auto gf = build_rho_grid<2>(full, {.level = 2});
   ASSERT_EQ(gf.leaf_count(), 512u);
   ASSERT_TRUE(gf.has_materials());
   check_compressed_round_trip(gf, "full grid with materials");
   point_cloud bare = full;
   bare.normals.clear();
   bare.materials.clear();
-  const auto gb = build_rho_grid<4>(bare, {.depth = 2});
+  const auto gb = build_rho_grid<4>(bare, {.level = 1});
   ASSERT_EQ(gb.sigma(), 0);
   check_compressed_round_trip(gb, "sigma 0");
-  check_compressed_round_trip(build_rho_grid<2>(bunny_small(), {.depth = 6}), "bunny rho 2");
-  check_compressed_round_trip(build_rho_grid<3>(bunny_small(), {.depth = 4}), "bunny rho 3");
-  check_compressed_round_trip(build_rho_grid<4>(bunny_small(), {.depth = 3, .normal_bits = 9}),
+  check_compressed_round_trip(build_rho_grid<2>(bunny_small(), {.level = 5}), "bunny rho 2");
+  check_compressed_round_trip(build_rho_grid<3>(bunny_small(), {.level = 3}), "bunny rho 3");
+  check_compressed_round_trip(build_rho_grid<4>(bunny_small(), {.level = 2, .normal_bits = 9}),
                               "bunny rho 4");
   check_compressed_round_trip(
-      build_rho_grid<5>(bunny_small(), {.depth = 2, .normal_bits = 16, .material_bits = 0}),
+      build_rho_grid<5>(bunny_small(), {.level = 1, .normal_bits = 16, .material_bits = 0}),
       "bunny rho 5");
   // save/load keeps the layout's contract too.
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   const auto path = (std::filesystem::temp_directory_path() / "pbr_lod_rho_grid_c.lod").string();
   g.save(path, rho_grid_layout::compressed);
   EXPECT_EQ(rho_grid_file_rho(path), 3);
@@ -635,12 +802,12 @@ TEST(RhoGridCompressed, RoundTripIsExact) {
   std::filesystem::remove(path);
 }
 
-// The targets on the real bunny (bun_zipper, octree depth 7, 56 k samples): geometry
+// The targets on the real bunny (bun_zipper, oct/6, 56 k samples): geometry
 // ≤ 2 bits per sample (Botsch 2002 reports ~2), attributes of every cell well under the IS
 // stream's 13·(1 + inner/leaf) ≈ 17.3 bits. Each context refinement must pay for itself.
 TEST(RhoGridCompressed, BunnyMeetsTheTargets) {
   static const triangle_mesh bunny = read_mesh(test::data_file("bun_zipper.ply"));
-  const auto g = build_rho_grid<2>(bunny, {.depth = 7});
+  const auto g = build_rho_grid<2>(bunny, {.level = 6});
   const auto cs = g.coded_size();
   EXPECT_LE(cs.bits_per_sample_geometry, 2.0);
   EXPECT_LT(cs.bits_per_sample_attributes, 13.0);
@@ -664,7 +831,7 @@ TEST(RhoGridCompressed, BunnyMeetsTheTargets) {
 // coded byte either fails validation (counts, ranges, exact stream length) or decodes to some
 // other valid tree — never a crash or an out-of-bounds read (run under ASan).
 TEST(RhoGridCompressed, TruncatedOrCorruptStreamsAreErrors) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 3});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
   const auto bytes = g.serialise(rho_grid_layout::compressed);
   std::mt19937 rng(3);
   expect_cuts_and_flips_throw(bytes, 32, rng);
@@ -745,29 +912,29 @@ void check_valid(const rho_grid<Rho>& g, std::size_t leaves) {
 TEST(RhoGridDegenerate, LadderOfDegenerateInputs) {
   point_cloud one;
   one.positions = {vec3f(1, 2, 3)};
-  check_valid(build_rho_grid<3>(one, {.depth = 4}), 1);  // one point: one path of k cells
+  check_valid(build_rho_grid<3>(one, {.level = 3}), 1);  // one point: one path of k cells
   point_cloud dup;
   dup.positions.assign(50, vec3f(-1, 0, 1));
   dup.normals.assign(50, vec3f(0, 1, 0));
-  check_valid(build_rho_grid<2>(dup, {.depth = 6}), 1);  // duplicates: one cell per level
+  check_valid(build_rho_grid<2>(dup, {.level = 5}), 1);  // duplicates: one cell per level
   point_cloud line;
   for (int i = 0; i < 100; ++i) line.positions.emplace_back(float(i), 0.f, 0.f);
   // 100 collinear points spread over the cube's x axis: 3^4 = 81 leaf columns, all occupied.
-  check_valid(build_rho_grid<3>(line, {.depth = 4}), 81);
+  check_valid(build_rho_grid<3>(line, {.level = 3}), 81);
   // Zero-area triangles only (collinear and repeated vertices): built from the vertices.
   triangle_mesh flat;
   flat.vertices.positions = {vec3f(0, 0, 0), vec3f(1, 0, 0), vec3f(2, 0, 0), vec3f(1, 0, 0)};
   flat.faces = {{0, 1, 2}, {1, 3, 1}};
-  check_valid(build_rho_grid<2>(flat, {.depth = 3}), 3);
+  check_valid(build_rho_grid<2>(flat, {.level = 2}), 3);
   // A mesh with one good and one zero-area triangle: the degenerate one is skipped.
   triangle_mesh mixed;
   mixed.vertices.positions = {vec3f(0, 0, 0), vec3f(1, 0, 0), vec3f(0, 1, 0), vec3f(2, 0, 0)};
   mixed.faces = {{0, 1, 2}, {0, 1, 3}};
-  const auto gm = build_rho_grid<2>(mixed, {.depth = 4});
+  const auto gm = build_rho_grid<2>(mixed, {.level = 3});
   check_valid(gm, gm.leaf_count());
   EXPECT_GT(gm.leaf_count(), 16u);
   EXPECT_THROW((void)build_rho_grid<3>(point_cloud{}, {}), InvalidArgument);
-  EXPECT_THROW((void)build_rho_grid<3>(one, {.depth = 99}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<3>(one, {.level = 98}), InvalidArgument);
   EXPECT_THROW((void)build_rho_grid<3>(one, {.normal_bits = 3}), InvalidArgument);
   point_cloud nan = one;
   nan.positions[0].x() = std::numeric_limits<float>::quiet_NaN();
@@ -781,8 +948,8 @@ TEST(RhoGridDegenerate, FarFromTheOriginBuildsTheSameTree) {
   triangle_mesh near = bunny_small();
   triangle_mesh far = near;
   far.vertices.origin += vec3d(1e7, -2e7, 1e7);
-  const auto a = build_rho_grid<3>(near, {.depth = 3});
-  const auto b = build_rho_grid<3>(far, {.depth = 3});
+  const auto a = build_rho_grid<3>(near, {.level = 2});
+  const auto b = build_rho_grid<3>(far, {.level = 2});
   EXPECT_EQ(a.cell_count(), b.cell_count());
   for (std::uint32_t c = 0; c < a.inner_count(); ++c) ASSERT_TRUE(a.code(c) == b.code(c));
   EXPECT_NEAR((b.origin() - a.origin() - vec3d(1e7, -2e7, 1e7)).norm(), 0, 1e-6);
@@ -797,7 +964,7 @@ TEST(RhoGridDegenerate, FarFromTheOriginBuildsTheSameTree) {
 // each child's bounding sphere lies inside its parent's, and the generic traversal with the
 // default policy at tolerance 0 and no culling emits every leaf once and nothing else.
 TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 4});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 3});
   const rho_grid_hierarchy<3, with_normals> h(g);
   std::vector<int> reached(g.cell_count(), 0);
   std::vector<rho_grid_cell> stack{h.root()};
@@ -808,7 +975,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
     const sphere ps = h.bounding_sphere(n);
     std::size_t count = 0;
     for (const rho_grid_cell c : h.children(n)) {
-      ASSERT_EQ(c.level, n.level + 1);
+      ASSERT_EQ(c.depth, n.depth + 1);
       ++reached[c.cell];
       const sphere cs = h.bounding_sphere(c);
       EXPECT_LE((cs.centre - ps.centre).norm() + cs.radius, ps.radius * (1 + 1e-5f));
@@ -827,7 +994,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
   // Asking for attributes the grid does not store is an error, not garbage.
   point_cloud bare;
   bare.positions = {vec3f(0, 0, 0), vec3f(1, 1, 1)};
-  const auto gb = build_rho_grid<2>(bare, {.depth = 2});
+  const auto gb = build_rho_grid<2>(bare, {.level = 1});
   EXPECT_THROW((void)(rho_grid_hierarchy<2, with_normals>(gb)), InvalidArgument);
 }
 
@@ -835,7 +1002,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
 // where a test is within rounding of equality (bounded here to 0.1 % of the cells), and the
 // images agree to the same degree.
 TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
-  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.depth = 5});
+  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   for (float s : {1.0f, 2.0f, 4.0f}) {
     for (double dist : {1.2, 2.5, 6.0}) {
       const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
@@ -869,10 +1036,10 @@ TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
 // reaches the leaves; s = 4 draws fewer cells than s = 1; culling drops cells behind the viewer
 // and off screen (a camera looking away draws nothing).
 TEST(RhoGridRender, SplatConditionAndCulling) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 5});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
-  // At distance 8 (radii) a depth-4 cell spans ≤ 2.2 px (conservatively): s = 4 stops there,
-  // s = 1 goes on to the leaves.
+  // At distance 8 (radii) a cell at depth 4 (level 3) spans ≤ 2.2 px (conservatively): s = 4 stops
+  // there, s = 1 goes on to the leaves.
   const auto count = [&](double dist, float s, double az = 30) {
     const camera cam = camera::orbit(c, 0.5 * g.cube_side(), az, 20, dist, 1, {256, 256});
     return traverse_cells(g, view(cam, g.origin()), s);
@@ -894,7 +1061,7 @@ TEST(RhoGridRender, SplatConditionAndCulling) {
 // Conservative bounds: every drawn inner cell's projected cube (its 8 corners, exactly) is at
 // most s pixels wide and tall — the splat condition never under-estimates.
 TEST(RhoGridRender, SplatConditionIsConservative) {
-  const auto g = build_rho_grid<3>(bunny_small(), {.depth = 5});
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 10, 35, 8, 1, {300, 300});
   const view v(cam, g.origin());
@@ -904,7 +1071,7 @@ TEST(RhoGridRender, SplatConditionIsConservative) {
   (void)traverse_cells(g, v, s, &drawn);
   for (const auto& [r, splat] : drawn) {
     if (!splat) continue;
-    const double side = g.cell_side(r.level);
+    const double side = g.cell_side(r.depth);
     float x0 = 1e30f, x1 = -1e30f, y0 = 1e30f, y1 = -1e30f;
     for (int k = 0; k < 8; ++k) {
       const vec3f p((r.pos[0] + (k & 1)) * side, (r.pos[1] + ((k >> 1) & 1)) * side,
@@ -994,7 +1161,7 @@ TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
   plane.vertices.positions = {vec3f(-1, -0.3f, -1), vec3f(1, 0.3f - 0.1f, -1), vec3f(1, 0.4f, 1),
                               vec3f(-1, -0.2f, 1)};
   plane.faces = {{0, 1, 2}, {0, 2, 3}};
-  const auto g = build_rho_grid<2>(plane, {.depth = 8});
+  const auto g = build_rho_grid<2>(plane, {.level = 7});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   for (float s : {1.0f, 2.0f, 4.0f, 8.0f}) {
     for (int az : {0, 120, 240}) {
@@ -1015,7 +1182,7 @@ TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
 }
 
 TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
-  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.depth = 5});
+  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
   // At 5 radii a leaf spans ~0.6 px: the points close the surface, so neither map leaks.
   const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 5, 1, {256, 256});

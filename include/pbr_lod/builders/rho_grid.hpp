@@ -54,8 +54,9 @@ namespace pbr_lod {
   return (r * r * r + sigma) / (r * r - 1);
 }
 
-/// Deepest level supported for a given ρ: the leaf path (k base-ρ³ digits) fits in 63 bits.
-[[nodiscard]] constexpr int rho_grid_max_depth(int rho) {
+/// Deepest subdivision supported for a given ρ: the leaf path (k base-ρ³ digits) fits in 63 bits.
+/// This is the tree depth k of the leaves (the root cube at depth 0), the paper's level + 1.
+[[nodiscard]] constexpr int rho_grid_max_leaf_depth(int rho) {
   int k = 0;
   unsigned long long cells = 1;
   const unsigned long long step = static_cast<unsigned long long>(rho) * rho * rho;
@@ -66,10 +67,18 @@ namespace pbr_lod {
   return k;
 }
 
+/// Finest level (as the paper numbers levels, rho_grid_options::level) supported for a given ρ:
+/// 20 for ρ = 2, 12 for ρ = 3, 9 for ρ = 4, 8 for ρ = 5.
+[[nodiscard]] constexpr int rho_grid_max_level(int rho) {
+  return rho_grid_max_leaf_depth(rho) - 1;
+}
+
 struct rho_grid_options {
-  /// k, the number of subdivision levels: leaves are cells of 1/ρ^k of the bounding cube.
-  /// The paper's Table 2 uses oct/7, oct/10 (ρ = 2) and tri/4, tri/6 (ρ = 3).
-  int depth = 6;
+  /// The level of the leaves as the paper numbers it (Table 2's oct/7, tri/4, ...): the leaves
+  /// are the cells of a ρ^(level+1) grid over the bounding cube — oct/7 is a 256³ grid, tri/4 a
+  /// 243³ grid. (Level 0 is the first ρ×ρ×ρ grid; the cube itself is level −1, which builds a
+  /// single cell.) Range [−1, rho_grid_max_level(ρ)].
+  int level = 5;
   /// Bits of the quantised normal (pbr_lod::normal_quantizer, 6..16), 0 for none. 13 as in the
   /// paper (and Botsch 2002). Ignored (no bits) when the input has no normals: a point cloud
   /// without normals. A mesh always has geometric normals.
@@ -89,7 +98,7 @@ struct rho_grid_options {
 
 /// What a build measured. Bits per leaf sample are of the actual streams and structure.
 struct rho_grid_stats {
-  int rho = 0, depth = 0, sigma = 0;
+  int rho = 0, level = 0, sigma = 0;  ///< level as in rho_grid_options
   std::size_t samples = 0;            ///< leaf samples n
   std::size_t inner_cells = 0;        ///< N, non-empty non-leaf cells (Eq. 1)
   double bits_per_sample_nis = 0;     ///< NIS stream payload bits / n
@@ -162,16 +171,21 @@ struct rho_grid_access;
 
 /// A ρ-grid over a triangle mesh or a point cloud (ρ ∈ {2,3,4,5}: octree, tri-grid, ...).
 ///
-/// Cells are numbered breadth first: level 0 is the root (cell 0), and the cells of each level
+/// Levels and depths: level() is the paper's level of the leaves (rho_grid_options::level). A
+/// cell's *depth* d counts the subdivisions of the bounding cube above it: the cube (the root)
+/// has depth 0, the cells of the paper's level l have depth l + 1, the leaves leaf_depth() =
+/// level() + 1. The per-cell accessors (depth_begin, cell_side) and rho_grid_node take depths.
+///
+/// Cells are numbered breadth first: depth 0 is the root (cell 0), and the cells of each depth
 /// follow in path order, the children of a cell contiguous and in increasing digit order, digit
 /// j = x + ρ·y + ρ²·z of the child's position in its parent. Cells [0, inner_count()) are inner
-/// (every level < depth()); the rest are the leaves (level depth()). Inner cell i's children are
-/// cells first_child(i) + rank, one per set bit of code(i) — the §3.3 child table is the cell
-/// array itself, so the pointer is a 32-bit index.
+/// (every depth < leaf_depth()); the rest are the leaves (depth leaf_depth()). Inner cell i's
+/// children are cells first_child(i) + rank, one per set bit of code(i) — the §3.3 child table is
+/// the cell array itself, so the pointer is a 32-bit index.
 ///
 /// Geometry: the bounding cube has its minimum corner at origin() (double) and side cube_side();
-/// a cell at level l with integer position (x, y, z) ∈ [0, ρ^l)³ has centre
-/// origin + ((x, y, z) + ½)·cube_side/ρ^l. Attribute of a cell: normal code in the low
+/// a cell at depth d with integer position (x, y, z) ∈ [0, ρ^d)³ has centre
+/// origin + ((x, y, z) + ½)·cube_side/ρ^d. Attribute of a cell: normal code in the low
 /// normal_bits() bits, material above it.
 template <int Rho>
 class rho_grid {
@@ -184,7 +198,10 @@ class rho_grid {
 
   rho_grid() = default;
 
-  [[nodiscard]] int depth() const { return depth_; }
+  /// The paper's level of the leaves (rho_grid_options::level); −1 for a single-cell grid.
+  [[nodiscard]] int level() const { return leaf_depth_ - 1; }
+  /// Depth of the leaves below the root cube: level() + 1, the k of Eq. 1–3.
+  [[nodiscard]] int leaf_depth() const { return leaf_depth_; }
   [[nodiscard]] bool empty() const { return attrs_count_ == 0; }
   [[nodiscard]] vec3d origin() const { return origin_; }
   [[nodiscard]] double cube_side() const { return side_; }
@@ -203,8 +220,9 @@ class rho_grid {
   [[nodiscard]] std::size_t cell_count() const { return attrs_count_; }
   [[nodiscard]] std::size_t inner_count() const { return codes_.size(); }
   [[nodiscard]] std::size_t leaf_count() const { return attrs_count_ - codes_.size(); }
-  /// First cell of level l (0 ≤ l ≤ depth + 1; level_begin(depth + 1) = cell_count()).
-  [[nodiscard]] std::uint32_t level_begin(int l) const { return level_start_[std::size_t(l)]; }
+  /// First cell of depth d (0 ≤ d ≤ leaf_depth() + 1; depth_begin(leaf_depth() + 1) =
+  /// cell_count()).
+  [[nodiscard]] std::uint32_t depth_begin(int d) const { return depth_start_[std::size_t(d)]; }
   [[nodiscard]] bool is_leaf(std::uint32_t c) const { return c >= codes_.size(); }
   [[nodiscard]] const code_type& code(std::uint32_t c) const { return codes_[c]; }
   [[nodiscard]] std::uint32_t first_child(std::uint32_t c) const { return first_child_[c]; }
@@ -218,8 +236,8 @@ class rho_grid {
   [[nodiscard]] std::uint32_t material(std::uint32_t c) const {
     return attribute(c) >> normal_bits_;
   }
-  /// Side of a cell at level l.
-  [[nodiscard]] double cell_side(int l) const { return side_ / std::pow(double(Rho), l); }
+  /// Side of a cell at depth d.
+  [[nodiscard]] double cell_side(int d) const { return side_ / std::pow(double(Rho), d); }
 
   /// The sampled surface points (relative to origin(), one per cell), when the build kept them.
   [[nodiscard]] const std::vector<vec3f>& sample_points() const { return sample_points_; }
@@ -258,16 +276,16 @@ class rho_grid {
 
   /// Equal structure and attributes (sample points and stats are not compared).
   friend bool operator==(const rho_grid& a, const rho_grid& b) {
-    return a.depth_ == b.depth_ && a.origin_ == b.origin_ && a.side_ == b.side_ &&
+    return a.leaf_depth_ == b.leaf_depth_ && a.origin_ == b.origin_ && a.side_ == b.side_ &&
            a.input_centre_ == b.input_centre_ && a.input_radius_ == b.input_radius_ &&
            a.normal_bits_ == b.normal_bits_ && a.material_bits_ == b.material_bits_ &&
            a.codes_ == b.codes_ && a.first_child_ == b.first_child_ && a.attrs_ == b.attrs_ &&
-           a.level_start_ == b.level_start_ && a.attrs_count_ == b.attrs_count_;
+           a.depth_start_ == b.depth_start_ && a.attrs_count_ == b.attrs_count_;
   }
 
  private:
   friend struct detail::rho_grid_access<Rho>;
-  int depth_ = 0;
+  int leaf_depth_ = 0;
   vec3d origin_ = vec3d::Zero();
   double side_ = 1;
   vec3d input_centre_ = vec3d::Zero();
@@ -276,7 +294,7 @@ class rho_grid {
   std::vector<code_type> codes_;            // inner cells
   std::vector<std::uint32_t> first_child_;  // inner cells
   std::vector<std::uint16_t> attrs_;        // every cell (empty when σ = 0)
-  std::vector<std::uint32_t> level_start_;  // depth + 2 entries
+  std::vector<std::uint32_t> depth_start_;  // leaf_depth + 2 entries
   std::size_t attrs_count_ = 0;             // cells
   std::vector<vec3f> sample_points_;
   rho_grid_stats stats_;

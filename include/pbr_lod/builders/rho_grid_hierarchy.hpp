@@ -2,16 +2,16 @@
 // (Duguet & Drettakis 2004, §4, §4.1, §4.2 child order, §5.1).
 //
 // rho_grid_hierarchy<ρ, A> models Hierarchy (traverse/hierarchy.hpp) over a built rho_grid<ρ>:
-// a node is a cell with its level and integer position (positions are implicit in the path),
+// a node is a cell with its depth and integer position (positions are implicit in the path),
 // A ⊆ {normal, colour} is the compile-time attribute set of the primitives (normal = the decoded
 // σ-bit normal, colour = the material's palette colour), and emit() sends one point_prim at the
 // cell centre. Any traversal policy can drive it; rho_grid_policy is the paper's.
 //
 // rho_grid_policy is the paper's Render(cell, centre, level) with Botsch et al.'s transformation
 // factorisation: the homogeneous screen position H = (X, Y, W) of a cell centre is its parent's
-// plus an entry of a per-level displacement table (one vec add per cell, no matrix product) —
+// plus an entry of a per-depth displacement table (one vec add per cell, no matrix product) —
 // the traversal's per-entry state — and the conservative screen bounds of a cell come from a
-// per-level bounds table:
+// per-depth bounds table:
 //   A_x = max over the cube's corners of |ΔX|, A_y likewise, B = max |ΔW|.
 // With E_x = A_x·W + B·|X|, every corner's x = X'/W' lies within E_x / (W·(W − B)) of X/W
 // (while W − B > 0: the cell is wholly in front of the eye). So, all in homogeneous coordinates
@@ -55,11 +55,12 @@ namespace pbr_lod {
 
 enum class rho_grid_arithmetic { floating, fixed };
 
-/// A node of a ρ-grid hierarchy: the cell index (rho_grid numbering), its level and its integer
-/// position in [0, ρ^level)³ — the path the implicit positions need.
+/// A node of a ρ-grid hierarchy: the cell index (rho_grid numbering), its depth below the root
+/// cube (the paper's level + 1, see rho_grid) and its integer position in [0, ρ^depth)³ — the
+/// path the implicit positions need.
 struct rho_grid_cell {
   std::uint32_t cell;
-  int level;
+  int depth;
   std::array<std::uint32_t, 3> pos;
 };
 
@@ -92,7 +93,7 @@ class rho_grid_hierarchy {
       throw InvalidArgument("rho-grid: colours requested, the grid stores no materials");
     if constexpr (A.normal) q_ = normal_quantizer::shared(g.normal_bits());  // one per process
     // cell_side() takes a pow(); a frame asks for it once per drawn cell.
-    for (int l = 0; l <= g.depth(); ++l) side_.push_back(g.cell_side(l));
+    for (int d = 0; d <= g.leaf_depth(); ++d) side_.push_back(g.cell_side(d));
   }
 
   [[nodiscard]] const rho_grid<Rho>& grid() const { return *g_; }
@@ -109,7 +110,7 @@ class rho_grid_hierarchy {
   [[nodiscard]] static node_id child(const node_id& n, int j, std::uint32_t cell) {
     return {
         cell,
-        n.level + 1,
+        n.depth + 1,
         {n.pos[0] * Rho + std::uint32_t(j % Rho), n.pos[1] * Rho + std::uint32_t((j / Rho) % Rho),
          n.pos[2] * Rho + std::uint32_t(j / (Rho * Rho))}};
   }
@@ -122,13 +123,13 @@ class rho_grid_hierarchy {
 
   /// Centre of cell n relative to origin().
   [[nodiscard]] vec3f centre(const node_id& n) const {
-    const double s = side_[std::size_t(n.level)];
+    const double s = side_[std::size_t(n.depth)];
     return vec3f(float((double(n.pos[0]) + 0.5) * s), float((double(n.pos[1]) + 0.5) * s),
                  float((double(n.pos[2]) + 0.5) * s));
   }
   /// The cell's circumscribed sphere: the surface it samples lies in the cell.
   [[nodiscard]] sphere bounding_sphere(const node_id& n) const {
-    return {centre(n), 0.5f * std::sqrt(3.0f) * float(side_[std::size_t(n.level)])};
+    return {centre(n), 0.5f * std::sqrt(3.0f) * float(side_[std::size_t(n.depth)])};
   }
 
   /// The cell's sample as a square of size_px pixels at the cell centre.
@@ -152,7 +153,7 @@ class rho_grid_hierarchy {
  private:
   const rho_grid<Rho>* g_;
   std::shared_ptr<const normal_quantizer> q_;
-  std::vector<double> side_;  // cell side per level
+  std::vector<double> side_;  // cell side per depth
 };
 
 /// Calls f(rho_grid_hierarchy<Rho, A>(g)) with A the attributes g stores (normals when it has
@@ -208,7 +209,7 @@ struct rho_traversal {
   };
   Arith arith;
   hom root{};
-  std::vector<level_tables> levels;
+  std::vector<level_tables> levels;  // indexed by cell depth (0 = root cube)
   value cx{}, cy{}, znear{}, zfar{};
 
   rho_traversal(const rho_grid<Rho>& g, const view& v, bool fixed) {
@@ -222,9 +223,9 @@ struct rho_traversal {
       std::array<std::array<double, 3>, R3> d;
       double ax, ay, b;
     };
-    std::vector<dl> dt(std::size_t(g.depth()) + 1);
+    std::vector<dl> dt(std::size_t(g.leaf_depth()) + 1);
     double bound = std::max({std::abs(h0[0]), std::abs(h0[1]), std::abs(h0[2])});
-    for (int l = 0; l <= g.depth(); ++l) {
+    for (int l = 0; l <= g.leaf_depth(); ++l) {
       const double s = g.cell_side(l), hs = 0.5 * s;
       auto& e = dt[std::size_t(l)];
       e.ax = hs * r.cwiseAbs().sum();
@@ -265,7 +266,7 @@ struct rho_traversal {
 
   enum class verdict { cull, draw, refine };
 
-  /// The §4.1 tests for a cell at level l with homogeneous centre h.
+  /// The §4.1 tests for a cell at depth l with homogeneous centre h.
   [[nodiscard]] verdict test(const hom& h, int l, bool leaf, float s, bool cull) const {
     const auto& t = levels[std::size_t(l)];
     if (h.w + t.b < znear) return verdict::cull;  // wholly behind the viewer
@@ -356,7 +357,7 @@ class rho_grid_policy {
     using verdict = typename tables::verdict;
     const bool leaf = h.is_leaf(n);
     const float s = splat_size(o);
-    const verdict vd = t_.test(hs, n.level, leaf, s, o.frustum_cull);
+    const verdict vd = t_.test(hs, n.depth, leaf, s, o.frustum_cull);
     if (vd == verdict::cull) return {visit_result::verdict::cull, 0};
     if (vd == verdict::draw) return {visit_result::verdict::emit, leaf ? 1.0f : s};
     return {visit_result::verdict::refine, s};
@@ -365,7 +366,7 @@ class rho_grid_policy {
   template <class H, class F>
   void for_each_child(const H& h, const rho_grid_cell& n, const state& hs, F&& f) const {
     const auto& code = h.grid().code(n.cell);
-    const auto& tab = t_.levels[std::size_t(n.level) + 1];
+    const auto& tab = t_.levels[std::size_t(n.depth) + 1];
     const auto visit_child = [&](int j, std::uint32_t cell) {
       const auto& d = tab.disp[std::size_t(j)];
       f(H::child(n, j, cell), state{hs.x + d.x, hs.y + d.y, hs.w + d.w});

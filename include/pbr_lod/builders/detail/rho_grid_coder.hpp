@@ -171,7 +171,7 @@ struct adaptive_int {
 };
 
 /// Open-addressing set of packed cell positions (x | y << 21 | z << 42, each < 2^21, which
-/// rho_grid_max_depth guarantees), for the neighbourhood contexts.
+/// rho_grid_max_leaf_depth guarantees), for the neighbourhood contexts.
 class cell_set {
  public:
   static constexpr std::uint64_t empty_key = ~std::uint64_t(0);

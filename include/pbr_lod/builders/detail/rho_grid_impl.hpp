@@ -76,24 +76,24 @@ struct rho_grid_access {
     g.input_centre_ = centre;
     g.input_radius_ = radius;
   }
-  static void set_frame(grid& g, int depth, const vec3d& origin, double side, int nb, int mb) {
-    g.depth_ = depth;
+  static void set_frame(grid& g, int leaf_depth, const vec3d& origin, double side, int nb, int mb) {
+    g.leaf_depth_ = leaf_depth;
     g.origin_ = origin;
     g.side_ = side;
     g.normal_bits_ = nb;
     g.material_bits_ = mb;
   }
-  /// Derives child indices and level starts from the codes (breadth-first), checking that the
-  /// shape is a complete depth-k tree: every inner cell has a child, every cell below level k is
+  /// Derives child indices and depth starts from the codes (breadth-first), checking that the
+  /// shape is a complete depth-k tree: every inner cell has a child, every cell above depth k is
   /// inner, and the cells add up to `cells`. Throws FormatError naming `what` otherwise.
   static void finish(grid& g, std::size_t cells, const std::string& what) {
     g.attrs_count_ = cells;
     g.first_child_.assign(g.codes_.size(), 0);
-    g.level_start_.assign(std::size_t(g.depth_) + 2, 0);
-    std::uint64_t begin = 0, end = 1;  // cells of the current level
-    for (int l = 0; l < g.depth_; ++l) {
+    g.depth_start_.assign(std::size_t(g.leaf_depth_) + 2, 0);
+    std::uint64_t begin = 0, end = 1;  // cells of the current depth
+    for (int l = 0; l < g.leaf_depth_; ++l) {
       if (end > g.codes_.size())
-        throw FormatError(what + ": level " + std::to_string(l) + " needs " + std::to_string(end) +
+        throw FormatError(what + ": depth " + std::to_string(l) + " needs " + std::to_string(end) +
                           " childhood codes, the stream has " + std::to_string(g.codes_.size()));
       std::uint64_t next = end;
       for (std::uint64_t i = begin; i < end; ++i) {
@@ -105,12 +105,12 @@ struct rho_grid_access {
         if (next > 0xffffffffull)
           throw FormatError(what + ": more cells than 32-bit child indices address");
       }
-      g.level_start_[std::size_t(l) + 1] = std::uint32_t(end);
+      g.depth_start_[std::size_t(l) + 1] = std::uint32_t(end);
       begin = end;
       end = next;
     }
-    g.level_start_[std::size_t(g.depth_)] = std::uint32_t(begin);
-    g.level_start_[std::size_t(g.depth_) + 1] = std::uint32_t(end);
+    g.depth_start_[std::size_t(g.leaf_depth_)] = std::uint32_t(begin);
+    g.depth_start_[std::size_t(g.leaf_depth_) + 1] = std::uint32_t(end);
     if (g.codes_.size() != begin)
       throw FormatError(what + ": " + std::to_string(g.codes_.size()) +
                         " childhood codes, but the tree has " + std::to_string(begin) +
@@ -120,7 +120,7 @@ struct rho_grid_access {
                         std::to_string(cells) + " were stored");
     auto& s = g.stats_;
     s.rho = Rho;
-    s.depth = g.depth_;
+    s.level = g.level();
     s.sigma = g.sigma();
     s.samples = g.leaf_count();
     s.inner_cells = g.inner_count();
