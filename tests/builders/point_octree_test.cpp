@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <iterator>
 #include <limits>
+#include <numbers>
 #include <thread>
 
 #include <filesystem>
@@ -392,8 +394,28 @@ TEST(PointOctree, LoadRejectsCorruptFiles) {
 
 using recording_policy = test::recording_policy<point_octree_policy>;
 
-// LOD selection (§6): every inner node the policy emits is within τ by the paper's tilted-area
-// metric, and a larger τ draws fewer splats.
+/// Pajarola §6, Fig. 11, computed in double from the node's stored geometry and the camera alone
+/// (not from the policy's derived selection records or the float view): the diameter of the
+/// circle whose area is the disk's projected area cos(γ − θ_c)·πab·d²/((c − e)·w)², with
+/// cos(γ − θ_c) = 1 while γ ≤ θ_c; +∞ once the node's sphere reaches the eye plane.
+double reference_screen_size(const octree_nc& t, std::uint32_t n, const camera& cam) {
+  const auto& nd = t.at(n);
+  const vec3d ce = t.origin() + nd.centre.cast<double>() - cam.eye;
+  const vec3d w = (cam.target - cam.eye).normalized();
+  const double depth = ce.dot(w);
+  if (depth <= nd.radius) return std::numeric_limits<double>::infinity();
+  const double focal = 0.5 * cam.vp.height / std::tan(cam.fovy_degrees * std::numbers::pi / 360);
+  const double gamma =
+      std::acos(std::min(1.0, std::abs(nd.normal.cast<double>().dot(ce)) / ce.norm()));
+  const double tilt = gamma > nd.cone_angle ? std::cos(gamma - nd.cone_angle) : 1.0;
+  const double area = std::numbers::pi * nd.axis_u.cast<double>().norm() *
+                      nd.axis_v.cast<double>().norm() * focal * focal / (depth * depth);
+  return 2 * std::sqrt(std::max(0.0, tilt * area) / std::numbers::pi);
+}
+
+// LOD selection (§6): with culling off, the policy's cut is the brute-force one — descend from
+// the root while the reference screen size exceeds τ, take the node where it does not (or the
+// leaf) — and a larger τ draws fewer splats. Only nodes within float rounding of τ may differ.
 TEST(PointOctree, TiltedAreaPolicyRespectsTolerance) {
   const auto pts = dense_points(200000, 4);
   const auto t = build_point_octree(pts);
@@ -401,18 +423,34 @@ TEST(PointOctree, TiltedAreaPolicyRespectsTolerance) {
   const view v(cam, t.origin());
   std::size_t previous = std::numeric_limits<std::size_t>::max();
   for (const float tol : {1.0f, 2.0f, 4.0f, 8.0f, 16.0f}) {
+    std::vector<std::uint32_t> expected, near_tie, stack{t.root()};
+    while (!stack.empty()) {
+      const std::uint32_t n = stack.back();
+      stack.pop_back();
+      const double size = reference_screen_size(t, n, cam);
+      if (std::abs(size - tol) < 1e-4 * tol) near_tie.push_back(n);
+      if (t.is_leaf(n) || size <= tol)
+        expected.push_back(n);
+      else
+        for (const auto c : t.children(n)) stack.push_back(c);
+    }
     counting_sink<octree_nc::attrs> sink;
-    const traverse_options o{.tolerance_px = tol,
-                             .backface_cull = true,
-                             .cull_volume = traverse_options::volume::view_cone};
+    const traverse_options o{.tolerance_px = tol, .frustum_cull = false};
     std::vector<std::uint32_t> emitted;
     const auto st = traverse(t, v, o, sink, recording_policy{{}, &emitted});
-    for (auto n : emitted)
-      if (!t.is_leaf(n)) {
-        EXPECT_LE(point_octree_policy{}.screen_size(t, n, t.bounding_sphere(n), v, o), tol);
-      }
+    std::sort(expected.begin(), expected.end());
+    std::sort(emitted.begin(), emitted.end());
+    std::vector<std::uint32_t> differ;
+    std::set_symmetric_difference(expected.begin(), expected.end(), emitted.begin(), emitted.end(),
+                                  std::back_inserter(differ));
+    std::printf("tau %g: %zu drawn, %zu differ from the brute force, %zu near-ties\n", tol,
+                emitted.size(), differ.size(), near_tie.size());
+    // A tie at a node changes which of it and its descendants are drawn: allow a few per tie.
+    EXPECT_LE(differ.size(), 9 * near_tie.size())
+        << "tau " << tol << ": " << emitted.size() << " drawn, " << expected.size() << " expected";
+    EXPECT_GT(emitted.size(), 100u);
     EXPECT_LE(sink.splats, previous);
-    EXPECT_EQ(sink.splats, st.splats);
+    EXPECT_EQ(sink.splats + sink.points, st.splats + st.points);
     previous = sink.splats;
   }
   EXPECT_LT(previous, pts.size() / 10);

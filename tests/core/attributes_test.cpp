@@ -38,6 +38,9 @@ TEST(Attributes, FromCloudRequiresRequestedAttributes) {
   EXPECT_EQ(s.normals.size(), 2u);
   c.colours = {rgb8{}};  // wrong length
   EXPECT_THROW(c.validate(), InvalidArgument);
+  // An empty cloud has every attribute (each vector holds its 0 entries), so a builder gets it
+  // and says what is wrong — no points — rather than a missing attribute.
+  EXPECT_TRUE(point_set<all_attributes>::from(point_cloud{}).empty());
 }
 
 TEST(Attributes, RebaseKeepsWorldPositions) {

@@ -199,6 +199,14 @@ class point_octree {
     if constexpr (A.colour) s.colour = node_colours_[n];
     sink.splat(s);
   }
+  /// The node as a one-pixel point at its mean, with its normal and colour.
+  template <class S>
+  void emit_node_point(node_id n, S& sink) const {
+    point_prim<attrs> p{nodes_[n].centre, 1.0f};
+    p.normal = nodes_[n].normal;
+    if constexpr (A.colour) p.colour = node_colours_[n];
+    sink.point(p);
+  }
 
   // ---- inspection
   [[nodiscard]] const std::vector<node>& nodes() const { return nodes_; }
@@ -296,11 +304,16 @@ struct point_octree_policy : default_policy {
     return 2 * std::sqrt(std::max(0.0f, a_screen) / std::numbers::pi_v<float>);
   }
   /// A node within the tolerance draws its own splat e_c — a leaf too; a leaf still larger than
-  /// the tolerance draws its samples.
+  /// the tolerance draws its samples. A whole model smaller than a pixel (the root drawn below
+  /// one pixel) draws the pixel it falls in: a lone sample or exact duplicates have no spacing
+  /// to size a splat (the estimate is a 10⁻⁶ floor), which would cover no pixel centre and
+  /// vanish; render_reference draws such samples one pixel across too.
   template <class H, class S>
   void emit(const H& h, const typename H::node_id& n, const view& v, float size_px,
             const traverse_options& o, S& sink) const {
-    if (h.is_leaf(n) && !(size_px <= o.tolerance_px))
+    if (n == h.root() && size_px < 1)
+      h.emit_node_point(n, sink);
+    else if (h.is_leaf(n) && !(size_px <= o.tolerance_px))
       h.emit(n, v, sink);
     else
       h.emit_node_splat(n, sink);

@@ -118,7 +118,9 @@ class point_set {
   [[nodiscard]] static point_set from(const point_cloud& c, const std::string& what = "input") {
     c.validate(what);
     const attributes have = c.present();
-    if (!have.contains(A))
+    // An empty cloud has every attribute (each vector holds its 0 entries): the builder, not
+    // this copy, then says what is wrong — that there are no points.
+    if (!c.empty() && !have.contains(A))
       throw InvalidArgument(what + " has attributes " + have.to_string() + " but " + A.to_string() +
                             " were requested");
     point_set s;
