@@ -248,7 +248,7 @@ struct rho_grid_adapter {
   static constexpr const char* name = "rho_grid";
   using built = rho_grid<3>;
   static built build(const triangle_mesh& m, unsigned threads) {
-    return build_rho_grid<3>(m, {.depth = 5, .threads = threads});
+    return build_rho_grid<3>(m, {.level = 4, .threads = threads});
   }
   static void save(const built& b, const std::string& p) { b.save(p); }
   static built load(const std::string& p) { return built::load(p); }
@@ -268,7 +268,7 @@ struct rho_grid_adapter {
 struct rho_grid_points_adapter : rho_grid_adapter {
   static constexpr const char* name = "rho_grid_points";
   static built build(const triangle_mesh& m, unsigned threads) {
-    return build_rho_grid<3>(m.vertices, {.depth = 5, .threads = threads});
+    return build_rho_grid<3>(m.vertices, {.level = 4, .threads = threads});
   }
 };
 
