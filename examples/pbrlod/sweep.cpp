@@ -23,7 +23,9 @@
 #include "contact_sheet.hpp"
 #include "lod.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/peers/cgal_simplify.hpp"
 #ifdef PBR_LOD_HAVE_PCL_PEERS
@@ -44,6 +46,10 @@ std::string number(double v);
 struct sweep_input {
   std::string name;
   loaded_input data;
+  /// The input's points with normals: its own, else the mesh's area-weighted vertex normals,
+  /// else estimated (k-NN PCA, MST orientation) — what a cloud's reference render and the
+  /// peers shade with, as the point builders shade with the normals they estimate.
+  point_cloud shaded_points;
 };
 
 struct sweep_plan {
@@ -86,12 +92,12 @@ constexpr std::size_t sheet_view = 1;
 /// in PBR_LOD_DATA and a generated multi-million-point scene (full).
 std::vector<sweep_input> sweep_inputs(const std::vector<std::string>& files, bool full) {
   std::vector<sweep_input> in;
-  for (const auto& f : files) in.push_back({fs::path(f).filename().string(), load(f)});
+  for (const auto& f : files) in.push_back({fs::path(f).filename().string(), load(f), {}});
   if (!in.empty()) return in;
   if (!full) {
     loaded_input scene;
     scene.mesh = make_demo_scene(20);
-    in.push_back({"generated-scene-small", std::move(scene)});
+    in.push_back({"generated-scene-small", std::move(scene), {}});
     return in;
   }
   const char* env = std::getenv("PBR_LOD_DATA");
@@ -101,12 +107,19 @@ std::vector<sweep_input> sweep_inputs(const std::vector<std::string>& files, boo
   for (const char* f : {"bun_zipper.ply", "happy_vrip_res3.ply", "cow.obj",
                         "milk_cartoon_all_small_clorox.pcd", "1.2-with-color.las"}) {
     const fs::path p = fs::path(env) / f;
-    if (fs::exists(p)) in.push_back({p.filename().string(), load(p.string())});
+    if (fs::exists(p)) in.push_back({p.filename().string(), load(p.string()), {}});
   }
   loaded_input scene;
   scene.mesh = make_demo_scene(450);  // ≈ 2 M triangles, ≈ 1 M vertices
-  in.push_back({"generated-scene-large", std::move(scene)});
+  in.push_back({"generated-scene-large", std::move(scene), {}});
   return in;
+}
+
+point_cloud with_normals_for_shading(const loaded_input& in) {
+  point_cloud c = in.mesh.vertices;
+  if (!c.normals.empty() || c.size() < 3) return c;
+  c.normals = in.is_mesh() ? area_weighted_normals(in.mesh) : estimate_normals(c.positions);
+  return c;
 }
 
 sweep_plan make_plan(const std::vector<std::string>& files, const std::string& size) {
@@ -115,6 +128,7 @@ sweep_plan make_plan(const std::vector<std::string>& files, const std::string& s
   const bool full = size == "full";
   sweep_plan p;
   p.inputs = sweep_inputs(files, full);
+  for (auto& in : p.inputs) in.shaded_points = with_normals_for_shading(in.data);
   for (const char* d : {"near", "mid", "far"}) {
     const std::string dist = std::string(d) == "near" ? "1.5" : std::string(d) == "mid" ? "3" : "8";
     for (const int az : full ? std::vector<int>{30, 210} : std::vector<int>{30})
@@ -142,12 +156,12 @@ frame timed_frame(const lod& l, frame_request r, int repeats) {
   return f;
 }
 
-/// The input's own full-detail render: the mesh's triangles, or every point as a splat.
-image input_reference(const loaded_input& in, const camera& cam, const view_args& va) {
-  render_options o = lod_render_options(va, !in.mesh.vertices.colours.empty());
-  o.fx.shading = in.is_mesh() || !in.mesh.vertices.normals.empty();
-  return in.is_mesh() ? render_reference(in.mesh, cam, o)
-                      : render_reference(in.mesh.vertices, cam, o);
+/// The input's own full-detail render: the mesh's triangles, or every point as a splat (shaded
+/// with its normals, estimated when the file has none).
+image input_reference(const sweep_input& in, const camera& cam, const view_args& va) {
+  render_options o = lod_render_options(va, !in.shaded_points.colours.empty());
+  return in.data.is_mesh() ? render_reference(in.data.mesh, cam, o)
+                           : render_reference(in.shaded_points, cam, o);
 }
 
 /// One builder over one input: built once with its defaults, then for each view its finest cut
@@ -308,7 +322,7 @@ std::pair<image, double> timed_render(const point_cloud& c, const camera& cam,
 /// its finest level, the reference of its psnr.
 void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan& plan,
                 const std::vector<image>& input_refs, progress& prog, sweep_results& out) {
-  const point_cloud& all = in.data.mesh.vertices;
+  const point_cloud& all = in.shaded_points;
   std::vector<camera> cams;
   std::vector<render_options> opts;
   for (const auto& v : plan.views) {
@@ -629,7 +643,7 @@ void sweep_input_file(const sweep_input& in, const sweep_plan& plan, progress& p
     va.view = spec;
     va.size = plan.size;
     prog.step("reference of " + in.name + " " + name);
-    refs.push_back(input_reference(in.data, make_camera(in.data.mesh.vertices, va), va));
+    refs.push_back(input_reference(in, make_camera(in.data.mesh.vertices, va), va));
   }
   for (const method_entry& m : methods())
     if (m.build) sweep_builder(m, in, plan, refs, prog, out);
