@@ -23,7 +23,8 @@
 //               threshold, a point for an inner node, the leaf's 1–4 triangles at a leaf, the
 //               optional silhouette rule — pop_policy with the generic traverse().
 //   §3.2        RENDER-COHERENCY: the previous frame's cut is kept and moved up or down —
-//               pop_coherent_traversal.
+//               pop_coherent_traversal, the generic coherent_traversal (traverse/coherent.hpp)
+//               with pop_policy.
 //   §3.3        splat size from eye-space z only (traverse_options::metric = eye_z) or exact
 //               (projection_metric::exact).
 //   §3.4        simplified splatting (constant-colour squares of the splat size) or visibility
@@ -60,8 +61,8 @@
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/triangle_mesh.hpp"
+#include "pbr_lod/traverse/coherent.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
-#include "pbr_lod/traverse/ranks.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 
 namespace pbr_lod {
@@ -339,6 +340,11 @@ enum class pop_point_mode {
 /// direction from the eye (|n·d| < silhouette_cos) draws its subtree's triangles instead of a
 /// point. It changes what a cut node draws, not the cut, so coherent traversals stay exact.
 struct pop_policy : default_policy {
+  /// A parent's sphere holds its children's (quantised outwards) and its normal cone theirs, so
+  /// whenever a node refines its ancestors do: the coherent traversal may stop its upward
+  /// search at the first parent that refines (traverse/coherent.hpp).
+  static constexpr bool monotone_refine = true;
+
   float silhouette_cos = 0;  ///< 0: off; e.g. 0.1 (within ≈ 5.7° of perpendicular)
   pop_point_mode points = pop_point_mode::simplified;
 
@@ -364,50 +370,13 @@ struct pop_policy : default_policy {
   }
 };
 
-/// POP's RENDER-COHERENCY (§3.2): keeps the previous frame's cut — the nodes drawn and the nodes
-/// culled — and moves from each of them down (when it must now refine) or up (while its parent
-/// need not refine any more), instead of starting at the root. Produces exactly the cut of the
-/// plain traversal with the same options and policy (the refine rule is monotone: a parent's
-/// sphere holds its children's, so its splat is at least as large, its frustum and back-face
-/// tests at most as strict), and emits it in the plain traversal's order, so images are
-/// byte-identical. traverse_stats::visited counts the nodes evaluated this frame.
+/// POP's RENDER-COHERENCY (§3.2): the generic frame-coherent traversal (traverse/coherent.hpp)
+/// with POP's policy — the previous frame's cut, moved down or up, emitted in traverse()'s
+/// order, so images are byte-identical to the plain traversal's.
 template <attributes A>
-class pop_coherent_traversal {
- public:
-  using node_id = typename pop_tree<A>::node_id;
-  explicit pop_coherent_traversal(const pop_tree<A>& t);
-
-  /// Draws one frame. The first frame (or after reset()) starts at the root.
-  template <Sink<A> S>
-  traverse_stats frame(const view& v, const traverse_options& o, S& sink,
-                       const pop_policy& policy = {});
-  /// Forgets the cut: the next frame starts at the root.
-  void reset() { front_.clear(); }
-  /// The nodes drawn in the last frame, in drawing order.
-  [[nodiscard]] const std::vector<node_id>& drawn() const { return drawn_; }
-  /// The last frame's cut: drawn and culled nodes (unordered).
-  [[nodiscard]] const std::vector<node_id>& front() const { return front_; }
-
- private:
-  enum state : std::uint8_t { culled_frustum, culled_backface, refine, draw };
-  state eval(node_id n, const view& v, const traverse_options& o, const pop_policy& p, float& size);
-  state cached(node_id n, const view& v, const traverse_options& o, const pop_policy& p);
-  void descend(node_id f, const view& v, const traverse_options& o, const pop_policy& p);
-  void add(node_id n, state s);
-
-  const pop_tree<A>* t_;
-  std::vector<node_id> rank_;  // position of each node in the plain traversal's order
-  std::vector<std::uint32_t> stamp_, added_;
-  std::vector<state> state_;
-  std::vector<float> size_;
-  std::uint32_t frame_ = 0;
-  std::vector<node_id> front_, next_, drawn_;
-  traverse_stats st_;
-};
+using pop_coherent_traversal = coherent_traversal<pop_tree<A>, pop_policy>;
 
 }  // namespace pbr_lod
-
-#include "pbr_lod/builders/detail/pop_impl.hpp"
 
 namespace pbr_lod {
 // The common interface (traverse/hierarchy.hpp): render, stats and tests drive it like any other.
