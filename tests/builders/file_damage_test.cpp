@@ -11,6 +11,7 @@
 // The files are small (< 10 kB) so every cut is tried; flips try every byte of the first 256 (the
 // head of every format) and 256 spread over the rest.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -42,17 +43,18 @@ struct format_case {
   std::function<void(const std::string& in, const std::string& out)> load_and_save;
 };
 
-/// In /dev/shm (RAM) when there is one: the test writes ~30 000 small files, and on a busy disk
-/// each costs milliseconds in the file system rather than microseconds in the loader.
+/// In /dev/shm (RAM) when there is one: the test writes ~20 000 small files, and on a busy disk
+/// each costs milliseconds in the file system rather than microseconds in the loader. Named by
+/// process too: ctest runs the tests of one format in parallel processes.
 std::string scratch_path(const std::string& name) {
   const std::filesystem::path dir = std::filesystem::is_directory("/dev/shm")
                                         ? std::filesystem::path("/dev/shm")
                                         : std::filesystem::temp_directory_path();
-  return (dir / ("pbr_lod_file_damage_" + name)).string();
+  return (dir / ("pbr_lod_file_damage_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
-/// A wavy 4×4 grid of 32 triangles with vertex colours, and points sampled on it (with normals
-/// and colours): the smallest inputs that still give every builder more than one node.
+/// A wavy 4×4 grid of 32 triangles with vertex colours, and 60 points sampled on it (with normals
+/// and colours): files of 0.2–9 kB, so that every cut can be tried.
 const triangle_mesh& tiny_mesh() {
   static const triangle_mesh m = [] {
     triangle_mesh g;
@@ -102,9 +104,7 @@ bytes_t saved_bytes(const H& h, const std::string& path, SaveArgs... args) {
 
 template <class H>
 void load_and_save(const std::string& in, const std::string& out) {
-  const H h = H::load(in);
-  std::filesystem::remove(out);  // a new file, not a truncated one (see write())
-  h.save(out);
+  H::load(in).save(out);
 }
 
 using octree = point_octree<point_octree_attributes(with_normals_colours)>;
