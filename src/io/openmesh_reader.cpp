@@ -497,8 +497,11 @@ std::pair<std::size_t, std::size_t> scan_off_ascii(const std::string& path, std:
     }
     return false;
   };
-  if (!next() || tok.size() < 3)
-    format_error(path, cat("line ", line_no), "expected '<vertices> <faces> <edges>'");
+  // Exactly three: OpenMesh reads the counts as tokens, so a fourth value on the line would be
+  // read as the next count, shifting every later one (fuzz_off: "0 5 4 6" made it take a
+  // trailing number as a face's corner count and allocate gigabytes).
+  if (!next() || tok.size() != 3)
+    format_error(path, cat("line ", line_no), "expected exactly '<vertices> <faces> <edges>'");
   const auto nv = parse_number<std::uint32_t>(tok[0]);
   const auto nf = parse_number<std::uint32_t>(tok[1]);
   if (!nv || !nf || !parse_number<std::uint64_t>(tok[2]))

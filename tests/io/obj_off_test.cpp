@@ -146,6 +146,15 @@ TEST_F(ObjOff, OffQuadAndTriangle) {
 // COFF: per-vertex integer colours after the coordinates.
 // A quad repeating a corner is degenerate: dropped whole, counted as the 2 triangles it would
 // have made (read_report counts triangles).
+// OpenMesh reads the counts line as tokens: a fourth value becomes the first face's corner
+// count and shifts every later one, so a trailing number became a count of 88888881 corners and
+// the read took gigabytes and minutes. The input is fuzz_off's finding, reduced; the counts line
+// must now hold exactly three values.
+TEST_F(ObjOff, OffCountsLineWithAFourthValueIsAnError) {
+  PBR_LOD_EXPECT_THROW_MSG(read_mesh(write("c.off", "COFF\n0 5 4 6\n0\n0\n0\n0\n0 1\n88888881")),
+                           FormatError, "line 2: expected exactly '<vertices> <faces> <edges>'");
+}
+
 TEST_F(ObjOff, OffDegenerateQuadCounted) {
   read_report r;
   const auto m =
