@@ -2,11 +2,13 @@
 # Sets everything up and runs every test: installs missing Debian packages, builds pbr_lod with
 # warnings as errors, runs the test suite (which also installs the library to a temporary prefix
 # and builds a consumer project against it), then builds and runs the suite again under
-# AddressSanitizer + UndefinedBehaviorSanitizer.
+# AddressSanitizer + UndefinedBehaviorSanitizer, then runs every fuzz target briefly
+# (scripts/fuzz.sh, docs/fuzzing.md).
 #
 # Environment: PBR_LOD_DATA (the shared/data folder; default ../shared/data beside the checkout;
 # when it is missing, tests that read the real scans are skipped, unless CI=true, which fails),
 # JOBS (parallel build jobs; default: number of cores), SKIP_SANITIZERS=1 to skip the second pass,
+# FUZZ_SECONDS (per fuzz target; default 10; 0 skips the fuzz pass),
 # BUILD_DIR (default: build), PBR_LOD_CCACHE=0 to build without ccache.
 #
 # Build cost (docs/development.md): Ninja, and ccache as the compiler launcher when it is
@@ -64,6 +66,17 @@ if [ "${SKIP_SANITIZERS:-0}" != 1 ]; then
   phase "tests (ASan + UBSan)"
   ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     ctest --test-dir "$build/asan" --output-on-failure -j "$jobs"
+fi
+fuzz_seconds="${FUZZ_SECONDS:-10}"
+if [ "$fuzz_seconds" != 0 ]; then
+  # install-deps.sh installs clang-16; a machine that cannot have it still runs everything else.
+  if command -v clang++-16 > /dev/null; then
+    phase "fuzz (${fuzz_seconds} s per target)"
+    PBRLOD="$(realpath "$build/release/examples/pbrlod")" JOBS="$jobs" \
+      bash scripts/fuzz.sh "$fuzz_seconds"
+  else
+    echo "test.sh: clang++-16 is missing; skipped the fuzz pass (bash scripts/install-deps.sh)" >&2
+  fi
 fi
 phase ""
 command -v ccache > /dev/null && [ "${PBR_LOD_CCACHE:-1}" != 0 ] &&

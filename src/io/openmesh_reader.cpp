@@ -293,6 +293,26 @@ void run_openmesh(const std::string& path, soup_importer& imp) {
 
 constexpr std::size_t max_obj_corners = 10000;
 
+/// Whitespace as OpenMesh's OBJ reader sees it: it splits with `istream >>`, i.e. the C locale's
+/// isspace, which includes '\v' and '\f'. The scan must split the same way, or a line such as
+/// "f\v…" is an unknown keyword to the scan and a face to OpenMesh, which then asserts on it
+/// (found by fuzz_obj).
+bool obj_space(char c) {
+  return c == ' ' || c == '\t' || c == '\n' || c == '\v' || c == '\f' || c == '\r';
+}
+
+/// Splits on obj_space into `out` (cleared first).
+void split_obj(std::string_view line, std::vector<std::string_view>& out) {
+  out.clear();
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && obj_space(line[i])) ++i;
+    const std::size_t b = i;
+    while (i < line.size() && !obj_space(line[i])) ++i;
+    if (i > b) out.push_back(line.substr(b, i - b));
+  }
+}
+
 struct obj_scan {
   std::size_t v = 0, vt = 0, vn = 0, f = 0;
   std::vector<std::string> mtllibs;
@@ -314,8 +334,8 @@ obj_scan scan_obj(const std::string& path, std::string_view text) {
       const std::string_view line = trim(text.substr(pos, nl - pos));
       pos = nl + 1;
       ++line_no;
-      if (line.empty() || line[0] == '#') continue;
-      split_ws(line, tok);
+      split_obj(line, tok);
+      if (tok.empty() || tok[0][0] == '#') continue;
       const std::string_view kw = tok[0];
       if (pass == 0) {
         total_v += kw == "v";
@@ -477,8 +497,11 @@ std::pair<std::size_t, std::size_t> scan_off_ascii(const std::string& path, std:
     }
     return false;
   };
-  if (!next() || tok.size() < 3)
-    format_error(path, cat("line ", line_no), "expected '<vertices> <faces> <edges>'");
+  // Exactly three: OpenMesh reads the counts as tokens, so a fourth value on the line would be
+  // read as the next count, shifting every later one (fuzz_off: "0 5 4 6" made it take a
+  // trailing number as a face's corner count and allocate gigabytes).
+  if (!next() || tok.size() != 3)
+    format_error(path, cat("line ", line_no), "expected exactly '<vertices> <faces> <edges>'");
   const auto nv = parse_number<std::uint32_t>(tok[0]);
   const auto nf = parse_number<std::uint32_t>(tok[1]);
   if (!nv || !nf || !parse_number<std::uint64_t>(tok[2]))

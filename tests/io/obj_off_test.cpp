@@ -85,6 +85,18 @@ TEST_F(ObjOff, ObjFaceIndexOutOfRange) {
                            "line 4 (face 0): vertex index 4 is out of range: the file has 3");
 }
 
+// OpenMesh splits OBJ lines with `istream >>`, so '\v' and '\f' separate words: "f\v…" is a face
+// to it. The scan used to see an unknown keyword and let the line through, and OpenMesh's reader
+// then aborted on an assertion (`!vhandles.empty()`). The input is fuzz_obj's crash, verbatim.
+TEST_F(ObjOff, ObjFaceKeywordSeparatedByVerticalTabIsChecked) {
+  const std::string crash("#  \xd7\nf\x0b\x00\x61\x00\x01\x66# /0-4  -1 2 1\n", 27);
+  ASSERT_EQ(crash.size(), 27u);
+  PBR_LOD_EXPECT_THROW_MSG(read_mesh(write("vt.obj", crash)), FormatError, "line 2 (face 0)");
+  // A well-formed face separated by '\f' and '\v' reads as OpenMesh reads it.
+  const auto m = read_mesh(write("ff.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf\f1\v2 3\n"));
+  EXPECT_EQ(m.num_faces(), 1u);
+}
+
 TEST_F(ObjOff, ObjZeroIndex) {
   PBR_LOD_EXPECT_THROW_MSG(read_mesh(write("z.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n")),
                            FormatError, "'0' is not a valid vertex reference");
@@ -134,6 +146,15 @@ TEST_F(ObjOff, OffQuadAndTriangle) {
 // COFF: per-vertex integer colours after the coordinates.
 // A quad repeating a corner is degenerate: dropped whole, counted as the 2 triangles it would
 // have made (read_report counts triangles).
+// OpenMesh reads the counts line as tokens: a fourth value becomes the first face's corner
+// count and shifts every later one, so a trailing number became a count of 88888881 corners and
+// the read took gigabytes and minutes. The input is fuzz_off's finding, reduced; the counts line
+// must now hold exactly three values.
+TEST_F(ObjOff, OffCountsLineWithAFourthValueIsAnError) {
+  PBR_LOD_EXPECT_THROW_MSG(read_mesh(write("c.off", "COFF\n0 5 4 6\n0\n0\n0\n0\n0 1\n88888881")),
+                           FormatError, "line 2: expected exactly '<vertices> <faces> <edges>'");
+}
+
 TEST_F(ObjOff, OffDegenerateQuadCounted) {
   read_report r;
   const auto m =

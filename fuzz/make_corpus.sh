@@ -1,0 +1,145 @@
+#!/usr/bin/env bash
+# Writes the fuzz targets' seed corpora: small valid files of every format, one folder per target.
+#   fuzz/make_corpus.sh PBRLOD DATA OUT
+# PBRLOD: the pbrlod tool (builds the hierarchy files); DATA: the shared/data folder (the bunny
+# res4 PLY and the LAS file are copied from it; the hierarchies are built from them); OUT: the
+# corpus root, e.g. build/fuzz/corpus, which gets OUT/fuzz_<target>/.
+# Seeds are small on purpose: libFuzzer runs each input whole, so a 2 MB seed (the real PCD scan)
+# would cost milliseconds per execution. The PCD seeds are written here, byte by byte, in the
+# three encodings (ascii, binary, binary_compressed) instead.
+set -euo pipefail
+pbrlod="$1" data="$2" out="$3"
+for t in ply obj off pcd las point_octree rho_grid pop pca_octree pmr; do mkdir -p "$out/fuzz_$t"; done
+
+# --- meshes and point clouds ---------------------------------------------------------------------
+cp --no-preserve=mode "$data/bun_zipper_res4.ply" "$out/fuzz_ply/bunny_res4.ply"
+cp --no-preserve=mode "$data/1.2-with-color.las" "$out/fuzz_las/with_color_1.2.las"
+
+# An octahedron with vertex colours and normals: the coloured mesh the POP seed is built from.
+octahedron="$out/fuzz_ply/octahedron_colour.ply"
+cat > "$octahedron" <<'PLY'
+ply
+format ascii 1.0
+element vertex 6
+property float x
+property float y
+property float z
+property float nx
+property float ny
+property float nz
+property uchar red
+property uchar green
+property uchar blue
+element face 8
+property list uchar int vertex_indices
+end_header
+1 0 0 1 0 0 255 0 0
+-1 0 0 -1 0 0 0 255 0
+0 1 0 0 1 0 0 0 255
+0 -1 0 0 -1 0 255 255 0
+0 0 1 0 0 1 0 255 255
+0 0 -1 0 0 -1 255 0 255
+3 0 2 4
+3 2 1 4
+3 1 3 4
+3 3 0 4
+3 2 0 5
+3 1 2 5
+3 3 1 5
+3 0 3 5
+PLY
+
+# Binary PLY, both byte orders: one triangle (float xyz, uchar count + int indices).
+f0='\x00\x00\x00\x00' f1le='\x00\x00\x80\x3f' f1be='\x3f\x80\x00\x00'
+binary_ply() {  # binary_ply ORDER ZERO ONE INT0 INT1 INT2
+  printf 'ply\nformat binary_%s_endian 1.0\nelement vertex 3\nproperty float x\n' "$1"
+  printf 'property float y\nproperty float z\nelement face 1\n'
+  printf 'property list uchar int vertex_indices\nend_header\n'
+  printf "$2$2$2$3$2$2$2$3$2"'\x03'"$4$5$6"
+}
+binary_ply little "$f0" "$f1le" '\x00\x00\x00\x00' '\x01\x00\x00\x00' '\x02\x00\x00\x00' \
+  > "$out/fuzz_ply/triangle_le.ply"
+binary_ply big "$f0" "$f1be" '\x00\x00\x00\x00' '\x00\x00\x00\x01' '\x00\x00\x00\x02' \
+  > "$out/fuzz_ply/triangle_be.ply"
+
+cat > "$out/fuzz_obj/quad.obj" <<'OBJ'
+# a quad with texture coordinates and normals, a triangle without
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+vn 0 0 1
+f 1/1/1 2/2/1 3/3/1 4/4/1
+f -4 -2 -1
+OBJ
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//1 2//1 3//1\nvn 0 0 1\n' > "$out/fuzz_obj/triangle.obj"
+
+printf 'OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n' > "$out/fuzz_off/square.off"
+cat > "$out/fuzz_off/tetra_colour.off" <<'OFF'
+COFF
+4 4 6
+0 0 0 255 0 0 255
+1 0 0 0 255 0 255
+0 1 0 0 0 255 255
+0 0 1 255 255 255 255
+3 0 2 1
+3 0 1 3
+3 0 3 2
+3 1 2 3
+OFF
+printf 'NOFF\n3 1 0\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n3 0 1 2\n' > "$out/fuzz_off/normals.off"
+
+pcd_head() {  # pcd_head DATA FIELDS SIZE TYPE COUNT POINTS
+  printf '# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS %s\nSIZE %s\n' "$2" "$3"
+  printf 'TYPE %s\nCOUNT %s\nWIDTH %s\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS %s\nDATA %s\n' \
+    "$4" "$5" "$6" "$6" "$1"
+}
+{
+  pcd_head ascii 'x y z normal_x normal_y normal_z rgb' '4 4 4 4 4 4 4' 'F F F F F F F' \
+    '1 1 1 1 1 1 1' 3
+  printf '0 0 0 0 0 1 4.2108e+06\n1 0 0 0 0 1 4.2108e+06\nnan nan nan 0 0 1 0\n'
+} > "$out/fuzz_pcd/ascii.pcd"
+# Two points (0,0,0) and (1,1,1), colours red and green (rgb as U4: 0x00RRGGBB).
+red='\x00\x00\xff\x00' green='\x00\xff\x00\x00'
+{
+  pcd_head binary 'x y z rgb' '4 4 4 4' 'F F F U' '1 1 1 1' 2
+  printf "$f0$f0$f0$red$f1le$f1le$f1le$green"
+} > "$out/fuzz_pcd/binary.pcd"
+# binary_compressed: u32 compressed size, u32 raw size, then LZF. The raw data is one array per
+# field (x x y y z z rgb rgb: 32 bytes); LZF's control byte 0x1f is "a literal run of 32 bytes".
+{
+  pcd_head binary_compressed 'x y z rgb' '4 4 4 4' 'F F F U' '1 1 1 1' 2
+  printf '\x21\x00\x00\x00\x20\x00\x00\x00\x1f'
+  printf "$f0$f1le$f0$f1le$f0$f1le$red$green"
+} > "$out/fuzz_pcd/binary_compressed.pcd"
+
+# --- hierarchy files, built by the pbrlod tool from the small inputs above -----------------------
+bunny="$out/fuzz_ply/bunny_res4.ply"
+las="$out/fuzz_las/with_color_1.2.las"
+build() {  # build TARGET NAME INPUT METHOD [--param k=v]...
+  local target="$1" name="$2" input="$3" method="$4"
+  shift 4
+  "$pbrlod" build --method "$method" "$@" "$input" -o "$out/fuzz_$target/$name.lod" > /dev/null
+}
+build point_octree bunny "$bunny" point-octree
+build point_octree las_colour "$las" point-octree
+build pop bunny "$bunny" pop
+build pop octahedron_colour "$octahedron" pop
+build pop bunny_float_nodes "$bunny" pop --param nodes=float
+build pca_octree bunny "$bunny" pca-octree
+build pca_octree las_colour "$las" pca-octree
+build pmr bunny "$bunny" pmr
+rm -f "$out/fuzz_pmr/bunny.lod.build-seconds"  # the tool's timing note, not a PMR file
+for layout in is nis compressed; do
+  build rho_grid "bunny_rho2_$layout" "$bunny" rho-grid --param rho=2 --param depth=4 \
+    --param layout=$layout
+  build rho_grid "las_rho3_$layout" "$las" rho-grid --param rho=3 --param depth=3 \
+    --param layout=$layout
+done
+build rho_grid bunny_rho4_no_attributes "$bunny" rho-grid --param rho=4 --param depth=2 \
+  --param normal_bits=0 --param material_bits=0
+build rho_grid bunny_rho5 "$bunny" rho-grid --param rho=5 --param depth=2
