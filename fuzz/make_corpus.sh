@@ -135,11 +135,11 @@ build pca_octree las_colour "$las" pca-octree
 build pmr bunny "$bunny" pmr
 rm -f "$out/fuzz_pmr/bunny.lod.build-seconds"  # the tool's timing note, not a PMR file
 for layout in is nis compressed; do
-  build rho_grid "bunny_rho2_$layout" "$bunny" rho-grid --param rho=2 --param depth=4 \
+  build rho_grid "bunny_rho2_$layout" "$bunny" rho-grid --param rho=2 --param level=3 \
     --param layout=$layout
-  build rho_grid "las_rho3_$layout" "$las" rho-grid --param rho=3 --param depth=3 \
+  build rho_grid "las_rho3_$layout" "$las" rho-grid --param rho=3 --param level=2 \
     --param layout=$layout
 done
-build rho_grid bunny_rho4_no_attributes "$bunny" rho-grid --param rho=4 --param depth=2 \
+build rho_grid bunny_rho4_no_attributes "$bunny" rho-grid --param rho=4 --param level=1 \
   --param normal_bits=0 --param material_bits=0
-build rho_grid bunny_rho5 "$bunny" rho-grid --param rho=5 --param depth=2
+build rho_grid bunny_rho5 "$bunny" rho-grid --param rho=5 --param level=1

@@ -115,7 +115,7 @@ template <int Rho>
 format_case rho_grid_case(rho_grid_layout layout, const std::string& name) {
   return {name,
           [layout](const std::string& p) {
-            return saved_bytes(build_rho_grid<Rho>(tiny_mesh(), {.depth = 2}), p, layout);
+            return saved_bytes(build_rho_grid<Rho>(tiny_mesh(), {.level = 1}), p, layout);
           },
           &load_and_save<rho_grid<Rho>>};
 }
