@@ -244,12 +244,18 @@ class rasterizer {
     float lit;  ///< Lambert factor (1 without shading)
   };
 
-  /// Blending: the sums of the accumulation pass, per pixel.
-  struct blend_sample {
+  /// Blending: the sums of the accumulation pass over one side of the surfaces.
+  struct blend_sums {
     float r = 0, g = 0, b = 0;                            ///< Σ w·colour (with colour)
     float nx = 0, ny = 0, nz = 0;                         ///< Σ w·normal (with shading)
     float w = 0;                                          ///< Σ w
     float key = -std::numeric_limits<float>::infinity();  ///< front-most contributing key
+  };
+  /// Per pixel: the fragments facing the eye ([0]; also splats and points without normals) and
+  /// those facing away ([1]), kept apart so that the two sides of a thin part less than ε thick
+  /// (a fin, a sheet seen edge-on) are not averaged: the facing side wins where it has weight.
+  struct blend_sample {
+    std::array<blend_sums, 2> side;
   };
   struct blend_state {
     std::vector<blend_sample> acc;  ///< allocated by begin_accumulation()
@@ -301,6 +307,7 @@ class rasterizer {
   struct blend_value {
     float r = 0, g = 0, b = 0;
     vec3f n = vec3f::Zero();
+    std::size_t away = 0;  ///< 1 when the primitive faces away from the eye
   };
   template <class Prim>
   [[nodiscard]] blend_value blend_value_of(const Prim& p,
@@ -311,9 +318,12 @@ class rasterizer {
       bv.g = p.colour.g;
       bv.b = p.colour.b;
     }
-    if constexpr (fx.shading) {
-      const float len = p.normal.norm();
-      if (len > 0) bv.n = p.normal * ((p.normal.dot(to_prim) > 0 ? -1.0f : 1.0f) / len);
+    if constexpr (A.normal) {
+      bv.away = p.normal.dot(to_prim) > 0 ? 1 : 0;
+      if constexpr (fx.shading) {
+        const float len = p.normal.norm();
+        if (len > 0) bv.n = p.normal * ((bv.away ? -1.0f : 1.0f) / len);
+      }
     }
     return bv;
   }
@@ -321,7 +331,7 @@ class rasterizer {
   /// Accumulation: fragment of key k and weight w at pixel i, if not behind the offset surface.
   void accumulate(std::size_t i, float k, float w, const blend_value& bv) {
     if (!(k >= kb_[i])) return;
-    blend_sample& a = blend_.acc[i];
+    blend_sums& a = blend_.acc[i].side[bv.away];
     if constexpr (fx.colour) {
       a.r += w * bv.r;
       a.g += w * bv.g;
@@ -413,6 +423,7 @@ class rasterizer {
         proj_, v, [kb](std::size_t i, float k) { return k >= kb[i]; },
         [this](std::size_t i, float k, const std::array<float, kNP>& a, bool front) {
           blend_value bv;
+          bv.away = front ? 0 : 1;
           if constexpr (fx.colour) {
             bv.r = a[kColourAt];
             bv.g = a[kColourAt + 1];
@@ -427,12 +438,14 @@ class rasterizer {
         });
   }
 
-  /// colour = Σ w·colour / Σ w, normal = Σ w·n shaded per pixel, depth = front-most fragment.
+  /// colour = Σ w·colour / Σ w, normal = Σ w·n shaded per pixel, depth = front-most fragment,
+  /// over the fragments facing the eye, or where there are none, those facing away.
   /// Pixels no weighted fragment reached keep the visibility pass's colour and depth.
   void normalise_blend() {
     if (!blend_.accumulating) return;  // no accumulation pass was run: the visibility image
     for (std::size_t i = 0; i < blend_.acc.size(); ++i) {
-      const blend_sample& a = blend_.acc[i];
+      const blend_sample& both = blend_.acc[i];
+      const blend_sums& a = both.side[both.side[0].w > 0 ? 0 : 1];
       if (!(a.w > 0)) continue;
       kb_[i] = a.key;
       fragment_colour c{flat_, 1.0f};
