@@ -83,8 +83,10 @@ namespace pbr_lod {
 ///  3. finish(): colour = Σ w·colour / Σ w, normal = Σ w·n normalised and shaded per pixel
 ///     (deferred shading, as Botsch et al.: a blended normal varies smoothly across splats, as a
 ///     triangle's interpolated normal does; blending shaded colours would only smear each splat's
-///     flat shade), depth = the front-most contributing fragment. Shadows and hole filling then
-///     run on the blended frame as without blending.
+///     flat shade), depth = the front-most contributing fragment. Fragments facing the eye and
+///     facing away are summed apart and the facing ones win where they have weight, so the two
+///     sides of a part thinner than ε are not averaged. Shadows and hole filling then run on the
+///     blended frame as without blending.
 ///
 /// Usage: construct, send primitives (point/splat/triangle, any order), then finish() once. With
 /// E.blending: send them, call begin_accumulation(), send the same primitives again, finish()
