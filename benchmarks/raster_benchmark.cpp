@@ -283,6 +283,15 @@ BENCHMARK_CAPTURE(BM_effects, shadows, effects{.colour = false, .shadows = true}
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_effects, hole_filling, effects{.colour = false, .hole_filling = true})
     ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_effects, colour_blending, effects{.colour = true, .blending = true})
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_effects, shading_colour_blending,
+                  effects{.shading = true, .colour = true, .blending = true})
+    ->Unit(benchmark::kMillisecond);
+// Every effect but blending: the effect set `all` was before blending existed.
+BENCHMARK_CAPTURE(BM_effects, all_but_blending,
+                  all_effects - effects{.colour = false, .blending = true})
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_effects, all, all_effects)->Unit(benchmark::kMillisecond);
 
 }  // namespace

@@ -341,19 +341,33 @@ json demo_splats(const loaded_input& mesh, const loaded_input& pts, const camera
                  const render_options& o, const image& ref, const std::string& dir,
                  progress& prog) {
   json report;
-  for (const bool holes : {false, true}) {
+  // The samples as splats: plain, with hole filling, and blended (splat quality against the
+  // mesh, not LOD).
+  struct variant {
+    const char* key;
+    const char* png;
+    const char* step;
+    effects fx;
+  };
+  const variant variants[] = {
+      {"splats", "points.png", "rendering splats", no_effects},
+      {"splats_hole_filled", "points_hole_filled.png", "rendering splats with hole filling",
+       effects{.colour = false, .hole_filling = true}},
+      {"splats_blended", "points_blended.png", "rendering blended splats",
+       effects{.colour = false, .blending = true}},
+  };
+  for (const variant& var : variants) {
     render_options po = o;
-    po.fx.hole_filling = holes;
-    prog.step(holes ? "rendering splats with hole filling" : "rendering splats");
+    po.fx = po.fx | var.fx;
+    prog.step(var.step);
     const auto t0 = clock_type::now();
     const image img = render_input(pts, cam, po);
     const double secs = seconds_since(t0);
-    const std::string png =
-        (fs::path(dir) / (holes ? "points_hole_filled.png" : "points.png")).string();
+    const std::string png = (fs::path(dir) / var.png).string();
     write_png(png, img);
     json j = error_json(compare_images(ref, img));
     j.str("png", png).num("seconds", secs);
-    report.object(holes ? "splats_hole_filled" : "splats", j);
+    report.object(var.key, j);
   }
   render_options so = o;
   so.fx.shadows = true;

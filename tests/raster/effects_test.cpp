@@ -142,6 +142,24 @@ TEST(Effects, CompiledOutEqualsSwitchedOffHoleFilling) {
   check_effect<effects{.colour = false, .hole_filling = true}>("hole_filling");
 }
 
+// Blending needs colour or shading to have anything to average, so the "alone" half of
+// check_effect is done with colour: blending + colour differs from colour alone.
+TEST(Effects, CompiledOutEqualsSwitchedOffBlending) {
+  const view v = test_view();
+  const scene s;
+  constexpr effects X{.colour = false, .blending = true};
+  constexpr effects without = all_effects - X;
+  const image runtime_off = render<A, all_effects>(v, test_options(without), s);
+  EXPECT_EQ(runtime_off, (render<A, without>(v, test_options(all_effects), s)));
+  EXPECT_NE((render<A, all_effects>(v, test_options(all_effects), s)), runtime_off);
+  constexpr effects colour_blend{.colour = true, .blending = true};
+  const image only = render<A, colour_blend>(v, test_options(all_effects), s);
+  EXPECT_EQ(only, (render<A, all_effects>(v, test_options(colour_blend), s)));
+  EXPECT_NE(only, (render<A, all_effects>(v, test_options(effects{.colour = true}), s)));
+  // Without colour and shading there is nothing to blend: the effect is dropped, not run.
+  static_assert(!rasterizer<positions_only, X>::fx.blending);
+}
+
 // Nothing compiled in ignores every run-time request.
 TEST(Effects, NothingCompiledIgnoresRequests) {
   const view v = test_view();
@@ -256,6 +274,8 @@ TEST(Effects, Parse) {
   EXPECT_EQ(parse_effects("all"), all_effects);
   EXPECT_EQ(parse_effects("none"), no_effects);
   EXPECT_EQ(parse_effects("colour+holes").to_string(), "colour+hole_filling");
+  EXPECT_EQ(parse_effects("colour,blend"), (effects{.colour = true, .blending = true}));
+  EXPECT_EQ(parse_effects("blending").to_string(), "blending");
   EXPECT_THROW((void)parse_effects("sparkles"), InvalidArgument);
 }
 

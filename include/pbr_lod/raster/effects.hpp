@@ -20,25 +20,41 @@ struct effects {
   bool backface_cull = false;  ///< drop back-facing triangles, and splats/points with normals
   bool shadows = false;        ///< two-pass directional shadow map
   bool hole_filling = false;   ///< screen-space reconstruction of background pixels in surfaces
+  /// Splat blending with per-pixel normalisation (Pajarola, Sainz & Guidotti 2003; Botsch et al.
+  /// 2005): overlapping splats and points of one surface are averaged with a radially
+  /// decreasing weight instead of the front-most one winning. Two passes over the primitives.
+  bool blending = false;
 
   friend constexpr bool operator==(const effects&, const effects&) = default;
 
   [[nodiscard]] constexpr effects operator&(const effects& o) const {
-    return {shading && o.shading, colour && o.colour, backface_cull && o.backface_cull,
-            shadows && o.shadows, hole_filling && o.hole_filling};
+    return {shading && o.shading,
+            colour && o.colour,
+            backface_cull && o.backface_cull,
+            shadows && o.shadows,
+            hole_filling && o.hole_filling,
+            blending && o.blending};
   }
   [[nodiscard]] constexpr effects operator|(const effects& o) const {
-    return {shading || o.shading, colour || o.colour, backface_cull || o.backface_cull,
-            shadows || o.shadows, hole_filling || o.hole_filling};
+    return {shading || o.shading,
+            colour || o.colour,
+            backface_cull || o.backface_cull,
+            shadows || o.shadows,
+            hole_filling || o.hole_filling,
+            blending || o.blending};
   }
   /// The effects of *this that are not in o.
   [[nodiscard]] constexpr effects operator-(const effects& o) const {
-    return {shading && !o.shading, colour && !o.colour, backface_cull && !o.backface_cull,
-            shadows && !o.shadows, hole_filling && !o.hole_filling};
+    return {shading && !o.shading,
+            colour && !o.colour,
+            backface_cull && !o.backface_cull,
+            shadows && !o.shadows,
+            hole_filling && !o.hole_filling,
+            blending && !o.blending};
   }
   /// True when every effect of `other` is also in *this.
   [[nodiscard]] constexpr bool contains(const effects& other) const {
-    return (other - *this) == effects{false, false, false, false, false};
+    return (other - *this) == effects{false, false, false, false, false, false};
   }
 
   /// "shading+colour+...", or "none".
@@ -54,15 +70,17 @@ struct effects {
     add(backface_cull, "backface_cull");
     add(shadows, "shadows");
     add(hole_filling, "hole_filling");
+    add(blending, "blending");
     return s.empty() ? "none" : s;
   }
 };
 
-inline constexpr effects all_effects{true, true, true, true, true};
-inline constexpr effects no_effects{false, false, false, false, false};
+inline constexpr effects all_effects{true, true, true, true, true, true};
+inline constexpr effects no_effects{false, false, false, false, false, false};
 
 /// Parses the `--effects` list of the pbrlod tool: names separated by ',' or '+' (shading,
-/// colour|color, backface_cull|cull, shadows, hole_filling|holes), or "all" / "none".
+/// colour|color, backface_cull|cull, shadows, hole_filling|holes, blending|blend), or "all" /
+/// "none".
 /// Throws InvalidArgument naming the unknown word.
 [[nodiscard]] inline effects parse_effects(std::string_view list) {
   effects fx = no_effects;
@@ -84,10 +102,12 @@ inline constexpr effects no_effects{false, false, false, false, false};
       fx.shadows = true;
     } else if (w == "hole_filling" || w == "holes") {
       fx.hole_filling = true;
+    } else if (w == "blending" || w == "blend") {
+      fx.blending = true;
     } else {
       throw InvalidArgument("effects: unknown effect '" + std::string(w) +
                             "' (expected shading, colour, backface_cull, shadows, hole_filling, "
-                            "all or none)");
+                            "blending, all or none)");
     }
     start = end + 1;
   }
@@ -119,6 +139,12 @@ struct render_options {
   /// Neighbours count only when their depth is within this relative distance of the front-most
   /// depth in the window, so geometry behind a surface does not bleed into its holes.
   float hole_filling_depth_tolerance = 0.03f;
+  /// Blending: the visibility pass draws each splat or point this many of its own radii further
+  /// from the eye along the view ray (Botsch et al. 2005's ε), and every fragment of the
+  /// accumulation pass in front of that offset surface is blended. Large enough to span the
+  /// depth spread of overlapping splats of one curved surface (their tangent planes part by
+  /// about κr²/2 over a radius r), small enough that a surface one radius behind stays hidden.
+  float blend_depth_epsilon = 1.0f;
   int shadow_map_size = 1024;  ///< texels per side of the square shadow map
   /// Depth bias, in shadow-map texels (world size of one texel times this), against self-shadowing
   /// ("shadow acne") from the discretised depth of sloped surfaces and flat point squares.

@@ -11,7 +11,11 @@
 //  * Lambert shading with one directional light, two-sided for all primitives: a normal that
 //    faces away from the eye is flipped (for triangles: when the triangle is seen from its back);
 //  * shadows by a two-pass shadow map (Williams 1978) fitted to the primitives' bounds;
-//  * hole filling by a screen-space reconstruction filter (Pfister et al. 2000; POP §3.4).
+//  * hole filling by a screen-space reconstruction filter (Pfister et al. 2000; POP §3.4);
+//  * splat blending with per-pixel normalisation (Pajarola, Sainz & Guidotti 2003, "Object-space
+//    blending and splatting of points"; Botsch, Hornung, Zwicker & Kobbelt 2005, "High-quality
+//    surface splatting on today's GPUs"): a visibility pass with depths offset by ε along the
+//    view rays, an accumulation pass, and a normalisation pass (see "Blending" below).
 //
 // Effects cost nothing when off. `render<A, Compiled>` looks at the requested effects once per
 // frame and calls an instantiation of rasterizer<A, E> for exactly that effect set, so inside
@@ -25,10 +29,13 @@
 // primitive drawn; the same primitives in the same order give the same bytes.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <span>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -44,9 +51,13 @@
 
 namespace pbr_lod {
 
-/// The effects of E that attribute set A can apply: shading needs normals, colour needs colours.
+/// The effects of E that attribute set A can apply: shading needs normals, colour needs colours,
+/// and blending needs one of the two (with neither, every fragment has the flat colour and there
+/// is nothing to average).
 [[nodiscard]] constexpr effects applicable_effects(const effects& e, const attributes& a) {
-  return {e.shading && a.normal, e.colour && a.colour, e.backface_cull, e.shadows, e.hole_filling};
+  const bool shading = e.shading && a.normal, colour = e.colour && a.colour;
+  return {shading,   colour,         e.backface_cull,
+          e.shadows, e.hole_filling, e.blending && (shading || colour)};
 }
 
 /// A z-buffered rasteriser for one frame; models Sink<A>.
@@ -57,8 +68,29 @@ namespace pbr_lod {
 /// front side and are never culled. With E.shadows the rasteriser needs the map of a first pass
 /// (render() builds it); constructed without one, nothing is in shadow.
 ///
-/// Usage: construct, send primitives (point/splat/triangle, any order), then finish() once.
-/// Not thread-safe; one rasteriser per frame.
+/// Blending (E.blending). Two passes over the same primitives, then a normalisation in finish():
+///  1. visibility: every splat and point is drawn scaled about the eye by 1 + ε·r/|c − eye| (r its
+///     radius, ε = render_options::blend_depth_epsilon): the same pixels, each pushed along its own
+///     view ray by about ε·r. Depth and its unblended colour are written (the colour is kept for
+///     the rare pixel that no weighted fragment reaches). Triangles are drawn as without blending.
+///  2. accumulation (after begin_accumulation(), the same primitives again): every fragment whose
+///     own, unshifted depth is not behind the pass-1 depth adds weight·colour and, with shading,
+///     weight·normal (turned towards the eye) to the pixel. Weight 1 − r² for splats (r² = s² + t²
+///     in the splat's plane, so it falls to 0 on the ellipse), for squares r² = |pixel − centre|²
+///     over the squared half-diagonal, 1 for one-pixel points and for triangles (an exact surface:
+///     no offset, so a triangle hides what lies behind it and blends with splats less than their
+///     ε in front of it). Nothing is depth-written in this pass.
+///  3. finish(): colour = Σ w·colour / Σ w, normal = Σ w·n normalised and shaded per pixel
+///     (deferred shading, as Botsch et al.: a blended normal varies smoothly across splats, as a
+///     triangle's interpolated normal does; blending shaded colours would only smear each splat's
+///     flat shade), depth = the front-most contributing fragment. Fragments facing the eye and
+///     facing away are summed apart and the facing ones win where they have weight, so the two
+///     sides of a part thinner than ε are not averaged. Shadows and hole filling then run on the
+///     blended frame as without blending.
+///
+/// Usage: construct, send primitives (point/splat/triangle, any order), then finish() once. With
+/// E.blending: send them, call begin_accumulation(), send the same primitives again, finish()
+/// (render() and render_direct() do this). Not thread-safe; one rasteriser per frame.
 template <attributes A, effects E = effects{}>
 class rasterizer {
  public:
@@ -93,6 +125,10 @@ class rasterizer {
   /// A square of p.size_px pixels (≤ 1: the pixel containing the projected centre), at the depth
   /// of its centre. Points behind the near plane or beyond the far plane are dropped.
   void point(const point_prim<A>& p) {
+    if constexpr (fx.blending) {
+      blended_point(p);
+      return;
+    }
     const vec3f d = p.position - proj_.eye;
     const float z = d.dot(proj_.forward);
     if (!(z >= proj_.w_near)) return;  // behind the near plane, or NaN
@@ -122,6 +158,10 @@ class rasterizer {
 
   /// The ellipse centre ± u ± v (u, v orthogonal semi-axes), projected exactly.
   void splat(const splat_prim<A>& s) {
+    if constexpr (fx.blending) {
+      blended_splat(s);
+      return;
+    }
     const vec3f d = s.centre - proj_.eye;
     if constexpr (kCullNormals)
       if (s.normal.dot(d) > 0) return;
@@ -132,6 +172,11 @@ class rasterizer {
 
   /// A triangle with per-vertex normal and colour interpolated perspective-correctly.
   void triangle(const triangle_prim<A>& t) {
+    if constexpr (fx.blending)
+      if (blend_.accumulating) {
+        accumulate_triangle(t);
+        return;
+      }
     std::array<detail::tri_vertex<kNP>, 3> v;
     for (std::size_t k = 0; k < 3; ++k) {
       v[k].h = proj_.point(t.p[k]);
@@ -162,9 +207,16 @@ class rasterizer {
         });
   }
 
-  /// Runs the per-frame passes the effect set has (shadow resolve, hole filling) and returns the
-  /// image. Call once; the rasteriser is empty afterwards.
+  /// Blending only: ends the visibility pass. Send the same primitives again, then finish().
+  void begin_accumulation() requires(fx.blending) {
+    blend_.acc.assign(key_.size(), blend_sample{});
+    blend_.accumulating = true;
+  }
+
+  /// Runs the per-frame passes the effect set has (blend normalisation, shadow resolve, hole
+  /// filling) and returns the image. Call once; the rasteriser is empty afterwards.
   [[nodiscard]] image finish() {
+    if constexpr (fx.blending) normalise_blend();
     image img;
     img.width = view_.width;
     img.height = view_.height;
@@ -178,6 +230,7 @@ class rasterizer {
     key_.clear();
     colour_.clear();
     lit_.clear();
+    if constexpr (fx.blending) blend_ = {};
     return img;
   }
 
@@ -192,6 +245,25 @@ class rasterizer {
     rgb8 albedo;
     float lit;  ///< Lambert factor (1 without shading)
   };
+
+  /// Blending: the sums of the accumulation pass over one side of the surfaces.
+  struct blend_sums {
+    float r = 0, g = 0, b = 0;                            ///< Σ w·colour (with colour)
+    float nx = 0, ny = 0, nz = 0;                         ///< Σ w·normal (with shading)
+    float w = 0;                                          ///< Σ w
+    float key = -std::numeric_limits<float>::infinity();  ///< front-most contributing key
+  };
+  /// Per pixel: the fragments facing the eye ([0]; also splats and points without normals) and
+  /// those facing away ([1]), kept apart so that the two sides of a thin part less than ε thick
+  /// (a fin, a sheet seen edge-on) are not averaged: the facing side wins where it has weight.
+  struct blend_sample {
+    std::array<blend_sums, 2> side;
+  };
+  struct blend_state {
+    std::vector<blend_sample> acc;  ///< allocated by begin_accumulation()
+    bool accumulating = false;
+  };
+  struct no_blend_state {};
 
   static std::size_t pixel_count(const view& v) {
     return static_cast<std::size_t>(v.width) * static_cast<std::size_t>(v.height);
@@ -224,6 +296,175 @@ class rasterizer {
     if constexpr (kLitBuffer) lb_[i] = c.lit;
   }
 
+  // ---- blending (compiled only when fx.blending) ----
+
+  /// The scale about the eye that pushes a primitive of world radius r at distance dist from
+  /// the eye back by ε·r along its view rays, keeping its pixels.
+  [[nodiscard]] float blend_push(float r, float dist) const {
+    const float f = 1 + opt_.blend_depth_epsilon * r / dist;
+    return std::isfinite(f) && f > 1 ? f : 1.0f;
+  }
+
+  /// What one primitive adds to the sums: colour and the normal turned towards the eye.
+  struct blend_value {
+    float r = 0, g = 0, b = 0;
+    vec3f n = vec3f::Zero();
+    std::size_t away = 0;  ///< 1 when the primitive faces away from the eye
+  };
+  template <class Prim>
+  [[nodiscard]] blend_value blend_value_of(const Prim& p,
+                                           [[maybe_unused]] const vec3f& to_prim) const {
+    blend_value bv;
+    if constexpr (fx.colour) {
+      bv.r = p.colour.r;
+      bv.g = p.colour.g;
+      bv.b = p.colour.b;
+    }
+    if constexpr (A.normal) {
+      bv.away = p.normal.dot(to_prim) > 0 ? 1 : 0;
+      if constexpr (fx.shading) {
+        const float len = p.normal.norm();
+        if (len > 0) bv.n = p.normal * ((bv.away ? -1.0f : 1.0f) / len);
+      }
+    }
+    return bv;
+  }
+
+  /// Accumulation: fragment of key k and weight w at pixel i, if not behind the offset surface.
+  void accumulate(std::size_t i, float k, float w, const blend_value& bv) {
+    if (!(k >= kb_[i])) return;
+    blend_sums& a = blend_.acc[i].side[bv.away];
+    if constexpr (fx.colour) {
+      a.r += w * bv.r;
+      a.g += w * bv.g;
+      a.b += w * bv.b;
+    }
+    if constexpr (fx.shading) {
+      a.nx += w * bv.n.x();
+      a.ny += w * bv.n.y();
+      a.nz += w * bv.n.z();
+    }
+    a.w += w;
+    a.key = std::max(a.key, k);
+  }
+
+  void blended_point(const point_prim<A>& p) {
+    const vec3f d = p.position - proj_.eye;
+    const float z = d.dot(proj_.forward);
+    if (!(z >= proj_.w_near)) return;  // behind the near plane, or NaN
+    if constexpr (kCullNormals)
+      if (p.normal.dot(d) > 0) return;
+    const float key = 1.0f / z;
+    const float sx = proj_.cx + d.dot(proj_.right_px) * key;
+    const float sy = proj_.cy - d.dot(proj_.up_px) * key;
+    const float size = std::max(p.size_px, 1.0f);
+    if (!blend_.accumulating) {
+      // A square is at one depth: pushing it back by ε·(half its side in the world) divides
+      // its key, and keeps its pixels.
+      const float push = 1 + opt_.blend_depth_epsilon * 0.5f * size / proj_.focal;
+      const float k = std::isfinite(push) && push > 1 ? key / push : key;
+      const fragment_colour c = shade(p, d);
+      detail::raster_square(view_.width, view_.height, sx, sy, p.size_px, k,
+                            [this, c](std::size_t i, float kk) {
+                              if (kk > kb_[i]) {
+                                kb_[i] = kk;
+                                store(i, c);
+                              }
+                            });
+      return;
+    }
+    const blend_value bv = blend_value_of(p, d);
+    if (!(p.size_px > 1)) {
+      detail::raster_square(view_.width, view_.height, sx, sy, p.size_px, key,
+                            [&](std::size_t i, float k) { accumulate(i, k, 1.0f, bv); });
+      return;
+    }
+    // r² = |pixel centre − centre|² / (half-diagonal)²: 1 at the corners.
+    const float inv_h2 = 2.0f / (p.size_px * p.size_px);
+    const std::size_t w = width();
+    detail::raster_square(view_.width, view_.height, sx, sy, p.size_px, key,
+                          [&](std::size_t i, float k) {
+                            const float dx = static_cast<float>(i % w) + 0.5f - sx;
+                            const float dy = static_cast<float>(i / w) + 0.5f - sy;
+                            accumulate(i, k, std::max(0.0f, 1 - (dx * dx + dy * dy) * inv_h2), bv);
+                          });
+  }
+
+  void blended_splat(const splat_prim<A>& s) {
+    const vec3f d = s.centre - proj_.eye;
+    if constexpr (kCullNormals)
+      if (s.normal.dot(d) > 0) return;
+    if (!blend_.accumulating) {
+      const float f =
+          blend_push(std::sqrt(std::max(s.u.squaredNorm(), s.v.squaredNorm())), d.norm());
+      const fragment_colour c = shade(s, d);
+      const detail::span_target<true, kLitBuffer> out{kb_, cb_, lb_, packed(c), c.lit};
+      detail::raster_ellipse(proj_, vec3f(proj_.eye + d * f), vec3f(s.u * f), vec3f(s.v * f), out);
+      return;
+    }
+    const blend_value bv = blend_value_of(s, d);
+    detail::raster_ellipse_radial(proj_, s.centre, s.u, s.v, [&](std::size_t i, float k, float r2) {
+      accumulate(i, k, std::max(0.0f, 1 - r2), bv);
+    });
+  }
+
+  void accumulate_triangle(const triangle_prim<A>& t) {
+    std::array<detail::tri_vertex<kNP>, 3> v;
+    for (std::size_t k = 0; k < 3; ++k) {
+      v[k].h = proj_.point(t.p[k]);
+      if constexpr (fx.shading)
+        for (int c = 0; c < 3; ++c) v[k].a[static_cast<std::size_t>(c)] = t.normal[k][c];
+      if constexpr (fx.colour) {
+        v[k].a[kColourAt + 0] = t.colour[k].r;
+        v[k].a[kColourAt + 1] = t.colour[k].g;
+        v[k].a[kColourAt + 2] = t.colour[k].b;
+      }
+    }
+    float* const kb = kb_;
+    detail::raster_triangle<fx.backface_cull>(
+        proj_, v, [kb](std::size_t i, float k) { return k >= kb[i]; },
+        [this](std::size_t i, float k, const std::array<float, kNP>& a, bool front) {
+          blend_value bv;
+          bv.away = front ? 0 : 1;
+          if constexpr (fx.colour) {
+            bv.r = a[kColourAt];
+            bv.g = a[kColourAt + 1];
+            bv.b = a[kColourAt + 2];
+          }
+          if constexpr (fx.shading) {
+            const vec3f n(a[0], a[1], a[2]);
+            const float len = n.norm();
+            if (len > 0) bv.n = n / (front ? len : -len);
+          }
+          accumulate(i, k, 1.0f, bv);
+        });
+  }
+
+  /// colour = Σ w·colour / Σ w, normal = Σ w·n shaded per pixel, depth = front-most fragment,
+  /// over the fragments facing the eye, or where there are none, those facing away.
+  /// Pixels no weighted fragment reached keep the visibility pass's colour and depth.
+  void normalise_blend() {
+    if (!blend_.accumulating) return;  // no accumulation pass was run: the visibility image
+    for (std::size_t i = 0; i < blend_.acc.size(); ++i) {
+      const blend_sample& both = blend_.acc[i];
+      const blend_sums& a = both.side[both.side[0].w > 0 ? 0 : 1];
+      if (!(a.w > 0)) continue;
+      kb_[i] = a.key;
+      fragment_colour c{flat_, 1.0f};
+      if constexpr (fx.colour) {
+        const float inv = 1.0f / a.w;
+        c.albedo = {detail::to_channel(a.r * inv), detail::to_channel(a.g * inv),
+                    detail::to_channel(a.b * inv)};
+      }
+      if constexpr (fx.shading) {
+        const vec3f n(a.nx, a.ny, a.nz);
+        const float len = n.norm();
+        c.lit = detail::lambert(len > 0 ? vec3f(n / len) : vec3f::Zero(), light_, ambient_);
+      }
+      store(i, c);
+    }
+  }
+
   view view_;
   detail::persp_projection proj_;
   render_options opt_;
@@ -238,6 +479,7 @@ class rasterizer {
   rgb8 flat_;
   vec3f light_ = vec3f::Zero();
   float ambient_ = 0;
+  [[no_unique_address]] std::conditional_t<fx.blending, blend_state, no_blend_state> blend_;
 };
 
 static_assert(Sink<rasterizer<positions_only>, positions_only>);
@@ -255,8 +497,10 @@ namespace detail {
       return e.backface_cull;
     case 3:
       return e.shadows;
-    default:
+    case 4:
       return e.hole_filling;
+    default:
+      return e.blending;
   }
 }
 [[nodiscard]] constexpr effects with_effect(effects e, int i) {
@@ -273,8 +517,11 @@ namespace detail {
     case 3:
       e.shadows = true;
       break;
-    default:
+    case 4:
       e.hole_filling = true;
+      break;
+    default:
+      e.blending = true;
       break;
   }
   return e;
@@ -284,7 +531,7 @@ namespace detail {
 /// constant: one branch per effect per frame, and only subsets of Allowed are instantiated.
 template <effects Allowed, effects Fixed, int I, class F>
 [[nodiscard]] image dispatch_effects(const effects& run, F& f) {
-  if constexpr (I == 5) {
+  if constexpr (I == 6) {
     return f.template operator()<Fixed>();
   } else {
     if constexpr (effect_flag(Allowed, I)) {
@@ -295,25 +542,38 @@ template <effects Allowed, effects Fixed, int I, class F>
   }
 }
 
+/// Sends the frame to r: once, or with blending twice (visibility, then accumulation).
+template <class R, attributes A>
+void replay_passes(R& r, const buffer_sink<A>& prims) {
+  prims.replay(r);
+  if constexpr (R::fx.blending) {
+    r.begin_accumulation();
+    prims.replay(r);
+  }
+}
+
 template <attributes A, effects E>
 [[nodiscard]] image render_prims(const view& v, const render_options& opt,
                                  const buffer_sink<A>& prims) {
   if constexpr (E.shadows) {
     const shadow_map sm = build_shadow_map(prims, v, opt);
     rasterizer<A, E> r(v, opt, &sm);
-    prims.replay(r);
+    replay_passes(r, prims);
     return r.finish();
   } else {
     rasterizer<A, E> r(v, opt);
-    prims.replay(r);
+    replay_passes(r, prims);
     return r.finish();
   }
 }
 
 template <attributes A, effects E, class DrawFn>
 [[nodiscard]] image render_streamed(const view& v, const render_options& opt, DrawFn& draw) {
-  if constexpr (E.shadows) {
-    buffer_sink<A> prims;  // the light pass and the camera pass see the same primitives
+  constexpr bool blend = rasterizer<A, E>::fx.blending;
+  if constexpr (E.shadows || blend) {
+    // Shadows: the light pass and the camera pass see the same primitives; blending: the
+    // visibility and the accumulation pass do.
+    buffer_sink<A> prims;
     draw(prims);
     return render_prims<A, E>(v, opt, prims);
   } else {
@@ -350,7 +610,7 @@ template <attributes A, effects Compiled = all_effects>
 ///
 /// Why a buffer and not the rasteriser itself as the sink: shadows need the frame's primitives
 /// twice anyway, and with one sink type the caller's traversal is compiled once, not once per
-/// effect combination (32 of them), which is what made every file that renders slow to build.
+/// effect combination (64 of them), which is what made every file that renders slow to build.
 ///
 /// The buffer keeps its capacity from frame to frame on each thread (one per attribute set,
 /// holding up to the largest frame drawn): a fresh buffer per frame paid for growing and
@@ -378,8 +638,8 @@ template <attributes A, effects Compiled = all_effects, class DrawFn>
 }
 
 /// render() without the buffer: `draw(sink)` writes straight into the rasteriser<A, E>& (with
-/// shadows, a buffer_sink<A>&) it is given. The same image as render(); no copy of the frame,
-/// but the caller's draw is compiled once per effect combination in the calling file. For
+/// shadows or blending, a buffer_sink<A>&) it is given. The same image as render(); no copy of the
+/// frame, but the caller's draw is compiled once per effect combination in the calling file. For
 /// measuring the rasteriser itself, and for frames too large to buffer.
 template <attributes A, effects Compiled = all_effects, class DrawFn>
 [[nodiscard]] image render_direct(const view& v, const render_options& opt, DrawFn&& draw) {
