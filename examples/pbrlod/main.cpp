@@ -55,7 +55,7 @@ void add_view_options(CLI::App* cmd, view_args& a) {
       ->check(CLI::IsMember({"y", "z"}))
       ->capture_default_str();
   cmd->add_option("--effects", a.effects_list,
-                  "comma list of shading, colour, backface_cull, shadows, hole_filling; 'none'; "
+                  "comma list of shading, colour, backface_cull, shadows, hole_filling, blending; 'none'; "
                   "'all'; 'default' = shading where the data has normals (or faces), colour where "
                   "it has colours");
 }
