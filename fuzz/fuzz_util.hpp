@@ -79,4 +79,16 @@ void load_and_round_trip(const std::string& in, const std::string& out) {
   (void)H::load(out);  // no catch: a saved hierarchy that does not load again is a bug
 }
 
+/// The whole of a hierarchy file target: the input resealed, written to this process's scratch
+/// file, and loaded (and round-tripped) as each of the hierarchy types a file of that format may
+/// hold.
+template <class... Hierarchies>
+int hierarchy_target(const std::uint8_t* data, std::size_t size) {
+  static const scratch_files scratch{{scratch_path(".lod", "in"), scratch_path(".lod", "out")}};
+  const auto bytes = resealed(data, size);
+  write_bytes(scratch.paths[0], bytes.data(), bytes.size());
+  (load_and_round_trip<Hierarchies>(scratch.paths[0], scratch.paths[1]), ...);
+  return 0;
+}
+
 }  // namespace pbr_lod::fuzz
