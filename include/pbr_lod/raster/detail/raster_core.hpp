@@ -331,6 +331,72 @@ inline void raster_square(int width, int height, float sx, float sy, float size,
 // Elliptical splats, exact perspective
 // ---------------------------------------------------------------------------------------------
 
+/// The projective map of the ellipse {c + s·u + t·v : s² + t² ≤ 1} that raster_ellipse and
+/// raster_ellipse_radial scan: hc the centre's homogeneous image, r1..r3 the rows of
+/// P⁻¹ = adj(P)/det for P = [u' v' c'], the key kx·x + ky·y + k0, and whether the ellipse lies
+/// wholly in front of the near plane. False when it lies wholly outside the clip range or has no
+/// area (edge-on, a zero or doubled axis, NaN).
+struct ellipse_map {
+  hom4 hc, hu, hv;
+  double r1[3], r2[3], r3[3];
+  double kx, ky, k0;
+  bool in_front;
+};
+
+template <class Proj>
+inline bool map_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const vec3f& v,
+                        ellipse_map& m) {
+  m.hc = pr.point(c);
+  m.hu = pr.dir(u);
+  m.hv = pr.dir(v);
+  const hom4 &hc = m.hc, &hu = m.hu, &hv = m.hv;
+  // w (eye-space z for the camera) over the ellipse is w_c ± r with r = |(w_u, w_v)|; the tests
+  // against the clip range are done on squares to avoid a square root per splat.
+  const double wr2 = hu.w * hu.w + hv.w * hv.w;
+  const double to_near = hc.w - pr.w_near, to_far = hc.w - pr.w_far;
+  if (!(to_near >= 0 || to_near * to_near <= wr2)) return false;  // wholly behind the near plane
+  if (!(to_far < 0 || to_far * to_far < wr2)) return false;       // wholly beyond the far plane
+  m.in_front = to_near >= 0 && to_near * to_near >= wr2;
+
+  // Rows of P⁻¹ = adj(P)/det: (m2×m3, m3×m1, m1×m2)/det with columns m1 = u', m2 = v', m3 = c'.
+  const double m1[3] = {hu.x, hu.y, hu.w}, m2[3] = {hv.x, hv.y, hv.w}, m3[3] = {hc.x, hc.y, hc.w};
+  const auto cross = [](const double* a, const double* b, double* o) {
+    o[0] = a[1] * b[2] - a[2] * b[1];
+    o[1] = a[2] * b[0] - a[0] * b[2];
+    o[2] = a[0] * b[1] - a[1] * b[0];
+  };
+  double* r1 = m.r1;
+  double* r2 = m.r2;
+  double* r3 = m.r3;
+  cross(m2, m3, r1);
+  cross(m3, m1, r2);
+  cross(m1, m2, r3);
+  const double det = m3[0] * r3[0] + m3[1] * r3[1] + m3[2] * r3[2];
+  const auto norm2 = [](const double* a) { return a[0] * a[0] + a[1] * a[1] + a[2] * a[2]; };
+  // det = c'·(u'×v') = |c'||u'×v'|·cos θ, θ the angle between the plane's image normal and the
+  // centre's ray: |cos θ| ≤ 1e-9 is edge-on, u'×v' = 0 a zero or doubled axis; no area either
+  // way (the test also catches NaN).
+  if (!(det * det > 1e-18 * norm2(m3) * norm2(r3))) return false;
+  const double inv = 1.0 / det;
+  for (int i = 0; i < 3; ++i) {
+    r1[i] *= inv;
+    r2[i] *= inv;
+    r3[i] *= inv;
+  }
+  // key(x, y) = kx·x + ky·y + k0 (the key numerators weight the plane parameters); for the
+  // camera the numerators are (0, 0, 1), so the key is the third row: 1/z is affine.
+  if constexpr (Proj::perspective) {
+    m.kx = r3[0];
+    m.ky = r3[1];
+    m.k0 = r3[2];
+  } else {
+    m.kx = hu.k * r1[0] + hv.k * r2[0] + hc.k * r3[0];
+    m.ky = hu.k * r1[1] + hv.k * r2[1] + hc.k * r3[1];
+    m.k0 = hu.k * r1[2] + hv.k * r2[2] + hc.k * r3[2];
+  }
+  return true;
+}
+
 /// Rasterises the ellipse {c + s·u + t·v : s² + t² ≤ 1} (c, u, v in the primitives' frame) into
 /// `out`, depth-tested.
 ///
@@ -344,50 +410,14 @@ inline void raster_square(int width, int height, float sx, float sy, float size,
 template <class Proj, bool Colour, bool Lit>
 inline void raster_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const vec3f& v,
                            const span_target<Colour, Lit>& out) {
-  const hom4 hc = pr.point(c), hu = pr.dir(u), hv = pr.dir(v);
-  // w (eye-space z for the camera) over the ellipse is w_c ± r with r = |(w_u, w_v)|; the tests
-  // against the clip range are done on squares to avoid a square root per splat.
-  const double wr2 = hu.w * hu.w + hv.w * hv.w;
-  const double to_near = hc.w - pr.w_near, to_far = hc.w - pr.w_far;
-  if (!(to_near >= 0 || to_near * to_near <= wr2)) return;  // wholly behind the near plane
-  if (!(to_far < 0 || to_far * to_far < wr2)) return;       // wholly beyond the far plane
-  const bool in_front = to_near >= 0 && to_near * to_near >= wr2;
-
-  // Rows of P⁻¹ = adj(P)/det: (m2×m3, m3×m1, m1×m2)/det with columns m1 = u', m2 = v', m3 = c'.
-  const double m1[3] = {hu.x, hu.y, hu.w}, m2[3] = {hv.x, hv.y, hv.w}, m3[3] = {hc.x, hc.y, hc.w};
-  const auto cross = [](const double* a, const double* b, double* o) {
-    o[0] = a[1] * b[2] - a[2] * b[1];
-    o[1] = a[2] * b[0] - a[0] * b[2];
-    o[2] = a[0] * b[1] - a[1] * b[0];
-  };
-  double r1[3], r2[3], r3[3];
-  cross(m2, m3, r1);
-  cross(m3, m1, r2);
-  cross(m1, m2, r3);
-  const double det = m3[0] * r3[0] + m3[1] * r3[1] + m3[2] * r3[2];
-  const auto norm2 = [](const double* a) { return a[0] * a[0] + a[1] * a[1] + a[2] * a[2]; };
-  // det = c'·(u'×v') = |c'||u'×v'|·cos θ, θ the angle between the plane's image normal and the
-  // centre's ray: |cos θ| ≤ 1e-9 is edge-on, u'×v' = 0 a zero or doubled axis; no area either
-  // way (the test also catches NaN).
-  if (!(det * det > 1e-18 * norm2(m3) * norm2(r3))) return;
-  const double inv = 1.0 / det;
-  for (int i = 0; i < 3; ++i) {
-    r1[i] *= inv;
-    r2[i] *= inv;
-    r3[i] *= inv;
-  }
-  // key(x, y) = kx·x + ky·y + k0 (the key numerators weight the plane parameters); for the
-  // camera the numerators are (0, 0, 1), so the key is the third row: 1/z is affine.
-  double kx, ky, k0;
-  if constexpr (Proj::perspective) {
-    kx = r3[0];
-    ky = r3[1];
-    k0 = r3[2];
-  } else {
-    kx = hu.k * r1[0] + hv.k * r2[0] + hc.k * r3[0];
-    ky = hu.k * r1[1] + hv.k * r2[1] + hc.k * r3[1];
-    k0 = hu.k * r1[2] + hv.k * r2[2] + hc.k * r3[2];
-  }
+  ellipse_map m;
+  if (!map_ellipse(pr, c, u, v, m)) return;
+  const hom4 &hc = m.hc, &hu = m.hu, &hv = m.hv;
+  const double* r1 = m.r1;
+  const double* r2 = m.r2;
+  const double* r3 = m.r3;
+  const double kx = m.kx, ky = m.ky, k0 = m.k0;
+  const bool in_front = m.in_front;
   const int width = pr.width, height = pr.height;
 
   if (in_front) {
@@ -542,34 +572,13 @@ inline void raster_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const
 template <class Proj, class Frag>
 inline void raster_ellipse_radial(const Proj& pr, const vec3f& c, const vec3f& u, const vec3f& v,
                                   Frag&& frag) {
-  const hom4 hc = pr.point(c), hu = pr.dir(u), hv = pr.dir(v);
-  const double wr2 = hu.w * hu.w + hv.w * hv.w;
-  const double to_near = hc.w - pr.w_near, to_far = hc.w - pr.w_far;
-  if (!(to_near >= 0 || to_near * to_near <= wr2)) return;  // wholly behind the near plane
-  if (!(to_far < 0 || to_far * to_far < wr2)) return;       // wholly beyond the far plane
-  const double m1[3] = {hu.x, hu.y, hu.w}, m2[3] = {hv.x, hv.y, hv.w}, m3[3] = {hc.x, hc.y, hc.w};
-  const auto cross = [](const double* a, const double* b, double* o) {
-    o[0] = a[1] * b[2] - a[2] * b[1];
-    o[1] = a[2] * b[0] - a[0] * b[2];
-    o[2] = a[0] * b[1] - a[1] * b[0];
-  };
-  double r1[3], r2[3], r3[3];
-  cross(m2, m3, r1);
-  cross(m3, m1, r2);
-  cross(m1, m2, r3);
-  const double det = m3[0] * r3[0] + m3[1] * r3[1] + m3[2] * r3[2];
-  const auto norm2 = [](const double* a) { return a[0] * a[0] + a[1] * a[1] + a[2] * a[2]; };
-  if (!(det * det > 1e-18 * norm2(m3) * norm2(r3))) return;  // edge-on or no area, as above
-  const double inv = 1.0 / det;
-  for (int i = 0; i < 3; ++i) {
-    r1[i] *= inv;
-    r2[i] *= inv;
-    r3[i] *= inv;
-  }
-  // Key numerators of u, v, c weight the plane parameters (for the camera: (0, 0, 1)).
-  const double kx = hu.k * r1[0] + hv.k * r2[0] + hc.k * r3[0];
-  const double ky = hu.k * r1[1] + hv.k * r2[1] + hc.k * r3[1];
-  const double k0 = hu.k * r1[2] + hv.k * r2[2] + hc.k * r3[2];
+  ellipse_map m;
+  if (!map_ellipse(pr, c, u, v, m)) return;
+  const hom4 &hc = m.hc, &hu = m.hu, &hv = m.hv;
+  const double* r1 = m.r1;
+  const double* r2 = m.r2;
+  const double* r3 = m.r3;
+  const double kx = m.kx, ky = m.ky, k0 = m.k0;
 
   double xlo = std::numeric_limits<double>::infinity(), xhi = -xlo, ylo = xlo, yhi = -xlo;
   const double wn = pr.w_near;
