@@ -13,8 +13,10 @@
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/traverse/culling.hpp"
 #include "support/data.hpp"
 #include "support/policies.hpp"
+#include "support/trig_culling.hpp"
 
 namespace {
 using namespace pbr_lod;
@@ -135,25 +137,58 @@ BENCHMARK(bm_tolerance)
     ->Arg(16)
     ->Unit(benchmark::kMillisecond);
 
-// Traversal alone (LOD selection of §6) at τ = 16 on the same surface.
+// §6 culling with the angles taken literally (atan, acos, asin per view-cone test; acos, asin
+// per back-face test: what the library did before its trigonometry-free tests), or with the
+// library's tests through the same visit() hook, so the two differ only in the tests.
+template <bool Trig>
+struct visit_culling_policy : point_octree_policy {
+  template <class H, class State>
+  [[nodiscard]] visit_result visit(const H& h, const typename H::node_id& n, const State&,
+                                   const view& v, const traverse_options& o) const {
+    const sphere s = h.bounding_sphere(n);
+    const bool culled = Trig
+                            ? test::outside_view_cone_trig(v, s) ||
+                                  test::back_facing_trig(s, h.normal_cone(n), v.eye)
+                            : outside_view_cone(v, s) || back_facing(s, h.normal_cone_cs(n), v.eye);
+    if (culled) return {visit_result::verdict::cull, 0};
+    const float size = screen_size(h, n, s, v, o);
+    return {refine(h, n, size, o) ? visit_result::verdict::refine : visit_result::verdict::emit,
+            size};
+  }
+};
+
+// Traversal alone (LOD selection of §6: view-cone and normal-cone culling, the tilted screen
+// area) on the same surface, from the sweep's distance (2.2 radii: everything in view) and from
+// close up (0.9 radii: much of the surface outside the view cone or facing away).
+template <class Policy>
 void bm_select(benchmark::State& state) {
   static const auto t = build_point_octree(surface(1'000'000));
   using tree = std::decay_t<decltype(t)>;
-  const view v(camera::orbit(t.origin(), 1.4, 30, 35, 2.2, 1, {1024, 1024}), t.origin());
+  const double dist = static_cast<double>(state.range(1)) / 10;
+  const view v(camera::orbit(t.origin(), 1.4, 30, 35, dist, 1, {1024, 1024}), t.origin());
   const traverse_options o{.tolerance_px = static_cast<float>(state.range(0)),
                            .backface_cull = true,
                            .cull_volume = traverse_options::volume::view_cone};
   traverse_stats st;
   for (auto _ : state) {
     counting_sink<tree::attrs> c;
-    st = traverse(t, v, o, c, point_octree_policy{});
+    st = traverse(t, v, o, c, Policy{});
     benchmark::DoNotOptimize(c.splats);
   }
   state.counters["nodes/s"] =
       benchmark::Counter(static_cast<double>(st.visited) * static_cast<double>(state.iterations()),
                          benchmark::Counter::kIsRate);
+  state.counters["visited"] = static_cast<double>(st.visited);
+  state.counters["culled"] = static_cast<double>(st.culled_frustum + st.culled_backface);
 }
-BENCHMARK(bm_select)->ArgName("tau_px")->Arg(1)->Arg(16)->Unit(benchmark::kMillisecond);
+void select_args(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"tau_px", "dist_x10"})->Unit(benchmark::kMillisecond);
+  for (const int tau : {1, 16})
+    for (const int dist : {22, 9}) b->Args({tau, dist});
+}
+BENCHMARK_TEMPLATE(bm_select, point_octree_policy)->Apply(select_args);
+BENCHMARK_TEMPLATE(bm_select, visit_culling_policy<false>)->Apply(select_args);
+BENCHMARK_TEMPLATE(bm_select, visit_culling_policy<true>)->Apply(select_args);
 
 // How far the node ellipses drift when the same cloud lies far from the origin: the paper's
 // world-coordinate homogeneous sums in float and double vs the stable merge (relative error of

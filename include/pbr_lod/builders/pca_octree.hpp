@@ -573,7 +573,7 @@ class pca_octree_cut {
         (o.cull_volume == traverse_options::volume::view_cone ? outside_view_cone(v, s)
                                                               : frustum_test(v, s, 0x3f) < 0))
       r = culled_frustum;
-    else if (o.backface_cull && back_facing(s, t_->normal_cone(n), v.eye))
+    else if (o.backface_cull && node_back_facing(*t_, n, s, v.eye))
       r = culled_backface;
     else if (p.refine(*t_, n, p.screen_size(*t_, n, s, v, o), o))
       r = refine;

@@ -173,6 +173,11 @@ class point_octree {
   [[nodiscard]] pbr_lod::normal_cone normal_cone(node_id n) const {
     return {nodes_[n].normal, nodes_[n].cone_angle};
   }
+  /// The same cone with cos θ_c and sin θ_c from selection(n): back-face culling without
+  /// trigonometry (§6).
+  [[nodiscard]] pbr_lod::normal_cone_cs normal_cone_cs(node_id n) const {
+    return {nodes_[n].normal, selection_[n].cos_cone, selection_[n].sin_cone};
+  }
   /// Inner node: its bounding elliptical splat. Leaf: one splat per sample (full detail).
   template <class S>
   void emit(node_id n, const view&, S& sink) const {

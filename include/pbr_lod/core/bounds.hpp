@@ -70,20 +70,44 @@ struct normal_cone {
   }
 };
 
+/// A normal cone with its semi-angle θ given by cos θ and sin θ, which a hierarchy derives once
+/// per node (after build and load) so that back-face culling needs no trigonometry per frame.
+struct normal_cone_cs {
+  vec3f axis = vec3f::UnitZ();
+  float cos_semi = -1;  ///< cos θ; θ ≥ π/2 (cos θ ≤ 0) never culls
+  float sin_semi = 0;
+};
+
 /// True when every surface point inside `bounds` with a normal inside `cone` faces away from an
 /// eye at `eye`, i.e. (p − eye)·n > 0 for all of them. Conservative: false whenever unsure.
 /// The view directions towards a sphere of radius r at distance d fill a cone of half-angle
 /// β = asin(r/d) about the centre direction; all normals face away iff
-/// angle(axis, centre − eye) + semi_angle + β < π/2.
+/// a + θ + β < π/2, a = angle(axis, centre − eye) (Pajarola 2003 §6, Fig. 10b: β + θ < 90°
+/// with his β the angle to the sphere's nearest view direction).
+///
+/// Without trigonometry (his "only a few floating-point operations", [14, 15]): with
+/// p = axis·(c − e), q = √(d² − r²) = d·cos β and r = d·sin β, the test is θ + β < π/2
+/// (cos(θ + β) > 0: cos θ·q > sin θ·r) and cos a > sin(θ + β) (p > sin θ·q + cos θ·r); both
+/// sides are squared where they are non-negative, so not even q's square root is taken.
+[[nodiscard]] inline bool back_facing(const sphere& bounds, const normal_cone_cs& cone,
+                                      const vec3f& eye) {
+  if (!(cone.cos_semi > 0)) return false;  // θ ≥ π/2: some normal faces every direction
+  const vec3f d = bounds.centre - eye;
+  const float r = bounds.radius, q2 = d.squaredNorm() - r * r;
+  if (!(q2 > 0)) return false;  // eye inside the bounds
+  const float c2 = cone.cos_semi * cone.cos_semi, s2 = cone.sin_semi * cone.sin_semi;
+  if (!(c2 * q2 > s2 * r * r)) return false;  // θ + β ≥ π/2
+  const float m = cone.axis.dot(d) - cone.cos_semi * r;
+  return m > 0 && m * m > s2 * q2;
+}
+
+/// The same test for a cone given by its semi-angle (two trigonometric calls per test; the
+/// hierarchies that cull many nodes per frame provide normal_cone_cs instead).
 [[nodiscard]] inline bool back_facing(const sphere& bounds, const normal_cone& cone,
                                       const vec3f& eye) {
   if (cone.semi_angle >= std::numbers::pi_v<float> / 2) return false;
-  const vec3f d = bounds.centre - eye;
-  const float dist = d.norm();
-  if (dist <= bounds.radius) return false;  // eye inside the bounds
-  const float beta = std::asin(std::min(1.0f, bounds.radius / dist));
-  const float cos_a = std::clamp(cone.axis.dot(d) / dist, -1.0f, 1.0f);
-  return std::acos(cos_a) + cone.semi_angle + beta < std::numbers::pi_v<float> / 2;
+  return back_facing(
+      bounds, normal_cone_cs{cone.axis, std::cos(cone.semi_angle), std::sin(cone.semi_angle)}, eye);
 }
 
 /// Elliptical disk (a splat): centre, unit normal, and the two semi-axis vectors u, v

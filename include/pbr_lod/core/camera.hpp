@@ -84,6 +84,9 @@ class view {
   float tan_half_fovy;
   int width, height;
   float z_near, z_far;
+  /// Cosine and sine of ω, the semi-angle of the cone about `forward` through the image corners
+  /// (Pajarola's viewing cone, which view-cone culling tests against: traverse/culling.hpp).
+  float cos_cone, sin_cone;
   /// left, right, bottom, top, near, far — inside is the positive side of every plane
   std::array<plane, 6> frustum;
 
@@ -115,6 +118,9 @@ class view {
     // Side planes pass through the eye; their normals point inwards.
     const float hx = 0.5f * static_cast<float>(width) / focal_px;  // tan of half the x fov
     const float hy = tan_half_fovy;
+    const float tan_cone = std::sqrt(hx * hx + hy * hy);
+    cos_cone = 1 / std::sqrt(1 + tan_cone * tan_cone);
+    sin_cone = tan_cone * cos_cone;
     const auto side = [&](const vec3f& n) {
       const vec3f nn = n.normalized();
       return plane{nn, -nn.dot(eye)};

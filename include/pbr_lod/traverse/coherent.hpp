@@ -109,7 +109,7 @@ class coherent_traversal {
       }
     }
     if constexpr (HasNormalCones<H>) {
-      if (o.backface_cull && back_facing(s, h_->normal_cone(n), v.eye)) return culled_backface;
+      if (o.backface_cull && node_back_facing(*h_, n, s, v.eye)) return culled_backface;
     }
     size = p.screen_size(*h_, n, s, v, o);
     return p.refine(*h_, n, size, o) ? refine : draw;

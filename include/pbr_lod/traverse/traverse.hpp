@@ -178,7 +178,7 @@ traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S&
         }
       }
       if constexpr (HasNormalCones<H>) {
-        if (o.backface_cull && back_facing(s, h.normal_cone(e.node), v.eye)) {
+        if (o.backface_cull && node_back_facing(h, e.node, s, v.eye)) {
           ++st.culled_backface;
           continue;
         }
