@@ -1,5 +1,6 @@
 // Tests of the PCA octree's file and of hard inputs (Kalaiah & Varshney 2003 §3.1 storage; the
 // DESIGN's numerics and errors). Each case says why its expectation holds.
+#include <Eigen/Eigenvalues>
 #include <bit>
 
 #include "builders/pca_octree_test_util.hpp"
@@ -185,8 +186,31 @@ TEST(pca_octree, EmptyAndNonFiniteInputAreClearErrors) {
                InvalidArgument);
 }
 
+/// Distance from p to the affine hull of pts (a point, a line or a plane; rank from the
+/// covariance's eigenvalues).
+double affine_hull_distance(const std::vector<vec3f>& pts, const vec3d& p) {
+  vec3d mean = vec3d::Zero();
+  for (const auto& q : pts) mean += q.cast<double>();
+  mean /= double(pts.size());
+  mat3d cov = mat3d::Zero();
+  for (const auto& q : pts)
+    cov += (q.cast<double>() - mean) * (q.cast<double>() - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<mat3d> es(cov);
+  const double top = std::max(es.eigenvalues().maxCoeff(), 1e-300);
+  vec3d off = p - mean;
+  for (int k = 0; k < 3; ++k)  // remove the spanned directions
+    if (es.eigenvalues()[k] > 1e-9 * top)
+      off -= es.eigenvectors().col(k) * es.eigenvectors().col(k).dot(off);
+  return off.norm();
+}
+
 // The CGAL-style ladder: 1 point, a repeated point, 2 points, a line, a plane — each builds a
-// finite hierarchy that draws finite points.
+// finite hierarchy that draws finite points. And the points drawn lie where the input does:
+// §3's rules give a zero variance a σ of 1e-15 along the right axis, so the generated points of
+// a point, a line or a plane stay on that point, line or plane (up to float rounding of the
+// coordinates, ~1e-6 of their size here) — finiteness alone would not see a floor of the wrong
+// size or a frame with its columns swapped. Checked on the float records: quantisation (§3.1)
+// rounds the frame's directions by up to e16, which moves points off the line by design.
 TEST(pca_octree, DegenerateInputsBuildFiniteHierarchies) {
   std::vector<std::pair<std::string, std::vector<vec3f>>> cases;
   cases.push_back({"one point", {vec3f(1, 2, 3)}});
@@ -209,6 +233,13 @@ TEST(pca_octree, DegenerateInputsBuildFiniteHierarchies) {
     EXPECT_GT(sink.points.size(), 0u) << name;
     for (const auto& p : sink.points)
       ASSERT_TRUE(all_finite(p.position) && all_finite(p.normal)) << name;
+    const auto f = build_pca_octree(s, {.leaf_size = 4, .quantise = false});
+    const auto on = draw(
+        f, camera_for(f.origin() + f.at(0).mean.cast<double>(), std::max(1.0f, f.at(0).radius)), 1);
+    ASSERT_GT(on.points.size(), 0u) << name;
+    for (const auto& p : on.points)
+      ASSERT_LT(affine_hull_distance(pts, f.origin() + p.position.cast<double>()), 1e-5)
+          << name << ": " << p.position.transpose();
   }
   // positions only: normals come from the k-NN estimation, which handles the same ladder
   point_set<positions_only> s;

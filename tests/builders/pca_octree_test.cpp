@@ -251,6 +251,12 @@ TEST(pca_octree, QuantisedNodesDecodeWithinTheirStatedError) {
     for (const auto& c : d.codebook_p) best = std::min(best, (c - feat).squaredNorm());
     const std::uint32_t idx = d.records[i][0] | (d.records[i][1] & 0xFu) << 8;
     EXPECT_NEAR((d.codebook_p[idx] - feat).squaredNorm(), best, 1e-5f * (1 + best)) << i;
+    // And the decoded σ (what rendering draws from) is that entry's: cell edge · 2^feature,
+    // floored at §3's 1e-15 — the stored index alone says nothing about the decoder.
+    for (int k = 0; k < 3; ++k) {
+      const double want = std::max(a.cell_size * std::exp2(double(d.codebook_p[idx][k])), 1e-15);
+      EXPECT_NEAR(b.sigma[k], want, 1e-5 * want) << i << " σ" << k;
+    }
   }
   EXPECT_LE(q.codebook_size_p(), 64u);
   EXPECT_GE(q.codebook_size_p(), 2u);

@@ -309,6 +309,21 @@ TEST(pmr_build, TraversalPicksCoarserLevelsFarAway) {
     traverse_options o;
     o.tolerance_px = factor;
     traverse(h, v, o, sink, pol);
+    // Each drawn leaf's level is choose_level() (checked against brute force below) of the world
+    // size of a pixel at the corner of its cell nearest the eye: the nearest of the 8 corners,
+    // found by trying them all.
+    for (std::uint32_t l = 0; l < h.leaf_count(); ++l) {
+      const auto& nd = h.nodes()[h.leaf(l).node];
+      if (frustum_test(v, h.bounding_sphere(h.leaf(l).node)) < 0) continue;
+      vec3f nearest = nd.cell_min;
+      for (int k = 0; k < 8; ++k) {
+        const vec3f c = nd.cell_min + nd.cell_size * vec3f(float(k & 1), float((k >> 1) & 1),
+                                                           float((k >> 2) & 1));
+        if ((c - v.eye).squaredNorm() < (nearest - v.eye).squaredNorm()) nearest = c;
+      }
+      EXPECT_EQ(used[l], h.choose_level(l, pixel_size_pmr(v, nearest), factor))
+          << "leaf " << l << " at distance " << dist;
+    }
     mean_level = 0;
     for (const auto u : used) mean_level += u;
     mean_level /= static_cast<double>(used.size());

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
+#include <vector>
 
 #include "pbr_lod/core/bounds.hpp"
 
@@ -14,6 +16,17 @@ TEST(Bounds, SphereAboutBoxCentreContainsAllPoints) {
   for (auto& p : pts) p = vec3f(u(rng), u(rng), u(rng));
   const sphere s = bounding_sphere_about_box_centre(pts);
   for (const auto& p : pts) EXPECT_TRUE(s.contains(p));
+  // Containment alone holds for any sphere that is too large: the centre is the box's (from a
+  // plain min/max) and the radius the farthest point's distance from it, so it touches a point.
+  vec3f lo = pts[0], hi = pts[0];
+  for (const auto& p : pts) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  EXPECT_LT((s.centre - 0.5f * (lo + hi)).norm(), 1e-6f);
+  float far = 0;
+  for (const auto& p : pts) far = std::max(far, (p - s.centre).norm());
+  EXPECT_NEAR(s.radius, far, 1e-5f * far);
 }
 
 // A cone of normals around +z with 10° semi-angle, a small sphere straight ahead: seen from

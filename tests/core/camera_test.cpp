@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <numbers>
 #include <random>
+#include <vector>
 
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/traverse/culling.hpp"
@@ -84,6 +87,11 @@ TEST(Camera, SphereProjectionExactMatchesBruteForce) {
     EXPECT_NEAR(exact, brute, 1e-3f * exact) << "centre " << c.transpose();
     EXPECT_LE(projected_radius_eye_z(v, s), exact * 1.0001f);
     EXPECT_LE(projected_radius_distance(v, s), projected_radius_eye_z(v, s) * 1.0001f);
+    // The estimates' own values (the orderings above hold for 0 too): the camera sits at
+    // (0, 0, 10) looking down −z, so the eye-space depth is 10 − c.z and the distance |c − eye|.
+    const float f = v.focal_px, depth = 10 - c.z(), dist = (c - vec3f(0, 0, 10)).norm();
+    EXPECT_NEAR(projected_radius_eye_z(v, s), f * 0.5f / depth, 1e-5f * exact);
+    EXPECT_NEAR(projected_radius_distance(v, s), f * 0.5f / dist, 1e-5f * exact);
   }
   // On the axis the exact value is f·tan(asin(r/d)) = f·r/sqrt(d²−r²).
   const sphere s{vec3f::Zero(), 1};
@@ -113,6 +121,61 @@ TEST(Camera, FrustumClassifiesSpheres) {
   EXPECT_EQ(frustum_test(v, sphere{vec3f(0, 0, 20), 1}), -1);     // behind the eye
   EXPECT_EQ(frustum_test(v, sphere{vec3f(100, 0, 0), 1}), -1);    // far right
   EXPECT_GT(frustum_test(v, sphere{vec3f(0, 0, -89.5f), 1}), 0);  // straddles the far plane
+}
+
+// Against sampled spheres (random centres in and around the view volume, radii 0.05–6): a
+// sphere the test calls outside (−1) has no sampled point inside the view volume (on screen,
+// depth within [z_near, z_far]); one it calls inside (0) has every sampled point inside. The
+// four spheres of FrustumClassifiesSpheres lie on the x and z axes, where top and bottom planes
+// built with the horizontal half-angle still classify them right.
+TEST(Camera, FrustumAgreesWithSampledSpheres) {
+  const view v(test_camera(), vec3d::Zero());
+  std::vector<vec3f> dirs;  // a Fibonacci sphere of directions, and the centre itself
+  const float golden = std::numbers::pi_v<float> * (3 - std::sqrt(5.0f));
+  for (int i = 0; i < 300; ++i) {
+    const float y = 1 - 2 * (float(i) + 0.5f) / 300, r = std::sqrt(1 - y * y);
+    dirs.emplace_back(r * std::cos(golden * float(i)), y, r * std::sin(golden * float(i)));
+  }
+  dirs.emplace_back(vec3f::Zero());
+  // Inside / outside by a margin, so that rounding at a plane decides nothing.
+  const auto where = [&](const vec3f& p) {
+    const vec3f e = v.to_eye(p);
+    const float m = 1e-3f;
+    if (e.z() < v.z_near * (1 - m) || e.z() > v.z_far * (1 + m)) return -1;
+    if (e.z() < v.z_near * (1 + m) || e.z() > v.z_far * (1 - m)) return 0;
+    const vec2f q = v.eye_to_screen(e);
+    const float mx = m * float(v.width), my = m * float(v.height);
+    if (q.x() < -mx || q.x() > float(v.width) + mx || q.y() < -my || q.y() > float(v.height) + my)
+      return -1;
+    if (q.x() < mx || q.x() > float(v.width) - mx || q.y() < my || q.y() > float(v.height) - my)
+      return 0;
+    return 1;
+  };
+  std::mt19937 rng(8);  // seeded: any spheres will do, the property holds for each
+  std::uniform_real_distribution<float> xy(-45, 45), z(-100, 12), radius(0.05f, 6);
+  int outside = 0, inside = 0, straddling = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const sphere s{vec3f(xy(rng), 0.75f * xy(rng), z(rng)), radius(rng)};
+    const int r = frustum_test(v, s);
+    int in = 0, out = 0;
+    for (const vec3f& d : dirs) {
+      const int w = where(s.centre + s.radius * d);
+      in += w > 0;
+      out += w < 0;
+    }
+    if (r < 0) {
+      ++outside;
+      ASSERT_EQ(in, 0) << k << ": culled, but " << in << " sampled points are in view";
+    } else if (r == 0) {
+      ++inside;
+      ASSERT_EQ(out, 0) << k << ": inside, but " << out << " sampled points are out of view";
+    } else {
+      ++straddling;
+    }
+  }
+  EXPECT_GT(outside, 400);
+  EXPECT_GT(inside, 400);
+  EXPECT_GT(straddling, 400);
 }
 
 }  // namespace

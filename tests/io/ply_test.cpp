@@ -42,8 +42,14 @@ TEST_F(Ply, CrLfAndBlankLines) {
       "property float z\r\nelement face 1\r\nproperty list uchar int vertex_indices\r\n"
       "end_header\r\n0 0 0\r\n\r\n1 0 0\r\n0 1 0\r\n3 0 1 2\r\n";
   const auto m = read_mesh(write("crlf.ply", text));
-  EXPECT_EQ(m.num_vertices(), 3u);
-  EXPECT_EQ(m.num_faces(), 1u);
+  ASSERT_EQ(m.num_vertices(), 3u);
+  ASSERT_EQ(m.num_faces(), 1u);
+  // The values too, not only the counts: a '\r' read as part of the last number, or a blank
+  // line read as a vertex of zeros, would move a vertex.
+  EXPECT_EQ(m.vertices.world(0), vec3d(0, 0, 0));
+  EXPECT_EQ(m.vertices.world(1), vec3d(1, 0, 0));
+  EXPECT_EQ(m.vertices.world(2), vec3d(0, 1, 0));
+  EXPECT_EQ(m.faces[0], (std::array<std::uint32_t, 3>{0, 1, 2}));
 }
 
 // A quad and a pentagon become 2 + 3 triangles, fanned from the first corner as OpenMesh does.

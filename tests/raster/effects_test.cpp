@@ -188,11 +188,16 @@ TEST(Effects, LambertShadingValue) {
 }
 
 // Two-sided: a splat seen from the side its normal points away from is lit like the same splat
-// with the normal flipped (the side the eye sees is the lit one).
+// with the normal flipped (the side the eye sees is the lit one). Equality alone would also hold
+// for a rasteriser that lit the hidden side both times, so the value is checked too: the normal
+// u × v = (0, 1, 1)/√2 faces the eye at (0.5, 2.2, 3.6), and with the light along (0.3, 1, 0.2)
+// the lit side gets 200·(0.15 + 0.85·(1.2/√2)/√1.13) = 200·0.8285 = 165.7 → 166; the hidden side
+// would get ambient only (n·l < 0): 30.
 TEST(Effects, TwoSidedSplatShading) {
   constexpr attributes B = with_normals;
   const view v = test_view(64, 48);
   render_options opt = test_options(effects{.shading = true});
+  opt.flat_colour = {200, 200, 200};
   const auto draw = [&](vec3f n) {
     return render<B>(v, opt, [&](auto& sink) {
       splat_prim<B> s{vec3f(0, 0.4f, 0), vec3f(0.5f, 0, 0), vec3f(0, 0.3f, -0.3f)};
@@ -201,8 +206,14 @@ TEST(Effects, TwoSidedSplatShading) {
     });
   };
   const vec3f n = vec3f(0.5f, 0, 0).cross(vec3f(0, 0.3f, -0.3f)).normalized();
-  EXPECT_EQ(draw(n), draw(-n));
-  EXPECT_GT(draw(n).covered_count(), 100u);
+  ASSERT_GT(n.dot(v.eye - vec3f(0, 0.4f, 0)), 0) << "n is the side the eye sees";
+  const image img = draw(n);
+  EXPECT_EQ(img, draw(-n));
+  EXPECT_GT(img.covered_count(), 100u);
+  for (std::size_t i = 0; i < img.size(); ++i)
+    if (img.covered(i)) {
+      ASSERT_EQ(img.colour[i], (rgb8{166, 166, 166})) << i;
+    }
 }
 
 // Shading needs normals: with positions and colours only, asking for shading changes nothing,

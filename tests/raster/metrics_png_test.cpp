@@ -141,6 +141,77 @@ TEST(Metrics, SsimIgnoresCommonBackground) {
   EXPECT_GT(ssim(a0, b0), s);  // the equal background now counts as perfect pixels
 }
 
+/// SSIM as metrics.hpp defines it, written out the slow way: for each pixel covered in either
+/// image, the 11×11 Gaussian window (σ = 1.5) over the pixels inside the image, weights
+/// renormalised to sum 1, the local means, variances and covariance of the luminance
+/// Y = 0.299 R + 0.587 G + 0.114 B, and eq. 13 with C1 = (0.01·255)², C2 = (0.03·255)².
+double brute_force_ssim(const image& a, const image& b) {
+  const auto lum = [](const image& img, int x, int y) {
+    const rgb8 c = img.at(x, y);
+    return 0.299 * c.r + 0.587 * c.g + 0.114 * c.b;
+  };
+  const double c1 = (0.01 * 255) * (0.01 * 255), c2 = (0.03 * 255) * (0.03 * 255);
+  double sum = 0;
+  std::size_t n = 0;
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) {
+      if (!a.covered(x, y) && !b.covered(x, y)) continue;
+      double w = 0, ma = 0, mb = 0, saa = 0, sbb = 0, sab = 0;
+      for (int j = -5; j <= 5; ++j)
+        for (int i = -5; i <= 5; ++i) {
+          const int xx = x + i, yy = y + j;
+          if (xx < 0 || yy < 0 || xx >= a.width || yy >= a.height) continue;
+          const double k = std::exp(-0.5 * (i * i + j * j) / (1.5 * 1.5));
+          const double p = lum(a, xx, yy), q = lum(b, xx, yy);
+          w += k;
+          ma += k * p;
+          mb += k * q;
+          saa += k * p * p;
+          sbb += k * q * q;
+          sab += k * p * q;
+        }
+      ma /= w, mb /= w, saa /= w, sbb /= w, sab /= w;
+      const double va = saa - ma * ma, vb = sbb - mb * mb, cov = sab - ma * mb;
+      sum += (2 * ma * mb + c1) * (2 * cov + c2) / ((ma * ma + mb * mb + c1) * (va + vb + c2));
+      ++n;
+    }
+  return n ? sum / double(n) : 1.0;
+}
+
+// Against the slow definition: coloured (not grey) random images, so the luminance weights
+// count, partly background so the covered-in-either rule counts, one of them a blurred and
+// shifted copy of the other so the covariance term is neither ±1 nor 0, on a frame smaller than
+// two windows so the border renormalisation counts. The tests above use grey or uniform images
+// only, which a wrong luminance weight, window width or C2 passes.
+TEST(Metrics, SsimMatchesBruteForce) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> byte(0, 255), coin(0, 4);
+  for (const auto& [w, h] : {std::pair{19, 17}, std::pair{40, 9}}) {
+    image a(w, h, {5, 6, 7}), b(w, h, {9, 8, 7});
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (coin(rng) == 0) continue;  // background in a
+        a.colour[a.index(x, y)] = {std::uint8_t(byte(rng)), std::uint8_t(byte(rng) / 2),
+                                   std::uint8_t(255 - byte(rng) / 4)};
+        a.depth[a.index(x, y)] = 1;
+      }
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (coin(rng) == 0) continue;  // background in b
+        // A shifted average of a's red and blue with noise in green: correlated, not equal.
+        const rgb8 p = a.at(std::min(x + 1, w - 1), y), q = a.at(x, std::max(y - 1, 0));
+        b.colour[b.index(x, y)] = {std::uint8_t((p.r + q.r) / 2), std::uint8_t(byte(rng)),
+                                   std::uint8_t((p.b + q.b) / 2)};
+        b.depth[b.index(x, y)] = 2;
+      }
+    const double want = brute_force_ssim(a, b);
+    EXPECT_GT(want, 0.01) << w << "x" << h;  // a correlated pair: not 0, far from 1
+    EXPECT_LT(want, 0.9) << w << "x" << h;
+    EXPECT_NEAR(ssim(a, b), want, 1e-9) << w << "x" << h;
+    EXPECT_NEAR(ssim(b, a), brute_force_ssim(b, a), 1e-9) << w << "x" << h;
+  }
+}
+
 TEST(Metrics, SizeMismatchThrows) {
   EXPECT_THROW((void)compare_images(image(3, 2), image(2, 3)), InvalidArgument);
 }
@@ -170,6 +241,42 @@ TEST(Metrics, HausdorffSelfAndTranslated) {
   EXPECT_NEAR(h.b_to_a_max, t.norm(), 1e-6);
   EXPECT_NEAR(h.a_to_b_mean, t.norm(), 1e-6);
   EXPECT_NEAR(h.symmetric(), t.norm(), 1e-6);
+  EXPECT_NEAR(h.b_to_a_mean, t.norm(), 1e-6);
+}
+
+// Distances that differ from point to point, so max and mean are different numbers and the two
+// directions differ: b is a jittered, thinned copy of a plus one far outlier. Checked against a
+// brute-force nearest neighbour over all pairs (216 × ~110 points).
+TEST(Metrics, HausdorffMatchesBruteForce) {
+  const point_cloud a = grid_cloud(vec3d::Zero());
+  point_cloud b;
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> jitter(-0.03f, 0.03f);
+  for (std::size_t i = 0; i < a.size(); i += 2)
+    b.positions.push_back(a.positions[i] + vec3f(jitter(rng), jitter(rng), jitter(rng)));
+  // An outlier 1.5 beyond grid point (5, 2, 3) on the grid's x = 0.5 face: its nearest point.
+  b.positions.push_back(a.positions[3 * 36 + 2 * 6 + 5] + vec3f(1.5f, 0, 0));
+  const auto one_sided = [](const point_cloud& from, const point_cloud& to) {
+    double mx = 0, sum = 0;
+    for (const vec3f& p : from.positions) {
+      double best = std::numeric_limits<double>::infinity();
+      for (const vec3f& q : to.positions)
+        best = std::min(best, (p.cast<double>() - q.cast<double>()).norm());
+      mx = std::max(mx, best);
+      sum += best;
+    }
+    return std::pair{mx, sum / double(from.size())};
+  };
+  const auto [ab_max, ab_mean] = one_sided(a, b);
+  const auto [ba_max, ba_mean] = one_sided(b, a);
+  EXPECT_NEAR(ba_max, 1.5, 1e-6);    // the outlier
+  ASSERT_GT(ab_max, 1.5 * ab_mean);  // the numbers do tell max from mean
+  const hausdorff_result h = hausdorff(a, b);
+  EXPECT_NEAR(h.a_to_b_max, ab_max, 1e-6);
+  EXPECT_NEAR(h.a_to_b_mean, ab_mean, 1e-6);
+  EXPECT_NEAR(h.b_to_a_max, ba_max, 1e-6);
+  EXPECT_NEAR(h.b_to_a_mean, ba_mean, 1e-6);
+  EXPECT_NEAR(h.symmetric(), std::max(ab_max, ba_max), 1e-6);
 }
 
 // Different origins 10⁷ apart describing the same world points: rebasing in double keeps them

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <numbers>
 #include <sstream>
@@ -89,6 +90,17 @@ TEST(Reference, CloudClosesSphereSurface) {
   const image_error es = compare_images(mesh_img, squares), ed = compare_images(mesh_img, disks);
   EXPECT_LT(es.hole_fraction, 0.002);
   EXPECT_LT(ed.hole_fraction, 0.002);
+  // No holes alone holds for splats of any size too large: the clouds also stay within the
+  // mesh's silhouette, but for a rim (pixels covered in the cloud render only, as a fraction of
+  // the mesh's). Measured: disks 0.19 %, tangent to the surface; squares 10.8 %, screen-aligned,
+  // so those at the silhouette stand out by up to their half side.
+  const auto grown = [&](const image_error& e) {
+    return double(e.covered_either - e.reference_covered) / double(e.reference_covered);
+  };
+  std::printf("sphere cloud outside the mesh silhouette: squares %.4f, disks %.4f\n", grown(es),
+              grown(ed));
+  EXPECT_LT(grown(es), 0.13);
+  EXPECT_LT(grown(ed), 0.0035);
 }
 
 // A cloud with ellipse axes draws those ellipses: one splat, its exact footprint.

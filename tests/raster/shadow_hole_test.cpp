@@ -103,20 +103,35 @@ TEST(Shadows, SplatsAndPointsCastShadows) {
     sink.point(p);
   });
   // Shadows without shading: lit pixels keep the flat colour, shadowed ones get ambient only.
-  bool splat_shadow = false, point_shadow = false;
+  // The splat's shadow is its disk (radius 0.3) straight below: every ground pixel within 0.2 of
+  // its centre is dark, and every one beyond 0.4 (and clear of the point's shadow) is lit. The
+  // point's footprint in the shadow map is not a world-space size, so of its shadow only the
+  // pixels nearest its centre are asked for, and only that some are dark.
+  std::size_t under_splat = 0, dark_under_splat = 0, clear = 0;
+  bool point_shadow = false;
   for (int y = 0; y < v.height; ++y)
     for (int x = 0; x < v.width; ++x) {
       if (!img.covered(x, y)) continue;
       const vec3f p = world_at(v, img, x, y);
       if (std::abs(p.y()) > 1e-3f) continue;
       const bool dark = img.at(x, y) == rgb8{30, 30, 30};
-      if ((p - vec3f(-0.6f, 0, 0)).norm() < 0.2f) splat_shadow |= dark;
+      const float to_splat = (p - vec3f(-0.6f, 0, 0)).norm();
+      if (to_splat < 0.2f) {
+        ++under_splat;
+        dark_under_splat += dark;
+      }
       if ((p - vec3f(0.6f, 0, 0)).norm() < 0.06f) point_shadow |= dark;
+      if (to_splat > 0.4f && p.x() < 0.2f) {
+        ++clear;
+        EXPECT_EQ(img.at(x, y), (rgb8{200, 200, 200})) << x << "," << y;
+      }
       if (std::abs(p.x()) > 1.2f) {
         EXPECT_EQ(img.at(x, y), (rgb8{200, 200, 200}));
       }
     }
-  EXPECT_TRUE(splat_shadow);
+  EXPECT_GT(under_splat, 50u);
+  EXPECT_EQ(dark_under_splat, under_splat);
+  EXPECT_GT(clear, 1000u);
   EXPECT_TRUE(point_shadow);
 }
 

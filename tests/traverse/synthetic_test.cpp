@@ -1,5 +1,10 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 
@@ -21,17 +26,71 @@ TEST(Synthetic, DemoSceneIsConsistent) {
   EXPECT_EQ(agree, m.num_faces());
 }
 
+/// Distance from p to the triangle (a, b, c): to the plane when p projects inside, else to the
+/// nearest edge.
+double triangle_distance(const vec3d& p, const vec3d& a, const vec3d& b, const vec3d& c) {
+  const auto segment = [&](const vec3d& s, const vec3d& t) {
+    const double l2 = (t - s).squaredNorm();
+    const double u = l2 > 0 ? std::clamp((p - s).dot(t - s) / l2, 0.0, 1.0) : 0.0;
+    return (s + u * (t - s) - p).norm();
+  };
+  const vec3d n = (b - a).cross(c - a);
+  if (n.squaredNorm() > 0) {
+    const vec3d q = p - n * (n.dot(p - a) / n.squaredNorm());
+    // Inside when q is on the inner side of all three edges.
+    const bool inside = (b - a).cross(q - a).dot(n) >= 0 && (c - b).cross(q - b).dot(n) >= 0 &&
+                        (a - c).cross(q - c).dot(n) >= 0;
+    if (inside) return (p - q).norm();
+  }
+  return std::min({segment(a, b), segment(b, c), segment(c, a)});
+}
+
+// Samples lie on the mesh (distance to the nearest triangle, brute force over all of them, at
+// float rounding), and are spread by area, not by face: the faces larger than the median face
+// hold a share of the samples equal to their share of the area (a sampler that picked faces
+// uniformly would give them half). 4000 samples: the share's standard error is under 0.8 %.
 TEST(Synthetic, SamplesLieOnTheSurface) {
   const auto m = make_demo_scene(8);
-  const auto c = sample_surface(m, 1000, 1);
-  ASSERT_EQ(c.size(), 1000u);
-  ASSERT_EQ(c.normals.size(), 1000u);
-  ASSERT_EQ(c.colours.size(), 1000u);
-  const box3 b = box3::of(m.vertices.positions);
-  for (const auto& p : c.positions) {
-    EXPECT_TRUE((p.array() >= b.min.array() - 1e-5f).all());
-    EXPECT_TRUE((p.array() <= b.max.array() + 1e-5f).all());
+  const std::size_t n = 4000;
+  const auto c = sample_surface(m, n, 1);
+  ASSERT_EQ(c.size(), n);
+  ASSERT_EQ(c.normals.size(), n);
+  ASSERT_EQ(c.colours.size(), n);
+  const auto& P = m.vertices.positions;
+  std::vector<double> area(m.faces.size());
+  for (std::size_t f = 0; f < m.faces.size(); ++f) {
+    const auto& t = m.faces[f];
+    area[f] =
+        0.5 * (P[t[1]] - P[t[0]]).cast<double>().cross((P[t[2]] - P[t[0]]).cast<double>()).norm();
   }
+  std::vector<double> sorted = area;
+  std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2),
+                   sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  double large_area = 0, total_area = 0;
+  for (const double a : area) {
+    total_area += a;
+    large_area += a > median ? a : 0;
+  }
+  std::size_t on_large = 0;
+  for (const auto& p : c.positions) {
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t best_face = 0;
+    for (std::size_t f = 0; f < m.faces.size(); ++f) {
+      const auto& t = m.faces[f];
+      const double d = triangle_distance(p.cast<double>(), P[t[0]].cast<double>(),
+                                         P[t[1]].cast<double>(), P[t[2]].cast<double>());
+      if (d < best) {
+        best = d;
+        best_face = f;
+      }
+    }
+    ASSERT_LT(best, 1e-5) << p.transpose();
+    on_large += area[best_face] > median;
+  }
+  const double share = large_area / total_area;
+  ASSERT_GT(share, 0.6) << "the test needs faces of unequal area";
+  EXPECT_NEAR(double(on_large) / double(n), share, 0.03);
   // Deterministic for a seed.
   EXPECT_EQ(sample_surface(m, 10, 5).positions, sample_surface(m, 10, 5).positions);
 }

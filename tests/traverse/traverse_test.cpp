@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 #include <set>
 #include <utility>
@@ -77,8 +78,24 @@ TEST(Traverse, FullDetailEmitsEverySampleOnce) {
   for (std::uint32_t i = 0; i < pts.size(); ++i) EXPECT_EQ(seen.count(i), 1u);
 }
 
-// The cut: every emitted inner node is at most `tolerance` pixels large and its parent was
-// larger; a larger tolerance never emits more primitives.
+/// The cut by definition, written as plain recursion: a subtree whose sphere is outside the
+/// frustum is dropped; a node that is a leaf or whose exact projected diameter is at most the
+/// tolerance is emitted; any other node is refined.
+void reference_cut(const tree_n& t, tree_n::node_id n, const view& v, float tol,
+                   std::vector<std::uint32_t>& out) {
+  const sphere s = t.bounding_sphere(n);
+  if (frustum_test(v, s) < 0) return;
+  if (t.is_leaf(n) || 2 * projected_radius_exact(v, s) <= tol) {
+    out.push_back(n);
+    return;
+  }
+  for (const auto c : t.children(n)) reference_cut(t, c, v, tol, out);
+}
+
+// The cut: exactly the nodes of the recursive definition (so every emitted inner node is at most
+// `tolerance` pixels large and its parent was larger: a traversal that refined one level too far
+// or stopped one level early keeps every node under the tolerance but fails this); a larger
+// tolerance never emits more primitives.
 TEST(Traverse, ToleranceControlsTheCut) {
   const auto pts = demo_points(20000);
   const tree_n tree(pts, 8);
@@ -92,6 +109,11 @@ TEST(Traverse, ToleranceControlsTheCut) {
       if (!tree.is_leaf(n)) {
         EXPECT_LE(2 * projected_radius_exact(v, tree.bounding_sphere(n)), tol);
       }
+    std::vector<std::uint32_t> want;
+    reference_cut(tree, tree.root(), v, tol, want);
+    std::sort(emitted.begin(), emitted.end());
+    std::sort(want.begin(), want.end());
+    EXPECT_EQ(emitted, want) << "tolerance " << tol;
     EXPECT_LE(sink.total(), previous) << "tolerance " << tol;
     previous = sink.total();
   }
@@ -141,6 +163,8 @@ TEST(Traverse, ApproximateMetricsDrawNoMoreThanExact) {
 
 // The same scene 10⁷ units from the origin, with the camera moved along, selects the same cut:
 // the hierarchy stores coordinates relative to its origin and the view subtracts it in double.
+// At 16 px the cut holds inner nodes, so the nodes' screen sizes decide it (at 2 px, as this test
+// once ran, it was every visible leaf: only the culling was compared).
 TEST(Traverse, FarFromOriginSelectsTheSameCut) {
   auto cloud = sample_surface(make_demo_scene(16), 10000, 3);
   const auto near_pts = point_set<with_normals>::from(cloud);
@@ -153,10 +177,16 @@ TEST(Traverse, FarFromOriginSelectsTheSameCut) {
   cam.target += cloud.origin;
   const view v_far(cam, far_pts.origin);
   counting_sink<tree_n::attrs> a, b;
-  const auto sa = traverse(near_tree, v_near, {.tolerance_px = 2}, a);
-  const auto sb = traverse(far_tree, v_far, {.tolerance_px = 2}, b);
+  std::vector<std::uint32_t> cut_a, cut_b;
+  const auto sa =
+      traverse(near_tree, v_near, {.tolerance_px = 16}, a, recording_policy{{}, &cut_a});
+  const auto sb = traverse(far_tree, v_far, {.tolerance_px = 16}, b, recording_policy{{}, &cut_b});
   EXPECT_EQ(sa.visited, sb.visited);
   EXPECT_EQ(a.total(), b.total());
+  // The same nodes, not only as many (the trees are built from the same relative floats).
+  EXPECT_EQ(cut_a, cut_b);
+  EXPECT_GT(sa.emitted_nodes, 0u) << "the cut is above the leaves somewhere";
+  EXPECT_GT(sa.emitted_leaves, 0u) << "and reaches the leaves elsewhere";
 }
 
 TEST(Traverse, EmptyHierarchyEmitsNothing) {
