@@ -10,6 +10,10 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
+  # examples/gl_viewer (optional; built when present): GLFW windows, EGL for the headless
+  # renderer, Mesa's llvmpipe driver when the machine has no GPU; a virtual X server to test
+  # its window.
+  libglfw3-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri xvfb xauth x11-utils
   # The fuzz targets (scripts/fuzz.sh): clang 16 and its libFuzzer runtime. Not clang-14, the
   # default clang: it rejects libstdc++ 12's ranges (iota_view), which the Hierarchy concept uses.
   clang-16 libclang-rt-16-dev

@@ -15,6 +15,7 @@
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/traverse/sink.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
+#include "pbr_lod/traverse/widening_sink.hpp"
 #include "tool.hpp"
 
 namespace pbrlod_tool {
@@ -32,6 +33,25 @@ struct frame {
   json extra;
 };
 
+/// The attribute set every hierarchy's primitives reach a host renderer in (host_sink).
+inline constexpr attributes host_attributes = with_normals_colours;
+
+/// A host renderer behind one type for every method (examples/gl_viewer): instead of the CPU
+/// rasteriser, draw_frame() sends it the frame's cut, widened to host_attributes. A Sink of
+/// host_attributes through virtual calls: one call per primitive, while the traversal itself
+/// stays the one the CPU frame compiles (into a buffer_sink of the hierarchy's own attributes).
+class host_sink {
+ public:
+  virtual ~host_sink() = default;
+  /// Called once per frame before its primitives: the view they are relative to (the
+  /// hierarchy's origin), the render options with the effects the hierarchy can apply (as the
+  /// CPU frame would), and the attributes that are real (others are zero).
+  virtual void begin(const view& v, const render_options& o, attributes carried) = 0;
+  virtual void point(const point_prim<host_attributes>& p) = 0;
+  virtual void splat(const splat_prim<host_attributes>& s) = 0;
+  virtual void triangle(const triangle_prim<host_attributes>& t) = 0;
+};
+
 /// What one frame is drawn from.
 struct frame_request {
   camera cam;
@@ -41,6 +61,10 @@ struct frame_request {
   std::uint64_t seed = 1;  ///< methods that generate points
   /// Also time LOD selection alone (one more traversal, into a counting sink).
   bool time_traversal = false;
+  /// When set, the cut goes to this host renderer and the frame's image stays empty; its
+  /// seconds are LOD selection plus the hand-over. Effects a host does not draw (shadows, hole
+  /// filling, blending) are its own business.
+  host_sink* host = nullptr;
 };
 
 /// Times a traversal of h into a counting sink: LOD selection without rasterisation.
@@ -53,18 +77,45 @@ double traversal_seconds(const H& h, const view& v, const traverse_options& t,
   return seconds_since(t0);
 }
 
-/// The frame of h through traverse() with the method's options and policy, timed as one pass.
+/// The cut of h sent to r.host (see frame_request::host).
+template <effects Compiled, class H, class Policy>
+frame host_frame(const H& h, const view& v, const render_options& o, const traverse_options& t,
+                 const Policy& policy, host_sink& host) {
+  frame f;
+  render_options ho = o;
+  ho.fx = o.fx & applicable_effects(Compiled, H::attrs);
+  f.fx = ho.fx;
+  const auto t0 = clock_type::now();
+  host.begin(v, ho, H::attrs);
+  thread_local buffer_sink<H::attrs> cut;  // kept from frame to frame, as render() keeps its own
+  cut.clear();
+  f.st = traverse(h, v, t, cut, policy);
+  struct forward {
+    host_sink& out;
+    void point(const point_prim<host_attributes>& p) { out.point(p); }
+    void splat(const splat_prim<host_attributes>& s) { out.splat(s); }
+    void triangle(const triangle_prim<host_attributes>& q) { out.triangle(q); }
+  } fw{host};
+  widening_sink<H::attrs, host_attributes, forward> widen{fw};
+  cut.replay(widen);
+  f.seconds = seconds_since(t0);
+  return f;
+}
+
+/// The frame of h through traverse() with the method's options and policy, timed as one pass
+/// (or, with r.host, the cut handed to that host renderer).
 /// `Compiled` narrows the effects compiled in (a method that never shadows, say).
 template <effects Compiled = all_effects, class H, class Policy>
 frame draw_frame(const H& h, const view& v, const render_options& o, const traverse_options& t,
-                 const Policy& policy, bool time_traversal) {
+                 const Policy& policy, const frame_request& r) {
+  if (r.host) return host_frame<Compiled>(h, v, o, t, policy, *r.host);
   frame f;
   f.fx = o.fx;
   const auto t0 = clock_type::now();
   f.img =
       render<H::attrs, Compiled>(v, o, [&](auto& sink) { f.st = traverse(h, v, t, sink, policy); });
   f.seconds = seconds_since(t0);
-  if (time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, policy);
+  if (r.time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, policy);
   return f;
 }
 

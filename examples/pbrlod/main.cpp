@@ -30,17 +30,6 @@
 #include "sweep.hpp"
 #include "tool.hpp"
 
-namespace pbrlod_tool {
-
-const std::vector<method_entry>& methods() {
-  static const std::vector<method_entry> m = {
-      point_octree_method(), rho_grid_method(), pop_method(), pca_octree_method(), pmr_method(),
-  };
-  return m;
-}
-
-}  // namespace pbrlod_tool
-
 namespace {
 using namespace pbrlod_tool;
 namespace fs = std::filesystem;
@@ -54,31 +43,11 @@ void add_view_options(CLI::App* cmd, view_args& a) {
   cmd->add_option("--up", a.up, "up axis: y (scans) or z (LiDAR)")
       ->check(CLI::IsMember({"y", "z"}))
       ->capture_default_str();
-  cmd->add_option("--effects", a.effects_list,
-                  "comma list of shading, colour, backface_cull, shadows, hole_filling, blending; 'none'; "
-                  "'all'; 'default' = shading where the data has normals (or faces), colour where "
-                  "it has colours");
-}
-
-/// The method that wrote a .lod file, by its magic.
-const method_entry& lod_method(const std::string& path) {
-  const auto h = peek_lod(path);
-  for (const auto& m : methods())
-    if (!m.magic.empty() && m.magic == h.magic && m.load) return m;
-  throw FormatError(path +
-                    ": not a hierarchy file written by this version of pbrlod (unknown magic)");
-}
-
-render_options make_render_options(const loaded_input& in, const view_args& a) {
-  render_options o;
-  if (a.effects_list == "default") {
-    o.fx = no_effects;
-    o.fx.shading = in.is_mesh() || !in.mesh.vertices.normals.empty();
-    o.fx.colour = !in.mesh.vertices.colours.empty();
-  } else {
-    o.fx = parse_effects(a.effects_list);
-  }
-  return o;
+  cmd->add_option(
+      "--effects", a.effects_list,
+      "comma list of shading, colour, backface_cull, shadows, hole_filling, blending; 'none'; "
+      "'all'; 'default' = shading where the data has normals (or faces), colour where "
+      "it has colours");
 }
 
 image render_input(const loaded_input& in, const camera& cam, const render_options& o) {

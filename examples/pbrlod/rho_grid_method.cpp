@@ -58,7 +58,7 @@ struct rho_method {
     frame f = with_rho_grid_hierarchy(g, [&](const auto& h) {
       constexpr attributes A = std::decay_t<decltype(h)>::attrs;
       if constexpr (A.normal) {
-        if (one_pass) {
+        if (one_pass && !r.host) {
           const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
           frame one;
           one.fx = o.fx;
@@ -70,7 +70,7 @@ struct rho_method {
           return one;
         }
       }
-      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v), r.time_traversal);
+      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v), r);
     });
     f.extra.boolean("one_pass_shadows", one_pass);
     return f;

@@ -182,6 +182,9 @@ std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n,
 camera make_camera(const point_cloud& c, const view_args& a);
 /// The same around a world-space bounding sphere (a hierarchy's recorded input bounds).
 camera make_camera(const vec3d& centre, double radius, const view_args& a);
+/// --effects for an input file drawn at full detail: 'default' = shading where it has normals
+/// (or faces), colour where it has colours.
+render_options make_render_options(const loaded_input& in, const view_args& a);
 /// --effects for a hierarchy: 'default' = shading, and colour when the hierarchy has colours.
 render_options lod_render_options(const view_args& a, bool has_colour);
 json error_json(const image_error& e);
@@ -244,6 +247,8 @@ struct method_entry {
   std::string tolerance_key = "tolerance_px";  ///< the --tolerance field in `render --json`
 };
 const std::vector<method_entry>& methods();
+/// The method that wrote a .lod file, by its magic (throws FormatError for an unknown one).
+const method_entry& lod_method(const std::string& path);
 
 // One per source file under examples/pbrlod/.
 method_entry point_octree_method();

@@ -15,21 +15,25 @@ namespace pbr_lod {
 
 namespace {
 
+/// Every triangle of m into sink (the reference render's primitives).
+template <attributes A, class S>
+void emit_mesh(const triangle_mesh& m, const std::vector<vec3f>& normals, S& sink) {
+  const auto& p = m.vertices.positions;
+  triangle_prim<A> t;
+  for (const auto& f : m.faces) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      t.p[k] = p[f[k]];
+      t.normal[k] = normals[f[k]];
+      if constexpr (A.colour) t.colour[k] = m.vertices.colours[f[k]];
+    }
+    sink.triangle(t);
+  }
+}
+
 template <attributes A>
 image render_mesh(const triangle_mesh& m, const view& v, const render_options& opt,
                   const std::vector<vec3f>& normals) {
-  const auto& p = m.vertices.positions;
-  return render<A>(v, opt, [&](auto& sink) {
-    triangle_prim<A> t;
-    for (const auto& f : m.faces) {
-      for (std::size_t k = 0; k < 3; ++k) {
-        t.p[k] = p[f[k]];
-        t.normal[k] = normals[f[k]];
-        if constexpr (A.colour) t.colour[k] = m.vertices.colours[f[k]];
-      }
-      sink.triangle(t);
-    }
-  });
+  return render<A>(v, opt, [&](auto& sink) { emit_mesh<A>(m, normals, sink); });
 }
 
 /// Splat radius per point: factor × k-NN spacing; points whose spacing is 0 (duplicates, a
@@ -52,47 +56,62 @@ std::vector<float> splat_radii(const point_cloud& c, const render_options& opt) 
   return r;
 }
 
+/// Every point of c into sink, as a splat (with normals or ellipses) or a square.
+template <attributes A, class S>
+void emit_cloud(const point_cloud& c, const view& v, const std::vector<float>& radius, S& sink) {
+  const bool ellipses = !c.axis_u.empty();
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const vec3f& p = c.positions[i];
+    if constexpr (A.normal) {
+      splat_prim<A> s;
+      s.centre = p;
+      if (ellipses) {
+        s.u = c.axis_u[i];
+        s.v = c.axis_v[i];
+        const vec3f n = s.u.cross(s.v);
+        s.normal = !c.normals.empty()    ? c.normals[i]
+                   : n.squaredNorm() > 0 ? vec3f(n.normalized())
+                                         : vec3f::UnitZ();
+      } else {
+        const vec3f n = c.normals[i];
+        const float r = radius[i] > 0
+                            ? radius[i]
+                            : 0.5f * v.pixel_size_at_depth(std::max(v.to_eye(p).z(), v.z_near));
+        const vec3f t = n.squaredNorm() > 0 ? any_orthogonal(n) : vec3f::UnitX();
+        s.u = t * r;
+        s.v = n.squaredNorm() > 0 ? vec3f(n.normalized().cross(t) * r) : vec3f(vec3f::UnitY() * r);
+        s.normal = n;
+      }
+      if constexpr (A.colour) s.colour = c.colours[i];
+      sink.splat(s);
+    } else {
+      point_prim<A> q;
+      q.position = p;
+      const float z = v.to_eye(p).z();
+      // Side = projected diameter; points behind the eye are dropped by the rasteriser.
+      q.size_px = z > 0 ? 2 * radius[i] / v.pixel_size_at_depth(z) : 1.0f;
+      if constexpr (A.colour) q.colour = c.colours[i];
+      sink.point(q);
+    }
+  }
+}
+
+/// The reference radius of each point (none when the cloud has its own ellipses).
+std::vector<float> cloud_radii(const point_cloud& c, const render_options& opt) {
+  return c.axis_u.empty() ? splat_radii(c, opt) : std::vector<float>{};
+}
+
 template <attributes A>
 image render_cloud(const point_cloud& c, const view& v, const render_options& opt) {
-  const bool ellipses = !c.axis_u.empty();
-  const std::vector<float> radius = ellipses ? std::vector<float>{} : splat_radii(c, opt);
-  return render<A>(v, opt, [&](auto& sink) {
-    for (std::size_t i = 0; i < c.size(); ++i) {
-      const vec3f& p = c.positions[i];
-      if constexpr (A.normal) {
-        splat_prim<A> s;
-        s.centre = p;
-        if (ellipses) {
-          s.u = c.axis_u[i];
-          s.v = c.axis_v[i];
-          const vec3f n = s.u.cross(s.v);
-          s.normal = !c.normals.empty()    ? c.normals[i]
-                     : n.squaredNorm() > 0 ? vec3f(n.normalized())
-                                           : vec3f::UnitZ();
-        } else {
-          const vec3f n = c.normals[i];
-          const float r = radius[i] > 0
-                              ? radius[i]
-                              : 0.5f * v.pixel_size_at_depth(std::max(v.to_eye(p).z(), v.z_near));
-          const vec3f t = n.squaredNorm() > 0 ? any_orthogonal(n) : vec3f::UnitX();
-          s.u = t * r;
-          s.v =
-              n.squaredNorm() > 0 ? vec3f(n.normalized().cross(t) * r) : vec3f(vec3f::UnitY() * r);
-          s.normal = n;
-        }
-        if constexpr (A.colour) s.colour = c.colours[i];
-        sink.splat(s);
-      } else {
-        point_prim<A> q;
-        q.position = p;
-        const float z = v.to_eye(p).z();
-        // Side = projected diameter; points behind the eye are dropped by the rasteriser.
-        q.size_px = z > 0 ? 2 * radius[i] / v.pixel_size_at_depth(z) : 1.0f;
-        if constexpr (A.colour) q.colour = c.colours[i];
-        sink.point(q);
-      }
-    }
-  });
+  const std::vector<float> radius = cloud_radii(c, opt);
+  return render<A>(v, opt, [&](auto& sink) { emit_cloud<A>(c, v, radius, sink); });
+}
+
+template <attributes A>
+void emit_cloud_widened(const point_cloud& c, const view& v, const render_options& opt,
+                        buffer_sink<with_normals_colours>& out) {
+  widening_sink<A, with_normals_colours, buffer_sink<with_normals_colours>> w{out};
+  emit_cloud<A>(c, v, cloud_radii(c, opt), w);
 }
 
 }  // namespace
@@ -115,6 +134,44 @@ image render_reference(const point_cloud& c, const camera& cam, const render_opt
   if (normal) return render_cloud<with_normals>(c, v, opt);
   if (colour) return render_cloud<attributes{.colour = true}>(c, v, opt);
   return render_cloud<positions_only>(c, v, opt);
+}
+
+attributes reference_primitives(const triangle_mesh& m, const camera& cam,
+                                buffer_sink<with_normals_colours>& out) {
+  m.validate("reference_primitives: mesh");
+  (void)view(cam, m.vertices.origin);  // the same camera checks as render_reference
+  std::vector<vec3f> normals = m.vertices.normals;
+  if (normals.empty()) normals = area_weighted_normals(m);
+  const bool colour = !m.vertices.colours.empty();
+  if (colour) {
+    emit_mesh<with_normals_colours>(m, normals, out);
+    return with_normals_colours;
+  }
+  widening_sink<with_normals, with_normals_colours, buffer_sink<with_normals_colours>> w{out};
+  emit_mesh<with_normals>(m, normals, w);
+  return with_normals;
+}
+
+attributes reference_primitives(const point_cloud& c, const camera& cam, const render_options& opt,
+                                buffer_sink<with_normals_colours>& out) {
+  c.validate("reference_primitives: point cloud");
+  const view v(cam, c.origin);
+  const bool normal = !c.normals.empty() || !c.axis_u.empty();
+  const bool colour = !c.colours.empty();
+  if (normal && colour) {
+    emit_cloud<with_normals_colours>(c, v, cloud_radii(c, opt), out);
+    return with_normals_colours;
+  }
+  if (normal) {
+    emit_cloud_widened<with_normals>(c, v, opt, out);
+    return with_normals;
+  }
+  if (colour) {
+    emit_cloud_widened<attributes{.colour = true}>(c, v, opt, out);
+    return attributes{.colour = true};
+  }
+  emit_cloud_widened<positions_only>(c, v, opt, out);
+  return positions_only;
 }
 
 }  // namespace pbr_lod

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
 
@@ -101,6 +102,40 @@ TEST(Reference, CloudClosesSphereSurface) {
               grown(ed));
   EXPECT_LT(grown(es), 0.13);
   EXPECT_LT(grown(ed), 0.0035);
+}
+
+// reference_primitives hands a host renderer exactly what render_reference draws: replayed
+// through the rasteriser with the attributes it reports, the same bytes come out, for a mesh
+// and for clouds with normals (disks) and without (squares sized for the camera).
+TEST(Reference, PrimitivesForAHostDrawTheSameImage) {
+  const triangle_mesh m = uv_sphere(vec3f(1, 2, 3), 1, 24, 32);
+  const camera cam = orbit_camera(vec3d(1, 2, 3), 1);
+  render_options opt;
+  opt.fx = effects{.shading = true, .colour = true};
+  const auto replayed = [&](const buffer_sink<with_normals_colours>& prims, attributes carried) {
+    render_options o = opt;
+    o.fx = opt.fx & applicable_effects(all_effects, carried);
+    return render_buffered<with_normals_colours>(view(cam, m.vertices.origin), o, prims);
+  };
+  buffer_sink<with_normals_colours> prims;
+  const attributes mesh_attrs = reference_primitives(m, cam, prims);
+  EXPECT_EQ(mesh_attrs, with_normals);
+  EXPECT_EQ(prims.triangles.size(), m.faces.size());
+  EXPECT_EQ(replayed(prims, mesh_attrs), render_reference(m, cam, opt));
+
+  point_cloud c = m.vertices;
+  prims.clear();
+  const attributes squares = reference_primitives(c, cam, opt, prims);
+  EXPECT_EQ(squares, positions_only);
+  EXPECT_EQ(prims.points.size(), c.size());
+  EXPECT_EQ(replayed(prims, squares), render_reference(c, cam, opt));
+
+  c.normals = area_weighted_normals(m);
+  prims.clear();
+  const attributes disks = reference_primitives(c, cam, opt, prims);
+  EXPECT_EQ(disks, with_normals);
+  EXPECT_EQ(prims.splats.size(), c.size());
+  EXPECT_EQ(replayed(prims, disks), render_reference(c, cam, opt));
 }
 
 // A cloud with ellipse axes draws those ellipses: one splat, its exact footprint.

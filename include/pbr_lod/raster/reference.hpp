@@ -16,6 +16,7 @@
 #include "pbr_lod/core/triangle_mesh.hpp"
 #include "pbr_lod/raster/effects.hpp"
 #include "pbr_lod/raster/image.hpp"
+#include "pbr_lod/traverse/widening_sink.hpp"
 
 namespace pbr_lod {
 
@@ -28,5 +29,17 @@ namespace pbr_lod {
 /// InvalidArgument when the cloud is invalid (point_cloud::validate).
 [[nodiscard]] image render_reference(const point_cloud& c, const camera& cam,
                                      const render_options& opt);
+
+/// The primitives render_reference(m, cam, opt) draws, appended to `out` for a host renderer
+/// that draws the reference itself (examples/gl_viewer), in the same order, relative to
+/// m.vertices.origin. Returns the attributes they carry: fields outside it are zero. Throws as
+/// render_reference.
+attributes reference_primitives(const triangle_mesh& m, const camera& cam,
+                                buffer_sink<with_normals_colours>& out);
+
+/// The same for render_reference(c, cam, opt): the splats (or, without normals, the squares
+/// sized for this camera) of every point, relative to c.origin.
+attributes reference_primitives(const point_cloud& c, const camera& cam, const render_options& opt,
+                                buffer_sink<with_normals_colours>& out);
 
 }  // namespace pbr_lod

@@ -1,0 +1,35 @@
+// pbrlod — the table of build methods and what a file or view asks of them: the parts of the
+// tool that the OpenGL viewer (examples/gl_viewer) shares through the pbrlod_core library.
+#include "pbr_lod/core/error.hpp"
+#include "tool.hpp"
+
+namespace pbrlod_tool {
+
+const std::vector<method_entry>& methods() {
+  static const std::vector<method_entry> m = {
+      point_octree_method(), rho_grid_method(), pop_method(), pca_octree_method(), pmr_method(),
+  };
+  return m;
+}
+
+const method_entry& lod_method(const std::string& path) {
+  const auto h = peek_lod(path);
+  for (const auto& m : methods())
+    if (!m.magic.empty() && m.magic == h.magic && m.load) return m;
+  throw FormatError(path +
+                    ": not a hierarchy file written by this version of pbrlod (unknown magic)");
+}
+
+render_options make_render_options(const loaded_input& in, const view_args& a) {
+  render_options o;
+  if (a.effects_list == "default") {
+    o.fx = no_effects;
+    o.fx.shading = in.is_mesh() || !in.mesh.vertices.normals.empty();
+    o.fx.colour = !in.mesh.vertices.colours.empty();
+  } else {
+    o.fx = parse_effects(a.effects_list);
+  }
+  return o;
+}
+
+}  // namespace pbrlod_tool

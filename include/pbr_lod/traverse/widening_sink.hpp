@@ -1,0 +1,56 @@
+// pbr_lod — widening_sink: primitives of one attribute set handed to a sink of a larger one.
+#pragma once
+
+#include "pbr_lod/traverse/sink.hpp"
+
+namespace pbr_lod {
+
+/// Forwards the primitives of attribute set From to a sink of a superset To, the fields From
+/// lacks left at their defaults (zero normal, black colour). A host renderer that draws every
+/// hierarchy through one vertex format (examples/gl_viewer: normals and colours) wraps its sink
+/// in this; which fields are real is From, known to the caller.
+template <attributes From, attributes To, Sink<To> Out>
+requires((!From.normal || To.normal) && (!From.colour || To.colour)) struct widening_sink {
+  Out& out;
+  void point(const point_prim<From>& p) {
+    point_prim<To> q;
+    q.position = p.position;
+    q.size_px = p.size_px;
+    if constexpr (From.normal)
+      q.normal = p.normal;
+    else if constexpr (To.normal)
+      q.normal = vec3f::Zero();  // Eigen leaves a default-constructed vector uninitialised
+    if constexpr (From.colour) q.colour = p.colour;
+    out.point(q);
+  }
+  void splat(const splat_prim<From>& s) {
+    splat_prim<To> q;
+    q.centre = s.centre;
+    q.u = s.u;
+    q.v = s.v;
+    if constexpr (From.normal)
+      q.normal = s.normal;
+    else if constexpr (To.normal)
+      q.normal = vec3f::Zero();  // Eigen leaves a default-constructed vector uninitialised
+    if constexpr (From.colour) q.colour = s.colour;
+    out.splat(q);
+  }
+  void triangle(const triangle_prim<From>& t) {
+    triangle_prim<To> q;
+    q.p = t.p;
+    if constexpr (To.normal) {
+      if constexpr (From.normal)
+        q.normal = t.normal;
+      else
+        q.normal.fill(vec3f::Zero());
+    }
+    if constexpr (From.colour) q.colour = t.colour;
+    out.triangle(q);
+  }
+};
+
+static_assert(
+    Sink<widening_sink<positions_only, with_normals_colours, buffer_sink<with_normals_colours>>,
+         positions_only>);
+
+}  // namespace pbr_lod
