@@ -76,20 +76,16 @@ std::vector<double> luminance(const image& img) {
   return y;
 }
 
-struct one_sided_result {
-  double max = 0, mean = 0, rms = 0;
-};
-
 /// max, mean and root mean square over `from` of the distance to the nearest point of `to`.
 /// Sums per fixed chunk, added in chunk order: the same result on any number of threads.
-one_sided_result one_sided(std::span<const vec3f> from, const knn_index& to, unsigned threads) {
+one_sided_distance one_sided(std::span<const vec3f> from, const knn_index& to, unsigned threads) {
   constexpr std::size_t chunk = 4096;
   const std::size_t chunks = (from.size() + chunk - 1) / chunk;
-  std::vector<one_sided_result> part(chunks);
+  std::vector<one_sided_distance> part(chunks);
   detail::parallel_tasks(chunks,
                          threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : threads,
                          [&](std::size_t c, unsigned) {
-                           one_sided_result& r = part[c];
+                           one_sided_distance& r = part[c];
                            const std::size_t end = std::min(from.size(), (c + 1) * chunk);
                            for (std::size_t i = c * chunk; i < end; ++i) {
                              const double d = to.nearest_distance(from[i]);
@@ -98,7 +94,7 @@ one_sided_result one_sided(std::span<const vec3f> from, const knn_index& to, uns
                              r.rms += d * d;
                            }
                          });
-  one_sided_result r;
+  one_sided_distance r;
   for (const auto& p : part) {
     r.max = std::max(r.max, p.max);
     r.mean += p.mean;
@@ -112,8 +108,8 @@ one_sided_result one_sided(std::span<const vec3f> from, const knn_index& to, uns
 
 hausdorff_result both_sides(std::span<const vec3f> a, const knn_index& index_a,
                             std::span<const vec3f> b, const knn_index& index_b, unsigned threads) {
-  const one_sided_result ab = one_sided(a, index_b, threads);
-  const one_sided_result ba = one_sided(b, index_a, threads);
+  const one_sided_distance ab = one_sided(a, index_b, threads);
+  const one_sided_distance ba = one_sided(b, index_a, threads);
   return {.a_to_b_max = ab.max,
           .b_to_a_max = ba.max,
           .a_to_b_mean = ab.mean,
@@ -166,6 +162,11 @@ hausdorff_result hausdorff(const point_cloud& a, const point_cloud& b) {
   const knn_index index_a(a.positions);  // throws on non-finite positions
   const knn_index index_b(b_in_a);
   return both_sides(a.positions, index_a, b_in_a, index_b, 1);
+}
+
+one_sided_distance distance_to(std::span<const vec3f> from, const knn_index& to, unsigned threads) {
+  if (from.empty() || to.size() == 0) throw InvalidArgument("distance_to: an empty point set");
+  return one_sided(from, to, threads);
 }
 
 hausdorff_result hausdorff(std::span<const vec3f> a, const knn_index& index_a,

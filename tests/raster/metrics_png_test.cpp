@@ -216,6 +216,9 @@ TEST(Metrics, HausdorffMatchesBruteForce) {
   EXPECT_NEAR(h.b_to_a_max, ba[0], 1e-6);
   EXPECT_NEAR(h.b_to_a_mean, ba[1], 1e-6);
   EXPECT_NEAR(h.b_to_a_rms, ba[2], 1e-6);
+  const one_sided_distance ba1 = distance_to(b, index_a);  // b → a alone, as in hausdorff()
+  EXPECT_EQ(ba1.max, h.b_to_a_max);
+  EXPECT_EQ(ba1.rms, h.b_to_a_rms);
   const hausdorff_result h3 = hausdorff(a, index_a, b, 3);
   EXPECT_EQ(h3.a_to_b_mean, h.a_to_b_mean);
   EXPECT_EQ(h3.b_to_a_rms, h.b_to_a_rms);

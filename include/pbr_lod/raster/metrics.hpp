@@ -49,6 +49,18 @@ struct hausdorff_result {
   [[nodiscard]] double symmetric() const { return std::max(a_to_b_max, b_to_a_max); }
 };
 
+/// One direction of a Hausdorff distance: the largest, mean and root-mean-square distance from
+/// a point of `from` to its nearest point of `to`.
+struct one_sided_distance {
+  double max = 0, mean = 0, rms = 0;
+};
+
+/// one_sided_distance of `from` (#F positions) to the points indexed by `to`, in one frame,
+/// queried on up to `threads` threads (0: all cores) in fixed chunks, so the result does not
+/// depend on the thread count. Throws InvalidArgument when either is empty.
+[[nodiscard]] one_sided_distance distance_to(std::span<const vec3f> from, const knn_index& to,
+                                             unsigned threads = 0);
+
 /// Hausdorff distance between the positions of a and b, via exact k-d tree queries. Computed in
 /// the frame of a's origin: b's positions are re-expressed relative to it in double first, so two
 /// georeferenced clouds with different origins compare correctly. Throws InvalidArgument when
