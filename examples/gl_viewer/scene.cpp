@@ -59,7 +59,9 @@ selection scene::draw(host_sink& host, const frame_settings& f) const {
                                  .tolerance = f.tolerance,
                                  .seed = f.seed,
                                  .time_traversal = false,
-                                 .host = &host});
+                                 .host = &host,
+                                 .collect_samples = false,
+                                 .sample_spacing = 0});
     return {fr.st, fr.seconds};
   }
   // An input at full detail: render_reference's primitives (pbrlod render INPUT).

@@ -4,6 +4,7 @@
 // metric, culling, policy) and its stats fields.
 #pragma once
 
+#include <algorithm>
 #include <limits>
 #include <memory>
 #include <span>
@@ -12,6 +13,8 @@
 #include <vector>
 
 #include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/traverse/sink.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -31,6 +34,11 @@ struct frame {
   double traverse_seconds = std::numeric_limits<double>::quiet_NaN();
   effects fx;
   json extra;
+  /// When the request asked for them: the positions of the samples of this view's cut with
+  /// nothing culled (splat and point centres, triangles' vertices), relative to `origin`.
+  std::vector<vec3f> samples;
+  vec3d origin = vec3d::Zero();
+  std::size_t sample_nodes = 0;  ///< nodes (inner and leaves) that cut emitted
 };
 
 /// The attribute set every hierarchy's primitives reach a host renderer in (host_sink).
@@ -65,6 +73,11 @@ struct frame_request {
   /// seconds are LOD selection plus the hand-over. Effects a host does not draw (shadows, hole
   /// filling, blending) are its own business.
   host_sink* host = nullptr;
+  /// Also collect frame::samples (one more traversal, culling nothing): the sweep's
+  /// object-space error.
+  bool collect_samples = false;
+  /// > 0: the samples also hold points on each triangle at about this spacing (world units).
+  float sample_spacing = 0;
 };
 
 /// Times a traversal of h into a counting sink: LOD selection without rasterisation.
@@ -102,12 +115,64 @@ frame host_frame(const H& h, const view& v, const render_options& o, const trave
   return f;
 }
 
+/// Appends points on triangle abc other than its corners: a barycentric grid of
+/// ⌈longest edge / spacing⌉ steps (none when the triangle is smaller than the spacing).
+inline void append_triangle_samples(std::vector<vec3f>& out, const vec3f& a, const vec3f& b,
+                                    const vec3f& c, double spacing) {
+  const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+  const int n = spacing > 0 ? static_cast<int>(std::ceil(longest / spacing)) : 0;
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; i + j <= n; ++j) {
+      if ((i == 0 && j == 0) || (i == n && j == 0) || (i == 0 && j == n)) continue;  // corners
+      const float u = static_cast<float>(i) / static_cast<float>(n),
+                  w = static_cast<float>(j) / static_cast<float>(n);
+      out.push_back(a + u * (b - a) + w * (c - a));
+    }
+}
+
+/// Positions of the primitives a traversal emits: point and splat centres, and each triangle's
+/// vertices and, when spacing > 0, points on it (append_triangle_samples).
+template <attributes A>
+struct sample_sink {
+  std::vector<vec3f>* out;
+  float spacing = 0;
+  void point(const point_prim<A>& p) { out->push_back(p.position); }
+  void splat(const splat_prim<A>& s) { out->push_back(s.centre); }
+  void triangle(const triangle_prim<A>& t) {
+    out->insert(out->end(), t.p.begin(), t.p.end());
+    append_triangle_samples(*out, t.p[0], t.p[1], t.p[2], spacing);
+  }
+};
+
+/// f.samples and f.origin when r asks for them: the cut this view and tolerance select, with
+/// frustum and back-face culling off (an object-space error over the whole model, at the level
+/// each part gets from this view). Vertices shared by triangles are counted once.
+template <class H, class Policy>
+void collect_samples(frame& f, const H& h, const view& v, traverse_options t, const Policy& policy,
+                     const frame_request& r, const vec3d& origin) {
+  if (!r.collect_samples) return;
+  t.frustum_cull = false;
+  t.backface_cull = false;
+  sample_sink<H::attrs> sink{&f.samples, r.sample_spacing};
+  const traverse_stats st = traverse(h, v, t, sink, policy);
+  f.sample_nodes = st.emitted_nodes + st.emitted_leaves;
+  if (st.triangles > 0) {
+    const auto less = [](const vec3f& a, const vec3f& b) {
+      return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+    };
+    std::sort(f.samples.begin(), f.samples.end(), less);
+    f.samples.erase(std::unique(f.samples.begin(), f.samples.end()), f.samples.end());
+  }
+  f.origin = origin;
+}
+
 /// The frame of h through traverse() with the method's options and policy, timed as one pass
-/// (or, with r.host, the cut handed to that host renderer).
-/// `Compiled` narrows the effects compiled in (a method that never shadows, say).
+/// (and its samples when r asks: collect_samples), or, with r.host, the cut handed to that host
+/// renderer. `Compiled` narrows the effects compiled in (a method that never shadows, say).
+/// `origin`: what h's coordinates are relative to.
 template <effects Compiled = all_effects, class H, class Policy>
 frame draw_frame(const H& h, const view& v, const render_options& o, const traverse_options& t,
-                 const Policy& policy, const frame_request& r) {
+                 const Policy& policy, const frame_request& r, const vec3d& origin) {
   if (r.host) return host_frame<Compiled>(h, v, o, t, policy, *r.host);
   frame f;
   f.fx = o.fx;
@@ -116,6 +181,7 @@ frame draw_frame(const H& h, const view& v, const render_options& o, const trave
       render<H::attrs, Compiled>(v, o, [&](auto& sink) { f.st = traverse(h, v, t, sink, policy); });
   f.seconds = seconds_since(t0);
   if (r.time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, policy);
+  collect_samples(f, h, v, t, policy, r, origin);
   return f;
 }
 
@@ -170,6 +236,27 @@ class lod_of final : public lod {
 template <class M, class H>
 std::unique_ptr<lod> make_lod(M m, H&& h) {
   return std::make_unique<lod_of<M, std::decay_t<H>>>(std::move(m), std::forward<H>(h));
+}
+
+/// The object-space error of a cut: `fwd` from its samples to the input's surface (a cloud's
+/// points; a mesh's vertices and points on its triangles), `bwd` from the input's points to
+/// the samples (how well the cut covers them).
+struct object_error {
+  one_sided_distance fwd, bwd;
+  [[nodiscard]] double symmetric() const { return std::max(fwd.max, bwd.max); }
+};
+
+/// object_error of a cut (frame::samples, relative to `origin`): `surface` indexed by
+/// `surface_index`, and `points`, both relative to `ref_origin`. The samples are rebased into
+/// that frame in double; distances are exact nearest neighbours (raster/metrics.hpp).
+inline object_error cut_error(const knn_index& surface_index, std::span<const vec3f> points,
+                              const vec3d& ref_origin, std::span<const vec3f> samples,
+                              const vec3d& origin) {
+  const vec3d shift = origin - ref_origin;
+  std::vector<vec3f> cut(samples.size());
+  for (std::size_t i = 0; i < cut.size(); ++i)
+    cut[i] = (samples[i].cast<double>() + shift).cast<float>();
+  return {distance_to(cut, surface_index), distance_to(points, knn_index(cut))};
 }
 
 /// The bounding sphere of world-space positions stored relative to `origin`.

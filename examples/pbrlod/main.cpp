@@ -19,8 +19,10 @@
 #include <iostream>
 #include <sstream>
 
+#include "child_build.hpp"
 #include "contact_sheet.hpp"
 #include "lod.hpp"
+#include "papers.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/raster/png.hpp"
@@ -84,7 +86,10 @@ int render_hierarchy(const std::string& input, const view_args& va, float tolera
                            .view = va,
                            .tolerance = tolerance,
                            .seed = seed,
-                           .time_traversal = false});
+                           .time_traversal = false,
+                           .host = nullptr,
+                           .collect_samples = false,
+                           .sample_spacing = 0});
   write_png(output, f.img);
   if (as_json) {
     json j;
@@ -268,8 +273,14 @@ json demo_method(const method_entry& m, const build_input& in, const camera& cam
   for (const float tol : m.demo_tolerances) {
     const std::string setting = setting_text(m, tol);
     prog.step("rendering " + m.name + " at " + setting);
-    const frame f =
-        l->draw({.cam = cam, .view = va, .tolerance = tol, .seed = 1, .time_traversal = false});
+    const frame f = l->draw({.cam = cam,
+                             .view = va,
+                             .tolerance = tol,
+                             .seed = 1,
+                             .time_traversal = false,
+                             .host = nullptr,
+                             .collect_samples = false,
+                             .sample_spacing = 0});
     const image_error e = compare_images(ref, f.img);
     const std::string png =
         (fs::path(dir) / (m.name + "_" + fixed(tol, tol == std::floor(tol) ? 0 : 1) + ".png"))
@@ -491,6 +502,33 @@ int main(int argc, char** argv) {
                   "tightens");
   sweep->add_flag("--json", as_json, "print one JSON object");
 
+  std::string papers_data, papers_dir = "docs/data/papers", papers_out = "pbrlod-papers",
+                           papers_view = "30,20,3";
+  int papers_repeats = 3;
+  auto* papers = app.add_subcommand(
+      "papers",
+      "the papers' own curves (PMR Table 2, POP Fig. 6, SPG Table 1, Pajarola Fig. 1) "
+      "beside our measured analogue");
+  papers->add_option("--data", papers_data,
+                     "folder with happy_vrip_res3.ply and bun_zipper.ply "
+                     "(default: $PBR_LOD_DATA)");
+  papers->add_option("--papers", papers_dir, "the transcribed tables")->capture_default_str();
+  papers->add_option("-o,--output", papers_out, "folder for the results")->capture_default_str();
+  papers->add_option("--view", papers_view, "AZ,EL,DIST (distance in radii)")
+      ->capture_default_str();
+  papers->add_option("--repeats", papers_repeats, "frames timed (the median)")
+      ->capture_default_str();
+
+  // One build of a sweep in a process of its own (child_build.hpp); not for users: no group.
+  std::string sb_method, sb_input, sb_output;
+  int sb_touch_mib = 0;
+  auto* sweep_build = app.add_subcommand("sweep-build", "");
+  sweep_build->group("");
+  sweep_build->add_option("--method", sb_method);
+  sweep_build->add_option("--input", sb_input);
+  sweep_build->add_option("--out", sb_output);
+  sweep_build->add_option("--touch-mib", sb_touch_mib);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*build) return cmd_build(method, build_input, build_output, params, as_json);
@@ -499,6 +537,9 @@ int main(int argc, char** argv) {
     if (*compare) return cmd_compare(cmp_a, cmp_b, as_json);
     if (*demo) return cmd_demo(demo_input, demo_dir, as_json);
     if (*sweep) return cmd_sweep(sweep_inputs, sweep_dir, sweep_size, sweep_check, as_json);
+    if (*papers)
+      return cmd_papers(papers_data, papers_dir, papers_out, papers_view, papers_repeats);
+    if (*sweep_build) return cmd_sweep_build(sb_method, sb_input, sb_output, sb_touch_mib);
   } catch (const pbr_lod::Error& e) {
     std::cerr << "pbrlod: " << e.what() << "\n";
     return 1;

@@ -85,7 +85,7 @@ struct pca_method {
     policy.render.seed = r.seed;
     policy.render.point_px = std::max(1.0f, r.tolerance);
     constexpr effects compiled{.shading = true, .colour = true, .backface_cull = true};
-    frame f = draw_frame<compiled>(t, v, o, topt, policy, r);
+    frame f = draw_frame<compiled>(t, v, o, topt, policy, r, t.origin());
     f.extra.integer("seed", static_cast<long long>(r.seed));
     f.extra.integer("nodes_drawn",
                     static_cast<long long>(f.st.emitted_nodes + f.st.emitted_leaves));

@@ -72,7 +72,7 @@ struct pmr_method_traits {
     std::vector<std::uint32_t> used(h.leaf_count(), 0);
     pmr_policy policy;
     policy.levels_used = &used;
-    frame f = draw_frame(h, v, o, topt, policy, r);
+    frame f = draw_frame(h, v, o, topt, policy, r, h.origin());
     std::vector<std::size_t> hist(h.levels(), 0);
     for (const auto u : used) ++hist[u];
     f.extra.raw("leaves_per_level", list(hist));

@@ -76,7 +76,7 @@ struct octree_method {
     const traverse_options topt{.tolerance_px = r.tolerance,
                                 .backface_cull = o.fx.backface_cull,
                                 .cull_volume = traverse_options::volume::view_cone};
-    frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r);
+    frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r, t.origin());
     f.extra.num("fraction_drawn",
                 static_cast<double>(f.st.splats) / static_cast<double>(t.samples().size()));
     return f;

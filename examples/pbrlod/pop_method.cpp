@@ -60,7 +60,7 @@ struct pop_method_traits {
       policy.points = pop_point_mode::visibility;
       o.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(r.tolerance)));
     }
-    return draw_frame(t, v, o, topt, policy, r);
+    return draw_frame(t, v, o, topt, policy, r, t.origin());
   }
   template <class Tree>
   json stats(const Tree& t, const std::string& path) const {

@@ -67,10 +67,11 @@ struct rho_method {
           one.seconds = seconds_since(t0);
           if (r.time_traversal)
             one.traverse_seconds = traversal_seconds(h, v, t, rho_grid_policy<R>(g, v, &order));
+          collect_samples(one, h, v, t, rho_grid_policy<R>(g, v, &order), r, g.origin());
           return one;
         }
       }
-      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v), r);
+      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v), r, g.origin());
     });
     f.extra.boolean("one_pass_shadows", one_pass);
     return f;

@@ -17,9 +17,12 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <memory>
+#include <span>
 #include <sstream>
 #include <thread>
 
+#include "child_build.hpp"
 #include "contact_sheet.hpp"
 #include "lod.hpp"
 #include "pbr_lod/core/error.hpp"
@@ -42,14 +45,27 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string number(double v);
+double diagonal_of(const point_cloud& c);
+
+/// make_demo_scene's detail for the full sweep's generated scene: ≈ 2.0 M vertices, generated
+/// in memory, never a file (vertices grow as detail²: 5.19 M measured at detail 640).
+constexpr int large_scene_detail = 400;
 
 struct sweep_input {
   std::string name;
+  /// What a build process loads: the file, or "generated:N" (child_build.hpp).
+  std::string spec;
   loaded_input data;
   /// The input's points with normals: its own, else the mesh's area-weighted vertex normals,
   /// else estimated (k-NN PCA, MST orientation) — what a cloud's reference render and the
   /// peers shade with, as the point builders shade with the normals they estimate.
   point_cloud shaded_points;
+  /// What the object-space error of every cut is measured against (reference_points()), in
+  /// the frame of the input's points, with a k-d tree over it built once; and the input's
+  /// bounding-box diagonal that error is divided by.
+  std::vector<vec3f> reference;
+  std::unique_ptr<knn_index> index;
+  double diagonal = 1;
 };
 
 struct sweep_plan {
@@ -58,6 +74,9 @@ struct sweep_plan {
   std::string size;                                        ///< WxH
   std::vector<float> tolerances;                           ///< coarse to fine
   int repeats = 1;                                         ///< frames timed: the median
+  /// Spacing of the points on a mesh's (and a cut's) triangles for the object-space error, as
+  /// a fraction of the input's bounding-box diagonal.
+  double surface_spacing = 0;
 };
 
 struct sweep_row {
@@ -68,6 +87,14 @@ struct sweep_row {
   double psnr = 0, holes = 0, ssim = 0, psnr_input = 0, holes_input = 0;
   std::size_t file_bytes = 0;
   double bytes_per_input_point = 0, bytes_per_sample = 0;
+  /// Object-space error of the cut against the input's points, over the bounding-box diagonal:
+  /// symmetric Hausdorff, cut → input (fwd) and input → cut (bwd) maxima, means and RMS.
+  double hausdorff = 0, hausdorff_fwd = 0, hausdorff_bwd = 0, mean_fwd = 0, mean_bwd = 0,
+         rms_fwd = 0, rms_bwd = 0;
+  /// The build process's peak resident memory (input loaded, build, program), and what the
+  /// build added on top of the loaded input, per input point. NaN for peers (built in-process).
+  double peak_build_mib = 0, build_bytes_per_input_point = 0;
+  double build_cpu_seconds = 0;  ///< user + system time of the build alone
 };
 
 /// A frame kept for the contact sheet at matched frame time (the "mid" view of each input).
@@ -92,12 +119,13 @@ constexpr std::size_t sheet_view = 1;
 /// in PBR_LOD_DATA and a generated multi-million-point scene (full).
 std::vector<sweep_input> sweep_inputs(const std::vector<std::string>& files, bool full) {
   std::vector<sweep_input> in;
-  for (const auto& f : files) in.push_back({fs::path(f).filename().string(), load(f), {}});
+  const auto add = [&](std::string name, const std::string& spec) {
+    in.push_back({std::move(name), spec, load_sweep_input(spec), {}, {}, {}, 1});
+  };
+  for (const auto& f : files) add(fs::path(f).filename().string(), f);
   if (!in.empty()) return in;
   if (!full) {
-    loaded_input scene;
-    scene.mesh = make_demo_scene(20);
-    in.push_back({"generated-scene-small", std::move(scene), {}});
+    add("generated-scene-small", "generated:20");
     return in;
   }
   const char* env = std::getenv("PBR_LOD_DATA");
@@ -107,11 +135,9 @@ std::vector<sweep_input> sweep_inputs(const std::vector<std::string>& files, boo
   for (const char* f : {"bun_zipper.ply", "happy_vrip_res3.ply", "cow.obj",
                         "milk_cartoon_all_small_clorox.pcd", "1.2-with-color.las"}) {
     const fs::path p = fs::path(env) / f;
-    if (fs::exists(p)) in.push_back({p.filename().string(), load(p.string()), {}});
+    if (fs::exists(p)) add(p.filename().string(), p.string());
   }
-  loaded_input scene;
-  scene.mesh = make_demo_scene(450);  // ≈ 2 M triangles, ≈ 1 M vertices
-  in.push_back({"generated-scene-large", std::move(scene), {}});
+  add("generated-scene-large", "generated:" + std::to_string(large_scene_detail));
   return in;
 }
 
@@ -122,13 +148,37 @@ point_cloud with_normals_for_shading(const loaded_input& in) {
   return c;
 }
 
+/// Spacing of the points a mesh's surface is sampled with for the object-space error, as a
+/// fraction of the bounding-box diagonal (full; small: 4× coarser, to stay within seconds): no
+/// surface point is farther than about spacing / √3 from a sample, so distances below
+/// ≈ 0.0015 (small: 0.006) of the diagonal are not resolved on meshes (a cloud's points are its
+/// surface: exact).
+constexpr double surface_spacing_full = 0.0025, surface_spacing_small = 0.01;
+
+/// The surface of the object-space error: a cloud's points; a mesh's vertices and points on
+/// its triangles (append_triangle_samples), so that a cut that samples the surface (ρ-grid
+/// cells, generated points) is measured against the surface, not against the nearest vertex.
+std::vector<vec3f> reference_points(const loaded_input& in, double diagonal, double spacing) {
+  const auto& v = in.mesh.vertices.positions;
+  std::vector<vec3f> ref(v.begin(), v.end());
+  for (const auto& f : in.mesh.faces)
+    append_triangle_samples(ref, v[f[0]], v[f[1]], v[f[2]], spacing * diagonal);
+  return ref;
+}
+
 sweep_plan make_plan(const std::vector<std::string>& files, const std::string& size) {
   if (size != "small" && size != "full")
     throw InvalidArgument("sweep --size: expected small or full, got '" + size + "'");
   const bool full = size == "full";
   sweep_plan p;
   p.inputs = sweep_inputs(files, full);
-  for (auto& in : p.inputs) in.shaded_points = with_normals_for_shading(in.data);
+  p.surface_spacing = full ? surface_spacing_full : surface_spacing_small;
+  for (auto& in : p.inputs) {
+    in.shaded_points = with_normals_for_shading(in.data);
+    in.diagonal = diagonal_of(in.data.mesh.vertices);
+    in.reference = reference_points(in.data, in.diagonal, p.surface_spacing);
+    in.index = std::make_unique<knn_index>(in.reference);
+  }
   for (const char* d : {"near", "mid", "far"}) {
     const std::string dist = std::string(d) == "near" ? "1.5" : std::string(d) == "mid" ? "3" : "8";
     for (const int az : full ? std::vector<int>{30, 210} : std::vector<int>{30})
@@ -145,7 +195,12 @@ sweep_plan make_plan(const std::vector<std::string>& files, const std::string& s
 frame timed_frame(const lod& l, frame_request r, int repeats) {
   r.time_traversal = true;
   std::vector<frame> frames;
-  for (int i = 0; i < repeats; ++i) frames.push_back(l.draw(r));
+  for (int i = 0; i < repeats; ++i) {
+    r.collect_samples = i == 0;  // the cut's samples once: the same every time
+    frames.push_back(l.draw(r));
+  }
+  std::vector<vec3f> samples = std::move(frames[0].samples);
+  const vec3d origin = frames[0].origin;
   std::sort(frames.begin(), frames.end(),
             [](const frame& a, const frame& b) { return a.seconds < b.seconds; });
   std::vector<double> trav;
@@ -153,6 +208,8 @@ frame timed_frame(const lod& l, frame_request r, int repeats) {
   std::sort(trav.begin(), trav.end());
   frame f = std::move(frames[frames.size() / 2]);
   f.traverse_seconds = trav[trav.size() / 2];
+  f.samples = std::move(samples);
+  f.origin = origin;
   return f;
 }
 
@@ -164,32 +221,51 @@ image input_reference(const sweep_input& in, const camera& cam, const view_args&
                            : render_reference(in.shaded_points, cam, o);
 }
 
+/// The object-space error of a cut whose samples are given relative to `origin`, against the
+/// input's points (a mesh's vertices), over the input's bounding-box diagonal; NaN for an
+/// empty cut.
+void set_object_error(sweep_row& row, const sweep_input& in, std::span<const vec3f> samples,
+                      const vec3d& origin) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (samples.empty()) {
+    row.hausdorff = row.hausdorff_fwd = row.hausdorff_bwd = nan;
+    row.mean_fwd = row.mean_bwd = row.rms_fwd = row.rms_bwd = nan;
+    return;
+  }
+  const point_cloud& input = in.data.mesh.vertices;
+  const object_error h = cut_error(*in.index, input.positions, input.origin, samples, origin);
+  const double d = in.diagonal;
+  row.hausdorff = h.symmetric() / d;
+  row.hausdorff_fwd = h.fwd.max / d;
+  row.hausdorff_bwd = h.bwd.max / d;
+  row.mean_fwd = h.fwd.mean / d;
+  row.mean_bwd = h.bwd.mean / d;
+  row.rms_fwd = h.fwd.rms / d;
+  row.rms_bwd = h.bwd.rms / d;
+}
+
 /// One builder over one input: built once with its defaults, then for each view its finest cut
 /// (the reference) and a frame per tolerance.
 void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_plan& plan,
-                   const std::vector<image>& input_refs, progress& prog, sweep_results& out) {
-  // Point builders take the mesh's vertices (with their normals and colours).
-  loaded_input points;
-  const bool as_mesh = m.builds_from_mesh || !in.data.is_mesh();
-  if (!as_mesh) points.mesh.vertices = in.data.mesh.vertices;
-  const build_input bi(as_mesh ? in.data : points, in.name);
+                   const std::vector<image>& input_refs, const fs::path& scratch, progress& prog,
+                   sweep_results& out) {
+  // Built in a process of its own (point builders from the mesh's vertices), for its peak
+  // memory; the hierarchy comes back through the file it saved.
   prog.step("building " + m.name + " from " + in.name);
-  const auto t0 = clock_type::now();
-  std::unique_ptr<lod> l;
-  try {
-    l = m.build({}, bi, false);
-  } catch (const InvalidArgument& e) {
-    out.skipped.push_back(m.name + " on " + in.name + ": " + e.what());
+  child_build b = build_in_child(m, in.spec, (scratch / (m.name + ".lod")).string());
+  if (!b.l) {
+    out.skipped.push_back(m.name + " on " + in.name + ": " + b.skipped);
     return;
   }
-  const double build_s = seconds_since(t0);
+  const std::unique_ptr<lod> l = std::move(b.l);
   const double n_in = static_cast<double>(in.data.mesh.num_vertices());
   for (std::size_t vi = 0; vi < plan.views.size(); ++vi) {
     view_args va;
     va.view = plan.views[vi].second;
     va.size = plan.size;
     const camera cam = make_camera(in.data.mesh.vertices, va);
-    const frame_request base{.cam = cam, .view = va, .tolerance = 0, .seed = 1};
+    frame_request base{.cam = cam, .view = va, .tolerance = 0, .seed = 1};
+    base.sample_spacing = static_cast<float>(plan.surface_spacing * in.diagonal);
     const image finest = l->draw(base).img;
     for (const float tol : plan.tolerances) {
       prog.step(m.name + " " + in.name + " " + plan.views[vi].first + " tolerance " +
@@ -204,7 +280,11 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
       row.input = in.name;
       row.view = plan.views[vi].first;
       row.tolerance = tol;
-      row.build_seconds = build_s;
+      row.build_seconds = b.build_seconds;
+      row.build_cpu_seconds = b.build_cpu_seconds;
+      row.peak_build_mib = b.peak_mib;
+      row.build_bytes_per_input_point =
+          std::max(0.0, b.peak_mib - b.before_build_mib) * 1048576.0 / n_in;
       row.frame_seconds = f.seconds;
       row.traverse_seconds = f.traverse_seconds;
       row.raster_seconds = std::max(0.0, f.seconds - f.traverse_seconds);
@@ -220,6 +300,7 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
       row.bytes_per_input_point = static_cast<double>(row.file_bytes) / n_in;
       row.bytes_per_sample =
           static_cast<double>(row.file_bytes) / static_cast<double>(l->samples());
+      set_object_error(row, in, f.samples, f.origin);
       out.rows.push_back(row);
       if (vi == sheet_view) out.tiles.push_back({m.name, in.name, tol, f.seconds, ei.psnr, f.img});
     }
@@ -344,6 +425,8 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
     const auto t0 = clock_type::now();
     const point_cloud level = with_disks(peer.level(all, setting, diagonal), opts[0]);
     const double build_s = seconds_since(t0);
+    sweep_row errors;  // view-independent: once per level
+    set_object_error(errors, in, level.positions, level.origin);
     // Stored as the input stores its points; the disks are derived at load, not stored.
     const std::size_t bpp = all.present().bytes_per_point();
     const std::size_t bytes = level.size() * bpp;
@@ -369,6 +452,15 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
       row.file_bytes = bytes;
       row.bytes_per_input_point = static_cast<double>(bytes) / static_cast<double>(all.size());
       row.bytes_per_sample = static_cast<double>(bpp);
+      row.hausdorff = errors.hausdorff;
+      row.hausdorff_fwd = errors.hausdorff_fwd;
+      row.hausdorff_bwd = errors.hausdorff_bwd;
+      row.mean_fwd = errors.mean_fwd;
+      row.mean_bwd = errors.mean_bwd;
+      row.rms_fwd = errors.rms_fwd;
+      row.rms_bwd = errors.rms_bwd;
+      row.peak_build_mib = row.build_bytes_per_input_point = row.build_cpu_seconds =
+          std::numeric_limits<double>::quiet_NaN();  // built in-process: not measured
       out.rows.push_back(row);
       if (vi == sheet_view) out.tiles.push_back({peer.name, in.name, setting, secs, ei.psnr, img});
     }
@@ -378,7 +470,9 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
 const char* const csv_header =
     "builder,input,setting,tolerance,view,build_seconds,frame_seconds,traverse_seconds,"
     "raster_seconds,points,splats,triangles,primitives,psnr,holes,ssim,psnr_input,holes_input,"
-    "file_bytes,bytes_per_input_point,bytes_per_sample";
+    "file_bytes,bytes_per_input_point,bytes_per_sample,hausdorff,hausdorff_fwd,hausdorff_bwd,"
+    "mean_fwd,mean_bwd,rms_fwd,rms_bwd,build_cpu_seconds,peak_build_mib,"
+    "build_bytes_per_input_point";
 
 std::string number(double v) {
   if (!std::isfinite(v)) return v > 0 ? "inf" : "nan";
@@ -397,6 +491,10 @@ std::string csv_line(const sweep_row& r) {
     << number(r.psnr) << ',' << number(r.holes) << ',' << number(r.ssim) << ','
     << number(r.psnr_input) << ',' << number(r.holes_input) << ',' << r.file_bytes << ','
     << number(r.bytes_per_input_point) << ',' << number(r.bytes_per_sample);
+  for (const double v :
+       {r.hausdorff, r.hausdorff_fwd, r.hausdorff_bwd, r.mean_fwd, r.mean_bwd, r.rms_fwd, r.rms_bwd,
+        r.build_cpu_seconds, r.peak_build_mib, r.build_bytes_per_input_point})
+    o << ',' << number(v);
   return o.str();
 }
 
@@ -414,17 +512,27 @@ json row_json(const sweep_row& r) {
   j.integer("file_bytes", static_cast<long long>(r.file_bytes));
   j.num("bytes_per_input_point", r.bytes_per_input_point);
   j.num("bytes_per_sample", r.bytes_per_sample);
+  j.num("hausdorff", r.hausdorff).num("hausdorff_fwd", r.hausdorff_fwd);
+  j.num("hausdorff_bwd", r.hausdorff_bwd).num("mean_fwd", r.mean_fwd).num("mean_bwd", r.mean_bwd);
+  j.num("rms_fwd", r.rms_fwd).num("rms_bwd", r.rms_bwd);
+  j.num("build_cpu_seconds", r.build_cpu_seconds).num("peak_build_mib", r.peak_build_mib);
+  j.num("build_bytes_per_input_point", r.build_bytes_per_input_point);
   return j;
 }
 
-/// --check: every builder produced rows for every input it can build from, and in every
-/// (builder or peer, input, view) series the error does not grow from one setting to the next
-/// finer one (PSNR may
-/// drop by at most `slack_db` from one step to the next finer one: a finer cut can move a
-/// splat's edge by a pixel). Returns the problems found.
+/// --check: every builder produced rows for every input it can build from; every row's
+/// object-space errors are finite and non-negative and every builder row has a peak build
+/// memory > 0; and in every (builder or peer, input, view) series the errors do not grow from
+/// one setting to the next finer one: PSNR may drop by at most `slack_db` (a finer cut can move
+/// a splat's edge by a pixel); the input → cut Hausdorff distance (coverage) may grow by at
+/// most `slack_bwd` and the cut → input RMS distance by at most `slack_rms_fwd` of the
+/// diagonal. Not the cut → input maximum: the PCA octree's generated points are random, and
+/// more of them reach further into the Gaussian tails (+0.02 of the diagonal from tolerance 4
+/// to 1 on the small scene), as PMR's finer levels add umbrella triangles that span more.
+/// Returns the problems found.
 std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
                                     const std::vector<std::string>& skipped) {
-  constexpr double slack_db = 1.0;
+  constexpr double slack_db = 1.0, slack_bwd = 0.01, slack_rms_fwd = 0.005;
   std::vector<std::string> problems;
   for (const method_entry& m : methods()) {
     if (!m.build) continue;
@@ -435,14 +543,36 @@ std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
     });
     if (!has_rows && !was_skipped) problems.push_back(m.name + ": no rows");
   }
+  for (const auto& r : rows) {
+    const std::string key = r.builder + " " + r.input + " " + r.view + " at " + number(r.tolerance);
+    for (const double v : {r.hausdorff, r.hausdorff_fwd, r.hausdorff_bwd, r.mean_fwd, r.mean_bwd,
+                           r.rms_fwd, r.rms_bwd})
+      if (!(std::isfinite(v) && v >= 0)) {
+        problems.push_back(key + ": object-space error " + number(v));
+        break;
+      }
+    const bool is_builder = std::any_of(methods().begin(), methods().end(),
+                                        [&](const method_entry& m) { return m.name == r.builder; });
+    if (is_builder && !(r.peak_build_mib > 0))
+      problems.push_back(key + ": peak build memory " + number(r.peak_build_mib) + " MiB");
+  }
   std::map<std::string, std::vector<const sweep_row*>> series;
   for (const auto& r : rows) series[r.builder + " " + r.input + " " + r.view].push_back(&r);
   for (auto& [key, s] : series) {  // rows are in coarse-to-fine order
-    for (std::size_t i = 1; i < s.size(); ++i)
+    for (std::size_t i = 1; i < s.size(); ++i) {
       if (s[i]->psnr < s[i - 1]->psnr - slack_db)
         problems.push_back(key + ": PSNR falls from " + number(s[i - 1]->psnr) + " dB at " +
                            number(s[i - 1]->tolerance) + " to " + number(s[i]->psnr) + " dB at " +
                            number(s[i]->tolerance));
+      if (s[i]->hausdorff_bwd > s[i - 1]->hausdorff_bwd + slack_bwd)
+        problems.push_back(key + ": input → cut Hausdorff grows from " +
+                           number(s[i - 1]->hausdorff_bwd) + " at " + number(s[i - 1]->tolerance) +
+                           " to " + number(s[i]->hausdorff_bwd) + " at " + number(s[i]->tolerance));
+      if (s[i]->rms_fwd > s[i - 1]->rms_fwd + slack_rms_fwd)
+        problems.push_back(key + ": cut → input RMS grows from " + number(s[i - 1]->rms_fwd) +
+                           " at " + number(s[i - 1]->tolerance) + " to " + number(s[i]->rms_fwd) +
+                           " at " + number(s[i]->tolerance));
+    }
   }
   return problems;
 }
@@ -635,8 +765,8 @@ void write_json(const std::string& path, const sweep_plan& plan, const std::stri
 }
 
 /// Every builder and peer over one input, with the input's own references per view.
-void sweep_input_file(const sweep_input& in, const sweep_plan& plan, progress& prog,
-                      sweep_results& out) {
+void sweep_input_file(const sweep_input& in, const sweep_plan& plan, const fs::path& scratch,
+                      progress& prog, sweep_results& out) {
   std::vector<image> refs;
   for (const auto& [name, spec] : plan.views) {
     view_args va;
@@ -646,7 +776,7 @@ void sweep_input_file(const sweep_input& in, const sweep_plan& plan, progress& p
     refs.push_back(input_reference(in, make_camera(in.data.mesh.vertices, va), va));
   }
   for (const method_entry& m : methods())
-    if (m.build) sweep_builder(m, in, plan, refs, prog, out);
+    if (m.build) sweep_builder(m, in, plan, refs, scratch, prog, out);
   for (const peer_entry& p : peer_table()) sweep_peer(p, in, plan, refs, prog, out);
 }
 
@@ -658,7 +788,11 @@ int cmd_sweep(const std::vector<std::string>& inputs, const std::string& dir,
   fs::create_directories(dir);
   progress prog(as_json);
   sweep_results res;
-  for (const sweep_input& in : plan.inputs) sweep_input_file(in, plan, prog, res);
+  const fs::path scratch = fs::path(dir) / "build-scratch";  // the child builds' files
+  fs::create_directories(scratch);
+  for (const sweep_input& in : plan.inputs) sweep_input_file(in, plan, scratch, prog, res);
+  std::error_code ec;
+  fs::remove_all(scratch, ec);
   const std::string csv = (fs::path(dir) / "sweep.csv").string();
   const std::string js = (fs::path(dir) / "sweep.json").string();
   const std::string sheet = (fs::path(dir) / "contact_sheet.png").string();

@@ -6,12 +6,13 @@
 #include <cmath>
 #include <limits>
 #include <string>
-#include <tuple>
+#include <thread>
 #include <utility>
 #include <vector>
 
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
 
@@ -75,15 +76,46 @@ std::vector<double> luminance(const image& img) {
   return y;
 }
 
-/// max and mean over `from` of the distance to the nearest point of `to`.
-std::pair<double, double> one_sided(const std::vector<vec3f>& from, const knn_index& to) {
-  double mx = 0, sum = 0;
-  for (const vec3f& p : from) {
-    const double d = to.nearest_distance(p);
-    mx = std::max(mx, d);
-    sum += d;
+/// max, mean and root mean square over `from` of the distance to the nearest point of `to`.
+/// Sums per fixed chunk, added in chunk order: the same result on any number of threads.
+one_sided_distance one_sided(std::span<const vec3f> from, const knn_index& to, unsigned threads) {
+  constexpr std::size_t chunk = 4096;
+  const std::size_t chunks = (from.size() + chunk - 1) / chunk;
+  std::vector<one_sided_distance> part(chunks);
+  detail::parallel_tasks(chunks,
+                         threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : threads,
+                         [&](std::size_t c, unsigned) {
+                           one_sided_distance& r = part[c];
+                           const std::size_t end = std::min(from.size(), (c + 1) * chunk);
+                           for (std::size_t i = c * chunk; i < end; ++i) {
+                             const double d = to.nearest_distance(from[i]);
+                             r.max = std::max(r.max, d);
+                             r.mean += d;
+                             r.rms += d * d;
+                           }
+                         });
+  one_sided_distance r;
+  for (const auto& p : part) {
+    r.max = std::max(r.max, p.max);
+    r.mean += p.mean;
+    r.rms += p.rms;
   }
-  return {mx, sum / double(from.size())};
+  const auto n = static_cast<double>(from.size());
+  r.mean /= n;
+  r.rms = std::sqrt(r.rms / n);
+  return r;
+}
+
+hausdorff_result both_sides(std::span<const vec3f> a, const knn_index& index_a,
+                            std::span<const vec3f> b, const knn_index& index_b, unsigned threads) {
+  const one_sided_distance ab = one_sided(a, index_b, threads);
+  const one_sided_distance ba = one_sided(b, index_a, threads);
+  return {.a_to_b_max = ab.max,
+          .b_to_a_max = ba.max,
+          .a_to_b_mean = ab.mean,
+          .b_to_a_mean = ba.mean,
+          .a_to_b_rms = ab.rms,
+          .b_to_a_rms = ba.rms};
 }
 
 }  // namespace
@@ -129,10 +161,24 @@ hausdorff_result hausdorff(const point_cloud& a, const point_cloud& b) {
     b_in_a[i] = (b.positions[i].cast<double>() + shift).cast<float>();
   const knn_index index_a(a.positions);  // throws on non-finite positions
   const knn_index index_b(b_in_a);
-  hausdorff_result h;
-  std::tie(h.a_to_b_max, h.a_to_b_mean) = one_sided(a.positions, index_b);
-  std::tie(h.b_to_a_max, h.b_to_a_mean) = one_sided(b_in_a, index_a);
-  return h;
+  return both_sides(a.positions, index_a, b_in_a, index_b, 1);
+}
+
+one_sided_distance distance_to(std::span<const vec3f> from, const knn_index& to, unsigned threads) {
+  if (from.empty() || to.size() == 0) throw InvalidArgument("distance_to: an empty point set");
+  return one_sided(from, to, threads);
+}
+
+hausdorff_result hausdorff(std::span<const vec3f> a, const knn_index& index_a,
+                           std::span<const vec3f> b, unsigned threads) {
+  if (a.empty() || b.empty())
+    throw InvalidArgument(std::string("hausdorff: point set ") + (a.empty() ? "a" : "b") +
+                          " is empty");
+  if (index_a.size() != a.size())
+    throw InvalidArgument("hausdorff: the index holds " + std::to_string(index_a.size()) +
+                          " points, a has " + std::to_string(a.size()));
+  const knn_index index_b(b);  // throws on non-finite positions
+  return both_sides(a, index_a, b, index_b, threads);
 }
 
 }  // namespace pbr_lod

@@ -2,13 +2,17 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <random>
 #include <string>
+#include <vector>
 
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/png.hpp"
 
@@ -287,6 +291,62 @@ TEST(Metrics, HausdorffAcrossOrigins) {
   rebase(b, vec3d(1e7 + 123.25, -2e6 - 0.5, 3e5 + 7));
   EXPECT_NEAR(hausdorff(a, b).symmetric(), 0, 1e-5);
   EXPECT_THROW((void)hausdorff(a, point_cloud{}), InvalidArgument);
+}
+
+// The indexed overload against a brute-force O(n·m) loop over every pair: random sets of
+// different sizes (seeded; any data will do — the answer is defined pair by pair), computed on
+// 1 and on 3 threads, which must agree exactly (fixed chunks, summed in order).
+TEST(Metrics, HausdorffMatchesBruteForce) {
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::vector<vec3f> a(700), b(450);
+  for (auto& p : a) p = vec3f(u(rng), u(rng), 0.3f * u(rng));
+  for (auto& p : b) p = vec3f(u(rng), u(rng), u(rng));
+  const auto brute = [](const std::vector<vec3f>& from, const std::vector<vec3f>& to) {
+    double mx = 0, sum = 0, sum2 = 0;
+    for (const auto& p : from) {
+      double best = std::numeric_limits<double>::infinity();
+      for (const auto& q : to) best = std::min(best, static_cast<double>((p - q).norm()));
+      mx = std::max(mx, best);
+      sum += best;
+      sum2 += best * best;
+    }
+    const auto n = static_cast<double>(from.size());
+    return std::array<double, 3>{mx, sum / n, std::sqrt(sum2 / n)};
+  };
+  const auto ab = brute(a, b), ba = brute(b, a);
+  const knn_index index_a(a);
+  const hausdorff_result h = hausdorff(a, index_a, b, 1);
+  EXPECT_NEAR(h.a_to_b_max, ab[0], 1e-6);
+  EXPECT_NEAR(h.a_to_b_mean, ab[1], 1e-6);
+  EXPECT_NEAR(h.a_to_b_rms, ab[2], 1e-6);
+  EXPECT_NEAR(h.b_to_a_max, ba[0], 1e-6);
+  EXPECT_NEAR(h.b_to_a_mean, ba[1], 1e-6);
+  EXPECT_NEAR(h.b_to_a_rms, ba[2], 1e-6);
+  const one_sided_distance ba1 = distance_to(b, index_a);  // b → a alone, as in hausdorff()
+  EXPECT_EQ(ba1.max, h.b_to_a_max);
+  EXPECT_EQ(ba1.rms, h.b_to_a_rms);
+  const hausdorff_result h3 = hausdorff(a, index_a, b, 3);
+  EXPECT_EQ(h3.a_to_b_mean, h.a_to_b_mean);
+  EXPECT_EQ(h3.b_to_a_rms, h.b_to_a_rms);
+  EXPECT_THROW((void)hausdorff(a, knn_index(b), b), InvalidArgument);  // index over other points
+  EXPECT_THROW((void)hausdorff(a, index_a, std::vector<vec3f>{}), InvalidArgument);
+}
+
+// A 20×20 grid of spacing 1 against the same grid shifted by d = 0.3 along z (off its plane):
+// every point's nearest is its own copy (any other is ≥ √(1 + d²) away), so max, mean and RMS
+// are all exactly d, both ways — the analytic case of the sweep's object-space error.
+TEST(Metrics, HausdorffGridShiftedOffPlane) {
+  std::vector<vec3f> a, b;
+  for (int j = 0; j < 20; ++j)
+    for (int i = 0; i < 20; ++i) {
+      a.emplace_back(float(i), float(j), 0.0f);
+      b.emplace_back(float(i), float(j), 0.3f);
+    }
+  const hausdorff_result h = hausdorff(a, knn_index(a), b);
+  for (const double d :
+       {h.a_to_b_max, h.b_to_a_max, h.a_to_b_mean, h.b_to_a_mean, h.a_to_b_rms, h.b_to_a_rms})
+    EXPECT_NEAR(d, 0.3, 1e-6);
 }
 
 // --- PNG ---------------------------------------------------------------------------------------

@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <span>
 
+#include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/raster/image.hpp"
 
@@ -41,14 +43,36 @@ struct hausdorff_result {
   double b_to_a_max = 0;
   double a_to_b_mean = 0;  ///< mean of the same distances
   double b_to_a_mean = 0;
+  double a_to_b_rms = 0;  ///< root mean square of the same distances
+  double b_to_a_rms = 0;
   /// The Hausdorff distance max(a→b, b→a).
   [[nodiscard]] double symmetric() const { return std::max(a_to_b_max, b_to_a_max); }
 };
+
+/// One direction of a Hausdorff distance: the largest, mean and root-mean-square distance from
+/// a point of `from` to its nearest point of `to`.
+struct one_sided_distance {
+  double max = 0, mean = 0, rms = 0;
+};
+
+/// one_sided_distance of `from` (#F positions) to the points indexed by `to`, in one frame,
+/// queried on up to `threads` threads (0: all cores) in fixed chunks, so the result does not
+/// depend on the thread count. Throws InvalidArgument when either is empty.
+[[nodiscard]] one_sided_distance distance_to(std::span<const vec3f> from, const knn_index& to,
+                                             unsigned threads = 0);
 
 /// Hausdorff distance between the positions of a and b, via exact k-d tree queries. Computed in
 /// the frame of a's origin: b's positions are re-expressed relative to it in double first, so two
 /// georeferenced clouds with different origins compare correctly. Throws InvalidArgument when
 /// either cloud is empty or has non-finite positions.
 [[nodiscard]] hausdorff_result hausdorff(const point_cloud& a, const point_cloud& b);
+
+/// As above for positions already in one frame, with an index over `a` built by the caller (a
+/// sweep compares many cuts with the same input and builds its index once): A #A positions,
+/// index_a a knn_index over exactly them, B #B positions. The per-point queries run on up to
+/// `threads` threads (0: all cores); the result does not depend on it. Throws InvalidArgument
+/// when either set is empty or index_a's size differs from #A.
+[[nodiscard]] hausdorff_result hausdorff(std::span<const vec3f> a, const knn_index& index_a,
+                                         std::span<const vec3f> b, unsigned threads = 0);
 
 }  // namespace pbr_lod
