@@ -226,7 +226,8 @@ BENCHMARK(bm_quantised)
 // Views: sweep_camera; the reference is every triangle. mode 0: simplified splatting with the
 // eye-space-z splat size and back-face culling (the paper); 1: the same with the exact size; 2:
 // visibility splatting (one-pixel points) + the rasteriser's hole filling, filter radius =
-// threshold; 3: mode 0 without back-face culling.
+// threshold; 3: mode 0 without back-face culling; 4: mode 2 with §3.4's first pass (each point
+// also drawn as a full-size occluder; pop_point_mode::visibility_two_pass).
 void bm_threshold(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0));
   const float tol = static_cast<float>(state.range(1)) / 10;
@@ -235,7 +236,8 @@ void bm_threshold(benchmark::State& state) {
   state.SetLabel(mesh_name(which));
   const camera cam = sweep_camera(which, t);
   const view v(cam, t.origin());
-  render_options ro{.fx = {.shading = true, .colour = false, .hole_filling = mode == 2}};
+  render_options ro{
+      .fx = {.shading = true, .colour = false, .hole_filling = mode == 2 || mode == 4}};
   ro.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(tol)));
   static std::map<int, image> refs;
   if (!refs.count(which)) {
@@ -247,7 +249,9 @@ void bm_threshold(benchmark::State& state) {
       .metric = mode == 1 ? projection_metric::exact : projection_metric::eye_z,
       .backface_cull = mode != 3};
   pop_policy pol;
-  pol.points = mode == 2 ? pop_point_mode::visibility : pop_point_mode::simplified;
+  pol.points = mode == 2   ? pop_point_mode::visibility
+               : mode == 4 ? pop_point_mode::visibility_two_pass
+                           : pop_point_mode::simplified;
   traverse_stats st;
   image img;
   for (auto _ : state) {
@@ -262,7 +266,7 @@ void bm_threshold(benchmark::State& state) {
   state.counters["holes"] = err.hole_fraction;
 }
 BENCHMARK(bm_threshold)
-    ->ArgsProduct({{0, 1, 2}, {10, 20, 34, 50}, {0, 1, 2, 3}})
+    ->ArgsProduct({{0, 1, 2}, {10, 20, 34, 50}, {0, 1, 2, 3, 4}})
     ->ArgNames({"mesh", "tol_x10", "mode"})
     ->Unit(benchmark::kMillisecond);
 

@@ -56,9 +56,9 @@ json octree_stats_json(const Tree& t, const std::string& path) {
   j.num("build_seconds", st.has_timings ? st.seconds : nan);
   j.num("estimation_seconds", st.has_timings ? st.estimation_seconds : nan);
   j.num("tree_seconds", st.has_timings ? st.tree_seconds : nan);
-  // Nodes whose EQ 5–6 ellipse was replaced by the corners' bounding circle: a build statistic,
-  // not stored in the file (null for a loaded one).
-  j.num("circle_fallbacks", st.has_timings ? static_cast<double>(st.circle_fallbacks) : nan);
+  // Nodes whose EQ 5–6 ellipse was replaced by the corners' bounding circle: counted on the
+  // stored nodes (point_octree::is_circle), so a loaded file gives the build's number.
+  j.integer("circle_fallbacks", static_cast<long long>(st.circle_fallbacks));
   return j;
 }
 

@@ -42,8 +42,8 @@ json pop_stats_json(const Tree& t, const std::string& path) {
 }
 
 /// What POP contributes to a frame: the paper's splat size from eye-space z (§3.3), back-face
-/// culling by normal cones, and with hole filling §3.4's visibility splatting (one-pixel points
-/// + screen-space reconstruction).
+/// culling by normal cones, and with hole filling §3.4's visibility splatting (a full-size
+/// occluder then a one-pixel point per point node + screen-space reconstruction).
 struct pop_method_traits {
   template <class Tree>
   std::pair<vec3d, double> input_bounds(const Tree& t) const {
@@ -57,7 +57,7 @@ struct pop_method_traits {
         .tolerance_px = r.tolerance, .metric = projection_metric::eye_z, .backface_cull = true};
     pop_policy policy;
     if (o.fx.hole_filling) {
-      policy.points = pop_point_mode::visibility;
+      policy.points = pop_point_mode::visibility_two_pass;
       o.hole_filling_radius = std::max(1, static_cast<int>(std::ceil(r.tolerance)));
     }
     return draw_frame(t, v, o, topt, policy, r, t.origin());

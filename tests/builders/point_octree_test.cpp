@@ -392,6 +392,423 @@ TEST(PointOctree, LoadRejectsCorruptFiles) {
   EXPECT_THROW((void)octree_nc::load(path + ".missing"), IoError);
 }
 
+// ---- §3's mean split and EQ 5–6's ellipse, against references computed here ---------------
+
+constexpr attributes disk_in{.normal = true, .ellipse = true};
+using octree_d = point_octree<point_octree_attributes(disk_in)>;
+
+/// Indices (into t.samples()) of the samples below node n, found by walking to its leaves.
+template <class T>
+std::vector<std::uint32_t> subtree_samples(const T& t, std::uint32_t n) {
+  std::vector<std::uint32_t> out, stack{n};
+  while (!stack.empty()) {
+    const std::uint32_t m = stack.back();
+    stack.pop_back();
+    const auto& nd = t.at(m);
+    if (nd.leaf)
+      for (std::uint32_t k = nd.first; k < nd.first + nd.count; ++k) out.push_back(k);
+    else
+      for (const auto c : t.children(m)) stack.push_back(c);
+  }
+  return out;
+}
+
+/// Octant of p about m, bit 0 = x, 1 = y, 2 = z (p ≥ m on that axis), or −1 when p lies within
+/// `tie` of one of the three split planes (then rounding decides and the test does not judge).
+int octant_about(const vec3d& p, const vec3d& m, double tie) {
+  int o = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(p[a] - m[a]) <= tie) return -1;
+    o |= p[a] >= m[a] ? 1 << a : 0;
+  }
+  return o;
+}
+
+/// §3: every node's centre is the mean of the samples below it, and an inner node's children
+/// are the non-empty octants about that mean, in octant order, each holding exactly the samples
+/// of its octant. Brute force over the whole tree, from the stored samples; returns the number
+/// of inner nodes checked. A tree split anywhere else than at the mean (the bounding box's
+/// centre, a shifted mean) fails the octant check.
+template <class T>
+std::size_t check_mean_split(const T& t, std::uint32_t leaf_size) {
+  const auto& s = t.samples();
+  std::size_t inner = 0, ties = 0;
+  for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
+    const auto& nd = t.at(n);
+    const auto below = subtree_samples(t, n);
+    vec3d mean = vec3d::Zero();
+    double extent = 0;
+    for (const auto k : below) mean += s.positions[k].template cast<double>();
+    mean /= static_cast<double>(below.size());
+    for (const auto k : below)
+      extent = std::max(extent, (s.positions[k].template cast<double>() - mean).norm());
+    // Stored as float: within a few float ulps of the mean's magnitude.
+    const double scale = std::max(mean.norm(), extent) + 1e-30;
+    EXPECT_LE((nd.centre.template cast<double>() - mean).norm(), 4e-7 * scale) << "node " << n;
+    if (nd.leaf) {
+      EXPECT_LE(nd.count, leaf_size) << "leaf " << n;
+      continue;
+    }
+    ++inner;
+    EXPECT_GT(below.size(), leaf_size) << "node " << n << " should have been a leaf";
+    int previous = -1;
+    std::size_t held = 0;
+    for (const auto c : t.children(n)) {
+      const auto mine = subtree_samples(t, c);
+      held += mine.size();
+      int octant = -1;
+      for (const auto k : mine) {
+        const int o = octant_about(s.positions[k].template cast<double>(), mean, 1e-9 * scale);
+        if (o < 0) {
+          ++ties;
+          continue;
+        }
+        if (octant < 0) octant = o;
+        EXPECT_EQ(o, octant) << "node " << n << " child " << c << " sample " << k
+                             << " lies in another octant of the mean than its siblings";
+      }
+      EXPECT_GT(octant, previous) << "node " << n << ": children not in octant order";
+      previous = octant;
+    }
+    EXPECT_EQ(held, below.size()) << "node " << n;
+  }
+  EXPECT_EQ(ties, 0u) << "samples on a split plane: pick other data";
+  return inner;
+}
+
+// Hand-computed (§3: "the one-to-eight subdivision is determined by the average of the points"):
+// ten samples on a line at x = 0..8 and 20 average to x̄ = 56/10 = 5.6, so the root's children
+// hold {0..5} and {6, 7, 8, 20}; the first (6 > 4 samples) splits again at its mean 2.5 into
+// {0, 1, 2} and {3, 4, 5}. A split at the bounding box's centre (x = 10) would give {0..8}, {20}.
+TEST(PointOctree, MeanSplitByHand) {
+  point_set<disk_in> pts;
+  for (const float x : {20.0f, 3.0f, 0.0f, 8.0f, 5.0f, 1.0f, 7.0f, 4.0f, 2.0f, 6.0f}) {
+    pts.positions.emplace_back(x, 0.0f, 0.0f);
+    pts.normals.emplace_back(0.0f, 0.0f, 1.0f);
+    pts.axis_u.emplace_back(0.1f, 0.0f, 0.0f);
+    pts.axis_v.emplace_back(0.0f, 0.1f, 0.0f);
+  }
+  const auto t = build_point_octree(pts, {.leaf_size = 4, .normal_bits = 0, .threads = 1});
+  const auto xs = [&](std::uint32_t n) {
+    std::vector<float> v;
+    for (const auto k : subtree_samples(t, n)) v.push_back(t.samples().positions[k].x());
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  ASSERT_EQ(t.nodes().size(), 5u);  // root, {0..5}, {6, 7, 8, 20}, {0, 1, 2}, {3, 4, 5}
+  EXPECT_FLOAT_EQ(t.at(0).centre.x(), 5.6f);
+  ASSERT_EQ(t.at(0).count, 2u);
+  const std::uint32_t lo = t.at(0).first, hi = lo + 1;
+  EXPECT_EQ(xs(lo), (std::vector<float>{0, 1, 2, 3, 4, 5}));
+  EXPECT_EQ(xs(hi), (std::vector<float>{6, 7, 8, 20}));
+  EXPECT_FLOAT_EQ(t.at(lo).centre.x(), 2.5f);
+  EXPECT_FLOAT_EQ(t.at(hi).centre.x(), 10.25f);
+  EXPECT_TRUE(t.is_leaf(hi));
+  ASSERT_FALSE(t.is_leaf(lo));
+  EXPECT_EQ(xs(t.at(lo).first), (std::vector<float>{0, 1, 2}));
+  EXPECT_EQ(xs(t.at(lo).first + 1), (std::vector<float>{3, 4, 5}));
+}
+
+// The same by brute force on 20 000 skewed samples (exponential in x, squared uniform in y: the
+// mean is far from the bounding box's centre at every level), through the parallel build.
+TEST(PointOctree, MeanSplitMatchesBruteForce) {
+  std::mt19937 rng(42);  // any data will do; skewed so that mean and box centre differ
+  std::exponential_distribution<float> ex(1.0f);
+  std::uniform_real_distribution<float> u(0, 1);
+  point_set<disk_in> pts;
+  for (int i = 0; i < 20000; ++i) {
+    const float y = u(rng);
+    pts.positions.emplace_back(ex(rng), y * y, u(rng) - 0.5f);
+    pts.normals.emplace_back(0.0f, 0.0f, 1.0f);
+    pts.axis_u.emplace_back(0.01f, 0.0f, 0.0f);
+    pts.axis_v.emplace_back(0.0f, 0.01f, 0.0f);
+  }
+  for (const unsigned threads : {1u, 2u}) {
+    const auto t = build_point_octree(pts, {.leaf_size = 8, .threads = threads});
+    EXPECT_GT(check_mean_split(t, 8), 500u) << "threads " << threads;
+  }
+}
+
+/// What fit_ellipse() should have produced at node n, recomputed from the stored tree alone and
+/// with other means (Eigen's 3×3 and 2×2 solvers, a frame of our own): the tangent covariance of
+/// the samples below n about its centre plus the mean covariance (uuᵀ + vvᵀ)/4 of their disks
+/// (docs/point-octree.md), its eigen-axes (EQ 5–6) scaled by the smallest f that covers the
+/// corners c ± u ± v of the disks below (leaf: the samples', inner: the children's; Fig. 6b),
+/// and the guard: the corners' bounding circle replaces the ellipse unless the ellipse is smaller
+/// in area and its major axis at most the circle's diameter. `circle` also where the covariance
+/// is round, as point_octree::is_circle() counts it.
+struct expected_ellipse {
+  double a, b;    ///< semi-axis lengths
+  vec3d e1;       ///< major axis direction
+  bool circle;    ///< the guard chose the bounding circle
+  bool near_tie;  ///< within 10⁻⁴ of the guard's threshold: rounding decides
+  bool round;     ///< λ₁ ≈ λ₂: the axis direction is not defined
+};
+template <class T>
+expected_ellipse reference_ellipse(const T& t, std::uint32_t n, ellipse_axis_rule rule) {
+  const auto& s = t.samples();
+  const auto& nd = t.at(n);
+  const vec3d c = nd.centre.template cast<double>(), nrm = nd.normal.template cast<double>();
+  mat3d m = mat3d::Zero();
+  const auto below = subtree_samples(t, n);
+  for (const auto k : below) {
+    const vec3d d = s.positions[k].template cast<double>() - c;
+    const vec3d u = s.axis_u[k].template cast<double>(), v = s.axis_v[k].template cast<double>();
+    m += d * d.transpose() + 0.25 * (u * u.transpose() + v * v.transpose());
+  }
+  m /= static_cast<double>(below.size());
+  // Our own tangent frame: any orthonormal pair ⟂ n (the eigen-axes do not depend on it).
+  const vec3d
+      t1 = (std::abs(nrm.x()) < 0.6 ? vec3d::UnitX() : vec3d::UnitY()).cross(nrm).normalized(),
+      t2 = nrm.cross(t1);
+  Eigen::Matrix<double, 2, 3> P;
+  P.row(0) = t1;
+  P.row(1) = t2;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(P * m * P.transpose());
+  const double l1 = std::max(0.0, es.eigenvalues()(1)), l2 = std::max(0.0, es.eigenvalues()(0));
+  const vec3d e1 = (P.transpose() * es.eigenvectors().col(1)).normalized(), e2 = nrm.cross(e1);
+  double a1 = rule == ellipse_axis_rule::eigenvalue ? l1 : std::sqrt(l1);
+  double b1 = rule == ellipse_axis_rule::eigenvalue ? l2 : std::sqrt(l2);
+  if (!(a1 > 1e-300)) a1 = b1 = 1;
+  b1 = std::max(b1, 1e-3 * a1);
+  double f2 = 0, r2 = 0;
+  const auto visit = [&](const vec3f& corner) {
+    const vec3d d = corner.template cast<double>() - c;
+    const double x = d.dot(e1), y = d.dot(e2);
+    f2 = std::max(f2, x * x / (a1 * a1) + y * y / (b1 * b1));
+    r2 = std::max(r2, x * x + y * y);
+  };
+  const auto corners = [&](const vec3f& p, const vec3f& u, const vec3f& v) {
+    for (const vec3f& q : std::array<vec3f, 4>{p + u + v, p + u - v, p - u + v, p - u - v})
+      visit(q);
+  };
+  if (nd.leaf)
+    for (const auto k : below) corners(s.positions[k], s.axis_u[k], s.axis_v[k]);
+  else
+    for (const auto ch : t.children(n)) corners(t.at(ch).centre, t.at(ch).axis_u, t.at(ch).axis_v);
+  const double f = std::sqrt(f2), r = std::sqrt(r2);
+  const double area_ratio = f2 * a1 * b1 / r2, length_ratio = f * a1 / (2 * r);
+  expected_ellipse e{f * a1, f * b1, e1, false, false, (l1 - l2) <= 1e-3 * l1};
+  // A round covariance (λ₁ = λ₂: a one-sample leaf with a circular disk, a symmetric grid)
+  // scaled to reach the farthest corner is that corner's bounding circle; whether the guard then
+  // fires is decided by rounding (its area ratio is exactly 1), and the disk is the same.
+  const double anisotropy = (l1 - l2) / std::max(l1, 1e-300);
+  const bool round = anisotropy <= 5e-7;
+  e.circle = round || !(area_ratio < 1 && length_ratio <= 1);
+  e.near_tie = !round && (anisotropy <= 1e-5 || std::abs(area_ratio - 1) < 1e-4 ||
+                          std::abs(length_ratio - 1) < 1e-4);
+  if (e.circle) e.a = e.b = r;
+  return e;
+}
+
+/// Compares every node's stored ellipse with reference_ellipse(): lengths to 10⁻⁴ (the stored
+/// ones carry f's 10⁻⁵ margin), the major axis to 0.1°, circle or not as the guard says. Returns
+/// {circles the rule predicts, circles stored (is_circle), near ties skipped, ellipses kept}.
+struct shape_counts {
+  std::size_t predicted_circles = 0, stored_circles = 0, ties = 0, ellipses = 0;
+};
+template <class T>
+shape_counts check_ellipse_shapes(const T& t, ellipse_axis_rule rule) {
+  shape_counts out;
+  for (std::uint32_t n = 0; n < t.nodes().size(); ++n) {
+    const auto& nd = t.at(n);
+    const expected_ellipse e = reference_ellipse(t, n, rule);
+    out.stored_circles += t.is_circle(n);
+    if (e.near_tie) {
+      ++out.ties;
+      continue;
+    }
+    out.predicted_circles += e.circle;
+    out.ellipses += !e.circle;
+    EXPECT_EQ(t.is_circle(n), e.circle) << "node " << n << (e.circle ? " should" : " should not")
+                                        << " fall back to the bounding circle";
+    EXPECT_NEAR(nd.axis_u.norm(), e.a, 1e-4 * e.a) << "node " << n;
+    EXPECT_NEAR(nd.axis_v.norm(), e.b, 1e-4 * e.a) << "node " << n;
+    if (!e.circle && !e.round) {
+      EXPECT_GT(std::abs(nd.axis_u.template cast<double>().normalized().dot(e.e1)),
+                std::cos(0.1 * std::numbers::pi / 180))
+          << "node " << n << ": major axis off the covariance's eigenvector";
+    }
+  }
+  return out;
+}
+
+/// A planar patch 4:1: a (2·80 + 1) × (2·20 + 1) grid of spacing h in the plane through o with
+/// normal n, stretched along d1, each sample a circular disk of radius h.
+struct stretched_patch {
+  vec3d o{3, -2, 5};
+  vec3d n = vec3d(1, 2, 2) / 3;
+  vec3d d1 = vec3d(2, -1, 0) / std::sqrt(5.0);  // ⟂ n
+  vec3d d2 = n.cross(d1);
+  double h = 0.025;
+  int nx = 80, ny = 20;
+  point_set<disk_in> points() const {
+    point_set<disk_in> p;
+    p.origin = o;
+    for (int i = -nx; i <= nx; ++i)
+      for (int j = -ny; j <= ny; ++j) {
+        p.positions.push_back((i * h * d1 + j * h * d2).cast<float>());
+        p.normals.push_back(n.cast<float>());
+        p.axis_u.push_back((h * d1).cast<float>());
+        p.axis_v.push_back((h * d2).cast<float>());
+      }
+    return p;
+  }
+  /// EQ 5–6 for the whole patch: the grid's variances h²((2k + 1)² − 1)/12 along d1 and d2, plus
+  /// the disks' r²/4 each.
+  double lambda1() const { return h * h * ((2 * nx + 1) * (2 * nx + 1) - 1) / 12 + h * h / 4; }
+  double lambda2() const { return h * h * ((2 * ny + 1) * (2 * ny + 1) - 1) / 12 + h * h / 4; }
+};
+
+// EQ 5–6 analytically: one leaf holding the whole 4:1 patch. Its ellipse's axes are the patch's
+// directions; with a' = √λ the lengths are f·√λ₁ and f·√λ₂ with f² = x²/λ₁ + y²/λ₂ at the
+// outermost disk corner (x, y) = (80h + h, 20h + h). With the paper's a' = λ (EQ 6 as printed)
+// the same patch gives a ≈ 8.3 > 2r: the guard draws the corners' bounding circle of radius
+// |(x, y)| instead.
+TEST(PointOctree, EllipseOfAStretchedPatchIsAnalytic) {
+  const stretched_patch patch;
+  const auto pts = patch.points();
+  const double l1 = patch.lambda1(), l2 = patch.lambda2();
+  const double x = (patch.nx + 1) * patch.h, y = (patch.ny + 1) * patch.h;
+  for (const int bits : {0, 16}) {
+    SCOPED_TRACE(::testing::Message() << "normal_bits " << bits);
+    const auto t = build_point_octree(pts, {.leaf_size = 1u << 20, .normal_bits = bits});
+    ASSERT_EQ(t.nodes().size(), 1u);
+    const auto& root = t.at(0);
+    const double f = std::sqrt(x * x / l1 + y * y / l2);
+    // Quantised (16 bits), the stored axes turn by up to a few tenths of a degree, which moves
+    // f by per cents (the corner's y grows by x·θ): the lengths are checked unquantised, the
+    // ratio (λ's only, computed before quantisation) and the directions both ways.
+    if (bits == 0) {
+      EXPECT_NEAR(root.axis_u.norm(), f * std::sqrt(l1), 2e-5 * f * std::sqrt(l1));
+      EXPECT_NEAR(root.axis_v.norm(), f * std::sqrt(l2), 2e-5 * f * std::sqrt(l1));
+    }
+    EXPECT_NEAR(root.axis_u.norm() / root.axis_v.norm(), std::sqrt(l1 / l2), 1e-4);
+    const double cos_tol = bits ? 1e-4 : 1e-6;  // 0.8° and 0.08°
+    EXPECT_GT(std::abs(root.axis_u.cast<double>().normalized().dot(patch.d1)), 1 - cos_tol);
+    EXPECT_GT(std::abs(root.axis_v.cast<double>().normalized().dot(patch.d2)), 1 - cos_tol);
+    EXPECT_GT(std::abs(root.normal.cast<double>().dot(patch.n)), 1 - cos_tol);
+    EXPECT_FALSE(t.is_circle(0));
+    EXPECT_EQ(t.stats().circle_fallbacks, 0u);
+
+    const auto paper = build_point_octree(
+        pts,
+        {.leaf_size = 1u << 20, .axis_rule = ellipse_axis_rule::eigenvalue, .normal_bits = bits});
+    const double r = std::hypot(x, y);
+    EXPECT_NEAR(paper.at(0).axis_u.norm(), r, 1e-4 * r);
+    EXPECT_NEAR(paper.at(0).axis_v.norm(), r, 1e-4 * r);
+    EXPECT_TRUE(paper.is_circle(0));
+    EXPECT_EQ(paper.stats().circle_fallbacks, 1u);
+  }
+}
+
+// The same patch in a deep tree (leaf size 8): the root's ellipse covers its children's, so f is
+// larger, but its axes still follow the patch and their ratio is still √(λ₁/λ₂) ≈ 3.93 — a
+// builder that always drew circles (ratio 1) or swapped the axes fails here. Every node is then
+// checked against reference_ellipse().
+TEST(PointOctree, EllipsesFollowTheCovarianceAtEveryLevel) {
+  const stretched_patch patch;
+  const auto t = build_point_octree(patch.points(), {.leaf_size = 8, .normal_bits = 0});
+  const auto& root = t.at(0);
+  EXPECT_FALSE(t.is_leaf(0));
+  EXPECT_NEAR(root.axis_u.norm() / root.axis_v.norm(), std::sqrt(patch.lambda1() / patch.lambda2()),
+              1e-4);
+  EXPECT_GT(std::abs(root.axis_u.cast<double>().normalized().dot(patch.d1)), 1 - 1e-6);
+  const auto c = check_ellipse_shapes(t, ellipse_axis_rule::sqrt_eigenvalue);
+  std::printf("patch: %zu nodes, %zu ellipses, %zu circles, %zu near ties\n", t.nodes().size(),
+              c.ellipses, c.predicted_circles, c.ties);
+  EXPECT_GT(c.ellipses, t.nodes().size() / 2);
+  EXPECT_EQ(t.stats().circle_fallbacks, c.stored_circles);
+}
+
+// circle_fallbacks on a crafted input where the answer is known: eight clusters at the corners
+// of a 40 × 10 × 10 box, one leaf each (16 samples, leaf size 16; the root's mean is the box's
+// centre, so each cluster is alone in its octant). Four are "bars" — a 4 × 4 grid 3 × 0.3 — whose
+// EQ 5–6 ellipse (f² = 3.6, a·b = 0.45 < r² = 2.27) is kept; four are "crosses" — 7 samples at
+// (±1, 0), 1 at (0, ±1) — whose ellipse, elongated along x (λ₁ = 7/8, λ₂ = 1/8), must stretch to
+// reach (0, ±1): f² = 1/λ₂ = 8, a = f·√λ₁ = √7 ≈ 2.65 > 2r = 2 and a·b = √7 > r² = 1, so the
+// bounding circle replaces it. The root (a 4:1
+// spread of clusters) keeps its ellipse. So: exactly the four cross leaves fall back, and the
+// count survives save() and load().
+TEST(PointOctree, CircleFallbacksMatchTheRuleOnACraftedInput) {
+  point_set<disk_in> pts;
+  std::vector<vec3d> cross_centres;
+  int corner = 0;
+  for (const double cx : {-20.0, 20.0})
+    for (const double cy : {-5.0, 5.0})
+      for (const double cz : {-5.0, 5.0}) {
+        const bool cross = (corner++ % 2) == 0;
+        std::vector<vec3d> local;
+        if (cross) {
+          cross_centres.emplace_back(cx, cy, cz);
+          for (int k = 0; k < 7; ++k) local.emplace_back(-1, 0, 0);
+          for (int k = 0; k < 7; ++k) local.emplace_back(1, 0, 0);
+          local.emplace_back(0, 1, 0);
+          local.emplace_back(0, -1, 0);
+        } else {
+          for (const double x : {-1.5, -0.5, 0.5, 1.5})
+            for (const double y : {-0.15, -0.05, 0.05, 0.15}) local.emplace_back(x, y, 0);
+        }
+        for (const vec3d& p : local) {
+          pts.positions.push_back((vec3d(cx, cy, cz) + p).cast<float>());
+          pts.normals.emplace_back(0.0f, 0.0f, 1.0f);
+          pts.axis_u.emplace_back(0.01f, 0.0f, 0.0f);
+          pts.axis_v.emplace_back(0.0f, 0.01f, 0.0f);
+        }
+      }
+  const auto t = build_point_octree(pts, {.leaf_size = 16, .normal_bits = 0});
+  ASSERT_EQ(t.nodes().size(), 9u);
+  std::size_t cross_leaves = 0;
+  for (std::uint32_t n = 1; n < 9; ++n) {
+    ASSERT_TRUE(t.is_leaf(n));
+    const vec3d c = t.at(n).centre.cast<double>();
+    const bool cross = std::any_of(cross_centres.begin(), cross_centres.end(),
+                                   [&](const vec3d& q) { return (q - c).norm() < 1e-3; });
+    cross_leaves += cross;
+    EXPECT_EQ(t.is_circle(n), cross) << "leaf " << n << " at " << c.transpose();
+  }
+  EXPECT_EQ(cross_leaves, 4u);
+  EXPECT_FALSE(t.is_circle(0));
+  EXPECT_EQ(t.stats().circle_fallbacks, 4u);
+  // The brute-force rule agrees node by node, with no near ties on this input.
+  const auto c = check_ellipse_shapes(t, ellipse_axis_rule::sqrt_eigenvalue);
+  EXPECT_EQ(c.predicted_circles, 4u);
+  EXPECT_EQ(c.ties, 0u);
+  // A loaded file has no timings, but the count is recomputed from its nodes.
+  const auto path = std::filesystem::temp_directory_path() / "pbr_lod_octree_fallbacks.lod";
+  t.save(path.string());
+  const auto back = octree_d::load(path.string());
+  std::filesystem::remove(path);
+  EXPECT_FALSE(back.stats().has_timings);
+  EXPECT_EQ(back.stats().circle_fallbacks, 4u);
+}
+
+// On the demo scene (curved, coloured, estimated ellipses; both axis rules): every node's
+// ellipse is the brute-force one, circle_fallbacks is the rule's count, and most nodes keep a
+// true ellipse (a builder that always drew circles fails the lengths and this count).
+TEST(PointOctree, EllipsesAndFallbacksOnTheDemoSceneMatchBruteForce) {
+  const auto pts = demo_points(20000, 5);
+  for (const auto rule : {ellipse_axis_rule::sqrt_eigenvalue, ellipse_axis_rule::eigenvalue}) {
+    const auto t = build_point_octree(pts, {.axis_rule = rule, .normal_bits = 0});
+    const auto c = check_ellipse_shapes(t, rule);
+    std::printf("demo scene, rule %d: %zu nodes, %zu ellipses, %zu circles (stats %zu), %zu ties\n",
+                static_cast<int>(rule), t.nodes().size(), c.ellipses, c.predicted_circles,
+                t.stats().circle_fallbacks, c.ties);
+    // With a' = λ a one-sample leaf is an exact tie: its corners (±|u|, ±|v|) and λᵢ = |·|²/4
+    // give f²·a'·b' = |u|² + |v|² = r², so rounding decides between ellipse and circle (with
+    // a' = √λ the same leaf gives 2|u||v| < r²: a clear ellipse).
+    std::size_t single = 0;
+    for (const auto& nd : t.nodes()) single += nd.leaf && nd.count == 1;
+    EXPECT_LE(c.ties,
+              t.nodes().size() / 100 + (rule == ellipse_axis_rule::eigenvalue ? single : 0));
+    EXPECT_LE(t.stats().circle_fallbacks, c.predicted_circles + c.ties);
+    EXPECT_GE(t.stats().circle_fallbacks, c.predicted_circles);
+    EXPECT_EQ(t.stats().circle_fallbacks, c.stored_circles);
+    // The paper's a' = λ is more elongated, so its guard fires far more often (see the docs).
+    EXPECT_GT(c.ellipses, t.nodes().size() / (rule == ellipse_axis_rule::sqrt_eigenvalue ? 2 : 10));
+  }
+}
+
 using recording_policy = test::recording_policy<point_octree_policy>;
 
 /// Pajarola §6, Fig. 11, computed in double from the node's stored geometry and the camera alone

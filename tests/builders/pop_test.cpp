@@ -1118,5 +1118,177 @@ TEST(PopRender, SilhouetteRuleDrawsTriangles) {
   EXPECT_LT(sb.points, sa.points);
 }
 
+// ---- §3.4 visibility splatting with its first pass --------------------------------------------
+
+/// 128×128, eye at (0, 0, 4) looking at the origin, 40° field of view: a point (x, y, z) lands at
+/// pixel column 64 + f·x/(4 − z), row 64 − f·y/(4 − z), with f = 64 / tan 20° ≈ 175.84 px.
+camera axis_camera() {
+  camera c;
+  c.eye = vec3d(0, 0, 4);
+  c.target = vec3d::Zero();
+  c.up = vec3d::UnitY();
+  c.fovy_degrees = 40;
+  c.vp = {128, 128};
+  return c;
+}
+constexpr rgb8 red{255, 0, 0}, green{0, 255, 0}, blue{0, 0, 255}, black{0, 0, 0};
+constexpr attributes colours_only{.colour = true};
+
+/// The blue back wall of the scenes below: two triangles at z = −2 (depth 6), ±4 wide — at 6 from
+/// the eye that is ±117 px, past every edge of the image.
+template <attributes A>
+void back_wall(rasterizer<A>& r) {
+  const vec3f a(-4, -4, -2), b(4, -4, -2), c(4, 4, -2), d(-4, 4, -2);
+  for (const auto& tri : {std::array<vec3f, 3>{a, b, c}, std::array<vec3f, 3>{a, c, d}}) {
+    triangle_prim<A> t{tri};
+    t.colour = {blue, blue, blue};
+    r.triangle(t);
+  }
+}
+
+// By hand: one occluder of 9 px about the image centre (pushed back to z = −0.1, as
+// pop_point_mode::visibility_two_pass does), its red one-pixel point at the origin, a green
+// point behind it at (0.05, 0, −1) — column 64 + 175.84·0.05/5 = 65.76, so pixel (65, 64) — and
+// the blue wall. The square covers the pixel centres 59.5..67.5: pixels 59..67 on both axes.
+// There, everything but the red point is hidden: the pixels are holes (background, no depth),
+// the green point included; just outside, the wall. Without the occluder, the wall and the green
+// point show. Drawn in two orders: the result does not depend on when the occluder comes.
+TEST(PopRender, FirstPassOccluderByHand) {
+  const view v(axis_camera(), vec3d::Zero());
+  const render_options ro{.fx = {.colour = true}, .background = black};
+  const auto draw = [&](bool occluder, bool occluder_last) {
+    rasterizer<colours_only> r(v, ro);
+    if (occluder && !occluder_last) r.occluder({vec3f(0, 0, -0.1f), 9});
+    back_wall(r);
+    point_prim<colours_only> p{vec3f(0, 0, 0), 1};
+    p.colour = red;
+    r.point(p);
+    point_prim<colours_only> g{vec3f(0.05f, 0, -1), 1};
+    g.colour = green;
+    r.point(g);
+    if (occluder && occluder_last) r.occluder({vec3f(0, 0, -0.1f), 9});
+    return r.finish();
+  };
+  const image with = draw(true, false), without = draw(false, false);
+  EXPECT_TRUE(with == draw(true, true));
+  EXPECT_EQ(without.at(64, 64), red);
+  EXPECT_EQ(without.at(65, 64), green);
+  EXPECT_EQ(without.at(60, 60), blue);
+  EXPECT_EQ(with.at(64, 64), red);
+  EXPECT_FLOAT_EQ(with.depth[with.index(64, 64)], 4.0f);
+  for (int y = 59; y <= 67; ++y)
+    for (int x = 59; x <= 67; ++x) {
+      if (x == 64 && y == 64) continue;
+      EXPECT_EQ(with.at(x, y), black) << x << "," << y;
+      EXPECT_FALSE(with.covered(x, y)) << x << "," << y;
+    }
+  for (const auto& [x, y] : {std::pair{58, 64}, std::pair{68, 64}, std::pair{64, 58},
+                             std::pair{64, 68}, std::pair{2, 2}}) {
+    EXPECT_EQ(with.at(x, y), blue) << x << "," << y;
+    EXPECT_NEAR(with.depth[with.index(x, y)], 6.0f, 1e-4f) << x << "," << y;
+  }
+}
+
+/// A red 64 × 64 grid of squares on z = 0, x, y ∈ [−1, 1] (pixels 20..107 from axis_camera()),
+/// in front of the blue wall of back_wall() — one mesh, so POP builds one tree of both.
+triangle_mesh hole_scene() {
+  triangle_mesh m;
+  const int n = 64;
+  const auto id = [n](int x, int y) { return static_cast<std::uint32_t>(y * (n + 1) + x); };
+  for (int y = 0; y <= n; ++y)
+    for (int x = 0; x <= n; ++x) {
+      m.vertices.positions.emplace_back(2.0f * x / n - 1, 2.0f * y / n - 1, 0.0f);
+      m.vertices.colours.push_back(red);
+    }
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      m.faces.push_back({id(x, y), id(x + 1, y), id(x + 1, y + 1)});
+      m.faces.push_back({id(x, y), id(x + 1, y + 1), id(x, y + 1)});
+    }
+  const auto w = static_cast<std::uint32_t>(m.vertices.positions.size());
+  for (const auto& [x, y] : std::array<std::pair<float, float>, 4>{
+           {{-4.0f, -4.0f}, {4.0f, -4.0f}, {4.0f, 4.0f}, {-4.0f, 4.0f}}}) {
+    m.vertices.positions.emplace_back(x, y, -2.0f);
+    m.vertices.colours.push_back(blue);
+  }
+  m.faces.push_back({w, w + 1, w + 2});
+  m.faces.push_back({w, w + 2, w + 3});
+  return m;
+}
+
+// §3.4 on a scene: at threshold 8 px the red grid's cut nodes are points a few pixels apart.
+// One-pixel points alone (pop_point_mode::visibility) leave gaps through which the blue wall
+// shows, and hole filling cannot repair them (they are covered). With the paper's first pass
+// (visibility_two_pass) no wall pixel survives inside the grid's square: each is a red point or
+// a hole; the same red points are drawn (the occluders lie behind the flat grid), and hole
+// filling with the threshold as radius (the paper's uniform filter) turns the holes red. The
+// wall outside the grid is drawn in both modes.
+TEST(PopRender, VisibilityTwoPassHidesTheSurfaceBehindTheGaps) {
+  const auto t = build_pop<with_normals_colours>(hole_scene());
+  const view v(axis_camera(), t.origin());
+  const traverse_options o{.tolerance_px = 8};
+  const auto frame = [&](pop_point_mode mode, bool holes) {
+    pop_policy pol;
+    pol.points = mode;
+    render_options ro{.fx = {.colour = true, .hole_filling = holes}, .background = black};
+    ro.hole_filling_radius = 8;
+    return render<with_normals_colours>(v, ro, [&](auto& sink) { traverse(t, v, o, sink, pol); });
+  };
+  struct tally {
+    std::size_t red = 0, blue = 0, holes = 0, other = 0;
+  };
+  // Inside the grid's square (pixels 20..107), 8 px (the filter's radius) in from its edges.
+  const auto count = [](const image& img) {
+    tally c;
+    for (int y = 28; y <= 99; ++y)
+      for (int x = 28; x <= 99; ++x) {
+        const rgb8 p = img.at(x, y);
+        if (p == red)
+          ++c.red;
+        else if (p == blue)
+          ++c.blue;
+        else if (p == black && !img.covered(x, y))
+          ++c.holes;
+        else
+          ++c.other;
+      }
+    return c;
+  };
+  const image one = frame(pop_point_mode::visibility, false);
+  const image two = frame(pop_point_mode::visibility_two_pass, false);
+  const image one_filled = frame(pop_point_mode::visibility, true);
+  const image two_filled = frame(pop_point_mode::visibility_two_pass, true);
+  const tally a = count(one), b = count(two), af = count(one_filled), bf = count(two_filled);
+  std::printf(
+      "72x72 px inside the grid: one pass %zu red, %zu wall; two passes %zu red, %zu holes, %zu "
+      "wall; filled: one pass %zu wall, two passes %zu red, %zu holes, %zu wall\n",
+      a.red, a.blue, b.red, b.holes, b.blue, af.blue, bf.red, bf.holes, bf.blue);
+  EXPECT_GT(a.blue, 72u * 72u / 4) << "the scene should show the wall through the gaps";
+  EXPECT_EQ(a.red + a.blue, 72u * 72u);
+  EXPECT_EQ(b.blue, 0u) << "the wall shows through the gaps despite the first pass";
+  EXPECT_EQ(b.other, 0u);
+  EXPECT_EQ(b.red, a.red);
+  EXPECT_EQ(b.red + b.holes, 72u * 72u);
+  EXPECT_GT(af.blue, 0u);
+  EXPECT_EQ(bf.blue, 0u);
+  EXPECT_EQ(bf.red, 72u * 72u);
+  // The wall beyond the grid (pixel (4, 64): x = −60/175.84·6 ≈ −2.0 on the wall) in every mode.
+  for (const image* img : {&one, &two, &one_filled, &two_filled}) {
+    EXPECT_EQ(img->at(4, 64), blue);
+    EXPECT_NEAR(img->depth[img->index(4, 64)], 6.0f, 1e-4f);
+  }
+  // Costs nothing when off: simplified and one-pass visibility send no occluder; the two-pass
+  // mode one per point.
+  for (const auto mode : {pop_point_mode::simplified, pop_point_mode::visibility,
+                          pop_point_mode::visibility_two_pass}) {
+    pop_policy pol;
+    pol.points = mode;
+    counting_sink<with_normals_colours> c;
+    traverse(t, v, o, c, pol);
+    EXPECT_GT(c.points, 500u);
+    EXPECT_EQ(c.occluders, mode == pop_point_mode::visibility_two_pass ? c.points : 0u);
+  }
+}
+
 }  // namespace
 }  // namespace pbr_lod

@@ -109,7 +109,10 @@ struct point_octree_build_stats {
   std::size_t input_points = 0;
   std::size_t nodes = 0, leaves = 0, max_depth = 0;
   bool estimated_normals = false, estimated_ellipses = false;
-  /// Nodes whose fitted ellipse was replaced by the corners' bounding circle (see fit guard).
+  /// Nodes drawn with the bounding circle of their corners (point_octree::is_circle): where
+  /// fit_ellipse's guard replaced the EQ 5–6 ellipse, and where the tangent covariance is round
+  /// (λ₁ = λ₂), whose EQ 5–6 ellipse is that circle. Counted on the stored nodes, so a loaded
+  /// file reports the same number as the build that wrote it.
   std::size_t circle_fallbacks = 0;
 };
 
@@ -224,6 +227,22 @@ class point_octree {
     return {nd.centre, nd.normal, nd.axis_u, nd.axis_v};
   }
   [[nodiscard]] int normal_bits() const { return normal_bits_; }
+  /// Whether node n's bounding ellipse is a circle (its axes equal to 10⁻⁶; the stored vectors
+  /// differ in length by the rounding of unit e₁ and n × e₁ only): fit_ellipse()'s guard replaced
+  /// the EQ 5–6 ellipse by the corners' bounding circle, or the tangent covariance is round
+  /// (λ₁ = λ₂ to ≈ 10⁻⁶: a one-sample leaf with a circular disk, a symmetric grid), when the
+  /// EQ 5–6 ellipse scaled to the farthest corner is that same circle and rounding alone decides
+  /// whether the guard fires.
+  [[nodiscard]] bool is_circle(node_id n) const {
+    const float a = nodes_[n].axis_u.norm(), b = nodes_[n].axis_v.norm();
+    return std::abs(a - b) <= 1e-6f * std::max(a, b);
+  }
+  /// The number of nodes for which is_circle() holds (stats().circle_fallbacks).
+  [[nodiscard]] std::size_t count_circles() const {
+    std::size_t c = 0;
+    for (node_id n = 0; n < nodes_.size(); ++n) c += is_circle(n) ? 1 : 0;
+    return c;
+  }
 
   /// What LOD selection (§6) needs of a node beyond its geometry, derived once after build and
   /// load so the per-frame test needs no trigonometry: the disk's area A_e = π·a·b and the

@@ -63,6 +63,7 @@
 #include "pbr_lod/core/triangle_mesh.hpp"
 #include "pbr_lod/traverse/coherent.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
+#include "pbr_lod/traverse/sink.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 
 namespace pbr_lod {
@@ -330,7 +331,18 @@ template <attributes A>
 /// How inner nodes are drawn when their splat is within the threshold (§3.4).
 enum class pop_point_mode {
   simplified,  ///< a constant-colour square of the splat size (QSplat's simplified splatting)
-  visibility,  ///< a one-pixel point; render with effects::hole_filling, radius = threshold
+  /// A one-pixel point only; render with effects::hole_filling, radius = threshold. Without a
+  /// first pass a surface behind the gaps between the points shows through them, and the hole
+  /// filling cannot repair those pixels (they are covered).
+  visibility,
+  /// §3.4 as the paper does it: each point node drawn twice, first at its full splat size in the
+  /// background colour (an occluder_prim: hides what lies behind, leaves a hole), then as a
+  /// one-pixel point in its own colour; leaves' triangles once. Render with
+  /// effects::hole_filling (radius = threshold) to reconstruct the holes. The occluder is pushed
+  /// back along its view ray by the node's radius, so it hides neither its own point nor its
+  /// neighbours' on a tilted surface (Surfel visibility splatting's ε). Sinks that do not take
+  /// occluders (OccluderSink) get the one-pixel points alone, as with `visibility`.
+  visibility_two_pass,
 };
 
 /// POP's RENDER (§3.2) as a traversal policy: the screen size is the splat size under
@@ -364,9 +376,20 @@ struct pop_policy : default_policy {
         return;
       }
     }
-    const float size =
-        points == pop_point_mode::visibility ? 1.0f : std::max(1.0f, std::min(size_px, 1e4f));
-    h.emit_point(n, size, sink);
+    const float splat = std::max(1.0f, std::min(size_px, 1e4f));
+    if (points == pop_point_mode::simplified) {
+      h.emit_point(n, splat, sink);
+      return;
+    }
+    if constexpr (OccluderSink<S>) {
+      if (points == pop_point_mode::visibility_two_pass) {
+        const sphere b = h.bounding_sphere(n);
+        const vec3f d = b.centre - v.eye;
+        const float len = d.norm();
+        sink.occluder({len > 0 ? vec3f(b.centre + d * (b.radius / len)) : b.centre, splat});
+      }
+    }
+    h.emit_point(n, 1.0f, sink);
   }
 };
 

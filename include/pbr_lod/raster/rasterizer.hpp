@@ -156,6 +156,33 @@ class rasterizer {
                           });
   }
 
+  /// An occluder (traverse/primitives.hpp; POP §3.4's first pass): a square like point()'s in the
+  /// background colour. Where it is front-most it hides what lies behind; finish() then makes the
+  /// pixel a hole (background colour, no depth) before shadows and hole filling, so the filter
+  /// reconstructs it from the surface's points. The order of occluders and primitives does not
+  /// matter: the nearest occluder depth per pixel is kept apart (allocated by the first occluder,
+  /// so frames without occluders have no extra buffer and no extra pass). Ignored with blending.
+  void occluder(const occluder_prim& o) {
+    if constexpr (fx.blending) return;
+    const vec3f d = o.position - proj_.eye;
+    const float z = d.dot(proj_.forward);
+    if (!(z >= proj_.w_near)) return;
+    const float key = 1.0f / z;
+    const float sx = proj_.cx + d.dot(proj_.right_px) * key;
+    const float sy = proj_.cy - d.dot(proj_.up_px) * key;
+    if (occluder_key_.empty()) occluder_key_.assign(key_.size(), proj_.key_far);
+    const std::uint32_t bg = detail::pack(opt_.background);
+    const auto write = [this, bg](std::size_t i, float k) {
+      occluder_key_[i] = std::max(occluder_key_[i], k);
+      if (k > kb_[i]) {
+        kb_[i] = k;
+        cb_[i] = bg;
+        if constexpr (kLitBuffer) lb_[i] = 1.0f;
+      }
+    };
+    detail::raster_square(view_.width, view_.height, sx, sy, o.size_px, key, write);
+  }
+
   /// The ellipse centre ± u ± v (u, v orthogonal semi-axes), projected exactly.
   void splat(const splat_prim<A>& s) {
     if constexpr (fx.blending) {
@@ -217,6 +244,7 @@ class rasterizer {
   /// filling) and returns the image. Call once; the rasteriser is empty afterwards.
   [[nodiscard]] image finish() {
     if constexpr (fx.blending) normalise_blend();
+    if (!occluder_key_.empty()) occluded_to_holes();
     image img;
     img.width = view_.width;
     img.height = view_.height;
@@ -230,6 +258,7 @@ class rasterizer {
     key_.clear();
     colour_.clear();
     lit_.clear();
+    occluder_key_.clear();
     if constexpr (fx.blending) blend_ = {};
     return img;
   }
@@ -440,6 +469,17 @@ class rasterizer {
         });
   }
 
+  /// Pixels where an occluder is still the front-most thing drawn (nothing nearer wrote a larger
+  /// key) become holes: background colour, no depth.
+  void occluded_to_holes() {
+    const std::uint32_t bg = detail::pack(opt_.background);
+    for (std::size_t i = 0; i < key_.size(); ++i)
+      if (occluder_key_[i] > proj_.key_far && !(key_[i] > occluder_key_[i])) {
+        key_[i] = proj_.key_far;
+        colour_[i] = bg;
+      }
+  }
+
   /// colour = Σ w·colour / Σ w, normal = Σ w·n shaded per pixel, depth = front-most fragment,
   /// over the fragments facing the eye, or where there are none, those facing away.
   /// Pixels no weighted fragment reached keep the visibility pass's colour and depth.
@@ -472,6 +512,7 @@ class rasterizer {
   std::vector<float> key_;             ///< depth key 1/z per pixel; key_far = empty
   std::vector<std::uint32_t> colour_;  ///< packed final colour, or albedo with shadows
   std::vector<float> lit_;             ///< Lambert factor per pixel (shadows + shading only)
+  std::vector<float> occluder_key_;    ///< nearest occluder key per pixel; empty: no occluder
   float* kb_ = nullptr;                // raw views of the buffers for the inner loops
   std::uint32_t* cb_ = nullptr;
   float* lb_ = nullptr;
@@ -483,6 +524,7 @@ class rasterizer {
 };
 
 static_assert(Sink<rasterizer<positions_only>, positions_only>);
+static_assert(OccluderSink<rasterizer<positions_only>>);
 static_assert(Sink<rasterizer<all_attributes, all_effects>, all_attributes>);
 
 namespace detail {

@@ -32,6 +32,17 @@ struct splat_prim {
   [[no_unique_address]] detail::maybe<A.colour, rgb8, 1> colour{};
 };
 
+/// An occluder: a square of size_px pixels about the projection of `position` that hides what
+/// lies behind it but is no surface itself — POP's first pass of visibility splatting (Chen &
+/// Nguyen 2001 §3.4: each point drawn at full splat size in the background colour, then as one
+/// pixel in its own colour). The rasteriser writes its depth and the background colour; where an
+/// occluder stays front-most the pixel is a hole (background, no depth) for the hole filling.
+/// Sent only to sinks that take it (OccluderSink in sink.hpp); it carries no attributes.
+struct occluder_prim {
+  vec3f position;
+  float size_px = 1;
+};
+
 /// A triangle, counter-clockwise seen from its front, with per-vertex normal and colour.
 template <attributes A>
 struct triangle_prim {

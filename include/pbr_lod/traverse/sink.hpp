@@ -25,13 +25,23 @@ concept Sink = requires(S& s, const point_prim<A>& p, const splat_prim<A>& q,
   s.triangle(t);
 };
 
+/// A sink that also takes occluders (occluder_prim: the first pass of POP's visibility
+/// splatting). Optional: an emitter sends occluders only to sinks that model this; the others
+/// draw the frame without them.
+template <class S>
+concept OccluderSink = requires(S& s, const occluder_prim& o) {
+  s.occluder(o);
+};
+
 /// Counts primitives by kind; the cheapest sink (for traversal benchmarks and cut statistics).
 template <attributes A>
 struct counting_sink {
   std::size_t points = 0, splats = 0, triangles = 0;
+  std::size_t occluders = 0;  ///< not primitives of the surface: not in total()
   void point(const point_prim<A>&) { ++points; }
   void splat(const splat_prim<A>&) { ++splats; }
   void triangle(const triangle_prim<A>&) { ++triangles; }
+  void occluder(const occluder_prim&) { ++occluders; }
   [[nodiscard]] std::size_t total() const { return points + splats + triangles; }
 };
 
@@ -43,6 +53,7 @@ struct buffer_sink {
   std::vector<point_prim<A>> points;
   std::vector<splat_prim<A>> splats;
   std::vector<triangle_prim<A>> triangles;
+  std::vector<occluder_prim> occluders;
 
   void point(const point_prim<A>& p) {
     points.push_back(p);
@@ -56,19 +67,28 @@ struct buffer_sink {
     triangles.push_back(t);
     note(kind::triangle);
   }
+  void occluder(const occluder_prim& o) {
+    occluders.push_back(o);
+    note(kind::occluder);
+  }
   void clear() {
     points.clear();
     splats.clear();
     triangles.clear();
+    occluders.clear();
     runs_.clear();
   }
   /// Replays the buffered primitives into another sink (e.g. the rasteriser), in the order they
-  /// were received.
+  /// were received; occluders only to a sink that takes them (OccluderSink).
   template <Sink<A> S>
   void replay(S& s) const {
-    std::size_t ip = 0, is = 0, it = 0;
+    std::size_t ip = 0, is = 0, it = 0, io = 0;
     for (const run& r : runs_) {
       switch (r.what) {
+        case kind::occluder:
+          for (const std::size_t e = std::min(io + r.count, occluders.size()); io < e; ++io)
+            if constexpr (OccluderSink<S>) s.occluder(occluders[io]);
+          break;
         case kind::point:
           for (const std::size_t e = std::min(ip + r.count, points.size()); ip < e; ++ip)
             s.point(points[ip]);
@@ -87,12 +107,14 @@ struct buffer_sink {
     for (; ip < points.size(); ++ip) s.point(points[ip]);
     for (; is < splats.size(); ++is) s.splat(splats[is]);
     for (; it < triangles.size(); ++it) s.triangle(triangles[it]);
+    if constexpr (OccluderSink<S>)
+      for (; io < occluders.size(); ++io) s.occluder(occluders[io]);
   }
 
  private:
   // The order as runs of one kind: a traversal emits long runs (a node's splats, a leaf's
   // triangles), so this costs a few bytes a frame, not a byte a primitive.
-  enum class kind : unsigned char { point, splat, triangle };
+  enum class kind : unsigned char { point, splat, triangle, occluder };
   struct run {
     kind what;
     std::size_t count;

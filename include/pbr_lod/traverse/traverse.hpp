@@ -123,6 +123,8 @@ struct counting_forwarder {
     ++triangles;
     inner.triangle(t);
   }
+  /// Occluders pass through to a sink that takes them (not counted: they are not primitives).
+  void occluder(const occluder_prim& o) requires OccluderSink<S> { inner.occluder(o); }
 };
 }  // namespace detail
 

@@ -126,7 +126,6 @@ struct point_octree_builder {
   std::thread::id caller = std::this_thread::get_id();  // the only thread that calls progress
   std::atomic<std::size_t> done{0};
   std::atomic<bool> cancel{false};
-  mutable std::atomic<std::size_t> circle_fallbacks{0};
 
   point_octree_builder(point_set<A>& pts, std::vector<typename tree::orientation_code>* codes,
                        const point_octree_options& o, const normal_quantizer* quant,
@@ -365,10 +364,8 @@ struct point_octree_builder {
     // from the origin) its major axis can reach 1000·r through the minor-axis floor and compound
     // level by level. Keep the ellipse only if its area is smaller and a ≤ 2r.
     const double rc = std::sqrt(r2) * (1 + 1e-5);
-    if (!(fa * fb < rc * rc && fa <= 2 * rc) || !std::isfinite(fb)) {
-      fa = fb = rc;
-      circle_fallbacks.fetch_add(1, std::memory_order_relaxed);
-    }
+    // (Counted afterwards on the stored nodes: point_octree::is_circle.)
+    if (!(fa * fb < rc * rc && fa <= 2 * rc) || !std::isfinite(fb)) fa = fb = rc;
     const auto a = static_cast<float>(fa), b = static_cast<float>(fb);
     nd.axis_u = e1 * a;
     nd.axis_v = e2 * b;
@@ -857,7 +854,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   out.sample_codes_ = std::move(work_codes);
   out.derive_selection(threads);
   st.tree_seconds = std::chrono::duration<double>(clock::now() - t1).count();
-  st.circle_fallbacks = b.circle_fallbacks.load();
+  st.circle_fallbacks = out.count_circles();
   st.nodes = out.nodes_.size();
   for (const auto& nd : out.nodes_) {
     st.leaves += nd.leaf;

@@ -187,6 +187,7 @@ struct point_octree_io {
     validate_tree(t, path);
     t.derive_selection();
     t.stats_.nodes = n_nodes;
+    t.stats_.circle_fallbacks = t.count_circles();
     for (const auto& nd : t.nodes_) {
       t.stats_.leaves += nd.leaf;
       t.stats_.max_depth = std::max<std::size_t>(t.stats_.max_depth, nd.depth);
