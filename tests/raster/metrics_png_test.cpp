@@ -251,7 +251,7 @@ TEST(Metrics, HausdorffSelfAndTranslated) {
 // Distances that differ from point to point, so max and mean are different numbers and the two
 // directions differ: b is a jittered, thinned copy of a plus one far outlier. Checked against a
 // brute-force nearest neighbour over all pairs (216 × ~110 points).
-TEST(Metrics, HausdorffMatchesBruteForce) {
+TEST(Metrics, HausdorffWithAnOutlierMatchesBruteForce) {
   const point_cloud a = grid_cloud(vec3d::Zero());
   point_cloud b;
   std::mt19937 rng(4);
@@ -296,7 +296,7 @@ TEST(Metrics, HausdorffAcrossOrigins) {
 // The indexed overload against a brute-force O(n·m) loop over every pair: random sets of
 // different sizes (seeded; any data will do — the answer is defined pair by pair), computed on
 // 1 and on 3 threads, which must agree exactly (fixed chunks, summed in order).
-TEST(Metrics, HausdorffMatchesBruteForce) {
+TEST(Metrics, IndexedHausdorffMatchesBruteForce) {
   std::mt19937 rng(42);
   std::uniform_real_distribution<float> u(-1, 1);
   std::vector<vec3f> a(700), b(450);
