@@ -242,6 +242,9 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
   // The tree: breadth-first, every inner node's children contiguous right after the previous
   // inner node's, so [1, nodes) is partitioned exactly once (a tree, no cycles).
   std::uint64_t next = 1;
+  // The leaf table follows the nodes: its size is checked against the file before the leaf
+  // count sizes anything (a lying count of 2³² leaves must not allocate 4 GB; found by fuzz_pmr).
+  r.need(nleaves, leaf_bytes, "leaves");
   std::vector<unsigned char> leaf_used(nleaves, 0);
   for (std::uint32_t k = 0; k < nnodes; ++k) {
     const auto& n = d.nodes[k];
@@ -257,7 +260,6 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
   }
   if (next != nnodes) r.fail("nodes not reachable from the root");
 
-  r.need(nleaves, leaf_bytes, "leaves");
   d.leaf_list.resize(nleaves);
   std::uint64_t expect = 0;
   for (std::uint32_t l = 0; l < nleaves; ++l) {
