@@ -24,9 +24,10 @@ point_octree_options octree_options(const std::vector<std::string>& items, bool 
   o.axis_rule = m.choice("axes", "sqrt", {"sqrt", "eigenvalue"}) == "sqrt"
                     ? ellipse_axis_rule::sqrt_eigenvalue
                     : ellipse_axis_rule::eigenvalue;
+  o.circle_guard = m.flag("circle_guard", true);
   m.finish("point-octree",
            "leaf_size, max_depth, normal_bits, knn, knn_ellipses, viewpoint, threads, covariance, "
-           "axes");
+           "axes, circle_guard");
   o.progress = progress_callback("point-octree", on_terminal);
   return o;
 }

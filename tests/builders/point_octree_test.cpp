@@ -783,6 +783,53 @@ TEST(PointOctree, CircleFallbacksMatchTheRuleOnACraftedInput) {
   EXPECT_EQ(back.stats().circle_fallbacks, 4u);
 }
 
+// The same input with circle_guard = false keeps the paper's EQ 5–6 ellipse everywhere: no
+// circles, and each cross leaf's ellipse has the lengths worked out above, a = f·√λ₁ = √7 and
+// b = f·√λ₂ = 1 (to 2 %: the 0.01 disks add their corners and covariance), still covering
+// every corner.
+TEST(PointOctree, WithoutTheCircleGuardTheCrossesKeepTheirEllipses) {
+  point_set<disk_in> pts;
+  for (const double cx : {-20.0, 20.0})
+    for (const double cy : {-5.0, 5.0}) {
+      std::vector<vec3d> local;
+      for (int k = 0; k < 7; ++k) local.emplace_back(-1, 0, 0);
+      for (int k = 0; k < 7; ++k) local.emplace_back(1, 0, 0);
+      local.emplace_back(0, 1, 0);
+      local.emplace_back(0, -1, 0);
+      for (const vec3d& p : local) {
+        pts.positions.push_back((vec3d(cx, cy, 0) + p).cast<float>());
+        pts.normals.emplace_back(0.0f, 0.0f, 1.0f);
+        pts.axis_u.emplace_back(0.01f, 0.0f, 0.0f);
+        pts.axis_v.emplace_back(0.0f, 0.01f, 0.0f);
+      }
+    }
+  const auto guarded = build_point_octree(pts, {.leaf_size = 16, .normal_bits = 0});
+  EXPECT_EQ(guarded.stats().circle_fallbacks, 4u);
+  const auto t =
+      build_point_octree(pts, {.leaf_size = 16, .circle_guard = false, .normal_bits = 0});
+  ASSERT_EQ(t.nodes().size(), 5u);
+  EXPECT_EQ(t.stats().circle_fallbacks, 0u);
+  for (std::uint32_t n = 1; n < 5; ++n) {
+    ASSERT_TRUE(t.is_leaf(n));
+    EXPECT_FALSE(t.is_circle(n));
+    const auto& nd = t.at(n);
+    EXPECT_NEAR(nd.axis_u.norm(), std::sqrt(7.0), 0.02 * std::sqrt(7.0)) << "leaf " << n;
+    EXPECT_NEAR(nd.axis_v.norm(), 1.0, 0.02) << "leaf " << n;
+    EXPECT_GT(std::abs(nd.axis_u.normalized().x()), 0.999f) << "major axis along x";
+    // Every sample's disk corner inside the ellipse.
+    const vec3f e1 = nd.axis_u / nd.axis_u.squaredNorm(), e2 = nd.axis_v / nd.axis_v.squaredNorm();
+    for (std::uint32_t i = 0; i < pts.positions.size(); ++i) {
+      const vec3f d = pts.positions[i] - nd.centre;
+      if (d.norm() > 2) continue;  // another cluster
+      for (const float sx : {-1.0f, 1.0f})
+        for (const float sy : {-1.0f, 1.0f}) {
+          const vec3f c = d + sx * pts.axis_u[i] + sy * pts.axis_v[i];
+          EXPECT_LE(detail::squared(c.dot(e1)) + detail::squared(c.dot(e2)), 1.0f + 1e-5f);
+        }
+    }
+  }
+}
+
 // On the demo scene (curved, coloured, estimated ellipses; both axis rules): every node's
 // ellipse is the brute-force one, circle_fallbacks is the rule's count, and most nodes keep a
 // true ellipse (a builder that always drew circles fails the lengths and this count).

@@ -72,6 +72,11 @@ struct point_octree_options {
   std::uint32_t max_depth = 48;
   covariance_method covariance = covariance_method::stable;
   ellipse_axis_rule axis_rule = ellipse_axis_rule::sqrt_eigenvalue;
+  /// Ours, not the paper's: draw a node with its corners' bounding circle when that is smaller
+  /// than the scaled EQ 5–6 ellipse or the ellipse's major axis exceeds the circle's diameter.
+  /// false keeps the paper's ellipse wherever it is finite (both bound every child disk);
+  /// docs/point-octree.md measures the two.
+  bool circle_guard = true;
   /// Quantise normals and ellipse axes to this many bits (§5, Fig. 9); 0 keeps float vectors.
   /// 16 bits: worst error well under 1° (docs/normal-quantization.md).
   int normal_bits = 16;

@@ -365,7 +365,8 @@ struct point_octree_builder {
     // level by level. Keep the ellipse only if its area is smaller and a ≤ 2r.
     const double rc = std::sqrt(r2) * (1 + 1e-5);
     // (Counted afterwards on the stored nodes: point_octree::is_circle.)
-    if (!(fa * fb < rc * rc && fa <= 2 * rc) || !std::isfinite(fb)) fa = fb = rc;
+    const bool ellipse_wins = !opt.circle_guard || (fa * fb < rc * rc && fa <= 2 * rc);
+    if (!ellipse_wins || !std::isfinite(fa) || !std::isfinite(fb)) fa = fb = rc;
     const auto a = static_cast<float>(fa), b = static_cast<float>(fb);
     nd.axis_u = e1 * a;
     nd.axis_v = e2 * b;
