@@ -1118,6 +1118,53 @@ TEST(PopRender, SilhouetteRuleDrawsTriangles) {
   EXPECT_LT(sb.points, sa.points);
 }
 
+/// pop_policy that also logs each emitted node and the screen size the traversal gave it.
+struct logging_pop_policy : pop_policy {
+  std::vector<std::pair<std::uint32_t, float>>* log = nullptr;
+  template <class H, class S>
+  void emit(const H& h, const typename H::node_id& n, const view& v, float size_px,
+            const traverse_options& o, S& sink) const {
+    log->emplace_back(n, size_px);
+    pop_policy::emit(h, n, v, size_px, o, sink);
+  }
+};
+
+// Fig. 6's QSplat comparison (leaves_as_points): the same tree and the same cut, every node of
+// the cut — leaves included — one point at its centre of its screen size (at least a pixel, as
+// inner nodes in POP's own mode); no triangles.
+TEST(PopRender, QSplatModeDrawsTheSameCutAsPoints) {
+  const auto t = build_pop<with_normals>(real_meshes::get().bunny);
+  for (const double dist : {1.5, 6.0})
+    for (const float tol : {1.0f, 4.0f}) {
+      SCOPED_TRACE(testing::Message() << "distance " << dist << ", tolerance " << tol);
+      const view v(bunny_camera(t, 30, dist, 256), t.origin());
+      const traverse_options o{.tolerance_px = tol};
+      std::vector<std::pair<std::uint32_t, float>> pop_log, qs_log;
+      buffer_sink<with_normals> pop, qs;
+      logging_pop_policy plain, qsplat;
+      plain.log = &pop_log;
+      qsplat.log = &qs_log;
+      qsplat.leaves_as_points = true;
+      const auto sp = traverse(t, v, o, pop, plain);
+      const auto sq = traverse(t, v, o, qs, qsplat);
+      EXPECT_EQ(qs_log, pop_log);
+      EXPECT_EQ(sq.visited, sp.visited);
+      ASSERT_GT(sp.emitted_leaves, 0u);
+      EXPECT_TRUE(qs.triangles.empty());
+      EXPECT_FALSE(pop.triangles.empty());
+      ASSERT_EQ(qs.points.size(), qs_log.size());
+      std::size_t leaves = 0;
+      for (std::size_t k = 0; k < qs_log.size(); ++k) {
+        const auto [n, size] = qs_log[k];
+        leaves += t.is_leaf(n);
+        EXPECT_EQ(qs.points[k].position, t.at(n).centre) << "point " << k;
+        EXPECT_EQ(qs.points[k].size_px, std::max(1.0f, std::min(size, 1e4f))) << "point " << k;
+        EXPECT_EQ(qs.points[k].normal, t.at(n).normal) << "point " << k;
+      }
+      EXPECT_EQ(leaves, sp.emitted_leaves);
+    }
+}
+
 // ---- §3.4 visibility splatting with its first pass --------------------------------------------
 
 /// 128×128, eye at (0, 0, 4) looking at the origin, 40° field of view: a point (x, y, z) lands at

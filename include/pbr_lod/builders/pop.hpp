@@ -359,10 +359,19 @@ struct pop_policy : default_policy {
 
   float silhouette_cos = 0;  ///< 0: off; e.g. 0.1 (within ≈ 5.7° of perpendicular)
   pop_point_mode points = pop_point_mode::simplified;
+  /// QSplat (Rusinkiewicz & Levoy 2000), the all-points tree POP's Fig. 6 compares against: a
+  /// leaf draws a point of its splat size (at least one pixel) instead of its triangles. The
+  /// same tree and cut, so the two differ only in what a leaf draws (a POP leaf holds 1–4
+  /// triangles, about one vertex: §3.5's "about QSplat's size"). Silhouette rule off.
+  bool leaves_as_points = false;
 
   template <class H, class S>
   void emit(const H& h, const typename H::node_id& n, const view& v, float size_px,
             const traverse_options& /*o*/, S& sink) const {
+    if (leaves_as_points) {
+      h.emit_point(n, std::max(1.0f, std::min(size_px, 1e4f)), sink);
+      return;
+    }
     if (h.is_leaf(n)) {
       h.emit_triangles(n, sink);
       return;
