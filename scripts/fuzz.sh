@@ -9,7 +9,9 @@
 # Environment: PBR_LOD_DATA (the shared/data folder; default ../shared/data beside the checkout),
 # PBRLOD (a built pbrlod tool for the hierarchy seeds; default build/release/examples/pbrlod,
 # built with the normal GCC tree when missing), JOBS (parallel build jobs; default: cores),
-# PBR_LOD_CCACHE=0 to build without ccache.
+# PBR_LOD_CCACHE=0 to build without ccache, FUZZ_MAX_LEN (largest input in bytes; default 262144,
+# which every seed fits; long runs go several times faster at 4096, where the small seeds still
+# reach every parser and the large ones are cut short: docs/fuzzing.md).
 # The corpus folders keep what the fuzzer adds, so a second run starts where the first stopped.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -38,7 +40,8 @@ if [ ! -x "$pbrlod" ]; then
 fi
 bash fuzz/make_corpus.sh "$pbrlod" "$data" "$build/corpus"
 
-# -max_len: the largest seed (the PMR file, ~140 kB) must fit; larger inputs only slow the run.
+# -max_len: by default the largest seed (the PMR file, ~140 kB) fits; larger inputs only slow the
+# run.
 # -timeout: a single input taking longer than 10 s is a hang. -rss_limit_mb: a count in a file
 # that makes a reader allocate gigabytes is a finding (read.hpp: counts are checked first).
 failed=()
@@ -46,7 +49,8 @@ for t in "${targets[@]}"; do
   mkdir -p "$build/artifacts/$t"
   log="$build/artifacts/$t/last_run.log"
   if ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-    "$build/fuzz/$t" "$build/corpus/$t" -max_total_time="$seconds" -max_len=262144 \
+    "$build/fuzz/$t" "$build/corpus/$t" -max_total_time="$seconds" \
+    -max_len="${FUZZ_MAX_LEN:-262144}" \
     -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$build/artifacts/$t/" > "$log" 2>&1; then
     runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
