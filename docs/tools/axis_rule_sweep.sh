@@ -17,7 +17,7 @@ for in in bun_zipper happy_vrip_res3; do
     "$P" build --method point-octree --param axes=$a --param circle_guard=$g "$D/$in.ply" \
       -o "$lod" > /dev/null
     s=$("$P" stats --json "$lod" | python3 -c \
-      'import json,sys; j=json.load(sys.stdin); print(f"{j[\"circle_fallbacks\"]},{j[\"nodes\"]}")')
+      'import json,sys; j=json.load(sys.stdin); print(j["circle_fallbacks"], j["nodes"], sep=",")')
     for v in 30,20,3 120,10,1.5 250,30,8; do
       "$P" render "$lod" --tolerance 0 --view $v --size 1024x1024 -o "$tmp/ref.png" > /dev/null
       for t in 1 2 4 8 16; do
