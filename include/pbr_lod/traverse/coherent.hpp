@@ -52,14 +52,14 @@ class coherent_traversal {
 
   explicit coherent_traversal(const H& h) : h_(&h) {
     const std::size_t n = h.nodes().size();
-    rank_.assign(n, 0);
     parent_.assign(n, no_node);
     stamp_.assign(n, 0);
     added_.assign(n, 0);
     state_.assign(n, draw);
     size_.assign(n, 0);
-    // Orders any cut as traverse() emits it, and finds every node's parent on the way.
-    traversal_ranks(h, rank_, [&](node_id p, node_id c) { parent_[c] = p; });
+    // Every node's parent (found on traverse()'s walk; the ranks themselves are not needed).
+    std::vector<node_id> rank(n, 0);
+    traversal_ranks(h, rank, [&](node_id p, node_id c) { parent_[c] = p; });
   }
 
   /// Draws one frame. The first frame (or after reset()) starts at the root.
@@ -78,10 +78,9 @@ class coherent_traversal {
       descend(h_->root(), v, o, p);
     else
       for (const node_id f : front_) move_from(f, v, o, p);
+    // next_ is already in traverse()'s order (see move_from), so the drawn nodes need no sort.
     for (const node_id n : next_)
       if (state_[n] == draw) drawn_.push_back(n);
-    std::sort(drawn_.begin(), drawn_.end(),
-              [&](node_id a, node_id b) { return rank_[a] < rank_[b]; });
     emit_cut(v, o, sink, p);
     front_.swap(next_);
     return st_;
@@ -131,15 +130,16 @@ class coherent_traversal {
     if (s == culled_backface) ++st_.culled_backface;
   }
 
-  /// RENDER(f) of the paper: the cut below f.
+  /// RENDER(f) of the paper: the cut below f, added in traverse()'s order (depth first, the
+  /// last child first: the same stack).
   void descend(node_id f, const view& v, const traverse_options& o, const Policy& p) {
-    std::vector<node_id> stack{f};
-    while (!stack.empty()) {
-      const node_id n = stack.back();
-      stack.pop_back();
+    stack_.assign(1, f);
+    while (!stack_.empty()) {
+      const node_id n = stack_.back();
+      stack_.pop_back();
       const state s = cached(n, v, o, p);
       if (s == refine)
-        for (const node_id c : h_->children(n)) stack.push_back(c);
+        for (const node_id c : h_->children(n)) stack_.push_back(c);  // as traverse() does
       else
         add(n, s);
     }
@@ -148,6 +148,14 @@ class coherent_traversal {
   /// From one node of the last cut: down when it must refine now, else up while the parent need
   /// not refine any more. Monotone policy: a parent that refines has ancestors that all refine,
   /// so the upward search stops there.
+  ///
+  /// Order: the last cut is visited in traverse()'s order, and each of its nodes adds either its
+  /// own subtree's cut (depth first, so in order) or an ancestor that every earlier node of the
+  /// last cut below that ancestor already added (they all climb to the same topmost
+  /// non-refining node). So next_ comes out in traverse()'s order, and the next frame visits it
+  /// in that order again — the node records are read front to back, as traverse() reads them,
+  /// instead of in the order the last frame happened to add them, with a sort at the end (which
+  /// cost more than the ≈ 4 % of node evaluations coherence saves on POP).
   void move_from(node_id f, const view& v, const traverse_options& o, const Policy& p) {
     if (added_[f] == frame_) return;
     if constexpr (!monotone_refine_policy<Policy>) {
@@ -196,12 +204,12 @@ class coherent_traversal {
   }
 
   const H* h_;
-  std::vector<node_id> rank_, parent_;  // rank: position in traverse()'s order
+  std::vector<node_id> parent_;
   std::vector<std::uint32_t> stamp_, added_;
   std::vector<state> state_;
   std::vector<float> size_;
   std::uint32_t frame_ = 0;
-  std::vector<node_id> front_, next_, drawn_;
+  std::vector<node_id> front_, next_, drawn_, stack_;
   traverse_stats st_;
 };
 
