@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "pbr_lod/builders/pop.hpp"
+#include "pbr_lod/builders/pop_flags.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
@@ -286,10 +287,11 @@ void bm_reference(benchmark::State& state) {
 BENCHMARK(bm_reference)->ArgNames({"mesh"})->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
 // ---- frame coherence (§3.2) -----------------------------------------------------------------
-// 48 frames orbiting and zooming; nodes evaluated per frame with and without the kept cut.
+// 48 frames orbiting and zooming; nodes evaluated per frame: coherent 0 = plain traverse(),
+// 1 = the kept cut (pop_coherent_traversal), 2 = the paper's two flags (pop_flag_traversal).
 void bm_coherence(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0));
-  const bool coherent = state.range(1) != 0;
+  const int mode = static_cast<int>(state.range(1));
   const float tol = static_cast<float>(state.range(2)) / 10;
   const auto& t = built(which, pop_sphere_rule::paper);
   state.SetLabel(mesh_name(which));
@@ -302,9 +304,12 @@ void bm_coherence(benchmark::State& state) {
   for (auto _ : state) {
     visited = drawn = 0;
     pop_coherent_traversal<with_normals> coh(t);
+    pop_flag_traversal<with_normals> flags(t);
     for (const auto& v : path) {
       counting_sink<with_normals> s;
-      const traverse_stats st = coherent ? coh.frame(v, o, s) : traverse(t, v, o, s, pop_policy{});
+      const traverse_stats st = mode == 1   ? coh.frame(v, o, s)
+                                : mode == 2 ? flags.frame(v, o, s)
+                                            : traverse(t, v, o, s, pop_policy{});
       visited += st.visited;
       drawn += st.emitted_nodes + st.emitted_leaves;
     }
@@ -313,7 +318,7 @@ void bm_coherence(benchmark::State& state) {
   state.counters["drawn/frame"] = static_cast<double>(drawn) / 48;
 }
 BENCHMARK(bm_coherence)
-    ->ArgsProduct({{0, 1}, {0, 1}, {10, 50}})
+    ->ArgsProduct({{0, 1}, {0, 1, 2}, {10, 50}})
     ->ArgNames({"mesh", "coherent", "tol_x10"})
     ->Unit(benchmark::kMillisecond);
 

@@ -32,6 +32,32 @@ concept monotone_refine_policy = requires {
   requires P::monotone_refine;
 };
 
+namespace detail {
+
+/// What traverse() decides for one node, in its order: outside the view volume, back-facing,
+/// refine, or draw (with its screen size in `size`). Shared by the coherent traversals.
+enum class node_state : std::uint8_t { culled_frustum, culled_backface, refine, draw };
+
+template <class H, class Policy>
+node_state evaluate_node(const H& h, const typename H::node_id& n, const view& v,
+                         const traverse_options& o, const Policy& p, float& size) {
+  const sphere s = h.bounding_sphere(n);
+  if (o.frustum_cull) {
+    if (o.cull_volume == traverse_options::volume::view_cone) {
+      if (outside_view_cone(v, s)) return node_state::culled_frustum;
+    } else if (frustum_test(v, s, 0x3f) < 0) {
+      return node_state::culled_frustum;
+    }
+  }
+  if constexpr (HasNormalCones<H>) {
+    if (o.backface_cull && node_back_facing(h, n, s, v.eye)) return node_state::culled_backface;
+  }
+  size = p.screen_size(h, n, s, v, o);
+  return p.refine(h, n, size, o) ? node_state::refine : node_state::draw;
+}
+
+}  // namespace detail
+
 /// Keeps the previous frame's cut — the nodes drawn and the nodes culled — and moves from each
 /// of them down (when it must now refine) or up (while its parent need not refine any more),
 /// instead of starting at the root. Produces exactly the cut traverse() gives with the same
@@ -94,24 +120,16 @@ class coherent_traversal {
   [[nodiscard]] const std::vector<node_id>& front() const { return front_; }
 
  private:
+  // The values of detail::node_state, unscoped for brevity here.
   enum state : std::uint8_t { culled_frustum, culled_backface, refine, draw };
+  static_assert(static_cast<int>(detail::node_state::draw) == draw &&
+                static_cast<int>(detail::node_state::refine) == refine &&
+                static_cast<int>(detail::node_state::culled_backface) == culled_backface);
 
   /// The tests of traverse() for one node, in its order.
   state eval(node_id n, const view& v, const traverse_options& o, const Policy& p, float& size) {
     ++st_.visited;
-    const sphere s = h_->bounding_sphere(n);
-    if (o.frustum_cull) {
-      if (o.cull_volume == traverse_options::volume::view_cone) {
-        if (outside_view_cone(v, s)) return culled_frustum;
-      } else if (frustum_test(v, s, 0x3f) < 0) {
-        return culled_frustum;
-      }
-    }
-    if constexpr (HasNormalCones<H>) {
-      if (o.backface_cull && node_back_facing(*h_, n, s, v.eye)) return culled_backface;
-    }
-    size = p.screen_size(*h_, n, s, v, o);
-    return p.refine(*h_, n, size, o) ? refine : draw;
+    return static_cast<state>(detail::evaluate_node(*h_, n, v, o, p, size));
   }
 
   state cached(node_id n, const view& v, const traverse_options& o, const Policy& p) {
