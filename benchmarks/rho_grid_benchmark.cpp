@@ -353,6 +353,65 @@ BENCHMARK(bm_frame)
     ->DenseRange(0, 2)
     ->Unit(benchmark::kMillisecond);
 
+// Table 3's analogue: frames per second of "Points" (every leaf in view as a one-pixel point,
+// no multi-level: rho_grid_policy::points_only), "Splats" (the flexible traversal, s = 1 px) and
+// "Shadows" (flexible + the one-pass shadows of §4.2), tri-grid levels 4 and 5 of the bunny and
+// Buddha res3, at the iPAQ's 240×320, shading on, from a far view (8 half sides of the cube from
+// its centre, the model ≈ 110 px tall: Fig. 5's top row) and a close one (3 half sides, the model
+// fills the screen and level 5's leaves are ≈ 0.4 px).
+const rho_grid<3>& tri_grid(int model_index, int level) {
+  static std::map<std::pair<int, int>, rho_grid<3>> cache;
+  const auto key = std::pair{model_index, level};
+  auto it = cache.find(key);
+  if (it == cache.end())
+    it = cache.emplace(key, build_rho_grid<3>(model(model_name(model_index)), {.level = level}))
+             .first;
+  return it->second;
+}
+
+void bm_table3(benchmark::State& state) {
+  const int mode = int(state.range(2));
+  const double dist = double(state.range(3));
+  const auto& g = tri_grid(int(state.range(0)), int(state.range(1)));
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const view v(camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {240, 320}), g.origin());
+  render_options o;
+  o.fx = effects{.shading = true};
+  o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  const traverse_options t{.tolerance_px = 1};
+  const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
+  traverse_stats st;
+  with_rho_grid_hierarchy(g, [&](const auto& h) {
+    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+    for (auto _ : state) {
+      image img;
+      if constexpr (A.normal) {
+        if (mode == 2)
+          img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, &order), &st);
+      }
+      if (img.colour.empty()) {
+        rho_grid_policy<3> p(g, v);
+        p.points_only = mode == 0;
+        img = render<A>(v, o, [&](auto& sink) { st = traverse(h, v, t, sink, p); });
+      }
+      benchmark::DoNotOptimize(img.colour.data());
+    }
+  });
+  state.SetLabel(std::string(model_name(int(state.range(0)))) + " tri/" +
+                 std::to_string(state.range(1)) + " " +
+                 (mode == 0   ? "points"
+                  : mode == 1 ? "splats"
+                              : "shadows"));
+  state.counters["samples"] = double(g.stats().samples);
+  state.counters["drawn"] = double(st.emitted_nodes + st.emitted_leaves);
+  state.counters["fps"] =
+      benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(bm_table3)
+    ->ArgsProduct({{0, 1}, {4, 5}, {0, 1, 2}, {8, 3}})
+    ->ArgNames({"model", "level", "mode_0points_1splats_2shadows", "dist"})
+    ->Unit(benchmark::kMillisecond);
+
 }  // namespace
 
 BENCHMARK_MAIN();

@@ -1058,6 +1058,41 @@ TEST(RhoGridRender, SplatConditionAndCulling) {
   EXPECT_GE(none.culled_frustum, 1u);
 }
 
+// Table 3's "Points" display (points_only): every leaf in view as a one-pixel point and no
+// inner cell, whatever the splat size. Without culling that is every leaf exactly once; far away,
+// where the flexible traversal draws a few splats, it still draws the leaves; looking away,
+// nothing.
+TEST(RhoGridRender, PointsOnlyDrawsEveryLeafInView) {
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 4});
+  const rho_grid_hierarchy<3, positions_only> h(g);
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const auto run = [&](double dist, bool points_only, bool cull, buffer_sink<positions_only>& out,
+                       bool away = false) {
+    camera cam = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {256, 256});
+    if (away) cam.target = cam.eye + (cam.eye - c);
+    const view v(cam, g.origin());
+    rho_grid_policy<3> p(g, v);
+    p.points_only = points_only;
+    return traverse(h, v, traverse_options{.tolerance_px = 4, .frustum_cull = cull}, out, p);
+  };
+  buffer_sink<positions_only> all, far_points, far_flexible, none;
+  const auto st = run(60, true, false, all);
+  EXPECT_EQ(st.emitted_leaves, g.stats().samples);
+  EXPECT_EQ(st.emitted_nodes, 0u);
+  EXPECT_EQ(all.points.size(), g.stats().samples);
+  EXPECT_TRUE(all.splats.empty());
+  for (const auto& p : all.points) ASSERT_EQ(p.size_px, 1.0f);
+  // Every leaf once: the points' positions are distinct cells.
+  std::set<std::array<float, 3>> at;
+  for (const auto& p : all.points) at.insert({p.position.x(), p.position.y(), p.position.z()});
+  EXPECT_EQ(at.size(), all.points.size());
+  const auto fp = run(60, true, true, far_points), ff = run(60, false, true, far_flexible);
+  EXPECT_GT(ff.emitted_nodes, 0u);
+  EXPECT_LT(ff.emitted_nodes + ff.emitted_leaves, fp.emitted_leaves);
+  EXPECT_EQ(fp.emitted_leaves, g.stats().samples);  // the whole model is in view
+  EXPECT_EQ(run(3, true, true, none, true).emitted_leaves, 0u);
+}
+
 // Conservative bounds: every drawn inner cell's projected cube (its 8 corners, exactly) is at
 // most s pixels wide and tall — the splat condition never under-estimates.
 TEST(RhoGridRender, SplatConditionIsConservative) {

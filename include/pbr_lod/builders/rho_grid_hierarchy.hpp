@@ -351,6 +351,11 @@ class rho_grid_policy {
     return t_.root;
   }
 
+  /// The paper's non-flexible "Points" display (§5.3, Table 3): every leaf in view as a
+  /// one-pixel point, inner cells refined whatever their size (no multi-level splats); the
+  /// cells are still culled against the view volume on the way down.
+  bool points_only = false;
+
   template <class H>
   [[nodiscard]] visit_result visit(const H& h, const rho_grid_cell& n, const state& hs, const view&,
                                    const traverse_options& o) const {
@@ -359,6 +364,9 @@ class rho_grid_policy {
     const float s = splat_size(o);
     const verdict vd = t_.test(hs, n.depth, leaf, s, o.frustum_cull);
     if (vd == verdict::cull) return {visit_result::verdict::cull, 0};
+    if (points_only)
+      return leaf ? visit_result{visit_result::verdict::emit, 1.0f}
+                  : visit_result{visit_result::verdict::refine, s};
     if (vd == verdict::draw) return {visit_result::verdict::emit, leaf ? 1.0f : s};
     return {visit_result::verdict::refine, s};
   }
