@@ -31,16 +31,29 @@ TEST(Camera, ProjectsTargetToCentre) {
   EXPECT_LT(v.eye_to_screen(v.to_eye(vec3f(0, 1, 0))).y(), 240);
 }
 
-// The view subtracts the origin in double: a camera 10⁷ units away from the world origin sees
-// data the same way as at the origin.
+// The view works in double until it is relative to the origin: a camera 10⁷ units away from the
+// world origin sees data the same way as at the origin — the same eye and frame, so the same
+// pixels. (A view that took the eye or the viewing direction in float at 10⁷, where floats are
+// a unit apart, fails: the eye moves by units, the direction by degrees.)
 TEST(Camera, OriginKeepsFarDataExact) {
-  camera c = test_camera();
+  camera base = test_camera();  // off the integer grid, where floats at 10⁷ would round
+  base.eye = vec3d(0.37, -0.21, 9.6);
+  base.target = vec3d(0.05, 0.11, -0.3);
+  camera c = base;
   const vec3d far(1e7, -3e6, 2e7);
   c.eye += far;
   c.target += far;
   const view v(c, far);
-  const view v0(test_camera(), vec3d::Zero());
+  const view v0(base, vec3d::Zero());
   EXPECT_EQ(v.eye, v0.eye);
+  EXPECT_NEAR((v.forward - v0.forward).norm(), 0.0f, 1e-6f);
+  EXPECT_NEAR((v.right - v0.right).norm(), 0.0f, 1e-6f);
+  EXPECT_NEAR((v.up - v0.up).norm(), 0.0f, 1e-6f);
+  for (const vec3f& p : {vec3f(0, 0, 0), vec3f(0.3f, -0.2f, 0.1f), vec3f(-1, 0.5f, 0.25f)}) {
+    const vec2f a = v.eye_to_screen(v.to_eye(p)), b = v0.eye_to_screen(v0.to_eye(p));
+    EXPECT_NEAR(a.x(), b.x(), 1e-3f) << p.transpose();
+    EXPECT_NEAR(a.y(), b.y(), 1e-3f) << p.transpose();
+  }
 }
 
 TEST(Camera, RejectsBadViewport) {
