@@ -25,8 +25,11 @@ point_cloud jittered_lattice(int nx, int ny, int nz, unsigned seed) {
         c.positions.emplace_back(x + 0.5f + jitter(rng), y + 0.5f + jitter(rng),
                                  z + 0.5f + jitter(rng));
         c.normals.push_back(vec3f::UnitZ());
-        c.colours.push_back(
-            {static_cast<std::uint8_t>(colour(rng)), static_cast<std::uint8_t>(colour(rng)), 9});
+        // All three channels random: PCL packs RGB into one float field, and a channel swapped or
+        // lost on the way back shows only when it varies.
+        c.colours.push_back({static_cast<std::uint8_t>(colour(rng)),
+                             static_cast<std::uint8_t>(colour(rng)),
+                             static_cast<std::uint8_t>(colour(rng))});
       }
   return c;
 }
@@ -37,7 +40,7 @@ TEST(PclPeers, VoxelGridGivesCellCentroids) {
   const point_cloud in = jittered_lattice(10, 8, 3, 1);
   struct acc {
     vec3d sum = vec3d::Zero();
-    double r = 0, g = 0;
+    double r = 0, g = 0, b = 0;
     int n = 0;
   };
   std::map<std::tuple<int, int, int>, acc> cells;
@@ -48,6 +51,7 @@ TEST(PclPeers, VoxelGridGivesCellCentroids) {
     a.sum += p.cast<double>();
     a.r += in.colours[i].r;
     a.g += in.colours[i].g;
+    a.b += in.colours[i].b;
     ++a.n;
   }
   const point_cloud out = pcl_voxel_grid(in, 2.0);
@@ -61,6 +65,7 @@ TEST(PclPeers, VoxelGridGivesCellCentroids) {
     EXPECT_NEAR((p.cast<double>() - a.sum / a.n).norm(), 0.0, 1e-4);
     EXPECT_NEAR(out.colours[k].r, a.r / a.n, 1.0);
     EXPECT_NEAR(out.colours[k].g, a.g / a.n, 1.0);
+    EXPECT_NEAR(out.colours[k].b, a.b / a.n, 1.0);
     EXPECT_NEAR((out.normals[k] - vec3f::UnitZ()).norm(), 0.0f, 1e-5f);
   }
 }
