@@ -21,8 +21,10 @@
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/builders/rho_grid_hierarchy.hpp"
 #include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/one_pass_shadows.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
+#include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
 
 namespace {
@@ -410,6 +412,38 @@ void bm_table3(benchmark::State& state) {
 BENCHMARK(bm_table3)
     ->ArgsProduct({{0, 1}, {4, 5}, {0, 1, 2}, {8, 3}})
     ->ArgNames({"model", "level", "mode_0points_1splats_2shadows", "dist"})
+    ->Unit(benchmark::kMillisecond);
+
+// §4.1's close views: leaves as one-pixel points (0) or as squares of their projected cell
+// (1, rho_grid_policy::leaf_splats), bunny tri/4, 512², s = 1, shading; the image against the
+// mesh drawn by the same rasteriser (PSNR over covered pixels, holes).
+void bm_leaf_splats(benchmark::State& state) {
+  const bool splats = state.range(0) != 0;
+  const double dist = double(state.range(1)) / 10;
+  const auto& g = tri_grid(0, 4);
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {512, 512});
+  const view v(cam, g.origin());
+  render_options o;
+  o.fx = effects{.shading = true};
+  const traverse_options t{.tolerance_px = 1};
+  image img;
+  with_rho_grid_hierarchy(g, [&](const auto& h) {
+    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
+    rho_grid_policy<3> p(g, v);
+    p.leaf_splats = splats;
+    for (auto _ : state) {
+      img = render<A>(v, o, [&](auto& sink) { traverse(h, v, t, sink, p); });
+      benchmark::DoNotOptimize(img.colour.data());
+    }
+  });
+  const image_error e = compare_images(render_reference(model(model_name(0)), cam, o), img);
+  state.counters["psnr_vs_mesh"] = e.psnr;
+  state.counters["holes"] = e.hole_fraction;
+}
+BENCHMARK(bm_leaf_splats)
+    ->ArgsProduct({{0, 1}, {12, 25, 60}})
+    ->ArgNames({"leaf_splats", "dist_x10"})
     ->Unit(benchmark::kMillisecond);
 
 }  // namespace

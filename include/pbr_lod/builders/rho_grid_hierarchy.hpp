@@ -38,6 +38,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <numeric>
 #include <ranges>
@@ -289,6 +290,19 @@ struct rho_traversal {
     return leaf ? verdict::draw : verdict::refine;
   }
 
+  /// The cell's conservative projected width in pixels (2·max(E_x, E_y) / (W·(W − B)), what the
+  /// splat test compares with s); +inf when the cell straddles the eye plane. Both sides are
+  /// products of two values, so the ratio is free of the fixed-point scale.
+  [[nodiscard]] float width_px(const hom& h, int l) const {
+    const auto& t = levels[std::size_t(l)];
+    const value den = h.w - t.b;
+    if (!(den > znear)) return std::numeric_limits<float>::infinity();
+    const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
+    const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
+    const double wd = static_cast<double>(Arith::mul(h.w, den));
+    return static_cast<float>(2 * static_cast<double>(ex > ey ? ex : ey) / wd);
+  }
+
   /// c·p / scale for a wide product p (float: c·p).
   [[nodiscard]] auto scaled(value c, const typename Arith::wide& p) const {
     if constexpr (std::is_same_v<value, float>)
@@ -355,6 +369,10 @@ class rho_grid_policy {
   /// one-pixel point, inner cells refined whatever their size (no multi-level splats); the
   /// cells are still culled against the view volume on the way down.
   bool points_only = false;
+  /// §4.1's close views without holes: a leaf drawn as a square of its cell's conservative
+  /// projected width (at least one pixel) instead of a one-pixel point, so that leaves larger
+  /// than a pixel still cover their cell. Off by default (docs/rho-grid.md measures both).
+  bool leaf_splats = false;
 
   template <class H>
   [[nodiscard]] visit_result visit(const H& h, const rho_grid_cell& n, const state& hs, const view&,
@@ -367,6 +385,10 @@ class rho_grid_policy {
     if (points_only)
       return leaf ? visit_result{visit_result::verdict::emit, 1.0f}
                   : visit_result{visit_result::verdict::refine, s};
+    if (leaf && leaf_splats) {
+      const float w = t_.width_px(hs, n.depth);  // +inf: straddles the eye plane, a point
+      return {visit_result::verdict::emit, std::isfinite(w) ? std::clamp(w, 1.0f, 1e4f) : 1.0f};
+    }
     if (vd == verdict::draw) return {visit_result::verdict::emit, leaf ? 1.0f : s};
     return {visit_result::verdict::refine, s};
   }
