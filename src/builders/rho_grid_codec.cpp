@@ -27,6 +27,7 @@
 // the table is on absolute values. Materials: a bit tree conditioned on the predicted material.
 #include <algorithm>
 #include <array>
+#include <memory>
 #include <optional>
 
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
@@ -243,10 +244,10 @@ template <bool Encode, int Rho, class Coder, class Get, class Put>
 void walk_attributes(Coder& rc, const rho_grid<Rho>& g, const rho_coder_options& options, Get&& get,
                      Put&& put, const std::string& what) {
   const int nb = g.normal_bits(), mb = g.material_bits();
-  std::optional<normal_quantizer> q;
+  std::shared_ptr<const normal_quantizer> q;  // the process-wide table, not one per call
   std::optional<normal_split> ns;
   if (nb > 0) {
-    q.emplace(nb);
+    q = normal_quantizer::shared(nb);
     ns.emplace(*q);
   }
   attribute_model m(mb);

@@ -24,6 +24,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <memory>
 #include <optional>
 
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
@@ -271,8 +272,9 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   std::vector<std::vector<code_type>> lcodes(depth);
   std::vector<std::vector<std::uint16_t>> lattrs(depth + 1);
   detail::bit_reader br(bytes.data() + r.pos, bits, what);
-  std::optional<normal_quantizer> q;
-  if (nb > 0) q.emplace(int(nb));
+  // The process-wide table: building one per parse was most of the cost of loading a small grid.
+  std::shared_ptr<const normal_quantizer> q;
+  if (nb > 0) q = normal_quantizer::shared(int(nb));
   const auto read_attr = [&](std::vector<std::uint16_t>& dst) {
     const auto a = std::uint32_t(br.get(int(sigma), "attribute"));
     if (q && !q->valid(a & ((1u << nb) - 1u)))
