@@ -12,6 +12,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <map>
 #include <string>
@@ -321,6 +322,19 @@ BENCHMARK(bm_traverse)
     ->Args({1, 1, 25, 1})
     ->Unit(benchmark::kMillisecond);
 
+/// One frame of g through the shared rasteriser: with the one-pass shadows of §4.2 when `order`
+/// (the light's child order) is given and g has normals, else the traversal with policy p.
+template <class H>
+image rho_frame(const H& h, const rho_grid<3>& g, const view& v, const render_options& o,
+                const traverse_options& t, const std::array<int, 27>* order,
+                const rho_grid_policy<3>& p, traverse_stats& st) {
+  constexpr attributes A = H::attrs;
+  if constexpr (A.normal) {
+    if (order) return render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, order), &st);
+  }
+  return render<A>(v, o, [&](auto& sink) { st = traverse(h, v, t, sink, p); });
+}
+
 // Whole frames (512², shading) into the shared rasteriser: no shadows, one-pass shadows (§4.2),
 // the rasteriser's two-pass shadow map.
 void bm_frame(benchmark::State& state) {
@@ -333,16 +347,9 @@ void bm_frame(benchmark::State& state) {
   const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
   traverse_stats st;
   with_rho_grid_hierarchy(g, [&](const auto& h) {
-    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
     for (auto _ : state) {
-      image img;
-      if constexpr (A.normal) {
-        if (state.range(0) == 1)
-          img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, &order), &st);
-      }
-      if (img.colour.empty())
-        img = render<A>(
-            v, o, [&](auto& sink) { st = traverse(h, v, t, sink, rho_grid_policy<3>(g, v)); });
+      const image img = rho_frame(h, g, v, o, t, state.range(0) == 1 ? &order : nullptr,
+                                  rho_grid_policy<3>(g, v), st);
       benchmark::DoNotOptimize(img.colour.data());
     }
   });
@@ -384,18 +391,10 @@ void bm_table3(benchmark::State& state) {
   const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
   traverse_stats st;
   with_rho_grid_hierarchy(g, [&](const auto& h) {
-    constexpr attributes A = std::decay_t<decltype(h)>::attrs;
     for (auto _ : state) {
-      image img;
-      if constexpr (A.normal) {
-        if (mode == 2)
-          img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, &order), &st);
-      }
-      if (img.colour.empty()) {
-        rho_grid_policy<3> p(g, v);
-        p.points_only = mode == 0;
-        img = render<A>(v, o, [&](auto& sink) { st = traverse(h, v, t, sink, p); });
-      }
+      rho_grid_policy<3> p(g, v);
+      p.points_only = mode == 0;
+      const image img = rho_frame(h, g, v, o, t, mode == 2 ? &order : nullptr, p, st);
       benchmark::DoNotOptimize(img.colour.data());
     }
   });
