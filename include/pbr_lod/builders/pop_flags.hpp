@@ -92,7 +92,6 @@ class pop_flag_traversal {
     f.p.emit(*t_, n, f.v, size, f.o, f.out);
   }
 
-  template <class S>
   void culled(state s) {
     if (s == state::culled_frustum) ++st_.culled_frustum;
     if (s == state::culled_backface) ++st_.culled_backface;
@@ -112,7 +111,7 @@ class pop_flag_traversal {
     if (s == state::draw)
       draw(n, size, f);
     else
-      culled<S>(s);
+      culled(s);
   }
 
   /// RENDER-COHERENCY(node).
@@ -158,7 +157,7 @@ class pop_flag_traversal {
     if (child_state == state::draw)
       draw(child, child_size, f);
     else
-      culled<S>(child_state);
+      culled(child_state);
   }
 
   const pop_tree<A>* t_;
