@@ -32,6 +32,10 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   j.str("timings", st.has_timings ? "measured by this build" : "absent (not stored in the file)");
   j.num("build_seconds",
         st.has_timings ? st.build_seconds : std::numeric_limits<double>::quiet_NaN());
+  if (st.has_timings) {
+    j.boolean("estimated_normals", st.estimated_normals);
+    j.num("estimation_seconds", st.estimation_seconds);
+  }
   return j;
 }
 
@@ -109,13 +113,14 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   o.level = static_cast<int>(m.integer("level", 5, 0, 39));
   o.normal_bits = static_cast<int>(m.integer("normal_bits", 13, 0, 16));
   o.material_bits = static_cast<int>(m.integer("material_bits", 3, 0, 8));
+  o.knn = static_cast<int>(m.integer("knn", 16, 0, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   rho_method method;
   method.layout_name = m.choice("layout", "is", {"is", "nis", "compressed"});
   method.layout = method.layout_name == "is"    ? rho_grid_layout::is
                   : method.layout_name == "nis" ? rho_grid_layout::nis
                                                 : rho_grid_layout::compressed;
-  m.finish("rho-grid", "rho, level, normal_bits, material_bits, threads, layout");
+  m.finish("rho-grid", "rho, level, normal_bits, material_bits, knn, threads, layout");
   o.progress = progress_callback("rho-grid", on_terminal);
   const loaded_input& li = in.get();
   return visit_rho(rho, [&]<int R>() {

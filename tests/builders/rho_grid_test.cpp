@@ -365,17 +365,47 @@ TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
   EXPECT_EQ(g.sigma(), 13);  // the samples have normals and no materials: 13 bits
 }
 
+// A cloud without normals (a LiDAR tile) gets k-NN normals: points on a sphere of radius 2,
+// 10^7 units from the origin, whose true outward normal is (p − c) / 2. Every cell, inner or
+// leaf, must carry its sample's outward normal to within the PCA error on a curved patch
+// (16 of 6000 points span ≈ 6° of arc: the estimate is within ≈ 3°) plus the 13-bit quantisation
+// (< 1°). Without the estimation σ would be 0; an unoriented estimate points inwards on about
+// half the cells; a normal taken from the wrong point is tens of degrees off.
+TEST(RhoGridAttributes, PositionsOnlyCloudGetsOutwardEstimatedNormals) {
+  point_cloud pc;
+  pc.origin = vec3d(1e7, -1e7, 1e7);
+  std::mt19937 rng(5);
+  std::normal_distribution<float> g(0, 1);
+  for (int i = 0; i < 6000; ++i) {
+    const vec3f d = vec3f(g(rng), g(rng), g(rng)).normalized();
+    pc.positions.push_back(2.0f * d);
+  }
+  const auto grid = build_rho_grid<3>(pc, {.level = 2, .keep_sample_points = true});
+  ASSERT_EQ(grid.normal_bits(), 13);
+  EXPECT_TRUE(grid.stats().estimated_normals);
+  const auto q = normal_quantizer::shared(13);
+  double worst = 1;
+  for (std::uint32_t c = 0; c < grid.cell_count(); ++c) {
+    const vec3d s = grid.sample_points()[c].cast<double>() + grid.origin() - pc.origin;
+    const vec3d truth = s.normalized();
+    worst = std::min(worst, q->decode(grid.normal_code(c)).cast<double>().dot(truth));
+  }
+  EXPECT_GT(worst, std::cos(5.0 * std::numbers::pi / 180)) << "worst angle "
+                                            << std::acos(std::min(1.0, worst)) * 180 / std::numbers::pi;
+}
+
 // σ follows the scene: no normals and no materials → σ = 0, nothing stored per cell; σ = 0 can
 // also be asked for on a mesh.
 TEST(RhoGridAttributes, SigmaFollowsTheScene) {
   point_cloud pc = sample_surface(make_demo_scene(8), 500, 2);
   pc.normals.clear();
   pc.colours.clear();
-  const auto g0 = build_rho_grid<2>(pc, {.level = 3});
+  const auto g0 = build_rho_grid<2>(pc, {.level = 3, .knn = 0});  // knn = 0: no estimation
   EXPECT_EQ(g0.sigma(), 0);
+  EXPECT_FALSE(g0.stats().estimated_normals);
   EXPECT_EQ(g0.memory_bytes(), g0.inner_count() * (sizeof(detail::child_code<2>) + 4));
   pc.materials.assign(pc.size(), 5);
-  const auto g3 = build_rho_grid<2>(pc, {.level = 3});
+  const auto g3 = build_rho_grid<2>(pc, {.level = 3, .knn = 0});
   EXPECT_EQ(g3.sigma(), 3);
   for (std::uint32_t c = 0; c < g3.cell_count(); ++c) EXPECT_EQ(g3.material(c), 5u);
   const auto gm =
@@ -782,7 +812,7 @@ TEST(RhoGridCompressed, RoundTripIsExact) {
   point_cloud bare = full;
   bare.normals.clear();
   bare.materials.clear();
-  const auto gb = build_rho_grid<4>(bare, {.level = 1});
+  const auto gb = build_rho_grid<4>(bare, {.level = 1, .knn = 0});
   ASSERT_EQ(gb.sigma(), 0);
   check_compressed_round_trip(gb, "sigma 0");
   check_compressed_round_trip(build_rho_grid<2>(bunny_small(), {.level = 5}), "bunny rho 2");
@@ -994,7 +1024,7 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
   // Asking for attributes the grid does not store is an error, not garbage.
   point_cloud bare;
   bare.positions = {vec3f(0, 0, 0), vec3f(1, 1, 1)};
-  const auto gb = build_rho_grid<2>(bare, {.level = 1});
+  const auto gb = build_rho_grid<2>(bare, {.level = 1, .knn = 0});
   EXPECT_THROW((void)(rho_grid_hierarchy<2, with_normals>(gb)), InvalidArgument);
 }
 

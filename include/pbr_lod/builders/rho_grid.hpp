@@ -35,6 +35,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -83,6 +84,15 @@ struct rho_grid_options {
   /// paper (and Botsch 2002). Ignored (no bits) when the input has no normals: a point cloud
   /// without normals. A mesh always has geometric normals.
   int normal_bits = 13;
+  /// A point cloud without normals: neighbours of the k-NN PCA normal estimated for every point
+  /// (core/estimation.hpp, the point-octree's front end), so that its cells are shaded like the
+  /// other builders'. 0 keeps no normals (normal_bits ignored), as the paper's builder would: its
+  /// inputs are meshes. Ours, not the paper's; docs/rho-grid.md measures both.
+  int knn = 16;
+  /// Where the scanner stood, in world coordinates: estimated normals face it (one pass) instead
+  /// of being made consistent over the k-NN graph (point_cloud::sensor is used when this is
+  /// unset).
+  std::optional<vec3d> viewpoint = std::nullopt;
   /// Bits of the material index (0..8), 0 for none; 3 = 8 materials as in the paper. Ignored
   /// when the input has no materials. Materials ≥ 2^bits are an InvalidArgument.
   int material_bits = 3;
@@ -108,6 +118,9 @@ struct rho_grid_stats {
   /// depend only on the input and the options, so two builds compare equal).
   bool has_timings = false;
   double build_seconds = 0;
+  /// The point cloud had no normals and the build estimated them (rho_grid_options::knn).
+  bool estimated_normals = false;
+  double estimation_seconds = 0;  ///< of the k-NN normals, inside build_seconds
   /// Largest bytes held by the build's per-level working set (cell coordinates of two levels,
   /// sampling results) on top of the structure itself.
   std::size_t peak_working_bytes = 0;
@@ -310,8 +323,8 @@ template <int Rho>
                                            const rho_grid_options& options = {});
 
 /// Builds the ρ-grid of a point cloud: a cell is non-empty when it holds an input point; its
-/// sample is that cell's input point closest to the centre (normals/materials when the cloud has
-/// them).
+/// sample is that cell's input point closest to the centre, with its normal (the cloud's, else
+/// estimated from options.knn neighbours) and material (when the cloud has them).
 template <int Rho>
 [[nodiscard]] rho_grid<Rho> build_rho_grid(const point_cloud& points,
                                            const rho_grid_options& options = {});
