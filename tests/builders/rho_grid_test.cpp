@@ -390,8 +390,8 @@ TEST(RhoGridAttributes, PositionsOnlyCloudGetsOutwardEstimatedNormals) {
     const vec3d truth = s.normalized();
     worst = std::min(worst, q->decode(grid.normal_code(c)).cast<double>().dot(truth));
   }
-  EXPECT_GT(worst, std::cos(5.0 * std::numbers::pi / 180)) << "worst angle "
-                                            << std::acos(std::min(1.0, worst)) * 180 / std::numbers::pi;
+  EXPECT_GT(worst, std::cos(5.0 * std::numbers::pi / 180))
+      << "worst angle " << std::acos(std::min(1.0, worst)) * 180 / std::numbers::pi;
 }
 
 // σ follows the scene: no normals and no materials → σ = 0, nothing stored per cell; σ = 0 can
