@@ -64,14 +64,17 @@ struct rho_method {
       if constexpr (A.normal) {
         if (one_pass && !r.host) {
           const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
+          // Occluders outside the frame still cast into it (§4.2 with culling).
+          rho_grid_policy<R> p(g, v, &order);
+          p.cast_shadows(g, v, o.sun.direction.normalized(),
+                         rho_grid_caster_side(g, o.shadow_map_size));
           frame one;
           one.fx = o.fx;
           const auto t0 = clock_type::now();
-          one.img = render_one_pass_shadows(h, v, o, t, rho_grid_policy<R>(g, v, &order), &one.st);
+          one.img = render_one_pass_shadows(h, v, o, t, p, &one.st);
           one.seconds = seconds_since(t0);
-          if (r.time_traversal)
-            one.traverse_seconds = traversal_seconds(h, v, t, rho_grid_policy<R>(g, v, &order));
-          collect_samples(one, h, v, t, rho_grid_policy<R>(g, v, &order), r, g.origin());
+          if (r.time_traversal) one.traverse_seconds = traversal_seconds(h, v, t, p);
+          collect_samples(one, h, v, t, p, r, g.origin());
           return one;
         }
       }

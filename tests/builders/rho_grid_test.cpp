@@ -1281,6 +1281,59 @@ TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
   }
 }
 
+// An occluder outside the frame still shadows what is in it. A ground strip (y = 0) seen from
+// straight above, a square at height 1.5 beside the frame, the light from the upper left
+// (to_light ∝ (−1, 1, 0)): the square's shadow, shifted +1.5 in x, covers ground x ∈ [0, 1],
+// |z| ≤ 0.5 — by hand, 0.8 × 1.0 of the 1.6 × 1.6 visible, 31.25 % of the frame. Frustum culling
+// drops the square (no shadow at all) unless the policy keeps casters; the traversal without
+// culling is the reference.
+TEST(RhoGridShadows, OccludersOutsideTheFrameStillCast) {
+  triangle_mesh m;
+  m.vertices.positions = {vec3f(-0.2f, 0, -1),       vec3f(2.2f, 0, -1),
+                          vec3f(2.2f, 0, 1),         vec3f(-0.2f, 0, 1),
+                          vec3f(-1.5f, 1.5f, -0.5f), vec3f(-0.5f, 1.5f, -0.5f),
+                          vec3f(-0.5f, 1.5f, 0.5f),  vec3f(-1.5f, 1.5f, 0.5f)};
+  m.faces = {{0, 2, 1}, {0, 3, 2}, {4, 6, 5}, {4, 7, 6}};
+  const auto g = build_rho_grid<2>(m, {.level = 8});
+  camera cam;
+  cam.eye = vec3d(1, 3, 0);
+  cam.target = vec3d(1, 0, 0);
+  cam.up = vec3d(0, 0, -1);
+  cam.fovy_degrees = 2 * std::atan(0.8 / 3) * 180 / std::numbers::pi;  // ground x ∈ [0.2, 1.8]
+  cam.vp = {128, 128};
+  cam.z_near = 0.1;
+  cam.z_far = 10;
+  const view v(cam, g.origin());
+  render_options o;
+  o.sun.direction = vec3f(-1, 1, 0);
+  o.fx = effects{.shading = true, .shadows = true};
+  const auto order = rho_grid_light_order<2>(o.sun.direction.normalized());
+  const rho_grid_hierarchy<2, with_normals> h(g);
+  const auto shadowed_fraction = [&](bool cull, bool casters) {
+    rho_grid_policy<2> p(g, v, &order);
+    if (casters)
+      p.cast_shadows(g, v, o.sun.direction.normalized(),
+                     rho_grid_caster_side(g, o.shadow_map_size));
+    const image img =
+        render_one_pass_shadows(h, v, o, {.tolerance_px = 1, .frustum_cull = cull}, p);
+    std::size_t dark = 0, covered = 0;
+    for (std::size_t i = 0; i < img.size(); ++i) {
+      if (!img.covered(i)) continue;
+      ++covered;
+      dark += img.colour[i].r < 100;  // lit ground: ≈ 0.15 + 0.85·0.71 of 200; shadow: 30
+    }
+    EXPECT_GT(covered, img.size() * 99 / 100);
+    return double(dark) / double(covered);
+  };
+  const double reference = shadowed_fraction(false, false);
+  const double culled = shadowed_fraction(true, false), kept = shadowed_fraction(true, true);
+  std::printf("shadowed: %.4f without culling, %.4f culled, %.4f culled keeping casters\n",
+              reference, culled, kept);
+  EXPECT_NEAR(reference, 0.3125, 0.02);
+  EXPECT_LT(culled, 0.01);  // the square casts nothing
+  EXPECT_NEAR(kept, reference, 0.005);
+}
+
 TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
   const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());

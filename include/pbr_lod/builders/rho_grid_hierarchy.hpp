@@ -212,6 +212,14 @@ struct rho_traversal {
   hom root{};
   std::vector<level_tables> levels;  // indexed by cell depth (0 = root cube)
   value cx{}, cy{}, znear{}, zfar{};
+  /// Shadow casters (§4.2 with frustum culling): which planes of the view volume may still cull
+  /// a cell — those the cell cannot cross by moving away from the light — and from which depth
+  /// a cell kept only as a caster is fine enough to emit. All true / unused when not casting.
+  struct caster_planes {
+    bool left = true, right = true, top = true, bottom = true, far = true, near = true;
+  } may_cull;
+  bool casters = false;
+  int caster_depth = 0;
 
   rho_traversal(const rho_grid<Rho>& g, const view& v, bool fixed) {
     // Rows of the map p ↦ (X, Y, W) in pixels × depth, relative to the principal point.
@@ -265,29 +273,63 @@ struct rho_traversal {
     zfar = arith.from(double(v.z_far));
   }
 
+  /// Keeps the cells that can shadow the view volume from a directional light (`to_light`, in
+  /// the view's frame): a plane of the volume culls only when moving away from the light never
+  /// brings a point back inside it (its inward function does not grow along −to_light), so every
+  /// occluder of a visible point survives. Cells kept only as casters are emitted once their side
+  /// is at most `caster_side` (a light-map texel) or they pass the splat condition.
+  void cast_shadows(const rho_grid<Rho>& g, const view& v, const vec3f& to_light,
+                    double caster_side) {
+    const vec3d d = -to_light.cast<double>();  // the direction shadows fall
+    const double dx = v.right.cast<double>().dot(d) * double(v.focal_px);
+    const double dy = -v.up.cast<double>().dot(d) * double(v.focal_px);
+    const double dw = v.forward.cast<double>().dot(d);
+    const double hx = 0.5 * v.width, hy = 0.5 * v.height;
+    may_cull = {.left = dx + hx * dw <= 0,
+                .right = hx * dw - dx <= 0,
+                .top = dy + hy * dw <= 0,
+                .bottom = hy * dw - dy <= 0,
+                .far = -dw <= 0,
+                .near = dw <= 0};
+    casters = true;
+    caster_depth = g.leaf_depth();
+    while (caster_depth > 0 && g.cell_side(caster_depth - 1) <= caster_side) --caster_depth;
+  }
+
   enum class verdict { cull, draw, refine };
 
   /// The §4.1 tests for a cell at depth l with homogeneous centre h.
   [[nodiscard]] verdict test(const hom& h, int l, bool leaf, float s, bool cull) const {
     const auto& t = levels[std::size_t(l)];
-    if (h.w + t.b < znear) return verdict::cull;  // wholly behind the viewer
+    if (h.w + t.b < znear)  // wholly behind the viewer
+      return may_cull.near ? verdict::cull : caster(l, leaf);
     const value den = h.w - t.b;
     if (!(den > znear)) return leaf ? verdict::draw : verdict::refine;  // straddles the eye plane
     const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
     const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
+    const auto rhs = Arith::splat_scale(s) * Arith::mul(h.w, den);
+    const bool small = Arith::lhs(ex) <= rhs && Arith::lhs(ey) <= rhs;
     if (cull) {
-      if (den > zfar) return verdict::cull;
       const auto wd = Arith::mul(h.w, den);
       // X·den ± E compared with ∓c·W·den: products of three values, taken in two steps so the
       // fixed-point path stays exact in 128 bits (c_x·W·den = c_x·(W·den)/scale).
       const auto xd = Arith::mul(h.x, den), yd = Arith::mul(h.y, den);
       const auto cxwd = scaled(cx, wd), cywd = scaled(cy, wd);
-      if (xd + ex < -cxwd || xd - ex > cxwd || yd + ey < -cywd || yd - ey > cywd)
+      const bool far = den > zfar, left = xd + ex<-cxwd, right = xd - ex> cxwd,
+                 top = yd + ey<-cywd, bottom = yd - ey> cywd;
+      if ((far && may_cull.far) || (left && may_cull.left) || (right && may_cull.right) ||
+          (top && may_cull.top) || (bottom && may_cull.bottom))
         return verdict::cull;
+      if (far || left || right || top || bottom)  // out of view, kept as a caster
+        return small ? verdict::draw : caster(l, leaf);
     }
-    const auto rhs = Arith::splat_scale(s) * Arith::mul(h.w, den);
-    if (Arith::lhs(ex) <= rhs && Arith::lhs(ey) <= rhs) return verdict::draw;
+    if (small) return verdict::draw;
     return leaf ? verdict::draw : verdict::refine;
+  }
+
+  /// A cell kept only for the shadows it casts.
+  [[nodiscard]] verdict caster(int l, bool leaf) const {
+    return leaf || l >= caster_depth ? verdict::draw : verdict::refine;
   }
 
   /// The cell's conservative projected width in pixels (2·max(E_x, E_y) / (W·(W − B)), what the
@@ -314,6 +356,14 @@ struct rho_traversal {
 };
 
 }  // namespace detail
+
+/// The side of a light-map texel of render_one_pass_shadows over g with a map of `texels` per
+/// side (render_options::shadow_map_size): the map spans the diameter of the root cube's
+/// bounding sphere. What rho_grid_policy::cast_shadows refines off-screen casters to.
+template <int Rho>
+[[nodiscard]] double rho_grid_caster_side(const rho_grid<Rho>& g, int texels) {
+  return std::sqrt(3.0) * g.cube_side() / double(std::max(2, texels));
+}
 
 /// The child visiting order that is front to back from a directional light (§4.2, Fig. 3):
 /// children sorted by decreasing projection of their centre offsets on `to_light` (the direction
@@ -363,6 +413,16 @@ class rho_grid_policy {
   template <class H>
   [[nodiscard]] state root_state(const H&, const view&, const traverse_options&) const {
     return t_.root;
+  }
+
+  /// For one-pass shadows (§4.2) with frustum culling: cells outside the view volume that may
+  /// shadow a point inside it (the volume swept away from the light `to_light`, unit, world
+  /// axes) are still traversed and emitted — down to a side of `caster_side`, one light-map
+  /// texel (rho_grid_caster_side) — so that the light map holds them; the rasteriser clips them.
+  /// Without this an occluder outside the frame casts no shadow into it. g and v as constructed.
+  void cast_shadows(const rho_grid<Rho>& g, const view& v, const vec3f& to_light,
+                    double caster_side) {
+    t_.cast_shadows(g, v, to_light, caster_side);
   }
 
   /// The paper's non-flexible "Points" display (§5.3, Table 3): every leaf in view as a
