@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
@@ -1246,16 +1247,17 @@ TEST(RhoGridShadows, LightOrderIsFrontToBack) {
   EXPECT_EQ(ord.front() / 3 % 3, 2);  // the top layer (y = 2) first for a light above
 }
 
-// One pass versus the rasteriser's two-pass shadow map on the same cut: both shade the same
-// pixels lit or shadowed except along shadow boundaries and where the two-pass map, whose point
-// footprints are one camera pixel, shows acne on lit surfaces (measured: shadowed pixels 20.1 %
-// one-pass vs 28.4 % two-pass, PSNR 21.8 dB). Without shadows, or with the order reversed (the
-// occluders drawn after what they shadow), the one-pass fraction drops to ~0 and this fails.
-// A plane cannot shadow itself from a directional light. With splats (s ≥ 2) under a close,
-// oblique camera the traversal draws coarse inner cells next to leaves; a coarse cell's centre
-// lies up to half its side off the plane, so a light map that stored occluders at their centres
-// and biased by the receiver's cell size alone shadowed fine cells next to coarse splats (the
-// dark speckle on the bunny at s ≥ 2). The map must store each occluder's far extent.
+// One pass versus the rasteriser's two-pass shadow map on the same cut. The two-pass map, whose
+// point footprints are one camera pixel and which has no slope-scaled bias, shows acne on lit
+// surfaces, so it shadows more (measured: 28.4 % of the pixels, one-pass 9.4 %, 20.1 % before
+// the one-pass slope bias); where the one pass shadows a pixel, the two-pass map must agree
+// (measured: 99.0 % of them). Without shadows, or with the order reversed (the occluders drawn
+// after what they shadow), the one-pass fraction drops to ~0 and this fails. A plane cannot shadow
+// itself from a directional light. With splats (s ≥ 2) under a close, oblique camera the traversal
+// draws coarse inner cells next to leaves; a coarse cell's centre lies up to half its side off the
+// plane, so a light map that stored occluders at their centres and biased by the receiver's cell
+// size alone shadowed fine cells next to coarse splats (the dark speckle on the bunny at s ≥ 2).
+// The map must store each occluder's far extent.
 TEST(RhoGridShadows, APlaneCastsNoShadowOnItself) {
   triangle_mesh plane;  // y = 0.3·x + 0.1·z, a tilted square: not aligned with the grid
   plane.vertices.positions = {vec3f(-1, -0.3f, -1), vec3f(1, 0.3f - 0.1f, -1), vec3f(1, 0.4f, 1),
@@ -1334,6 +1336,114 @@ TEST(RhoGridShadows, OccludersOutsideTheFrameStillCast) {
   EXPECT_NEAR(kept, reference, 0.005);
 }
 
+/// Does the ray from o along unit d hit triangle abc at a distance in (0, ∞)? Möller–Trumbore,
+/// double.
+bool ray_hits(const vec3d& o, const vec3d& d, const vec3d& a, const vec3d& b, const vec3d& c) {
+  const vec3d e1 = b - a, e2 = c - a, pv = d.cross(e2);
+  const double det = e1.dot(pv);
+  if (std::abs(det) < 1e-18) return false;
+  const vec3d tv = o - a;
+  const double u = tv.dot(pv) / det;
+  if (u < 0 || u > 1) return false;
+  const vec3d qv = tv.cross(e1);
+  const double v = d.dot(qv) / det;
+  if (v < 0 || u + v > 1) return false;
+  return e2.dot(qv) / det > 0;
+}
+
+/// A Sink that classifies every point through a one-pass light map and reports (cell, shadowed)
+/// for it; acne_policy tells it which cell is being emitted.
+struct acne_recorder {
+  const rho_grid_hierarchy<2, with_normals>* h;
+  one_pass_light_map* map;
+  std::function<void(const rho_grid_cell&, bool)> leaf;
+  const rho_grid_cell* cell = nullptr;
+  void point(const point_prim<with_normals>& p) {
+    leaf(*cell, map->shadowed_then_write(p.position, h->bounding_sphere(*cell).radius, p.normal));
+  }
+  void splat(const splat_prim<with_normals>&) {}
+  void triangle(const triangle_prim<with_normals>&) {}
+};
+struct acne_policy : rho_grid_policy<2> {
+  acne_recorder* r;
+  template <class H, class S>
+  void emit(const H& hh, const rho_grid_cell& n, const view& vv, float size,
+            const traverse_options& o, S& sink) const {
+    r->cell = &n;
+    rho_grid_policy<2>::emit(hh, n, vv, size, o, sink);
+  }
+};
+
+// Shadow acne of the one-pass light map against a ray-cast reference (bunny res3, oct/6, s = 1,
+// light from the upper left, off-frame casters kept). For every leaf drawn on a light-facing
+// surface (decoded normal · L > 0): the ray from its sampled surface point towards the light
+// either meets the mesh (a true shadow) or not. Acne: a leaf shadowed although neither that ray
+// nor the rays from four points half a cell away in its tangent plane meet the mesh (a cell on a
+// shadow boundary may go either way). Missed: a leaf lit although its own ray is blocked. Each
+// leaf weighs n·L, how far its lit and shadowed shades differ. Measured: without the
+// slope-scaled bias acne 8.5 %, missed 1.2 %; with it acne 1.9 %, missed 2.1 %. The test fails
+// if the rule is dropped (acne > 5 %) or overshoots (missed > 3 %).
+TEST(RhoGridShadows, SlopeScaledBiasRemovesMostAcne) {
+  const triangle_mesh m = read_mesh(test::data_file("bun_zipper_res3.ply"));
+  const auto g = build_rho_grid<2>(m, {.level = 6, .keep_sample_points = true});
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const vec3f to_light = vec3f(-0.6f, 0.7f, 0.3f).normalized();
+  const rho_grid_hierarchy<2, with_normals> h(g);
+  const auto q = normal_quantizer::shared(g.normal_bits());
+  std::vector<std::array<vec3d, 3>> tris;
+  for (const auto& f : m.faces)
+    tris.push_back({m.vertices.world(f[0]) - g.origin(), m.vertices.world(f[1]) - g.origin(),
+                    m.vertices.world(f[2]) - g.origin()});
+  const auto blocked = [&](const vec3d& p) {
+    const vec3d o = p + 1e-6 * g.cube_side() * to_light.cast<double>();
+    return std::any_of(tris.begin(), tris.end(), [&](const auto& t) {
+      return ray_hits(o, to_light.cast<double>(), t[0], t[1], t[2]);
+    });
+  };
+  const view v(camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {256, 256}), g.origin());
+  const auto order = rho_grid_light_order<2>(to_light);
+  std::array<double, 2> acne_rate{}, missed_rate{};
+  for (int with_slope : {0, 1}) {
+    one_pass_light_map map(to_light, h.bounding_sphere(h.root()), 1024, 1.0f,
+                           with_slope ? one_pass_slope_bias : 0.0f);
+    std::size_t facing = 0;
+    double total = 0, acne = 0, missed = 0;
+    acne_recorder rec{&h, &map, [&](const rho_grid_cell& n, bool dark) {
+                        if (!h.is_leaf(n)) return;
+                        const vec3f nrm = q->decode(g.normal_code(n.cell));
+                        const double w = nrm.dot(to_light);
+                        if (w <= 0) return;
+                        ++facing;
+                        total += w;
+                        const vec3d sp = g.sample_points()[n.cell].cast<double>();
+                        const bool b = blocked(sp);
+                        if (!dark && b) missed += w;
+                        if (!dark || b) return;
+                        // Half a cell along the tangent plane, lifted a tenth of a cell off the
+                        // surface so that the surface itself does not block the ray.
+                        const double hs = 0.5 * g.cell_side(n.depth);
+                        const vec3d nd = nrm.cast<double>(),
+                                    t1 = any_orthogonal(nrm).cast<double>(), t2 = nd.cross(t1),
+                                    lift = 0.2 * hs * nd;
+                        if (!(blocked(sp + hs * t1 + lift) || blocked(sp - hs * t1 + lift) ||
+                              blocked(sp + hs * t2 + lift) || blocked(sp - hs * t2 + lift)))
+                          acne += w;
+                      }};
+    acne_policy p{rho_grid_policy<2>(g, v, &order), &rec};
+    p.cast_shadows(g, v, to_light, rho_grid_caster_side(g, 1024));
+    (void)traverse(h, v, {.tolerance_px = 1}, rec, p);
+    ASSERT_GT(facing, 20000u);
+    acne_rate[std::size_t(with_slope)] = acne / total;
+    missed_rate[std::size_t(with_slope)] = missed / total;
+    std::printf(
+        "slope bias %s: %zu light-facing leaves, acne %.2f %%, missed %.2f %% (n·L weighted)\n",
+        with_slope ? "on" : "off", facing, 100 * acne / total, 100 * missed / total);
+  }
+  EXPECT_GT(acne_rate[0], 0.05);  // the case the rule is for
+  EXPECT_LT(acne_rate[1], 0.03);
+  EXPECT_LT(missed_rate[1], 0.03);
+}
+
 TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
   const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
@@ -1358,17 +1468,22 @@ TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
   EXPECT_GT(st.shadowed, 0u);
   EXPECT_GT(st.lit, 0u);  // (samples facing away from the light are shadowed too)
   // Shadowed pixels: darker than the unshadowed render.
-  std::size_t sh1 = 0, sh2 = 0, cov = 0;
+  std::size_t sh1 = 0, sh2 = 0, both = 0, cov = 0;
   for (std::size_t i = 0; i < one.size(); ++i) {
     if (!unshadowed.covered(i)) continue;
     ++cov;
-    sh1 += one.colour[i].r + 2 < unshadowed.colour[i].r;
-    sh2 += two.colour[i].r + 2 < unshadowed.colour[i].r;
+    const bool d1 = one.colour[i].r + 2 < unshadowed.colour[i].r,
+               d2 = two.colour[i].r + 2 < unshadowed.colour[i].r;
+    sh1 += d1;
+    sh2 += d2;
+    both += d1 && d2;
   }
-  EXPECT_GT(sh2, 0u);
-  std::printf("shadowed pixels: one-pass %.4f two-pass %.4f, PSNR %.2f dB\n",
-              double(sh1) / double(cov), double(sh2) / double(cov), e.psnr);
-  EXPECT_NEAR(double(sh1) / double(cov), double(sh2) / double(cov), 0.1);
+  std::printf(
+      "shadowed pixels: one-pass %.4f two-pass %.4f, both %.4f of one-pass's, PSNR %.2f dB\n",
+      double(sh1) / double(cov), double(sh2) / double(cov), double(both) / double(sh1), e.psnr);
+  EXPECT_GT(double(sh1) / double(cov), 0.05);
+  EXPECT_GE(sh2, sh1);
+  EXPECT_GT(double(both) / double(sh1), 0.95);
 }
 
 }  // namespace

@@ -15,6 +15,14 @@
 // circumsphere has radius r — plus half a texel), and a sample is shadowed only when that is
 // nearer than its own near extent (centre − r − the bias). Comparing extents, not centres, keeps
 // a coarse node from shadowing the finer nodes of the surface it lies on (docs/rho-grid.md).
+//
+// Slope-scaled bias (the acne rule): a receiver whose normal makes an angle α with the light
+// also allows k·(r/√3 + one texel)·tan α (k = one_pass_slope_bias = 2, tan α capped at
+// one_pass_slope_cap = 5): on a surface tilted against the light, the neighbours whose
+// footprints reach the receiver's texel lie up to that much nearer the light along the same
+// surface. Against a ray-cast reference (RhoGridShadows.SlopeScaledBiasRemovesMostAcne, bunny,
+// every light-facing leaf weighted by n·L, i.e. by how much lit and shadowed differ): acne
+// 8.5 % → 1.9 %, missed shadows 1.2 % → 2.1 %; a larger cap trades the one for the other.
 #pragma once
 
 #include <algorithm>
@@ -35,11 +43,18 @@ struct one_pass_shadow_stats {
   std::size_t lit = 0, shadowed = 0;  ///< primitives classified
 };
 
+/// The slope-scaled bias factor k of the one-pass light map, and the largest tan α it is
+/// applied with (see the top of this file).
+inline constexpr float one_pass_slope_bias = 2.0f;
+inline constexpr float one_pass_slope_cap = 5.0f;
+
 /// The orthographic light map over a bounding sphere, n × n texels across its diameter.
 class one_pass_light_map {
  public:
-  /// `to_light` unit; `bounds` contains everything drawn; bias in texels.
-  one_pass_light_map(const vec3f& to_light, const sphere& bounds, int texels, float bias_texels)
+  /// `to_light` unit; `bounds` contains everything drawn; bias in texels; slope: the factor k
+  /// of the slope-scaled bias (0: none).
+  one_pass_light_map(const vec3f& to_light, const sphere& bounds, int texels, float bias_texels,
+                     float slope = one_pass_slope_bias)
       : l_(to_light),
         lu_(any_orthogonal(to_light)),
         lv_(to_light.cross(lu_)),
@@ -48,17 +63,20 @@ class one_pass_light_map {
         n_(std::max(2, texels)),
         texel_(2 * bounds.radius / float(n_)),
         bias_(bias_texels * texel_),
+        slope_(std::isfinite(slope) ? std::max(slope, 0.0f) : 0.0f),
         depth_(std::size_t(n_) * std::size_t(n_), std::numeric_limits<float>::infinity()) {}
 
-  /// True when a sample at p whose node has bounding radius r is shadowed by what was written
-  /// before; then writes the sample's own footprint.
-  bool shadowed_then_write(const vec3f& p, float r) {
+  /// True when a sample at p whose node has bounding radius r and unit normal n (either sign;
+  /// zero: unknown, no slope bias) is shadowed by what was written before; then writes the
+  /// sample's own footprint.
+  bool shadowed_then_write(const vec3f& p, float r, const vec3f& n = vec3f::Zero()) {
     const vec3f d = p - c0_;
     const float tu = (d.dot(lu_) + half_) / texel_, tv = (d.dot(lv_) + half_) / texel_;
     const float z = -d.dot(l_);  // distance from the light, up to a constant
     const int ix = std::clamp(int(tu), 0, n_ - 1), iy = std::clamp(int(tv), 0, n_ - 1);
-    const bool shadowed = at(ix, iy) < z - r - bias_;
-    const float fr = (r / std::sqrt(3.0f)) / texel_ + 0.5f;
+    const float footprint = r / std::sqrt(3.0f);
+    const bool shadowed = at(ix, iy) < z - r - bias_ - slope_bias(n, footprint);
+    const float fr = footprint / texel_ + 0.5f;
     const int rr = int(std::ceil(fr));
     for (int y = std::max(0, iy - rr); y <= std::min(n_ - 1, iy + rr); ++y)
       for (int x = std::max(0, ix - rr); x <= std::min(n_ - 1, ix + rr); ++x) {
@@ -72,10 +90,16 @@ class one_pass_light_map {
 
  private:
   float& at(int x, int y) { return depth_[std::size_t(y) * std::size_t(n_) + std::size_t(x)]; }
+  /// k·(footprint + texel)·tan α, α the angle between n and the light (tan capped at 10).
+  [[nodiscard]] float slope_bias(const vec3f& n, float footprint) const {
+    const float c = std::abs(n.dot(l_)), s2 = std::max(0.0f, n.squaredNorm() - c * c);
+    if (!(slope_ > 0) || !(c > 0)) return 0;
+    return slope_ * (footprint + texel_) * std::min(std::sqrt(s2) / c, one_pass_slope_cap);
+  }
   vec3f l_, lu_, lv_, c0_;
   float half_;
   int n_;
-  float texel_, bias_;
+  float texel_, bias_, slope_;
   std::vector<float> depth_;
 };
 
@@ -102,17 +126,19 @@ class one_pass_shadow_sink {
 
   void point(const point_prim<A>& p) {
     point_prim<out_attrs> q{p.position, p.size_px};
-    q.colour = shade(p.position, p.normal, albedo(p), classify(p.position));
+    q.colour = shade(p.position, p.normal, albedo(p), classify(p.position, p.normal));
     inner_.point(q);
   }
   void splat(const splat_prim<A>& s) {
     splat_prim<out_attrs> q{s.centre, s.u, s.v};
-    q.colour = shade(s.centre, s.normal, albedo(s), classify(s.centre));
+    q.colour = shade(s.centre, s.normal, albedo(s), classify(s.centre, s.normal));
     inner_.splat(q);
   }
   void triangle(const triangle_prim<A>& t) {
     const vec3f c = (t.p[0] + t.p[1] + t.p[2]) / 3;
-    const bool dark = classify(c);
+    const vec3f fn = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]);
+    const float len = fn.norm();
+    const bool dark = classify(c, len > 0 && std::isfinite(len) ? vec3f(fn / len) : vec3f::Zero());
     triangle_prim<out_attrs> q{t.p};
     for (std::size_t k = 0; k < 3; ++k) {
       rgb8 a = flat_;
@@ -123,8 +149,8 @@ class one_pass_shadow_sink {
   }
 
  private:
-  bool classify(const vec3f& p) {
-    const bool dark = map_.shadowed_then_write(p, r_);
+  bool classify(const vec3f& p, const vec3f& n) {
+    const bool dark = map_.shadowed_then_write(p, r_, n);
     ++(dark ? st_.shadowed : st_.lit);
     return dark;
   }
