@@ -221,11 +221,14 @@ struct rho_traversal {
   bool casters = false;
   int caster_depth = 0;
 
+  /// Rows of the linear map p ↦ (X, Y, W) in pixels × depth, relative to the principal point.
+  [[nodiscard]] static std::array<vec3d, 3> rows(const view& v) {
+    return {v.right.cast<double>() * double(v.focal_px), -v.up.cast<double>() * double(v.focal_px),
+            v.forward.cast<double>()};
+  }
+
   rho_traversal(const rho_grid<Rho>& g, const view& v, bool fixed) {
-    // Rows of the map p ↦ (X, Y, W) in pixels × depth, relative to the principal point.
-    const vec3d r = v.right.cast<double>() * double(v.focal_px);
-    const vec3d u = -v.up.cast<double>() * double(v.focal_px);
-    const vec3d f = v.forward.cast<double>();
+    const auto [r, u, f] = rows(v);
     const vec3d c0 = vec3d::Constant(0.5 * g.cube_side()) - v.eye.cast<double>();
     const std::array<double, 3> h0{r.dot(c0), u.dot(c0), f.dot(c0)};
     struct dl {
@@ -281,9 +284,8 @@ struct rho_traversal {
   void cast_shadows(const rho_grid<Rho>& g, const view& v, const vec3f& to_light,
                     double caster_side) {
     const vec3d d = -to_light.cast<double>();  // the direction shadows fall
-    const double dx = v.right.cast<double>().dot(d) * double(v.focal_px);
-    const double dy = -v.up.cast<double>().dot(d) * double(v.focal_px);
-    const double dw = v.forward.cast<double>().dot(d);
+    const auto [r, u, f] = rows(v);
+    const double dx = r.dot(d), dy = u.dot(d), dw = f.dot(d);
     const double hx = 0.5 * v.width, hy = 0.5 * v.height;
     may_cull = {.left = dx + hx * dw <= 0,
                 .right = hx * dw - dx <= 0,
@@ -307,8 +309,10 @@ struct rho_traversal {
     if (!(den > znear)) return leaf ? verdict::draw : verdict::refine;  // straddles the eye plane
     const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
     const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
-    const auto rhs = Arith::splat_scale(s) * Arith::mul(h.w, den);
-    const bool small = Arith::lhs(ex) <= rhs && Arith::lhs(ey) <= rhs;
+    const auto small = [&] {  // the splat condition (Eq. 6)
+      const auto rhs = Arith::splat_scale(s) * Arith::mul(h.w, den);
+      return Arith::lhs(ex) <= rhs && Arith::lhs(ey) <= rhs;
+    };
     if (cull) {
       const auto wd = Arith::mul(h.w, den);
       // X·den ± E compared with ∓c·W·den: products of three values, taken in two steps so the
@@ -321,9 +325,9 @@ struct rho_traversal {
           (top && may_cull.top) || (bottom && may_cull.bottom))
         return verdict::cull;
       if (far || left || right || top || bottom)  // out of view, kept as a caster
-        return small ? verdict::draw : caster(l, leaf);
+        return small() ? verdict::draw : caster(l, leaf);
     }
-    if (small) return verdict::draw;
+    if (small()) return verdict::draw;
     return leaf ? verdict::draw : verdict::refine;
   }
 
