@@ -51,6 +51,7 @@ json pmr_stats_json(const pmr_hierarchy& h, const std::string& path, double buil
   j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
   j.num("bytes_per_point",
         static_cast<double>(h.file_bytes()) / static_cast<double>(h.positions().size()));
+  j.boolean("colours", h.has_colours());
   j.num("build_seconds", build_seconds);  // NaN → null: unknown
   return j;
 }
@@ -66,13 +67,14 @@ struct pmr_method_traits {
   }
   frame draw(const pmr_hierarchy& h, const frame_request& r) const {
     const view v(r.cam, h.origin());
-    const render_options o = lod_render_options(r.view, false);
+    const render_options o = lod_render_options(r.view, h.has_colours());
     traverse_options topt;
     topt.tolerance_px = r.tolerance;
     std::vector<std::uint32_t> used(h.leaf_count(), 0);
     pmr_policy policy;
     policy.levels_used = &used;
-    frame f = draw_frame(h, v, o, topt, policy, r, h.origin());
+    frame f = h.has_colours() ? draw_frame(pmr_colour_view(h), v, o, topt, policy, r, h.origin())
+                              : draw_frame(h, v, o, topt, policy, r, h.origin());
     std::vector<std::size_t> hist(h.levels(), 0);
     for (const auto u : used) ++hist[u];
     f.extra.raw("leaves_per_level", list(hist));

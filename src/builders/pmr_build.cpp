@@ -283,6 +283,12 @@ struct builder {
     d.positions.resize(n);
     d.normals.resize(n);
     for (std::size_t g = 0; g < n; ++g) d.positions[g] = local[d.source[g]].cast<float>();
+    // Colours travel with their samples (every level is a subset of the input).
+    d.colours.clear();
+    if (!cloud.colours.empty()) {
+      d.colours.resize(n);
+      for (std::size_t g = 0; g < n; ++g) d.colours[g] = cloud.colours[d.source[g]];
+    }
     for (const auto& r : results)
       for (std::size_t k = 0; k < r.own.size(); ++k) d.normals[global[r.own[k]]] = r.normal[k];
     // Levels.

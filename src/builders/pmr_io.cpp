@@ -1,13 +1,14 @@
 // pbr_lod — PMR (Dey & Hudson, IEEE Vis 2002) §2 Records and §3 (the file is mapped with
 // mmap): the versioned file "PBRLODPM" v1.
 //
-// Layout (little-endian): magic "PBRLODPM", u32 version, u32 flags (0); f64×3 origin, input min,
-// input max; u32 max_leaf_points, f32 neighbour_margin; u32 thresholds, f32 each; u64 × 6 build
-// counts (input points, duplicates, triangulated, removals, flat leaves, hull points); u32
+// Layout (little-endian): magic "PBRLODPM", u32 version, u32 flags (bit 0: colours); f64×3 origin,
+// input min, input max; u32 max_leaf_points, f32 neighbour_margin; u32 thresholds, f32 each; u64 ×
+// 6 build counts (input points, duplicates, triangulated, removals, flat leaves, hull points); u32
 // counts of samples, nodes, leaves, triangles, umbrellas, umbrella indices; then the arrays in
-// that order of pmr_data (positions, normals, source, nodes, leaves, levels, triangles,
-// umbrellas, umbrella indices); u64 FNV-1a of everything before. No timings: the same input and
-// options give the same bytes.
+// that order of pmr_data (positions, normals, source, colours as RGB bytes when flag bit 0 is
+// set, nodes, leaves, levels, triangles, umbrellas, umbrella indices); u64 FNV-1a of everything
+// before. A file without colours is the same bytes as before colours existed. No timings: the same
+// input and options give the same bytes.
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
@@ -29,10 +30,10 @@ bool operator==(const pmr_data& a, const pmr_data& b) {
   return a.origin == b.origin && a.input_min == b.input_min && a.input_max == b.input_max &&
          a.max_leaf_points == b.max_leaf_points && a.neighbour_margin == b.neighbour_margin &&
          a.rho == b.rho && a.positions == b.positions && a.normals == b.normals &&
-         a.source == b.source && a.nodes == b.nodes && a.leaf_list == b.leaf_list &&
-         a.levels == b.levels && a.triangles == b.triangles && a.umbrellas == b.umbrellas &&
-         a.umbrella_index == b.umbrella_index && a.stats.input_points == b.stats.input_points &&
-         a.stats.duplicates == b.stats.duplicates &&
+         a.colours == b.colours && a.source == b.source && a.nodes == b.nodes &&
+         a.leaf_list == b.leaf_list && a.levels == b.levels && a.triangles == b.triangles &&
+         a.umbrellas == b.umbrellas && a.umbrella_index == b.umbrella_index &&
+         a.stats.input_points == b.stats.input_points && a.stats.duplicates == b.stats.duplicates &&
          a.stats.triangulated_points == b.stats.triangulated_points &&
          a.stats.removals == b.stats.removals && a.stats.flat_leaves == b.stats.flat_leaves &&
          a.stats.hull_points == b.stats.hull_points;
@@ -41,13 +42,14 @@ bool operator==(const pmr_data& a, const pmr_data& b) {
 namespace {
 
 constexpr file_format pmr_format{"PMR", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'M'}, 1};
+constexpr std::uint32_t flag_colours = 1;
 constexpr std::size_t node_bytes = 4 * 8 + 4 * 4, leaf_bytes = 12, level_bytes = 20, tri_bytes = 12,
                       umbrella_bytes = 12;
 
 std::vector<unsigned char> encode(const pmr_data& d) {
   byte_writer w;
   write_head(w, pmr_format);
-  w.put(std::uint32_t{0});
+  w.put(d.colours.empty() ? std::uint32_t{0} : flag_colours);
   for (const vec3d* v : {&d.origin, &d.input_min, &d.input_max})
     for (int k = 0; k < 3; ++k) w.put((*v)[k]);
   w.put(d.max_leaf_points);
@@ -63,6 +65,11 @@ std::vector<unsigned char> encode(const pmr_data& d) {
   for (const auto& p : d.positions) w.put_vec(p);
   for (const auto& n : d.normals) w.put_vec(n);
   for (const auto s : d.source) w.put(s);
+  for (const rgb8& c : d.colours) {
+    w.put(c.r);
+    w.put(c.g);
+    w.put(c.b);
+  }
   for (const auto& n : d.nodes) {
     w.put_vec(n.cell_min);
     w.put(n.cell_size);
@@ -184,7 +191,8 @@ class mapping {
 pmr_data decode(reader& r, const unsigned char* bytes) {
   pmr_data d;
   r.skip_head();  // checked by read_head() in load_pmr_data
-  if (r.get<std::uint32_t>("flags") != 0) r.fail("unknown flags");
+  const auto flags = r.get<std::uint32_t>("flags");
+  if ((flags & ~flag_colours) != 0) r.fail("unknown flags");
   for (vec3d* v : {&d.origin, &d.input_min, &d.input_max})
     for (int k = 0; k < 3; ++k) {
       (*v)[k] = r.get<double>("origin/bounds");
@@ -224,6 +232,15 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
     d.source[i] = r.get<std::uint32_t>("source index");
     if (d.source[i] >= npts || seen[d.source[i]]++)
       r.fail("source index of sample " + std::to_string(i) + " out of range or repeated");
+  }
+  if (flags & flag_colours) {
+    r.need(npts, 3, "sample colours");
+    d.colours.resize(npts);
+    for (auto& c : d.colours) {
+      c.r = r.get<std::uint8_t>("colour");
+      c.g = r.get<std::uint8_t>("colour");
+      c.b = r.get<std::uint8_t>("colour");
+    }
   }
 
   r.need(nnodes, node_bytes, "nodes");
@@ -334,7 +351,7 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
 
 std::size_t pmr_file_bytes(const pmr_data& d) {
   const std::size_t header = 8 + 4 + 4 + 9 * 8 + 4 + 4 + 4 + 4 * d.rho.size() + 6 * 8 + 6 * 4;
-  return header + d.positions.size() * 28 + d.nodes.size() * node_bytes +
+  return header + d.positions.size() * 28 + d.colours.size() * 3 + d.nodes.size() * node_bytes +
          d.leaf_list.size() * leaf_bytes + d.levels.size() * level_bytes +
          d.triangles.size() * tri_bytes + d.umbrellas.size() * umbrella_bytes +
          d.umbrella_index.size() * 4 + 8;

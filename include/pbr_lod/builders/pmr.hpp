@@ -19,7 +19,8 @@
 //               Voronoi edges of V_p that the tangent polygon crosses — pmr_voronoi.cpp.
 //   §2 Records  umbrella radius per sample and level, average umbrella radius per level per
 //               leaf, triangles shared by umbrellas stored once per leaf and level; the file
-//               (save()/load(), "PBRLODPM" v1) — src/builders/pmr_io.cpp.
+//               (save()/load(), "PBRLODPM" v1) — src/builders/pmr_io.cpp. Beyond the paper: the
+//               input's colours, kept per sample when it has them (pmr_colour_view draws them).
 //   §3 Viewing  pixel size at the leaf's corner nearest the eye, the level whose average
 //               umbrella radius is closest to factor × pixel size (with the paper's ramp of the
 //               factor), point vs umbrella by 2 × umbrella radius vs pixel size, every shared
@@ -56,6 +57,7 @@
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -150,6 +152,7 @@ struct pmr_data {
   std::vector<float> rho;             ///< thresholds; levels = rho.size() + 1
   std::vector<vec3f> positions;       ///< relative to origin, leaf by leaf (see layout)
   std::vector<vec3f> normals;         ///< unit, from the level-0 Voronoi diagram (§2 Records)
+  std::vector<rgb8> colours;          ///< the input's, per stored sample; empty when it had none
   std::vector<std::uint32_t> source;  ///< input index of each stored sample
   std::vector<pmr_node> nodes;
   std::vector<pmr_leaf> leaf_list;
@@ -234,7 +237,8 @@ class pmr_hierarchy {
   }
   /// A leaf: its level and primitives chosen by the paper's rule with factor 1. An inner node
   /// (reached only by traversals that stop above the leaves): every leaf below it the same way.
-  template <class S>
+  /// Primitives carry the attributes Out (with colour: pmr_colour_view).
+  template <attributes Out = attrs, class S>
   void emit(node_id n, const view& v, S& sink) const {
     std::vector<node_id> stack{n};
     while (!stack.empty()) {
@@ -242,7 +246,7 @@ class pmr_hierarchy {
       stack.pop_back();
       if (is_leaf(m)) {
         const float ps = pixel_size(m, v);
-        emit_level(d_.nodes[m].first, choose_level(d_.nodes[m].first, ps, 1), ps, sink);
+        emit_level<Out>(d_.nodes[m].first, choose_level(d_.nodes[m].first, ps, 1), ps, sink);
         continue;
       }
       for (node_id c = d_.nodes[m].first + d_.nodes[m].count; c-- > d_.nodes[m].first;)
@@ -282,8 +286,9 @@ class pmr_hierarchy {
     return best;
   }
   /// Sends level `lvl` of leaf `leaf`: each sample a point when pixel > 2 × its umbrella radius,
-  /// else its umbrella's triangles, each distinct triangle once (§3 RENDER-NODE).
-  template <class S>
+  /// else its umbrella's triangles, each distinct triangle once (§3 RENDER-NODE). Out: the
+  /// primitives' attributes (normals; colours only when has_colours()).
+  template <attributes Out = attrs, class S>
   void emit_level(std::uint32_t leaf, std::uint32_t lvl, float pixel, S& sink) const {
     const auto& L = level(leaf, lvl);
     const std::uint32_t first = d_.leaf_list[leaf].first_point;
@@ -292,8 +297,9 @@ class pmr_hierarchy {
       const auto& u = d_.umbrellas[L.first_entry + k];
       const std::uint32_t s = first + k;
       if (u.count == 0 || pixel > 2 * u.radius) {
-        point_prim<attrs> p{d_.positions[s], 1};
+        point_prim<Out> p{d_.positions[s], 1};
         p.normal = d_.normals[s];
+        if constexpr (Out.colour) p.colour = d_.colours[s];
         sink.point(p);
         continue;
       }
@@ -302,8 +308,10 @@ class pmr_hierarchy {
         if (drawn[t]) continue;
         drawn[t] = 1;
         const auto& T = d_.triangles[L.first_tri + t];
-        triangle_prim<attrs> tri{{d_.positions[T[0]], d_.positions[T[1]], d_.positions[T[2]]}};
+        triangle_prim<Out> tri{{d_.positions[T[0]], d_.positions[T[1]], d_.positions[T[2]]}};
         tri.normal = {d_.normals[T[0]], d_.normals[T[1]], d_.normals[T[2]]};
+        if constexpr (Out.colour)
+          tri.colour = {d_.colours[T[0]], d_.colours[T[1]], d_.colours[T[2]]};
         sink.triangle(tri);
       }
     }
@@ -322,6 +330,9 @@ class pmr_hierarchy {
   [[nodiscard]] const std::vector<detail::pmr_node>& nodes() const { return d_.nodes; }
   [[nodiscard]] const std::vector<vec3f>& positions() const { return d_.positions; }
   [[nodiscard]] const std::vector<vec3f>& normals() const { return d_.normals; }
+  /// The input's colours, one per stored sample, when it had colours; else empty.
+  [[nodiscard]] const std::vector<rgb8>& colours() const { return d_.colours; }
+  [[nodiscard]] bool has_colours() const { return !d_.colours.empty(); }
   /// Input index of each stored sample (a permutation of the input).
   [[nodiscard]] const std::vector<std::uint32_t>& source() const { return d_.source; }
   [[nodiscard]] const std::vector<std::array<std::uint32_t, 3>>& triangles() const {
@@ -369,6 +380,46 @@ class pmr_hierarchy {
 };
 
 static_assert(Hierarchy<pmr_hierarchy>);
+
+/// A pmr_hierarchy whose primitives also carry the input's colours (it must have them:
+/// has_colours()): the same nodes, levels and primitives as the hierarchy, for pmr_policy or any
+/// other. Holds a pointer to the hierarchy, which must outlive it.
+class pmr_colour_view {
+ public:
+  using node_id = pmr_hierarchy::node_id;
+  static constexpr attributes attrs = with_normals_colours;
+
+  /// Throws InvalidArgument when h has no colours.
+  explicit pmr_colour_view(const pmr_hierarchy& h) : h_(&h) {
+    if (!h.has_colours()) throw InvalidArgument("pmr: the hierarchy has no colours");
+  }
+  [[nodiscard]] vec3d origin() const { return h_->origin(); }
+  [[nodiscard]] bool empty() const { return h_->empty(); }
+  [[nodiscard]] node_id root() const { return h_->root(); }
+  [[nodiscard]] bool is_leaf(node_id n) const { return h_->is_leaf(n); }
+  [[nodiscard]] auto children(node_id n) const { return h_->children(n); }
+  [[nodiscard]] sphere bounding_sphere(node_id n) const { return h_->bounding_sphere(n); }
+  template <class S>
+  void emit(node_id n, const view& v, S& sink) const {
+    h_->emit<attrs>(n, v, sink);
+  }
+  // What pmr_policy uses besides the Hierarchy interface.
+  [[nodiscard]] const std::vector<detail::pmr_node>& nodes() const { return h_->nodes(); }
+  [[nodiscard]] float pixel_size(node_id n, const view& v) const { return h_->pixel_size(n, v); }
+  [[nodiscard]] std::uint32_t choose_level(std::uint32_t leaf, float pixel, float factor) const {
+    return h_->choose_level(leaf, pixel, factor);
+  }
+  template <class S>
+  void emit_level(std::uint32_t leaf, std::uint32_t lvl, float pixel, S& sink) const {
+    h_->emit_level<attrs>(leaf, lvl, pixel, sink);
+  }
+  [[nodiscard]] const pmr_hierarchy& hierarchy() const { return *h_; }
+
+ private:
+  const pmr_hierarchy* h_;
+};
+
+static_assert(Hierarchy<pmr_colour_view>);
 
 /// Builds the PMR hierarchy of a point cloud (positions only are used; §2). Throws
 /// InvalidArgument on empty input, NaN/Inf coordinates, more than 2³² − 2 samples or bad
