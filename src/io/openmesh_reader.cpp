@@ -19,6 +19,7 @@
 // reader's material list and folder, the OFF reader's options), so reads are serialised.
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/IO/importer/BaseImporter.hh>
+#include <OpenMesh/Core/System/omstream.hh>
 #include <algorithm>
 #include <filesystem>
 #include <map>
@@ -282,8 +283,16 @@ void run_openmesh(const std::string& path, soup_importer& imp) {
       omio::Options::VertexNormal | omio::Options::VertexColor | omio::Options::FaceTexCoord;
   bool ok = false;
   {
+    // OpenMesh writes its complaints (a missing material file, a bad texture index) to omerr;
+    // the reader reports through read_report and exceptions instead, so a library call prints
+    // nothing.
     const std::lock_guard<std::mutex> lock(openmesh_mutex());
+    const bool err_on = ::omerr().is_enabled(), log_on = ::omlog().is_enabled();
+    ::omerr().disable();
+    ::omlog().disable();
     ok = omio::IOManager().read(path, imp, opt);
+    if (err_on) ::omerr().enable();
+    if (log_on) ::omlog().enable();
   }
   if (!imp.error().empty()) format_error(path, "", imp.error());
   if (!ok) format_error(path, "", "OpenMesh's reader rejected the file");
@@ -411,11 +420,20 @@ raw_geometry read_obj_file(const std::string& path, read_report& report) {
   const obj_scan s = scan_obj(path, text);
   const std::string name = file_name(path);
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  // OpenMesh opens every material library itself, at its directory prefix + the name as written
+  // ("../../dev/zero" included) and reads it to the end: a device or a FIFO would never end.
+  // So only regular files may be named; a missing one is a warning (OpenMesh skips it).
+  const std::size_t slash = path.find_last_of("\\/");
+  const std::string prefix = slash == std::string::npos ? "./" : path.substr(0, slash + 1);
   for (const std::string& lib : s.mtllibs) {
     std::error_code ec;
-    if (!std::filesystem::exists(dir / lib, ec))
-      report.warnings.push_back(
-          cat(name, ": material library ", (dir / lib).string(), " does not exist"));
+    const auto st = std::filesystem::status(prefix + lib, ec);
+    if (!std::filesystem::exists(st))
+      report.warnings.push_back(cat(name, ": material library ", prefix + lib, " does not exist"));
+    else if (!std::filesystem::is_regular_file(st))
+      format_error(path, "mtllib",
+                   cat("the material library ", prefix + lib,
+                       " is not a regular file (a device, a pipe or a folder)"));
   }
 
   soup_importer imp(/*one_based=*/true);

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <filesystem>
 
 #include "io_test_util.hpp"
 #include "pbr_lod/io/read.hpp"
@@ -69,6 +70,22 @@ TEST_F(ObjOff, ObjMissingMaterialIsAWarning) {
   EXPECT_EQ(m.num_faces(), 2u);
   ASSERT_FALSE(r.warnings.empty());
   EXPECT_NE(r.warnings[0].find("gone.mtl does not exist"), std::string::npos) << r.warnings[0];
+}
+
+// OpenMesh opens a material library by its name relative to the OBJ's folder and reads it to
+// the end, so "mtllib ../../dev/zero" made the reader read forever (found by reading the fuzzer's
+// log, which OpenMesh filled with missing-material warnings). Only regular files may be named.
+TEST_F(ObjOff, ObjMaterialLibraryMustBeARegularFile) {
+  PBR_LOD_EXPECT_THROW_MSG(read_mesh(write("dir.obj", std::string("mtllib .\n") + quad_obj)),
+                           FormatError, "is not a regular file");
+  if (std::filesystem::exists("/dev/zero")) {
+    std::string up;
+    for (const auto& part : std::filesystem::absolute(path("")).parent_path().relative_path())
+      if (!part.empty()) up += "../";
+    const std::string obj = "mtllib " + up + "dev/zero\n" + quad_obj;
+    PBR_LOD_EXPECT_THROW_MSG(read_mesh(write("zero.obj", obj)), FormatError,
+                             "is not a regular file");
+  }
 }
 
 // A material with map_Kd: texture_path is resolved against the OBJ's folder.
