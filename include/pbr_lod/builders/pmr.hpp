@@ -421,7 +421,8 @@ class pmr_colour_view {
 
 static_assert(Hierarchy<pmr_colour_view>);
 
-/// Builds the PMR hierarchy of a point cloud (positions only are used; §2). Throws
+/// Builds the PMR hierarchy of a point cloud from its positions (§2); its colours, when it has
+/// them, are kept per sample (pmr_colour_view), its normals only orient the estimated ones. Throws
 /// InvalidArgument on empty input, NaN/Inf coordinates, more than 2³² − 2 samples or bad
 /// options; Cancelled when the progress callback says so.
 [[nodiscard]] inline pmr_hierarchy build_pmr(const point_cloud& cloud,
