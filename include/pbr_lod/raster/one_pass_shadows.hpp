@@ -90,10 +90,13 @@ class one_pass_light_map {
 
  private:
   float& at(int x, int y) { return depth_[std::size_t(y) * std::size_t(n_) + std::size_t(x)]; }
-  /// k·(footprint + texel)·tan α, α the angle between n and the light (tan capped at 10).
+  /// k·(footprint + texel)·tan α, α the angle between n and the light (tan α capped at
+  /// one_pass_slope_cap).
   [[nodiscard]] float slope_bias(const vec3f& n, float footprint) const {
-    const float c = std::abs(n.dot(l_)), s2 = std::max(0.0f, n.squaredNorm() - c * c);
-    if (!(slope_ > 0) || !(c > 0)) return 0;
+    if (!(slope_ > 0)) return 0;
+    const float c = std::abs(n.dot(l_));
+    if (!(c > 0)) return 0;
+    const float s2 = std::max(0.0f, n.squaredNorm() - c * c);
     return slope_ * (footprint + texel_) * std::min(std::sqrt(s2) / c, one_pass_slope_cap);
   }
   vec3f l_, lu_, lv_, c0_;
