@@ -24,19 +24,22 @@ namespace {
 // leaves cost a deeper tree and more index memory for nothing.
 constexpr int leaf_size = 16;
 
-/// Keeps the k best (distance, index) pairs in caller-owned arrays, ordered by distance then
-/// index, so that ties come out the same whatever order the tree visits them in.
+/// Keeps the k best (distance, index) pairs in caller-owned arrays, ordered by distance, then
+/// equal distances by position (x, then y, then z) and by index — so that ties come out the
+/// same whatever order the tree visits them in, and, being decided by where the points are and
+/// not by their numbering, the same in any subset that holds them (the chunked build searches
+/// a chunk and its halo for the neighbours the whole input gives: chunked_point_octree.hpp).
 class sorted_result final : public flann::ResultSet<float> {
  public:
-  sorted_result(std::size_t capacity, std::uint32_t* idx, float* dist)
-      : capacity_(capacity), idx_(idx), dist_(dist) {}
+  sorted_result(std::size_t capacity, std::uint32_t* idx, float* dist, const float* coords)
+      : capacity_(capacity), idx_(idx), dist_(dist), coords_(coords) {}
   sorted_result(const sorted_result&) = delete;
   sorted_result& operator=(const sorted_result&) = delete;
   ~sorted_result() override = default;
 
   [[nodiscard]] bool full() const override { return count_ == capacity_; }
   // FLANN only offers points with dist < worstDist(): one ulp more lets an equal distance with a
-  // smaller index in, so ties are decided by index, not by the tree's visiting order. Cached:
+  // smaller key in, so ties are decided by the key, not by the tree's visiting order. Cached:
   // the tree asks for it at every node it visits.
   [[nodiscard]] float worstDist() const override { return worst_; }
   void addPoint(float dist, std::size_t index) override {
@@ -55,13 +58,18 @@ class sorted_result final : public flann::ResultSet<float> {
   [[nodiscard]] std::size_t size() const { return count_; }
 
  private:
-  static bool less(float d, std::uint32_t i, float d2, std::uint32_t i2) {
-    return d < d2 || (d == d2 && i < i2);
+  [[nodiscard]] bool less(float d, std::uint32_t i, float d2, std::uint32_t i2) const {
+    if (d != d2) return d < d2;
+    const float *a = coords_ + 3 * std::size_t{i}, *b = coords_ + 3 * std::size_t{i2};
+    for (int c = 0; c < 3; ++c)
+      if (a[c] != b[c]) return a[c] < b[c];
+    return i < i2;  // duplicates: the same point to every use of a neighbourhood
   }
   std::size_t capacity_;
   std::size_t count_ = 0;
   std::uint32_t* idx_;
   float* dist_;
+  const float* coords_;
   float worst_ = std::numeric_limits<float>::max();
 };
 
@@ -77,7 +85,7 @@ struct knn_index::impl {
 
   /// The `want` nearest points to q into idx[0..want), dist2[0..want); returns how many.
   std::size_t query_into(const vec3f& q, std::size_t want, std::uint32_t* idx, float* dist2) const {
-    sorted_result rs(want, idx, dist2);
+    sorted_result rs(want, idx, dist2, coords.data());
     const float qv[3] = {q.x(), q.y(), q.z()};
     index->findNeighbors(rs, qv, params);
     return rs.size();
@@ -131,7 +139,7 @@ float knn_index::nearest_distance(const vec3f& q) const {
   if (!impl_ || !impl_->index) return std::numeric_limits<float>::infinity();
   std::uint32_t i = 0;
   float d2 = std::numeric_limits<float>::infinity();
-  sorted_result rs(1, &i, &d2);
+  sorted_result rs(1, &i, &d2, impl_->coords.data());
   const float qv[3] = {q.x(), q.y(), q.z()};
   impl_->index->findNeighbors(rs, qv, impl_->params);
   return rs.size() == 0 ? std::numeric_limits<float>::infinity() : std::sqrt(d2);

@@ -75,8 +75,7 @@ TEST(Knn, GraphMatchesBruteForce) {
   // knn_spacing(k) is the distance of each row's (k + 1)-th entry (the point itself first), for
   // every point in the caller's order.
   const std::vector<float> s8 = knn_spacing(pts, 8, 2);
-  for (std::size_t i = 0; i < pts.size(); ++i)
-    ASSERT_EQ(s8[i], std::sqrt(g.dist2[i * 9 + 8])) << i;
+  for (std::size_t i = 0; i < pts.size(); ++i) ASSERT_EQ(s8[i], std::sqrt(g.dist2[i * 9 + 8])) << i;
   // Fewer points than k: every row lists all of them.
   const knn_graph small = nearest_neighbour_graph(std::span(pts).first(4), 9);
   EXPECT_EQ(small.k, 4u);
@@ -103,8 +102,8 @@ TEST(Knn, MortonOrderIsZOrder) {
 }
 
 // On a unit grid the 4 nearest neighbours of an interior point are at distance 1 (ties): they
-// come out ordered by index, and the same on every query.
-TEST(Knn, TiesAreOrderedByIndex) {
+// come out ordered by position (x, then y), not by index, and the same on every query.
+TEST(Knn, TiesAreOrderedByPosition) {
   std::vector<vec3f> pts;
   for (int j = 0; j < 9; ++j)
     for (int i = 0; i < 9; ++i) pts.emplace_back(float(i), float(j), 0);
@@ -112,7 +111,8 @@ TEST(Knn, TiesAreOrderedByIndex) {
   std::vector<std::uint32_t> idx;
   std::vector<float> d2;
   index.query(vec3f(4, 4, 0), 5, idx, d2);
-  const std::vector<std::uint32_t> want = {40, 31, 39, 41, 49};  // self, then by index
+  // Self, then (3,4), (4,3), (4,5), (5,4) — by index it would be 31, 39, 41, 49.
+  const std::vector<std::uint32_t> want = {40, 39, 31, 49, 41};
   EXPECT_EQ(idx, want);
   EXPECT_EQ(d2, (std::vector<float>{0, 1, 1, 1, 1}));
 }

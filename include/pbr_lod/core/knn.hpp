@@ -33,8 +33,9 @@ class knn_index {
 
   /// The min(k, size()) points nearest to q, nearest first: idx their indices into the points
   /// given to the constructor, dist2 their squared distances. Both vectors are resized to the
-  /// number found (0 when k ≤ 0 or the index is empty). Ties between equal distances are
-  /// resolved deterministically (same data → same answer).
+  /// number found (0 when k ≤ 0 or the index is empty). Equal distances are ordered by the
+  /// points' positions (x, then y, then z), exact duplicates by index: the same answer for the
+  /// same data, and for any subset of it that holds the neighbours.
   void query(const vec3f& q, int k, std::vector<std::uint32_t>& idx,
              std::vector<float>& dist2) const;
 
@@ -54,9 +55,9 @@ class knn_index {
 
 /// The k nearest neighbours of every point of a set, among the set: row i of `index` / `dist2`
 /// (k entries from i·k) lists the neighbours of point i nearest first; the first entry is i
-/// itself or a duplicate of it (distance 0). Equidistant neighbours come in a deterministic
-/// order (their rank on the Morton curve below), which for ties may differ from
-/// knn_index::query's order by index. k = min(requested, #P).
+/// itself or a duplicate of it (distance 0). Equidistant neighbours come ordered by position as
+/// in knn_index::query (exact duplicates by their rank on the Morton curve below).
+/// k = min(requested, #P).
 struct knn_graph {
   std::size_t k = 0;
   std::vector<std::uint32_t> index;  ///< #P × k point indices
