@@ -68,8 +68,7 @@ std::string generated_point_source::name() const {
   return "generated:" + std::to_string(n_);
 }
 
-void generated_point_source::read(std::uint64_t first, std::size_t count,
-                                  point_block& out) const {
+void generated_point_source::read(std::uint64_t first, std::size_t count, point_block& out) const {
   check_range(*this, first, count);
   out.positions.resize(count);
   out.normals.resize(normals_ ? count : 0);

@@ -126,7 +126,11 @@ template <attributes A>
 struct point_octree_builder;
 template <attributes A>
 struct point_octree_io;
+template <attributes In>
+struct chunked_point_octree_builder;
 }  // namespace detail
+template <attributes A>
+class chunked_point_octree;
 
 template <attributes A>
 class point_octree {
@@ -257,6 +261,10 @@ class point_octree {
     float cos_cone, sin_cone;
   };
   [[nodiscard]] const selection_record& selection(node_id n) const { return selection_[n]; }
+  [[nodiscard]] static selection_record make_selection(const node& nd) {
+    return {std::numbers::pi_v<float> * nd.axis_u.norm() * nd.axis_v.norm(),
+            std::cos(nd.cone_angle), std::sin(nd.cone_angle)};
+  }
   [[nodiscard]] const point_octree_build_stats& stats() const { return stats_; }
   /// Bytes the hierarchy occupies in memory (nodes, samples, codes), excluding vector slack.
   [[nodiscard]] std::size_t memory_bytes() const;
@@ -277,17 +285,17 @@ class point_octree {
  private:
   friend struct detail::point_octree_builder<A>;
   friend struct detail::point_octree_io<A>;
+  template <attributes In>
+  friend struct detail::chunked_point_octree_builder;
+  friend class chunked_point_octree<A>;
   [[nodiscard]] bool equal(const point_octree& o) const;
   void derive_selection(unsigned threads = std::thread::hardware_concurrency()) {
     detail::resize_fresh(selection_, nodes_.size(), std::max(1u, threads));
-    detail::parallel_chunks(
-        nodes_.size(), std::max(1u, threads), 1u << 15, [&](std::size_t lo, std::size_t hi) {
-          for (std::size_t i = lo; i < hi; ++i) {
-            const node& nd = nodes_[i];
-            selection_[i] = {std::numbers::pi_v<float> * nd.axis_u.norm() * nd.axis_v.norm(),
-                             std::cos(nd.cone_angle), std::sin(nd.cone_angle)};
-          }
-        });
+    detail::parallel_chunks(nodes_.size(), std::max(1u, threads), 1u << 15,
+                            [&](std::size_t lo, std::size_t hi) {
+                              for (std::size_t i = lo; i < hi; ++i)
+                                selection_[i] = make_selection(nodes_[i]);
+                            });
   }
 
   std::vector<node> nodes_;

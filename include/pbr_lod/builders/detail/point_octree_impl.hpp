@@ -424,17 +424,21 @@ struct point_octree_builder {
 
   /// Stage 2 (§3): the node's representative sample — centre p̄_c, normal n̄_c, the normal cone
   /// from the pass's smallest cosine, the mean colour. Axes and radius come with the ellipse.
-  node node_centre_and_cone(local& L, std::uint32_t ni, const input& inp, const vec3f& nbar,
-                            bool normal_valid, float min_dot) const {
+  /// (mean, colour sum, count, depth) rather than an input: the chunked build's top nodes hold
+  /// more samples than an input's 32-bit count (builders/chunked_point_octree.hpp).
+  static node node_centre_and_cone(local& L, std::uint32_t ni, const vec3d& mean,
+                                   const vec3d& colour_sum, std::uint64_t count,
+                                   std::uint32_t depth, const vec3f& nbar, bool normal_valid,
+                                   float min_dot) {
     node nd{};
-    nd.centre = inp.mean.template cast<float>();
+    nd.centre = mean.template cast<float>();
     nd.normal = nbar;
     nd.cone_angle = normal_valid ? std::acos(std::clamp(min_dot, -1.0f, 1.0f)) + 1e-6f
                                  : std::numbers::pi_v<float>;
     nd.cone_angle = std::min(nd.cone_angle, std::numbers::pi_v<float>);
-    nd.depth = static_cast<std::uint8_t>(std::min<std::uint32_t>(inp.depth, 255));
+    nd.depth = static_cast<std::uint8_t>(std::min<std::uint32_t>(depth, 255));
     if constexpr (A.colour) {
-      const vec3d cavg = inp.colour_sum / inp.count;
+      const vec3d cavg = colour_sum / static_cast<double>(count);
       L.colours[ni] = {static_cast<std::uint8_t>(std::lround(cavg.x())),
                        static_cast<std::uint8_t>(std::lround(cavg.y())),
                        static_cast<std::uint8_t>(std::lround(cavg.z()))};
@@ -611,7 +615,8 @@ struct point_octree_builder {
     int nonempty = 0;
     for (auto c : all.cnt) nonempty += c > 0;
 
-    node nd = node_centre_and_cone(L, ni, inp, nbar, normal_valid, all.min_dot);
+    node nd = node_centre_and_cone(L, ni, inp.mean, inp.colour_sum, inp.count, inp.depth, nbar,
+                                   normal_valid, all.min_dot);
     const float radius = static_cast<float>(std::sqrt(all.r2));
     // A leaf also when every sample coincides: no split separates duplicates.
     if (!can_split || nonempty < 2) return finish_leaf(L, ni, nd, inp, radius, normal_valid);
@@ -731,6 +736,74 @@ void quantize_samples(point_set<A>& pts, const normal_quantizer& q,
   });
 }
 
+/// The working copy of a build (§4 end): the input's attributes, unit normals, and what it lacks
+/// estimated from its k nearest neighbours. Only the first `keep` points are returned, estimated
+/// among all of them: the chunked build passes a chunk followed by its halo, the neighbours
+/// beyond the chunk's border (builders/chunked_point_octree.hpp).
+template <attributes A, attributes In>
+point_set<A> prepare_samples(const point_set<In>& points, const point_octree_options& opt,
+                             unsigned threads, point_octree_build_stats& st,
+                             std::size_t keep = std::numeric_limits<std::size_t>::max()) {
+  const std::size_t n = points.size();
+  point_set<A> work;
+  work.origin = points.origin;
+  const auto copy = [&](auto& to, const auto& from) {
+    resize_fresh(to, n, threads);
+    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
+      std::copy(from.begin() + static_cast<std::ptrdiff_t>(lo),
+                from.begin() + static_cast<std::ptrdiff_t>(hi),
+                to.begin() + static_cast<std::ptrdiff_t>(lo));
+    });
+  };
+  copy(work.positions, points.positions);
+  if constexpr (In.colour) copy(work.colours, points.colours);
+  estimation_options est_opt{
+      .k_normals = opt.knn, .k_ellipses = opt.knn_ellipses, .threads = threads};
+  // The estimation is the first tenth of the reported progress; a cancel there throws Cancelled.
+  if (opt.progress && keep >= n) est_opt.progress = [&](double f) { return opt.progress(0.1 * f); };
+  if (opt.viewpoint) {
+    est_opt.orientation = normal_orientation::viewpoint;
+    est_opt.viewpoint = vec3d(*opt.viewpoint - points.origin).template cast<float>();
+  }
+  if constexpr (In.normal) {
+    copy(work.normals, points.normals);
+    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) {
+        vec3f& v = work.normals[i];
+        const float len = v.norm();
+        v = (len > 0 && std::isfinite(len)) ? vec3f(v / len) : vec3f::UnitZ();
+      }
+    });
+  } else if constexpr (!In.ellipse) {
+    // Neither: both from one k-NN search.
+    auto est = estimate_normals_and_ellipses(work.positions, est_opt);
+    work.normals = std::move(est.normals);
+    work.axis_u = std::move(est.axes.u);
+    work.axis_v = std::move(est.axes.v);
+    st.estimated_normals = st.estimated_ellipses = true;
+  } else {
+    work.normals = estimate_normals(work.positions, est_opt);
+    st.estimated_normals = true;
+  }
+  if constexpr (In.ellipse) {
+    copy(work.axis_u, points.axis_u);
+    copy(work.axis_v, points.axis_v);
+  } else if constexpr (In.normal) {
+    auto axes = estimate_splat_ellipses(work.positions, work.normals, opt.knn_ellipses, threads);
+    work.axis_u = std::move(axes.u);
+    work.axis_v = std::move(axes.v);
+    st.estimated_ellipses = true;
+  }
+  if (keep < n) {
+    work.positions.resize(keep);
+    work.normals.resize(keep);
+    work.axis_u.resize(keep);
+    work.axis_v.resize(keep);
+    if constexpr (A.colour) work.colours.resize(keep);
+  }
+  return work;
+}
+
 template <attributes A>
 template <attributes In>
 point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
@@ -773,56 +846,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   };
   progress(0);
 
-  // The working copy: the input's attributes plus what §4 estimates from k nearest neighbours.
-  point_set<A> work;
-  work.origin = points.origin;
-  const auto copy = [&](auto& to, const auto& from) {
-    resize_fresh(to, n, threads);
-    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
-      std::copy(from.begin() + static_cast<std::ptrdiff_t>(lo),
-                from.begin() + static_cast<std::ptrdiff_t>(hi),
-                to.begin() + static_cast<std::ptrdiff_t>(lo));
-    });
-  };
-  copy(work.positions, points.positions);
-  if constexpr (In.colour) copy(work.colours, points.colours);
-  estimation_options est_opt{
-      .k_normals = opt.knn, .k_ellipses = opt.knn_ellipses, .threads = threads};
-  // The estimation is the first tenth of the reported progress; a cancel there throws Cancelled.
-  if (opt.progress) est_opt.progress = [&](double f) { return opt.progress(0.1 * f); };
-  if (opt.viewpoint) {
-    est_opt.orientation = normal_orientation::viewpoint;
-    est_opt.viewpoint = vec3d(*opt.viewpoint - points.origin).template cast<float>();
-  }
-  if constexpr (In.normal) {
-    copy(work.normals, points.normals);
-    parallel_for(n, threads, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t i = lo; i < hi; ++i) {
-        vec3f& v = work.normals[i];
-        const float len = v.norm();
-        v = (len > 0 && std::isfinite(len)) ? vec3f(v / len) : vec3f::UnitZ();
-      }
-    });
-  } else if constexpr (!In.ellipse) {
-    // Neither: both from one k-NN search.
-    auto est = estimate_normals_and_ellipses(work.positions, est_opt);
-    work.normals = std::move(est.normals);
-    work.axis_u = std::move(est.axes.u);
-    work.axis_v = std::move(est.axes.v);
-    st.estimated_normals = st.estimated_ellipses = true;
-  } else {
-    work.normals = estimate_normals(work.positions, est_opt);
-    st.estimated_normals = true;
-  }
-  if constexpr (In.ellipse) {
-    copy(work.axis_u, points.axis_u);
-    copy(work.axis_v, points.axis_v);
-  } else if constexpr (In.normal) {
-    auto axes = estimate_splat_ellipses(work.positions, work.normals, opt.knn_ellipses, threads);
-    work.axis_u = std::move(axes.u);
-    work.axis_v = std::move(axes.v);
-    st.estimated_ellipses = true;
-  }
+  point_set<A> work = prepare_samples<A>(points, opt, threads, st);
   st.estimation_seconds = std::chrono::duration<double>(clock::now() - t0).count();
   progress(0.1);
 

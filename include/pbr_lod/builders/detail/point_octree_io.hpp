@@ -61,6 +61,36 @@ struct point_octree_io {
     }
   }
 
+  /// One node record (also the chunked hierarchy's top file, builders/chunked_point_octree.hpp).
+  static void put_node(byte_writer& w, int bits, const typename tree::node& nd, const code_t* code,
+                       rgb8 colour) {
+    w.put_vec(nd.centre);
+    w.put(nd.radius);
+    w.put(nd.cone_angle);
+    w.put(nd.first);
+    w.put(nd.count);
+    w.put(nd.leaf);
+    w.put(nd.depth);
+    put_orientation(w, bits, code, nd.normal, nd.axis_u, nd.axis_v);
+    if constexpr (A.colour) w.put(colour);
+  }
+  /// Reads what put_node wrote, validating it; `i` names the node in messages.
+  static void get_node(byte_reader& r, const normal_quantizer* q, std::size_t i,
+                       typename tree::node& nd, code_t* code, rgb8& colour) {
+    nd.centre = r.get_vec("node centre", i);
+    nd.radius = r.get_finite("node radius", i);
+    nd.cone_angle = r.get_finite("node cone", i);
+    nd.first = r.get<std::uint32_t>("node first");
+    nd.count = r.get<std::uint32_t>("node count");
+    nd.leaf = r.get<std::uint8_t>("node leaf");
+    nd.depth = r.get<std::uint8_t>("node depth");
+    get_orientation(r, q, code, nd.normal, nd.axis_u, nd.axis_v, i);
+    if constexpr (A.colour) colour = r.get<rgb8>("node colour");
+    if (nd.radius < 0 || nd.cone_angle < 0 || nd.leaf > 1)
+      throw FormatError(r.path + ": node " + std::to_string(i) +
+                        " has a negative radius/cone or a bad leaf flag");
+  }
+
   static std::vector<unsigned char> serialise(const tree& t) {
     byte_writer w;
     w.bytes.reserve(t.file_bytes());
@@ -75,16 +105,9 @@ struct point_octree_io {
     w.put(static_cast<std::uint64_t>(t.stats_.input_points));
     const int bits = t.normal_bits_;
     for (std::size_t i = 0; i < t.nodes_.size(); ++i) {
-      const auto& nd = t.nodes_[i];
-      w.put_vec(nd.centre);
-      w.put(nd.radius);
-      w.put(nd.cone_angle);
-      w.put(nd.first);
-      w.put(nd.count);
-      w.put(nd.leaf);
-      w.put(nd.depth);
-      put_orientation(w, bits, bits ? &t.node_codes_[i] : nullptr, nd.normal, nd.axis_u, nd.axis_v);
-      if constexpr (A.colour) w.put(t.node_colours_[i]);
+      rgb8 colour{};
+      if constexpr (A.colour) colour = t.node_colours_[i];
+      put_node(w, bits, t.nodes_[i], bits ? &t.node_codes_[i] : nullptr, colour);
     }
     const auto& s = t.samples_;
     for (std::size_t i = 0; i < s.size(); ++i) {
@@ -161,20 +184,9 @@ struct point_octree_io {
     if constexpr (A.colour) t.node_colours_.resize(n_nodes);
     if (q) t.node_codes_.resize(n_nodes);
     for (std::size_t i = 0; i < n_nodes; ++i) {
-      auto& nd = t.nodes_[i];
-      nd.centre = r.get_vec("node centre", i);
-      nd.radius = r.get_finite("node radius", i);
-      nd.cone_angle = r.get_finite("node cone", i);
-      nd.first = r.get<std::uint32_t>("node first");
-      nd.count = r.get<std::uint32_t>("node count");
-      nd.leaf = r.get<std::uint8_t>("node leaf");
-      nd.depth = r.get<std::uint8_t>("node depth");
-      get_orientation(r, q.get(), q ? &t.node_codes_[i] : nullptr, nd.normal, nd.axis_u, nd.axis_v,
-                      i);
-      if constexpr (A.colour) t.node_colours_[i] = r.get<rgb8>("node colour");
-      if (nd.radius < 0 || nd.cone_angle < 0 || nd.leaf > 1)
-        throw FormatError(path + ": node " + std::to_string(i) +
-                          " has a negative radius/cone or a bad leaf flag");
+      rgb8 colour{};
+      get_node(r, q.get(), i, t.nodes_[i], q ? &t.node_codes_[i] : nullptr, colour);
+      if constexpr (A.colour) t.node_colours_[i] = colour;
     }
     s.resize(n_samples);
     if (q) t.sample_codes_.resize(n_samples);

@@ -1,0 +1,747 @@
+// The chunked (out-of-core) point-octree build: see
+// include/pbr_lod/builders/chunked_point_octree.hpp for the steps and why the result equals
+// build_point_octree's.
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/knn.hpp"
+
+namespace pbr_lod {
+namespace detail {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A point as the distribution and halo passes store it in a chunk's temporary file.
+struct point_record {
+  std::uint64_t index;
+  vec3f position, normal;
+  rgb8 colour;
+};
+constexpr std::size_t record_bytes = 8 + 12 + 12 + 3;
+
+/// A file appended to through a buffer: the passes write to every chunk's file at once.
+class append_file {
+ public:
+  explicit append_file(std::string path) : path_(std::move(path)) {
+    std::ofstream f(path_, std::ios::binary | std::ios::trunc);
+    if (!f) throw IoError(path_ + ": cannot open for writing");
+  }
+  void put(const point_record& r) {
+    const std::size_t at = buf_.size();
+    buf_.resize(at + record_bytes);
+    unsigned char* p = buf_.data() + at;
+    std::memcpy(p, &r.index, 8);
+    std::memcpy(p + 8, r.position.data(), 12);
+    std::memcpy(p + 20, r.normal.data(), 12);
+    std::memcpy(p + 32, &r.colour, 3);
+    ++count_;
+    if (buf_.size() >= (1u << 18)) flush();
+  }
+  void flush() {
+    if (buf_.empty()) return;
+    std::ofstream f(path_, std::ios::binary | std::ios::app);
+    f.write(reinterpret_cast<const char*>(buf_.data()), static_cast<std::streamsize>(buf_.size()));
+    if (!f) throw IoError(path_ + ": write failed");
+    buf_.clear();
+  }
+  [[nodiscard]] std::uint64_t count() const { return count_; }
+  [[nodiscard]] const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  std::vector<unsigned char> buf_;
+  std::uint64_t count_ = 0;
+};
+
+std::vector<point_record> read_records(const std::string& path) {
+  const std::vector<unsigned char> bytes = load_file_bytes(path);
+  if (bytes.size() % record_bytes != 0) throw IoError(path + ": temporary file cut short");
+  std::vector<point_record> out(bytes.size() / record_bytes);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const unsigned char* p = bytes.data() + i * record_bytes;
+    std::memcpy(&out[i].index, p, 8);
+    std::memcpy(out[i].position.data(), p + 8, 12);
+    std::memcpy(out[i].normal.data(), p + 20, 12);
+    std::memcpy(&out[i].colour, p + 32, 3);
+  }
+  return out;
+}
+
+/// One vec3f per input point, written scattered (a chunk's points, ascending indices) through a
+/// mapping of the range they span, read back in input order.
+class index_file {
+ public:
+  index_file(std::string path, std::uint64_t n) : path_(std::move(path)) {
+    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644);
+    if (fd_ < 0 || ::ftruncate(fd_, static_cast<off_t>(n * 12)) != 0)
+      throw IoError(path_ + ": cannot create: " + std::strerror(errno));
+  }
+  ~index_file() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  index_file(const index_file&) = delete;
+  index_file& operator=(const index_file&) = delete;
+
+  void scatter(const std::vector<point_record>& at, const std::vector<vec3f>& v) {
+    if (at.empty()) return;
+    const auto page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
+    const std::uint64_t lo = at.front().index * 12 / page * page, hi = (at.back().index + 1) * 12;
+    void* m =
+        ::mmap(nullptr, hi - lo, PROT_READ | PROT_WRITE, MAP_SHARED, fd_, static_cast<off_t>(lo));
+    if (m == MAP_FAILED) throw IoError(path_ + ": cannot map: " + std::strerror(errno));
+    auto* base = static_cast<unsigned char*>(m);
+    for (std::size_t i = 0; i < at.size(); ++i)
+      std::memcpy(base + (at[i].index * 12 - lo), v[i].data(), 12);
+    ::munmap(m, hi - lo);
+  }
+  void read(std::uint64_t first, std::size_t count, std::vector<vec3f>& out) const {
+    out.resize(count);
+    auto* dst = reinterpret_cast<char*>(out.data());
+    std::size_t done = 0;
+    const std::size_t want = count * 12;
+    while (done < want) {
+      const ssize_t got =
+          ::pread(fd_, dst + done, want - done, static_cast<off_t>(first * 12 + done));
+      if (got <= 0) throw IoError(path_ + ": read failed");
+      done += static_cast<std::size_t>(got);
+    }
+  }
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+};
+
+/// Removes the temporary folder however the build ends.
+struct temp_dir {
+  fs::path path;
+  ~temp_dir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+int octant_of(const vec3d& p, const vec3d& m) {
+  return (p.x() >= m.x() ? 1 : 0) | (p.y() >= m.y() ? 2 : 0) | (p.z() >= m.z() ? 4 : 0);
+}
+
+}  // namespace
+
+/// Per-octant sums of one node, streamed: the in-memory octant pass (point_octree_builder::
+/// octant_pass) sums each block of 2^16 of the node's samples from zero and adds the blocks'
+/// sums in order; a sample's block is its rank among the node's samples in input order, which
+/// the stable scatter of the in-memory build preserves. 64-bit counts: a top node may hold more
+/// samples than an in-memory build may.
+struct stream_sums {
+  std::array<std::uint64_t, 8> cnt{};
+  std::array<vec3d, 8> psum, nsum, csum;
+  stream_sums() {
+    psum.fill(vec3d::Zero());
+    nsum.fill(vec3d::Zero());
+    csum.fill(vec3d::Zero());
+  }
+  void add(const stream_sums& o) {
+    for (std::size_t u = 0; u < 8; ++u) {
+      cnt[u] += o.cnt[u];
+      psum[u] += o.psum[u];
+      nsum[u] += o.nsum[u];
+      csum[u] += o.csum[u];
+    }
+  }
+};
+
+struct stream_acc {
+  std::uint64_t seen = 0;
+  stream_sums total, part;
+  void add(int o, const vec3d& p, const vec3f* n, const rgb8* c, std::uint64_t block) {
+    const auto u = static_cast<std::size_t>(o);
+    ++part.cnt[u];
+    part.psum[u] += p;
+    if (n) part.nsum[u] += n->cast<double>();
+    if (c) part.csum[u] += vec3d(c->r, c->g, c->b);
+    if (++seen % block == 0) {
+      total.add(part);
+      part = {};
+    }
+  }
+  void finish(std::uint64_t block) {
+    if (seen % block != 0) total.add(part);
+    part = {};
+  }
+};
+
+template <attributes In>
+struct chunked_point_octree_builder {
+  static constexpr attributes A = point_octree_attributes(In);
+  using tree = point_octree<A>;
+  using node = typename tree::node;
+  using B = point_octree_builder<A>;
+  using code_t = typename tree::orientation_code;
+  using summary = typename B::summary;
+  static constexpr std::uint32_t none = 0xffffffffu;
+  static constexpr std::uint64_t block = B::block;
+
+  struct top_node {
+    std::uint64_t count = 0;
+    vec3d mean = vec3d::Zero(), normal_sum = vec3d::Zero(), colour_sum = vec3d::Zero();
+    std::uint32_t depth = 0;
+    enum class state : std::uint8_t { chunk, pending, split } st = state::chunk;
+    std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
+    std::uint32_t first_child = 0, children = 0, chunk = none;
+    double r2 = 0;
+    float min_dot = 1;
+    stream_acc acc;
+  };
+  struct chunk_info {
+    std::uint32_t top;
+    std::uint64_t count = 0;
+    vec3f lo = vec3f::Constant(std::numeric_limits<float>::infinity());
+    vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
+    double halo = 0;  // radius of the halo about [lo, hi]
+  };
+
+  const point_source& src;
+  fs::path dir;
+  const chunked_build_options& opt;
+  point_octree_options oo;  // the octree options without the progress callback
+  unsigned threads;
+  std::uint64_t n;
+  std::uint64_t chunk_points;
+  std::shared_ptr<const normal_quantizer> quant;
+  std::vector<top_node> nodes;
+  std::vector<chunk_info> chunks;
+  chunked_build_report rep;
+  temp_dir tmp;
+
+  chunked_point_octree_builder(const point_source& s, const std::string& d,
+                               const chunked_build_options& o)
+      : src(s), dir(d), opt(o), oo(o.octree), n(s.size()) {
+    oo.progress = {};
+    threads = oo.threads ? oo.threads : std::max(1u, std::thread::hardware_concurrency());
+    chunk_points = opt.chunk_points
+                       ? opt.chunk_points
+                       : std::max<std::uint64_t>(1, opt.memory_bytes / chunk_bytes_per_point);
+    chunk_points = std::clamp<std::uint64_t>(chunk_points, oo.leaf_size, (1u << 31) - 1);
+    if (oo.normal_bits > 0) quant = normal_quantizer::shared(oo.normal_bits);
+  }
+
+  void progress(double f) const {
+    if (opt.octree.progress && !opt.octree.progress(f))
+      throw Cancelled("build_point_octree_chunked: cancelled");
+  }
+
+  /// f(first index, block) over the whole source, block by block; one full pass.
+  template <class F>
+  void stream(F&& f) {
+    ++rep.passes;
+    point_block b;
+    for (std::uint64_t first = 0; first < n; first += opt.block_points) {
+      const auto count =
+          static_cast<std::size_t>(std::min<std::uint64_t>(opt.block_points, n - first));
+      src.read(first, count, b);
+      if (b.size() != count || (In.normal && b.normals.size() != count) ||
+          (In.colour && b.colours.size() != count))
+        throw IoError(src.name() + ": a block came back with the wrong number of points");
+      f(first, b);
+    }
+  }
+
+  [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
+    std::uint32_t x = 0;
+    while (nodes[x].st == top_node::state::split)
+      x = nodes[x].child[static_cast<std::size_t>(octant_of(p, nodes[x].mean))];
+    return x;
+  }
+
+  /// Step 1: the root's mean, then one pass per level splitting every node above chunk size.
+  void structure() {
+    stream_acc root;
+    stream([&](std::uint64_t first, const point_block& b) {
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        if (!all_finite(b.positions[k]))
+          throw InvalidArgument("build_point_octree_chunked: " + src.name() + ": position " +
+                                std::to_string(first + k) + " is not finite");
+        root.add(0, b.positions[k].cast<double>(), nullptr, nullptr, block);
+      }
+    });
+    root.finish(block);
+    nodes.assign(1, top_node{});
+    nodes[0].count = n;
+    nodes[0].mean = root.total.psum[0] / static_cast<double>(n);
+    for (;;) {
+      bool any = false;
+      for (auto& x : nodes)
+        if (x.st == top_node::state::chunk && x.count > chunk_points && x.depth < oo.max_depth) {
+          x.st = top_node::state::pending;
+          x.acc = {};
+          any = true;
+        }
+      if (!any) break;
+      stream([&](std::uint64_t, const point_block& b) {
+        for (const vec3f& pf : b.positions) {
+          const vec3d p = pf.cast<double>();
+          top_node& x = nodes[descend(p)];
+          if (x.st != top_node::state::pending) continue;
+          x.r2 = std::max(x.r2, (p - x.mean).squaredNorm());
+          x.acc.add(octant_of(p, x.mean), p, nullptr, nullptr, block);
+        }
+      });
+      split_pending();
+    }
+  }
+
+  void split_pending() {
+    const std::size_t end = nodes.size();
+    for (std::size_t i = 0; i < end; ++i) {
+      if (nodes[i].st != top_node::state::pending) continue;
+      nodes[i].acc.finish(block);
+      const stream_sums s = nodes[i].acc.total;
+      int nonempty = 0;
+      for (auto c : s.cnt) nonempty += c > 0;
+      if (nonempty < 2) {  // duplicates: the chunk's build makes it a leaf, as build() does
+        nodes[i].st = top_node::state::chunk;
+        continue;
+      }
+      nodes[i].st = top_node::state::split;
+      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
+      nodes[i].children = static_cast<std::uint32_t>(nonempty);
+      for (std::size_t o = 0; o < 8; ++o) {
+        if (s.cnt[o] == 0) continue;
+        top_node c;
+        c.count = s.cnt[o];
+        c.mean = s.psum[o] / static_cast<double>(s.cnt[o]);
+        c.depth = nodes[i].depth + 1;
+        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
+        nodes.push_back(c);
+      }
+    }
+  }
+
+  [[nodiscard]] std::string temp_path(const char* kind, std::size_t c) const {
+    return (tmp.path / (std::string(kind) + std::to_string(c))).string();
+  }
+
+  /// Step 2: every point into its chunk's file.
+  void distribute() {
+    for (std::uint32_t i = 0; i < nodes.size(); ++i)
+      if (nodes[i].st == top_node::state::chunk) {
+        nodes[i].chunk = static_cast<std::uint32_t>(chunks.size());
+        chunks.push_back({.top = i});
+      }
+    std::vector<append_file> files;
+    files.reserve(chunks.size());
+    for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("chunk", c));
+    stream([&](std::uint64_t first, const point_block& b) {
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        const std::uint32_t c = nodes[descend(b.positions[k].cast<double>())].chunk;
+        chunk_info& ci = chunks[c];
+        ci.lo = ci.lo.cwiseMin(b.positions[k]);
+        ci.hi = ci.hi.cwiseMax(b.positions[k]);
+        files[c].put({first + k, b.positions[k], In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                      In.colour ? b.colours[k] : rgb8{}});
+      }
+    });
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      files[c].flush();
+      chunks[c].count = files[c].count();
+      rep.largest_chunk = std::max(rep.largest_chunk, chunks[c].count);
+    }
+  }
+
+  [[nodiscard]] int knn_needed() const {
+    return In.normal ? oo.knn_ellipses : std::max(oo.knn, oo.knn_ellipses);
+  }
+
+  static double box_distance2(const vec3f& p, const chunk_info& c) {
+    const vec3d q = p.cast<double>(), lo = c.lo.template cast<double>(),
+                hi = c.hi.template cast<double>();
+    const vec3d d = (lo - q).cwiseMax(q - hi).cwiseMax(vec3d::Zero());
+    return d.squaredNorm();
+  }
+
+  /// Step 3: each chunk's halo radius from its own k-th neighbour distances (a true neighbour
+  /// is no farther from the chunk's box than that), then one pass collecting the halos.
+  void halos() {
+    if (chunks.size() < 2) return;
+    const int k = knn_needed();
+    std::vector<char> known(chunks.size(), 0);
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      if (chunks[c].count < static_cast<std::uint64_t>(k)) continue;
+      const auto recs = read_records(temp_path("chunk", c));
+      std::vector<vec3f> pts(recs.size());
+      for (std::size_t i = 0; i < recs.size(); ++i) pts[i] = recs[i].position;
+      const knn_graph g = nearest_neighbour_graph(pts, k, threads);
+      float worst = 0;
+      for (std::size_t i = 0; i < pts.size(); ++i)
+        worst = std::max(worst, g.dist2[i * g.k + g.k - 1]);
+      // A chunk point p has its k neighbours within h = max d_k of it, so within h of the box.
+      // Its splat is also bounded by its neighbours' own neighbourhood radii (ellipse_rule::
+      // local_spacing): a neighbour q's k-th neighbour is within |q − p| + d_k(p) ≤ 2h of q
+      // (p's ball holds k points), so within 3h of the box. A hair wider than the float
+      // distances, so rounding never leaves a point out.
+      chunks[c].halo = 3 * std::sqrt(static_cast<double>(worst)) * (1 + 1e-5) + 1e-30;
+      known[c] = 1;
+    }
+    // A chunk with fewer than k points takes every point: too few to bound its neighbours'
+    // distance by its own, and such chunks are rare and small.
+    for (std::size_t c = 0; c < chunks.size(); ++c)
+      if (!known[c]) chunks[c].halo = std::numeric_limits<double>::infinity();
+    collect_halos();
+  }
+
+  void collect_halos() {
+    std::vector<append_file> files;
+    files.reserve(chunks.size());
+    for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("halo", c));
+    // Chunks by cell of a coarse grid over the data, each listed in every cell its halo box
+    // touches: a point tests only the chunks of its cell.
+    vec3f lo = chunks[0].lo, hi = chunks[0].hi;
+    for (const auto& c : chunks) {
+      lo = lo.cwiseMin(c.lo);
+      hi = hi.cwiseMax(c.hi);
+    }
+    constexpr int g = 32;
+    const vec3d glo = lo.cast<double>(), ext = (hi - lo).cast<double>().cwiseMax(1e-30);
+    const auto cell = [&](double v, int axis) {
+      const double t = (v - glo[axis]) / ext[axis] * g;
+      return std::clamp(static_cast<int>(std::floor(std::clamp(t, -1.0, double(g)))), 0, g - 1);
+    };
+    std::vector<std::vector<std::uint32_t>> grid(g * g * g);
+    for (std::uint32_t c = 0; c < chunks.size(); ++c) {
+      const double h = chunks[c].halo;
+      std::array<int, 3> a{}, b{};
+      for (int ax = 0; ax < 3; ++ax) {
+        a[ax] = std::isfinite(h) ? cell(chunks[c].lo[ax] - h, ax) : 0;
+        b[ax] = std::isfinite(h) ? cell(chunks[c].hi[ax] + h, ax) : g - 1;
+      }
+      for (int z = a[2]; z <= b[2]; ++z)
+        for (int y = a[1]; y <= b[1]; ++y)
+          for (int x = a[0]; x <= b[0]; ++x) grid[(z * g + y) * g + x].push_back(c);
+    }
+    stream([&](std::uint64_t first, const point_block& b) {
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        const vec3f& p = b.positions[k];
+        const std::uint32_t own = nodes[descend(p.cast<double>())].chunk;
+        const auto& list = grid[(cell(p.z(), 2) * g + cell(p.y(), 1)) * g + cell(p.x(), 0)];
+        for (const std::uint32_t c : list) {
+          if (c == own) continue;
+          const double h = chunks[c].halo;
+          if (std::isfinite(h) && box_distance2(p, chunks[c]) > h * h) continue;
+          files[c].put({first + k, p, In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                        In.colour ? b.colours[k] : rgb8{}});
+        }
+      }
+    });
+    for (auto& f : files) {
+      f.flush();
+      rep.halo_points += f.count();
+    }
+  }
+
+  /// Step 4: per chunk, the estimation over the chunk and its halo, the quantisation, and the
+  /// prepared samples saved for step 6; the quantised normals go to `normals` in input order.
+  void estimate(index_file& normals) {
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      const auto recs = read_records(temp_path("chunk", c));
+      std::vector<point_record> halo;
+      if (chunks.size() > 1) halo = read_records(temp_path("halo", c));
+      point_set<In> set;
+      set.origin = src.origin();
+      set.resize(recs.size() + halo.size());
+      std::size_t i = 0;
+      for (const std::vector<point_record>* part :
+           {&recs, static_cast<const std::vector<point_record>*>(&halo)})
+        for (const point_record& r : *part) {
+          set.positions[i] = r.position;
+          if constexpr (In.normal) set.normals[i] = r.normal;
+          if constexpr (In.colour) set.colours[i] = r.colour;
+          ++i;
+        }
+      point_octree_build_stats st;
+      point_set<A> work = prepare_samples<A>(set, oo, threads, st, recs.size());
+      rep.estimated_normals = st.estimated_normals;
+      std::vector<code_t> codes;
+      if (quant) quantize_samples(work, *quant, codes, threads);
+      normals.scatter(recs, work.normals);
+      save_prepared(temp_path("prep", c), work, codes);
+      progress(0.2 + 0.3 * static_cast<double>(c + 1) / static_cast<double>(chunks.size()));
+    }
+  }
+
+  template <class T>
+  static void put_vector(std::ofstream& f, const std::vector<T>& v) {
+    f.write(reinterpret_cast<const char*>(v.data()),
+            static_cast<std::streamsize>(v.size() * sizeof(T)));
+  }
+  template <class T>
+  static void get_vector(std::ifstream& f, std::vector<T>& v, std::size_t n) {
+    v.resize(n);
+    f.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
+  }
+  void save_prepared(const std::string& path, const point_set<A>& w,
+                     const std::vector<code_t>& codes) const {
+    std::ofstream f(path, std::ios::binary | std::ios::trunc);
+    put_vector(f, w.positions);
+    put_vector(f, w.normals);
+    put_vector(f, w.axis_u);
+    put_vector(f, w.axis_v);
+    if constexpr (A.colour) put_vector(f, w.colours);
+    put_vector(f, codes);
+    if (!f) throw IoError(path + ": write failed");
+  }
+  void load_prepared(const std::string& path, std::size_t m, point_set<A>& w,
+                     std::vector<code_t>& codes) const {
+    std::ifstream f(path, std::ios::binary);
+    w.origin = src.origin();
+    get_vector(f, w.positions, m);
+    get_vector(f, w.normals, m);
+    get_vector(f, w.axis_u, m);
+    get_vector(f, w.axis_v, m);
+    if constexpr (A.colour) get_vector(f, w.colours, m);
+    get_vector(f, codes, quant ? m : 0);
+    if (!f) throw IoError(path + ": read failed");
+  }
+
+  /// Step 5: the top nodes' normal and colour sums (the root's over the whole input, every split
+  /// node's per octant, in the in-memory block order), then their normal cones.
+  void attribute_passes(const index_file& normals) {
+    stream_acc root;
+    for (auto& x : nodes) x.acc = {};
+    std::vector<vec3f> nb;
+    stream([&](std::uint64_t first, const point_block& b) {
+      normals.read(first, b.size(), nb);
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        const vec3d p = b.positions[k].cast<double>();
+        const rgb8* c = In.colour ? &b.colours[k] : nullptr;
+        root.add(0, p, &nb[k], c, block);
+        for (std::uint32_t x = 0; nodes[x].st == top_node::state::split;) {
+          const int o = octant_of(p, nodes[x].mean);
+          nodes[x].acc.add(o, p, &nb[k], c, block);
+          x = nodes[x].child[static_cast<std::size_t>(o)];
+        }
+      }
+    });
+    root.finish(block);
+    nodes[0].normal_sum = root.total.nsum[0];
+    nodes[0].colour_sum = root.total.csum[0];
+    bool any_split = false;
+    for (auto& x : nodes) {
+      if (x.st != top_node::state::split) continue;
+      any_split = true;
+      x.acc.finish(block);
+      for (std::size_t o = 0; o < 8; ++o) {
+        if (x.child[o] == none) continue;
+        top_node& c = nodes[x.child[o]];
+        c.normal_sum = x.acc.total.nsum[o];
+        c.colour_sum = x.acc.total.csum[o];
+        if (x.acc.total.cnt[o] != c.count ||
+            x.acc.total.psum[o] / static_cast<double>(c.count) != c.mean)
+          throw IoError(src.name() + ": the source gave different points on a second pass");
+      }
+    }
+    if (!any_split) return;
+    stream([&](std::uint64_t first, const point_block& b) {
+      normals.read(first, b.size(), nb);
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        const vec3d p = b.positions[k].cast<double>();
+        for (std::uint32_t x = 0; nodes[x].st == top_node::state::split;) {
+          top_node& t = nodes[x];
+          t.min_dot = std::min(t.min_dot, mean_normal(t).dot(nb[k]));
+          x = t.child[static_cast<std::size_t>(octant_of(p, t.mean))];
+        }
+      }
+    });
+  }
+
+  /// n̄_c as build() derives it from the node's input (and whether the normals cancel).
+  static bool normal_valid(const top_node& x) {
+    return x.normal_sum.norm() > 1e-6 * static_cast<double>(x.count);
+  }
+  static vec3f mean_normal(const top_node& x) {
+    const double nlen = x.normal_sum.norm();
+    return normal_valid(x) ? vec3f((x.normal_sum / nlen).template cast<float>()) : vec3f::UnitZ();
+  }
+
+  /// What step 6 keeps of a chunk for the top: its root's record and summary.
+  struct chunk_root {
+    node record;
+    rgb8 colour{};
+    code_t code{};
+    summary sum;
+  };
+
+  /// Step 6: chunk c's subtree from its input, as build() makes that node's subtree; saved.
+  chunk_root build_chunk(std::size_t c) {
+    const top_node& x = nodes[chunks[c].top];
+    const auto m = static_cast<std::uint32_t>(chunks[c].count);
+    tree t;
+    std::vector<code_t> codes;
+    load_prepared(temp_path("prep", c), m, t.samples_, codes);
+    B b(t.samples_, quant ? &codes : nullptr, oo, quant.get(), threads);
+    typename B::local L;
+    b.reserve(L, b.node_estimate(m));
+    L.nodes.resize(1);
+    if constexpr (A.colour) L.colours.resize(1);
+    if (quant) L.codes.resize(1);
+    const typename B::input inp{0, m, x.mean, x.normal_sum, x.colour_sum, x.depth};
+    chunk_root out;
+    out.sum = b.build(L, 0, inp, threads > 1 && m > 20000);
+    t.nodes_ = std::move(L.nodes);
+    if constexpr (A.colour) t.node_colours_ = std::move(L.colours);
+    t.node_codes_ = std::move(L.codes);
+    t.sample_codes_ = std::move(codes);
+    t.normal_bits_ = oo.normal_bits;
+    t.stats_.input_points = m;
+    t.save((dir / chunk_file_name(static_cast<std::uint32_t>(c))).string());
+    out.record = t.nodes_[0];
+    if constexpr (A.colour) out.colour = t.node_colours_[0];
+    if (quant) out.code = t.node_codes_[0];
+    return out;
+  }
+
+  /// Step 7: the top nodes bottom up (children come after their parent), as build() finishes
+  /// an inner node: centre and cone, then EQ 4 and EQ 5–6 over the children.
+  typename B::local finish_top(const std::vector<chunk_root>& roots) {
+    typename B::local T;
+    T.nodes.resize(nodes.size());
+    if constexpr (A.colour) T.colours.resize(nodes.size());
+    if (quant) T.codes.resize(nodes.size());
+    point_set<A> none_set;
+    B tb(none_set, nullptr, oo, quant.get(), 1);
+    std::vector<summary> sums(nodes.size());
+    for (std::size_t i = nodes.size(); i-- > 0;) {
+      const top_node& x = nodes[i];
+      if (x.st == top_node::state::chunk) {
+        const chunk_root& r = roots[x.chunk];
+        T.nodes[i] = r.record;
+        if constexpr (A.colour) T.colours[i] = r.colour;
+        if (quant) T.codes[i] = r.code;
+        sums[i] = r.sum;
+        continue;
+      }
+      node nd =
+          B::node_centre_and_cone(T, static_cast<std::uint32_t>(i), x.mean, x.colour_sum, x.count,
+                                  x.depth, mean_normal(x), normal_valid(x), x.min_dot);
+      nd.leaf = 0;
+      nd.first = x.first_child;
+      nd.count = x.children;
+      const std::vector<summary> kids(sums.begin() + x.first_child,
+                                      sums.begin() + x.first_child + x.children);
+      sums[i] = tb.finish_inner(T, static_cast<std::uint32_t>(i), nd, x.first_child, kids,
+                                static_cast<float>(std::sqrt(x.r2)), normal_valid(x));
+    }
+    return T;
+  }
+
+  void write_top(const typename B::local& T) const {
+    using io = point_octree_io<A>;
+    byte_writer w;
+    write_head(w, chunked_top_format);
+    w.put(static_cast<std::uint32_t>((A.colour ? 1u : 0u) | (quant ? 2u : 0u)));
+    w.put(static_cast<std::uint32_t>(oo.normal_bits));
+    const vec3d o = src.origin();
+    w.put(o.x());
+    w.put(o.y());
+    w.put(o.z());
+    w.put(n);
+    w.put(static_cast<std::uint64_t>(nodes.size()));
+    w.put(static_cast<std::uint64_t>(chunks.size()));
+    for (std::size_t i = 0; i < nodes.size(); ++i) {
+      rgb8 colour{};
+      if constexpr (A.colour) colour = T.colours[i];
+      io::put_node(w, oo.normal_bits, T.nodes[i], quant ? &T.codes[i] : nullptr, colour);
+    }
+    for (const auto& x : nodes) w.put(x.chunk);
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      w.put(chunks[c].top);
+      w.put(chunks[c].count);
+    }
+    append_checksum(w);
+    save_file_bytes((dir / chunked_top_file).string(), w.bytes);
+  }
+
+  chunked_build_report run() {
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
+    if (n == 0)
+      throw InvalidArgument("build_point_octree_chunked: " + src.name() + " has no points");
+    if (!all_finite(src.origin()))
+      throw InvalidArgument("build_point_octree_chunked: " + src.name() + ": origin not finite");
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec || !fs::is_directory(dir))
+      throw IoError(dir.string() + ": cannot create the output folder");
+    tmp.path = dir / "tmp-build";
+    fs::remove_all(tmp.path, ec);
+    fs::create_directories(tmp.path, ec);
+    if (ec) throw IoError(tmp.path.string() + ": cannot create: " + ec.message());
+    rep.input_points = n;
+    rep.chunk_points = chunk_points;
+    progress(0);
+    structure();
+    distribute();
+    halos();
+    progress(0.2);
+    double pass_s = std::chrono::duration<double>(clock::now() - t0).count();
+    const auto t1 = clock::now();
+    index_file normals((tmp.path / "normals").string(), n);
+    estimate(normals);
+    rep.estimation_seconds = std::chrono::duration<double>(clock::now() - t1).count();
+    const auto t2 = clock::now();
+    attribute_passes(normals);
+    pass_s += std::chrono::duration<double>(clock::now() - t2).count();
+    rep.pass_seconds = pass_s;
+    const auto t3 = clock::now();
+    std::vector<chunk_root> roots;
+    roots.reserve(chunks.size());
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      roots.push_back(build_chunk(c));
+      progress(0.5 + 0.5 * static_cast<double>(c + 1) / static_cast<double>(chunks.size()));
+    }
+    rep.chunk_build_seconds = std::chrono::duration<double>(clock::now() - t3).count();
+    write_top(finish_top(roots));
+    rep.chunks = chunks.size();
+    rep.top_nodes = nodes.size();
+    rep.seconds = std::chrono::duration<double>(clock::now() - t0).count();
+    return rep;
+  }
+};
+
+}  // namespace detail
+
+std::string chunk_file_name(std::uint32_t c) {
+  std::string s = std::to_string(c);
+  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".po";
+}
+
+chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
+                                                const chunked_build_options& options) {
+  const attributes a = src.attrs();
+  if (a.normal && a.colour)
+    return detail::chunked_point_octree_builder<attributes{.normal = true, .colour = true}>(
+               src, dir, options)
+        .run();
+  if (a.normal)
+    return detail::chunked_point_octree_builder<attributes{.normal = true}>(src, dir, options)
+        .run();
+  if (a.colour)
+    return detail::chunked_point_octree_builder<attributes{.colour = true}>(src, dir, options)
+        .run();
+  return detail::chunked_point_octree_builder<attributes{}>(src, dir, options).run();
+}
+
+}  // namespace pbr_lod

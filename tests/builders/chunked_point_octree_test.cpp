@@ -1,0 +1,279 @@
+// The chunked (out-of-core) point-octree: equal to the in-memory build, node for node and byte
+// for byte; lazy opening; damaged directories.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+
+#include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+
+namespace pbr_lod {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string temp_dir(const std::string& what) {
+  const fs::path p =
+      fs::temp_directory_path() / ("pbr_lod_chunked_" + std::to_string(::getpid()) + "_" + what);
+  fs::remove_all(p);
+  return p.string();
+}
+
+std::vector<char> bytes_of(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+}
+
+/// The wavy surface with normals and colours, plus a few returns far off it: their chunks hold
+/// fewer points than a neighbourhood, so their halo is everything.
+point_cloud surface_with_strays(std::size_t n) {
+  point_cloud c = make_wavy_surface(n, 7);
+  for (int i = 0; i < 5; ++i) {
+    c.positions.push_back(vec3f(3.0f + 0.01f * static_cast<float>(i), 2.5f, -2.0f));
+    c.normals.push_back(vec3f::UnitY());
+    c.colours.push_back({255, 0, 0});
+  }
+  return c;
+}
+
+template <class T>
+void expect_same_splats(const buffer_sink<T::attrs>& a, const buffer_sink<T::attrs>& b) {
+  ASSERT_EQ(a.splats.size(), b.splats.size());
+  ASSERT_EQ(a.points.size(), b.points.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.splats.size(); ++i) {
+    const auto &s = a.splats[i], &t = b.splats[i];
+    bool same = s.centre == t.centre && s.u == t.u && s.v == t.v && s.normal == t.normal;
+    if constexpr (T::attrs.colour) same = same && s.colour == t.colour;
+    differ += same ? 0 : 1;
+  }
+  EXPECT_EQ(differ, 0u) << "splats differ between the chunked and the in-memory cut";
+}
+
+/// Where two point-octrees first differ (for the failure message).
+template <class T>
+std::string first_difference(const T& a, const T& b) {
+  std::ostringstream out;
+  for (std::size_t i = 0; i < std::min(a.nodes().size(), b.nodes().size()); ++i) {
+    const auto &x = a.at(static_cast<std::uint32_t>(i)), &y = b.at(static_cast<std::uint32_t>(i));
+    if (x.centre != y.centre || x.radius != y.radius || x.normal != y.normal ||
+        x.cone_angle != y.cone_angle || x.axis_u != y.axis_u || x.axis_v != y.axis_v ||
+        x.first != y.first || x.count != y.count || x.leaf != y.leaf || x.depth != y.depth) {
+      out << "node " << i << " (depth " << int(x.depth) << ", leaf " << int(x.leaf) << "): centre "
+          << (x.centre - y.centre).norm() << " radius " << x.radius - y.radius << " normal "
+          << (x.normal - y.normal).norm() << " cone " << x.cone_angle - y.cone_angle << " axes "
+          << (x.axis_u - y.axis_u).norm() << "/" << (x.axis_v - y.axis_v).norm() << " first "
+          << x.first << "/" << y.first;
+      return out.str();
+    }
+  }
+  for (std::size_t i = 0; i < std::min(a.samples().size(), b.samples().size()); ++i)
+    if (a.samples().positions[i] != b.samples().positions[i] ||
+        a.samples().normals[i] != b.samples().normals[i] ||
+        a.samples().axis_u[i] != b.samples().axis_u[i])
+      return "sample " + std::to_string(i);
+  return a.nodes().size() == b.nodes().size() ? "codes or colours" : "node counts";
+}
+template <class T>
+std::string sample_differences(const T& a, const T& b) {
+  std::ostringstream out;
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < std::min(a.samples().size(), b.samples().size()); ++i)
+    if (a.samples().axis_u[i] != b.samples().axis_u[i] ||
+        a.samples().axis_v[i] != b.samples().axis_v[i]) {
+      if (k++ < 5)
+        out << " [" << i << " at " << a.samples().positions[i].transpose() << " du "
+            << (a.samples().axis_u[i] - b.samples().axis_u[i]).norm() << "]";
+    }
+  out << " total " << k;
+  return out.str();
+}
+
+using coloured = point_octree<point_octree_attributes(attributes{.colour = true})>;
+
+class ChunkedPointOctree : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    cloud_ = new point_cloud(surface_with_strays(60000));
+    dir_ = new std::string(temp_dir("equal"));
+    chunked_build_options o;
+    o.chunk_points = 2500;  // ~50 chunks over 3-4 levels of top nodes
+    report_ =
+        new chunked_build_report(build_point_octree_chunked(cloud_point_source(*cloud_), *dir_, o));
+    memory_ = new coloured(
+        build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(*cloud_)));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete cloud_;
+    delete dir_;
+    delete report_;
+    delete memory_;
+  }
+  static point_cloud* cloud_;
+  static std::string* dir_;
+  static chunked_build_report* report_;
+  static coloured* memory_;
+};
+point_cloud* ChunkedPointOctree::cloud_ = nullptr;
+std::string* ChunkedPointOctree::dir_ = nullptr;
+chunked_build_report* ChunkedPointOctree::report_ = nullptr;
+coloured* ChunkedPointOctree::memory_ = nullptr;
+
+TEST_F(ChunkedPointOctree, SplitsIntoManyChunksWithinTheLimit) {
+  EXPECT_GE(report_->chunks, 20u);
+  EXPECT_GE(report_->top_nodes, report_->chunks + 3);
+  EXPECT_LE(report_->largest_chunk, 2500u);
+  EXPECT_GT(report_->halo_points, 0u);
+  EXPECT_FALSE(fs::exists(fs::path(*dir_) / "tmp-build")) << "temporary files left behind";
+}
+
+TEST_F(ChunkedPointOctree, AssemblesToTheInMemoryBuildByteForByte) {
+  const auto open = chunked_point_octree < coloured::attrs.colour
+                        ? point_octree_attributes(attributes{.colour = true})
+                        : point_octree_attributes(attributes{}) > ::open(*dir_);
+  const coloured whole = open.assemble();
+  EXPECT_EQ(whole.nodes().size(), memory_->nodes().size());
+  EXPECT_TRUE(whole == *memory_) << first_difference(whole, *memory_)
+                                 << sample_differences(whole, *memory_);
+  const std::string a = *dir_ + "/assembled.po", b = *dir_ + "/memory.po";
+  whole.save(a);
+  memory_->save(b);
+  EXPECT_EQ(bytes_of(a), bytes_of(b));
+}
+
+TEST_F(ChunkedPointOctree, TraversalMatchesTheInMemoryCutAndLoadsOnlyWhatItNeeds) {
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  const sphere s = memory_->bounding_sphere(memory_->root());
+  const vec3d centre = memory_->origin() + s.centre.cast<double>();
+  struct shot {
+    double az, dist;
+    float tol;
+  };
+  for (const shot sh : {shot{30, 30, 8}, shot{30, 3, 4}, shot{200, 0.8, 1}}) {
+    const H h = H::open(*dir_);
+    camera cam = camera::orbit(centre, s.radius, sh.az, 20, sh.dist, 1, {256, 256});
+    if (sh.dist < 1) {  // close to the tube, looking at a small part of it
+      cam.eye = centre + vec3d(1.9, 0.2, 0.3);
+      cam.target = centre + vec3d(1.3, 0, 0);
+      cam.z_near = 0.01;
+    }
+    traverse_options o;
+    o.tolerance_px = sh.tol;
+    buffer_sink<H::attrs> got, want;
+    const traverse_stats a = traverse(h, view(cam, h.origin()), o, got, point_octree_policy{});
+    const traverse_stats b =
+        traverse(*memory_, view(cam, memory_->origin()), o, want, point_octree_policy{});
+    EXPECT_GT(got.splats.size(), 20u);
+    EXPECT_EQ(a.visited, b.visited);
+    EXPECT_EQ(a.emitted_leaves, b.emitted_leaves);
+    expect_same_splats<H>(got, want);
+    if (sh.dist == 30) {
+      EXPECT_EQ(h.chunks_loaded(), 0u) << "a far view drew from the top file alone";
+    }
+    if (sh.dist < 1) {
+      EXPECT_GT(h.chunks_loaded(), 0u);
+      EXPECT_LT(h.chunks_loaded(), h.chunk_count()) << "a close view read every chunk";
+    }
+  }
+}
+
+TEST(ChunkedPointOctreeEstimated, PositionsOnlyWithViewpointEqualsInMemory) {
+  // Estimated normals (oriented towards a viewpoint) and ellipses: the halos must give every
+  // chunk point the neighbours it has in the whole input.
+  const generated_point_source src(40000, 3, /*normals=*/false, /*colours=*/false);
+  const point_cloud all = read_all(src);
+  chunked_build_options o;
+  o.chunk_points = 3000;
+  o.octree.viewpoint = vec3d(0.3, 5.0, 0.2);
+  const std::string dir = temp_dir("estimated");
+  const chunked_build_report r = build_point_octree_chunked(src, dir, o);
+  EXPECT_GE(r.chunks, 10u);
+  EXPECT_TRUE(r.estimated_normals);
+  using H = chunked_point_octree<point_octree_attributes(attributes{})>;
+  const auto whole = H::open(dir).assemble();
+  const auto memory = build_point_octree(point_set<attributes{}>::from(all), o.octree);
+  EXPECT_TRUE(whole == memory);
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPointOctreeEstimated, GraphOrientationDiffersOnlyInSign) {
+  // Without a viewpoint the signs are propagated over the k-NN graph, which a chunk and its
+  // halo see only part of: the normals agree up to sign, the tree's structure exactly.
+  const generated_point_source src(30000, 5, false, false);
+  chunked_build_options o;
+  o.chunk_points = 3000;
+  const std::string dir = temp_dir("mst");
+  (void)build_point_octree_chunked(src, dir, o);
+  using H = chunked_point_octree<point_octree_attributes(attributes{})>;
+  const auto whole = H::open(dir).assemble();
+  const auto memory = build_point_octree(point_set<attributes{}>::from(read_all(src)), o.octree);
+  ASSERT_EQ(whole.samples().size(), memory.samples().size());
+  ASSERT_EQ(whole.nodes().size(), memory.nodes().size());
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < whole.samples().size(); ++i) {
+    ASSERT_EQ(whole.samples().positions[i], memory.samples().positions[i]);
+    off += std::abs(whole.samples().normals[i].dot(memory.samples().normals[i])) < 0.9999f;
+  }
+  EXPECT_EQ(off, 0u) << "normals differing by more than their sign";
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPointOctreeFiles, OneChunkWhenTheInputFits) {
+  const point_cloud c = make_wavy_surface(3000, 2);
+  const std::string dir = temp_dir("one");
+  const auto r = build_point_octree_chunked(cloud_point_source(c), dir, {});
+  EXPECT_EQ(r.chunks, 1u);
+  EXPECT_EQ(r.top_nodes, 1u);
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  EXPECT_TRUE(H::open(dir).assemble() ==
+              build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(c)));
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPointOctreeFiles, BadInputAndDamagedDirectoriesAreErrors) {
+  point_cloud empty;
+  EXPECT_THROW((void)build_point_octree_chunked(cloud_point_source(empty), temp_dir("e"), {}),
+               InvalidArgument);
+  point_cloud c = make_wavy_surface(20000, 4);
+  const std::string dir = temp_dir("damage");
+  chunked_build_options o;
+  o.chunk_points = 4000;
+  (void)build_point_octree_chunked(cloud_point_source(c), dir, o);
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  using G = chunked_point_octree<point_octree_attributes(attributes{})>;
+  EXPECT_THROW((void)G::open(dir), FormatError) << "a coloured hierarchy opened as uncoloured";
+  const std::string top = dir + "/" + chunked_top_file;
+  const std::vector<char> good = bytes_of(top);
+  // Every truncation and every flipped byte of the top file is an error, never a crash.
+  for (std::size_t cut = 0; cut < good.size(); cut += 7) {
+    std::ofstream(top, std::ios::binary | std::ios::trunc)
+        .write(good.data(), static_cast<std::streamsize>(cut));
+    EXPECT_THROW((void)H::open(dir), Error) << "cut at " << cut;
+  }
+  for (std::size_t at = 0; at < good.size(); at += 5) {
+    std::vector<char> bad = good;
+    bad[at] = static_cast<char>(bad[at] ^ 0x5a);
+    std::ofstream(top, std::ios::binary | std::ios::trunc)
+        .write(bad.data(), static_cast<std::streamsize>(bad.size()));
+    EXPECT_THROW((void)H::open(dir), Error) << "byte " << at << " flipped";
+  }
+  std::ofstream(top, std::ios::binary | std::ios::trunc)
+      .write(good.data(), static_cast<std::streamsize>(good.size()));
+  // Two chunks' files swapped: each is a valid point-octree, but not the one the top names.
+  const H h = H::open(dir);
+  ASSERT_GE(h.chunk_count(), 2u);
+  fs::rename(dir + "/" + chunk_file_name(0), dir + "/swap");
+  fs::rename(dir + "/" + chunk_file_name(1), dir + "/" + chunk_file_name(0));
+  fs::rename(dir + "/swap", dir + "/" + chunk_file_name(1));
+  EXPECT_THROW((void)h.chunk(0), FormatError);
+  EXPECT_THROW((void)h.assemble(), FormatError);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace pbr_lod
