@@ -56,13 +56,16 @@ chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
   t.origin_ = {r.get<double>("origin"), r.get<double>("origin"), r.get<double>("origin")};
   if (!all_finite(t.origin_)) throw FormatError(path + ": origin is not finite");
   t.input_points_ = r.get<std::uint64_t>("input points");
+  t.input_sphere_.centre = r.get_vec("input sphere", 0);
+  t.input_sphere_.radius = r.get_finite("input sphere", 0);
+  if (t.input_sphere_.radius < 0) throw FormatError(path + ": negative input sphere radius");
   const auto n_nodes = r.get<std::uint64_t>("top node count");
   const auto n_chunks = r.get<std::uint64_t>("chunk count");
   const std::uint64_t nb = io::node_bytes(bits);
-  const std::uint64_t header = 8 + 4 * 3 + 8 * 3 + 8 * 3;
+  const std::uint64_t header = 8 + 4 * 3 + 8 * 3 + 8 + 16 + 8 * 2;
   if (n_nodes == 0 || n_chunks == 0 || n_nodes > bytes.size() / nb ||
-      n_chunks > bytes.size() / 12 ||
-      header + n_nodes * (nb + 4) + n_chunks * 12 + 8 != bytes.size())
+      n_chunks > bytes.size() / 20 ||
+      header + n_nodes * (nb + 4) + n_chunks * 20 + 8 != bytes.size())
     throw FormatError(path + ": " + std::to_string(n_nodes) + " top nodes and " +
                       std::to_string(n_chunks) + " chunks do not fit the file's " +
                       std::to_string(bytes.size()) + " bytes");
@@ -78,9 +81,11 @@ chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
   for (auto& f : t.frontier_) f = r.get<std::uint32_t>("chunk of a top node");
   t.chunk_top_.resize(n_chunks);
   t.chunk_samples_.resize(n_chunks);
+  t.chunk_nodes_.resize(n_chunks);
   for (std::size_t c = 0; c < n_chunks; ++c) {
     t.chunk_top_[c] = r.get<std::uint32_t>("top node of a chunk");
     t.chunk_samples_[c] = r.get<std::uint64_t>("chunk samples");
+    t.chunk_nodes_[c] = r.get<std::uint64_t>("chunk nodes");
   }
   t.validate(path);
   t.top_selection_.resize(n_nodes);
@@ -97,7 +102,8 @@ void chunked_point_octree<A>::validate(const std::string& path) const {
   const std::size_t n = top_nodes_.size();
   std::uint64_t samples = 0;
   for (std::size_t c = 0; c < chunk_top_.size(); ++c) {
-    if (chunk_top_[c] >= n || frontier_[chunk_top_[c]] != c || chunk_samples_[c] == 0)
+    if (chunk_top_[c] >= n || frontier_[chunk_top_[c]] != c || chunk_samples_[c] == 0 ||
+        chunk_nodes_[c] == 0)
       throw FormatError(path + ": chunk " + std::to_string(c) + " and its top node disagree");
     samples += chunk_samples_[c];
   }
@@ -136,7 +142,8 @@ const typename chunked_point_octree<A>::tree& chunked_point_octree<A>::chunk(
     auto t = std::make_unique<tree>(tree::load(path));
     const node& root = top_nodes_[chunk_top_[c]];
     bool same = t->origin() == origin_ && t->normal_bits() == normal_bits_ &&
-                t->samples().size() == chunk_samples_[c] && same_record(t->at(0), root);
+                t->samples().size() == chunk_samples_[c] && t->nodes().size() == chunk_nodes_[c] &&
+                same_record(t->at(0), root);
     if constexpr (A.colour) same = same && t->node_colour(0) == top_colours_[chunk_top_[c]];
     if (!same) throw FormatError(path + ": does not match its record in the top file");
     s.t = std::move(t);
@@ -148,6 +155,14 @@ template <attributes A>
 std::size_t chunked_point_octree<A>::chunks_loaded() const {
   std::size_t k = 0;
   for (const auto& s : slots_) k += s->t != nullptr;
+  return k;
+}
+
+template <attributes A>
+std::uint64_t chunked_point_octree<A>::node_count() const {
+  std::uint64_t k = 0;
+  for (std::size_t i = 0; i < top_nodes_.size(); ++i) k += frontier_[i] == top ? 1 : 0;
+  for (const auto c : chunk_nodes_) k += c;
   return k;
 }
 

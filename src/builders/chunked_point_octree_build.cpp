@@ -17,6 +17,7 @@
 
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/knn.hpp"
 
 namespace pbr_lod {
@@ -226,6 +227,9 @@ struct chunked_point_octree_builder {
   std::vector<chunk_info> chunks;
   chunked_build_report rep;
   temp_dir tmp;
+  box3 box;              // of the input's positions (the root pass)
+  double sphere_r2 = 0;  // about box.centre() (the distribution pass)
+  std::vector<std::uint64_t> chunk_nodes;
 
   chunked_point_octree_builder(const point_source& s, const std::string& d,
                                const chunked_build_options& o)
@@ -276,6 +280,7 @@ struct chunked_point_octree_builder {
           throw InvalidArgument("build_point_octree_chunked: " + src.name() + ": position " +
                                 std::to_string(first + k) + " is not finite");
         root.add(0, b.positions[k].cast<double>(), nullptr, nullptr, block);
+        box.extend(b.positions[k]);
       }
     });
     root.finish(block);
@@ -348,6 +353,8 @@ struct chunked_point_octree_builder {
     stream([&](std::uint64_t first, const point_block& b) {
       for (std::size_t k = 0; k < b.size(); ++k) {
         const std::uint32_t c = nodes[descend(b.positions[k].cast<double>())].chunk;
+        sphere_r2 =
+            std::max(sphere_r2, (b.positions[k] - box.centre()).cast<double>().squaredNorm());
         chunk_info& ci = chunks[c];
         ci.lo = ci.lo.cwiseMin(b.positions[k]);
         ci.hi = ci.hi.cwiseMax(b.positions[k]);
@@ -607,6 +614,7 @@ struct chunked_point_octree_builder {
     t.normal_bits_ = oo.normal_bits;
     t.stats_.input_points = m;
     t.save((dir / chunk_file_name(static_cast<std::uint32_t>(c))).string());
+    chunk_nodes[c] = t.nodes_.size();
     out.record = t.nodes_[0];
     if constexpr (A.colour) out.colour = t.node_colours_[0];
     if (quant) out.code = t.node_codes_[0];
@@ -658,6 +666,10 @@ struct chunked_point_octree_builder {
     w.put(o.y());
     w.put(o.z());
     w.put(n);
+    // The input's bounding sphere about its box centre (bounding_sphere_about_box_centre): a
+    // view frames the directory as it frames the input, without reading the chunks.
+    w.put_vec(box.centre());
+    w.put(static_cast<float>(std::sqrt(sphere_r2)));
     w.put(static_cast<std::uint64_t>(nodes.size()));
     w.put(static_cast<std::uint64_t>(chunks.size()));
     for (std::size_t i = 0; i < nodes.size(); ++i) {
@@ -669,6 +681,7 @@ struct chunked_point_octree_builder {
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       w.put(chunks[c].top);
       w.put(chunks[c].count);
+      w.put(chunk_nodes[c]);
     }
     append_checksum(w);
     save_file_bytes((dir / chunked_top_file).string(), w.bytes);
@@ -708,6 +721,7 @@ struct chunked_point_octree_builder {
     const auto t3 = clock::now();
     std::vector<chunk_root> roots;
     roots.reserve(chunks.size());
+    chunk_nodes.assign(chunks.size(), 0);
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       roots.push_back(build_chunk(c));
       progress(0.5 + 0.5 * static_cast<double>(c + 1) / static_cast<double>(chunks.size()));

@@ -137,6 +137,11 @@ TEST_F(ChunkedPointOctree, AssemblesToTheInMemoryBuildByteForByte) {
                         ? point_octree_attributes(attributes{.colour = true})
                         : point_octree_attributes(attributes{}) > ::open(*dir_);
   const coloured whole = open.assemble();
+  const sphere s = bounding_sphere_about_box_centre(cloud_->positions);
+  EXPECT_EQ(open.input_sphere().centre, s.centre);
+  EXPECT_EQ(open.input_sphere().radius, s.radius);
+  EXPECT_EQ(open.node_count(), memory_->nodes().size());
+  EXPECT_EQ(open.chunks_loaded(), open.chunk_count()) << "assemble() reads every chunk";
   EXPECT_EQ(whole.nodes().size(), memory_->nodes().size());
   EXPECT_TRUE(whole == *memory_) << first_difference(whole, *memory_)
                                  << sample_differences(whole, *memory_);

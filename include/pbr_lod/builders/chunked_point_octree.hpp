@@ -185,6 +185,11 @@ class chunked_point_octree {
   [[nodiscard]] std::size_t chunk_count() const { return chunk_top_.size(); }
   [[nodiscard]] std::size_t chunks_loaded() const;
   [[nodiscard]] std::uint64_t input_points() const { return input_points_; }
+  /// The input's bounding sphere about the centre of its box (relative to origin()), as
+  /// bounding_sphere_about_box_centre gives it for the input's positions.
+  [[nodiscard]] sphere input_sphere() const { return input_sphere_; }
+  /// Nodes over the whole hierarchy (the top's inner nodes and every chunk's), from the top file.
+  [[nodiscard]] std::uint64_t node_count() const;
   [[nodiscard]] int normal_bits() const { return normal_bits_; }
   /// Chunk c's subtree (read from its file on first use; throws FormatError if it is damaged or
   /// does not match the top file).
@@ -218,15 +223,17 @@ class chunked_point_octree {
   std::vector<selection_record> top_selection_;
   std::vector<std::uint32_t> frontier_;   // per top node: its chunk, or `top`
   std::vector<std::uint32_t> chunk_top_;  // per chunk: its root's top node
-  std::vector<std::uint64_t> chunk_samples_;
+  std::vector<std::uint64_t> chunk_samples_, chunk_nodes_;
+  sphere input_sphere_;
   std::vector<std::unique_ptr<slot>> slots_;
 };
 
 namespace detail {
 /// The top file: head "PBRLODPC" | u32 version | u32 flags (1 colour, 2 quantised) | u32 normal
-/// bits | f64 origin[3] | u64 input points | u64 top nodes | u64 chunks | the top nodes as
-/// point-octree node records (a chunk's root: its record in the chunk) | u32 per top node: its
-/// chunk or 0xffffffff | per chunk: u32 top node, u64 samples | u64 FNV-1a checksum.
+/// bits | f64 origin[3] | u64 input points | f32 input sphere centre[3], f32 radius | u64 top
+/// nodes | u64 chunks | the top nodes as point-octree node records (a chunk's root: its record
+/// in the chunk) | u32 per top node: its chunk or 0xffffffff | per chunk: u32 top node,
+/// u64 samples, u64 nodes | u64 FNV-1a checksum.
 inline constexpr file_format chunked_top_format{
     "chunked point-octree", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'C'}, 1};
 }  // namespace detail
