@@ -240,6 +240,19 @@ TEST_F(Source, BinaryPlyElementBeforeVertices) {
   EXPECT_EQ(c.world(2), vec3d(6, 7, 8));
 }
 
+// ASCII: the rows of an element before the vertices (one line each) are skipped, and the
+// lines after the faces draw read_points' warning.
+TEST_F(Source, AsciiPlyElementBeforeVertices) {
+  const std::string s =
+      "ply\nformat ascii 1.0\nelement camera 2\nproperty list uchar float k\n"
+      "element vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "2 1 2\n\n0\n5 6 7\n8 9 10\n3 0 1 1\nextra\n";
+  const point_cloud c = check_file(write("cam_ascii.ply", s));
+  ASSERT_EQ(c.size(), 2u);
+  EXPECT_EQ(c.world(0), vec3d(5, 6, 7));
+}
+
 std::string pcd_header(const std::string& fields, const std::string& size, const std::string& type,
                        int points, const std::string& data,
                        const std::string& viewpoint = "0 0 0 1 0 0 0") {
