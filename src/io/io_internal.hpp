@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -47,6 +48,40 @@ struct raw_geometry {
 [[nodiscard]] triangle_mesh finish_mesh(raw_geometry&& g, const std::string& path,
                                         read_report& report);
 
+// --- finish_mesh's per-point rules, shared with the streaming sources (point_source_file.cpp),
+// so that a file read whole and the same file read in blocks cannot disagree -----------------
+
+/// The bounding box of the finite points, in double, grown one point at a time.
+struct finite_box {
+  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity());
+  vec3d hi = vec3d::Constant(-std::numeric_limits<double>::infinity());
+  std::uint64_t total = 0;   ///< points seen
+  std::uint64_t finite = 0;  ///< of those, with three finite coordinates (the ones kept)
+  /// Counts p and returns whether it is kept.
+  bool add(const vec3d& p) {
+    ++total;
+    if (!all_finite(p)) return false;
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+    ++finite;
+    return true;
+  }
+};
+
+/// Records points_read / dropped_non_finite (and the dropped warning) in `report` and returns the
+/// origin read.hpp promises: the box centre, or `hint` when it is finite and near the box.
+/// Throws FormatError when the finite points span more than a float can hold.
+[[nodiscard]] vec3d choose_origin(const finite_box& box, const std::optional<vec3d>& hint,
+                                  const std::string& path, read_report& report);
+
+/// The rule for a stored normal: non-finite → zero, clearly non-unit → normalised; counts both.
+struct normal_rule {
+  std::size_t bad = 0, renormalised = 0;
+  vec3f operator()(vec3f n);
+  /// The warnings for what was counted.
+  void report_to(const std::string& path, read_report& report) const;
+};
+
 // --- the format parsers (one .cpp each) ---------------------------------------------------------
 [[nodiscard]] raw_geometry read_ply_file(const std::string& path, read_report& report);
 [[nodiscard]] raw_geometry read_obj_file(const std::string& path, read_report& report);
@@ -58,6 +93,33 @@ struct raw_geometry {
 
 /// The whole file in memory. Throws IoError when it is missing, a directory or unreadable.
 [[nodiscard]] std::string read_file_bytes(const std::string& path);
+
+/// A file opened for positioned reads (pread): no shared cursor, so const reads from several
+/// threads at once are safe. Throws IoError as read_file_bytes does.
+class posix_file {
+ public:
+  explicit posix_file(const std::string& path);
+  ~posix_file();
+  posix_file(const posix_file&) = delete;
+  posix_file& operator=(const posix_file&) = delete;
+  [[nodiscard]] const std::string& path() const { return path_; }
+  [[nodiscard]] std::uint64_t size() const { return size_; }
+  /// Up to n bytes at `offset` into out; returns how many (fewer only at the end of the file).
+  std::size_t read_some(std::uint64_t offset, std::size_t n, void* out) const;
+  /// Exactly n bytes at `offset`; IoError when the file is shorter (it changed since opening).
+  void read_exact(std::uint64_t offset, std::size_t n, void* out) const;
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
+};
+
+/// The file's first bytes through the first complete line whose first word is `last_key`
+/// ("end_header", "DATA"), read in growing pieces so that a header is parsed without reading
+/// the data; the whole file when there is no such line. FormatError when the header would
+/// exceed 64 MiB.
+[[nodiscard]] std::string read_header_lines(const posix_file& f, std::string_view last_key);
 
 /// ".ply" for "a/b.PLY"; empty when there is no extension.
 [[nodiscard]] std::string lower_extension(const std::string& path);

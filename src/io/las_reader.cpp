@@ -15,7 +15,7 @@
 #include <cmath>
 #include <filesystem>
 
-#include "io_internal.hpp"
+#include "point_formats.hpp"
 
 namespace pbr_lod::detail {
 namespace {
@@ -26,12 +26,9 @@ constexpr std::uint16_t rgb_offset[11] = {0, 0, 20, 28, 0, 28, 0, 30, 30, 0, 30}
 
 }  // namespace
 
-raw_geometry read_las_file(const std::string& path, read_report& report) {
-  const std::string bytes = read_file_bytes(path);
-  const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
-  const std::uint64_t file_size = bytes.size();
+las_header parse_las_header(const std::string& path, const unsigned char* b,
+                            std::uint64_t file_size, read_report& report) {
   const std::string name = std::filesystem::path(path).filename().string();
-
   if (file_size < 4 || std::memcmp(b, "LASF", 4) != 0)
     format_error(path, "header", "expected the signature 'LASF' (not a LAS file)");
   if (file_size < 227)
@@ -70,7 +67,11 @@ raw_geometry read_las_file(const std::string& path, read_report& report) {
                  cat("point record length ", record_length, " is smaller than the ",
                      min_record_length[format], " bytes format ", format, " needs"));
 
-  std::uint64_t count = legacy_count;
+  las_header h;
+  h.record_length = record_length;
+  h.data_offset = data_offset;
+  h.rgb_offset = rgb_offset[format];
+  h.count = legacy_count;
   if (minor >= 4) {
     const std::uint64_t count64 = load_le<std::uint64_t>(b + 247);
     if (count64 != 0) {
@@ -78,21 +79,20 @@ raw_geometry read_las_file(const std::string& path, read_report& report) {
         report.warnings.push_back(cat(name, ": legacy point count ", legacy_count,
                                       " differs from the 64-bit count ", count64,
                                       "; using the latter"));
-      count = count64;
+      h.count = count64;
     }
   }
 
-  double scale[3], offset[3], bmax[3], bmin[3];
   for (int a = 0; a < 3; ++a) {
-    scale[a] = load_le<double>(b + 131 + 8 * a);
-    offset[a] = load_le<double>(b + 155 + 8 * a);
-    bmax[a] = load_le<double>(b + 179 + 16 * a);
-    bmin[a] = load_le<double>(b + 187 + 16 * a);
-    if (!std::isfinite(scale[a]) || scale[a] == 0.0)
+    h.scale[a] = load_le<double>(b + 131 + 8 * a);
+    h.offset[a] = load_le<double>(b + 155 + 8 * a);
+    h.bmax[a] = load_le<double>(b + 179 + 16 * a);
+    h.bmin[a] = load_le<double>(b + 187 + 16 * a);
+    if (!std::isfinite(h.scale[a]) || h.scale[a] == 0.0)
       format_error(
           path, "header",
-          cat("scale factor ", "xyz"[a], " = ", scale[a], " is not a finite non-zero number"));
-    if (!std::isfinite(offset[a]))
+          cat("scale factor ", "xyz"[a], " = ", h.scale[a], " is not a finite non-zero number"));
+    if (!std::isfinite(h.offset[a]))
       format_error(path, "header", cat("offset ", "xyz"[a], " is not finite"));
   }
 
@@ -104,50 +104,50 @@ raw_geometry read_las_file(const std::string& path, read_report& report) {
     format_error(path, "header",
                  cat("offset to point data ", data_offset, " is beyond the end of the file (",
                      file_size, " bytes)"));
-  const auto point_bytes = mul_checked(count, record_length);
+  const auto point_bytes = mul_checked(h.count, record_length);
   const auto end = point_bytes ? add_checked(data_offset, *point_bytes) : std::nullopt;
   if (!end || *end > file_size)
     format_error(path, "points",
-                 cat("truncated: ", count, " points of ", record_length, " bytes from offset ",
+                 cat("truncated: ", h.count, " points of ", record_length, " bytes from offset ",
                      data_offset, " need ", end ? cat(*end) : std::string("more than 2^64"),
                      " bytes, the file has ", file_size));
+  return h;
+}
+
+void las_outside_warning(const std::string& path, std::uint64_t outside, read_report& report) {
+  if (outside > 0)
+    report.warnings.push_back(cat(std::filesystem::path(path).filename().string(), ": ", outside,
+                                  " points lie outside the bounding box the header states"));
+}
+
+raw_geometry read_las_file(const std::string& path, read_report& report) {
+  const std::string bytes = read_file_bytes(path);
+  const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
+  const las_header h = parse_las_header(path, b, bytes.size(), report);
+  const std::uint64_t count = h.count;
 
   raw_geometry g;
   g.positions.resize(count);
-  const unsigned char* rec = b + data_offset;
-  for (std::uint64_t i = 0; i < count; ++i, rec += record_length)
-    for (int a = 0; a < 3; ++a)
-      g.positions[i][a] = load_le<std::int32_t>(rec + 4 * a) * scale[a] + offset[a];
-
-  if (rgb_offset[format] != 0) {
-    std::vector<std::array<std::uint16_t, 3>> rgb(count);
-    std::uint16_t top = 0;
-    rec = b + data_offset + rgb_offset[format];
-    for (std::uint64_t i = 0; i < count; ++i, rec += record_length)
-      for (int c = 0; c < 3; ++c) {
-        rgb[i][c] = load_le<std::uint16_t>(rec + 2 * c);
-        top = std::max(top, rgb[i][c]);
-      }
-    const int shift = top > 255 ? 8 : 0;
-    g.colours.resize(count);
-    for (std::uint64_t i = 0; i < count; ++i)
-      g.colours[i] = {static_cast<std::uint8_t>(rgb[i][0] >> shift),
-                      static_cast<std::uint8_t>(rgb[i][1] >> shift),
-                      static_cast<std::uint8_t>(rgb[i][2] >> shift)};
+  const unsigned char* rec = b + h.data_offset;
+  std::uint64_t outside = 0;
+  for (std::uint64_t i = 0; i < count; ++i, rec += h.record_length) {
+    g.positions[i] = h.position(rec);
+    if (h.outside(g.positions[i])) ++outside;
   }
 
-  // Points outside the header's bounds (by more than one quantum) mean a stale header: worth a
-  // warning, not an error, since the points themselves are well defined.
-  std::uint64_t outside = 0;
-  for (const vec3d& p : g.positions)
-    for (int a = 0; a < 3; ++a)
-      if (p[a] < bmin[a] - std::abs(scale[a]) || p[a] > bmax[a] + std::abs(scale[a])) {
-        ++outside;
-        break;
-      }
-  if (outside > 0)
-    report.warnings.push_back(
-        cat(name, ": ", outside, " points lie outside the bounding box the header states"));
+  if (h.rgb_offset != 0) {
+    std::vector<std::array<std::uint16_t, 3>> rgb(count);
+    std::uint16_t top = 0;
+    rec = b + h.data_offset;
+    for (std::uint64_t i = 0; i < count; ++i, rec += h.record_length) {
+      rgb[i] = h.rgb16(rec);
+      top = std::max({top, rgb[i][0], rgb[i][1], rgb[i][2]});
+    }
+    const int shift = las_header::colour_shift(top);
+    g.colours.resize(count);
+    for (std::uint64_t i = 0; i < count; ++i) g.colours[i] = las_header::colour(rgb[i], shift);
+  }
+  las_outside_warning(path, outside, report);
   return g;
 }
 

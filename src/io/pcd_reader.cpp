@@ -21,32 +21,11 @@
 #include <filesystem>
 #include <limits>
 
-#include "io_internal.hpp"
+#include "point_formats.hpp"
 
 namespace pbr_lod::detail {
-namespace {
 
-struct field {
-  std::string name;
-  std::size_t size = 4;
-  char type = 'F';
-  std::uint64_t count = 1;
-  std::uint64_t offset = 0;       ///< byte offset inside one point (binary / ascii value index)
-  std::uint64_t value_index = 0;  ///< index of the first value in an ASCII row
-};
-
-struct pcd_header {
-  std::vector<field> fields;
-  std::uint64_t width = 0, height = 0, points = 0;
-  std::uint64_t point_size = 0;  ///< bytes per point
-  std::uint64_t values_per_point = 0;
-  enum class data_kind { ascii, binary, compressed } data = data_kind::ascii;
-  std::size_t data_begin = 0;
-  std::size_t data_line = 0;
-  double viewpoint[7] = {0, 0, 0, 1, 0, 0, 0};
-};
-
-pcd_header parse_header(const std::string& path, std::string_view bytes) {
+pcd_header parse_pcd_header(const std::string& path, std::string_view bytes) {
   if (bytes.empty()) format_error(path, "", "the file is empty; expected a PCD header");
   pcd_header h;
   std::vector<std::string_view> tok;
@@ -138,7 +117,7 @@ pcd_header parse_header(const std::string& path, std::string_view bytes) {
                      " = ", *wh));
 
   for (std::size_t i = 0; i < nfields; ++i) {
-    field f;
+    pcd_field f;
     f.name = names[i];
     const auto size = parse_number<std::uint64_t>(size_store[i]);
     const std::string t = type_store[i];
@@ -168,8 +147,7 @@ pcd_header parse_header(const std::string& path, std::string_view bytes) {
   return h;
 }
 
-/// Reads element k of a field of one point from raw little-endian bytes, as double.
-double load_value(const unsigned char* p, const field& f) {
+double pcd_load_value(const unsigned char* p, const pcd_field& f) {
   switch (f.type) {
     case 'F':
       return f.size == 4 ? load_le<float>(p) : load_le<double>(p);
@@ -198,21 +176,15 @@ double load_value(const unsigned char* p, const field& f) {
   }
 }
 
-rgb8 unpack_rgb(std::uint32_t v) {
+rgb8 pcd_unpack_rgb(std::uint32_t v) {
   return {static_cast<std::uint8_t>((v >> 16) & 255u), static_cast<std::uint8_t>((v >> 8) & 255u),
           static_cast<std::uint8_t>(v & 255u)};
 }
 
-struct wanted {
-  const field* xyz[3] = {};
-  const field* normal[3] = {};
-  const field* rgb = nullptr;
-};
-
-wanted find_fields(const std::string& path, const pcd_header& h, read_report& report) {
-  wanted w;
-  const auto find = [&](std::string_view n) -> const field* {
-    for (const field& f : h.fields)
+pcd_wanted pcd_fields(const std::string& path, const pcd_header& h, read_report& report) {
+  pcd_wanted w;
+  const auto find = [&](std::string_view n) -> const pcd_field* {
+    for (const pcd_field& f : h.fields)
       if (f.name == n) return &f;
     return nullptr;
   };
@@ -234,26 +206,33 @@ wanted find_fields(const std::string& path, const pcd_header& h, read_report& re
                                   ", expected 4 (packed colour); colours ignored"));
     w.rgb = nullptr;
   }
+  const double* vp = h.viewpoint;
+  if (vp[0] != 0 || vp[1] != 0 || vp[2] != 0 || vp[3] != 1 || vp[4] != 0 || vp[5] != 0 ||
+      vp[6] != 0)
+    report.warnings.push_back(cat(std::filesystem::path(path).filename().string(),
+                                  ": VIEWPOINT is not the identity; points are returned as "
+                                  "stored (in the sensor frame), the pose is not applied"));
   return w;
 }
 
-/// Fills g from point i whose field f, element k, is at addr(f, k).
+namespace {
+
+/// Fills g from point i whose field f starts at addr(f, i).
 template <class Addr>
-void gather(raw_geometry& g, const wanted& w, std::uint64_t n, Addr addr) {
+void gather(raw_geometry& g, const pcd_wanted& w, std::uint64_t n, Addr addr) {
   g.positions.resize(n);
   if (w.normal[0]) g.normals.resize(n);
   if (w.rgb) g.colours.resize(n);
   for (std::uint64_t i = 0; i < n; ++i) {
-    for (int a = 0; a < 3; ++a) g.positions[i][a] = load_value(addr(*w.xyz[a], i), *w.xyz[a]);
-    if (w.normal[0])
-      for (int a = 0; a < 3; ++a)
-        g.normals[i][a] = static_cast<float>(load_value(addr(*w.normal[a], i), *w.normal[a]));
-    if (w.rgb) g.colours[i] = unpack_rgb(load_le<std::uint32_t>(addr(*w.rgb, i)));
+    const pcd_point q = pcd_load_point(w, [&](const pcd_field& f) { return addr(f, i); });
+    g.positions[i] = q.position;
+    if (w.normal[0]) g.normals[i] = q.normal;
+    if (w.rgb) g.colours[i] = q.colour;
   }
 }
 
 void read_ascii(const std::string& path, std::string_view data, const pcd_header& h,
-                const wanted& w, raw_geometry& g) {
+                const pcd_wanted& w, raw_geometry& g) {
   std::vector<std::string_view> tok;
   std::size_t pos = 0, line_no = h.data_line - 1;
   // Reserve only what the file can hold (one point per line, at least 2 bytes each).
@@ -271,88 +250,103 @@ void read_ascii(const std::string& path, std::string_view data, const pcd_header
       pos = nl + 1;
       ++line_no;
     }
-    if (found == 0)
-      format_error(path, cat("point ", i),
-                   cat("the file ends (truncated: POINTS promises ", n, ")"));
-    const std::string where = cat("point ", i, " (line ", line_no, ")");
-    if (tok.size() != h.values_per_point)
-      format_error(path, where,
-                   cat("expected ", h.values_per_point, " values, found ", tok.size()));
-    const auto value = [&](const field& f) -> double {
-      const std::string_view s = tok[f.value_index];
-      std::optional<double> v;
-      if (f.type == 'F') {
-        v = parse_number<double>(s);
-      } else if (const auto iv = parse_number<std::int64_t>(s)) {
-        v = static_cast<double>(*iv);
-      }
-      if (!v) format_error(path, where, cat("'", s, "' in field ", f.name, " is not a number"));
-      return *v;
-    };
-    vec3d p;
-    for (int a = 0; a < 3; ++a) p[a] = value(*w.xyz[a]);
-    g.positions.push_back(p);
-    if (w.normal[0])
-      g.normals.emplace_back(static_cast<float>(value(*w.normal[0])),
-                             static_cast<float>(value(*w.normal[1])),
-                             static_cast<float>(value(*w.normal[2])));
-    if (w.rgb) {
-      // The packed value is written as the float whose bits it is (TYPE F) or as an integer.
-      const std::string_view s = tok[w.rgb->value_index];
-      std::uint32_t bits = 0;
-      if (w.rgb->type == 'F') {
-        const auto f = parse_number<float>(s);
-        if (!f)
-          format_error(path, where, cat("'", s, "' in field ", w.rgb->name, " is not a number"));
-        bits = std::bit_cast<std::uint32_t>(*f);
-      } else {
-        const auto u = parse_number<std::int64_t>(s);
-        if (!u || *u < std::numeric_limits<std::int32_t>::min() ||
-            *u > std::numeric_limits<std::uint32_t>::max())
-          format_error(path, where,
-                       cat("'", s, "' in field ", w.rgb->name, " is not a 32-bit integer"));
-        bits = static_cast<std::uint32_t>(*u);
-      }
-      g.colours.push_back(unpack_rgb(bits));
-    }
+    if (found == 0) pcd_ascii_truncated(path, i, n);
+    const pcd_point q = pcd_parse_ascii_point(path, h, w, tok, i, line_no);
+    g.positions.push_back(q.position);
+    if (w.normal[0]) g.normals.push_back(q.normal);
+    if (w.rgb) g.colours.push_back(q.colour);
   }
 }
 
 }  // namespace
 
+pcd_point pcd_parse_ascii_point(const std::string& path, const pcd_header& h, const pcd_wanted& w,
+                                const std::vector<std::string_view>& tok, std::uint64_t i,
+                                std::size_t line_no) {
+  const std::string where = cat("point ", i, " (line ", line_no, ")");
+  if (tok.size() != h.values_per_point)
+    format_error(path, where, cat("expected ", h.values_per_point, " values, found ", tok.size()));
+  const auto value = [&](const pcd_field& f) -> double {
+    const std::string_view s = tok[f.value_index];
+    std::optional<double> v;
+    if (f.type == 'F') {
+      v = parse_number<double>(s);
+    } else if (const auto iv = parse_number<std::int64_t>(s)) {
+      v = static_cast<double>(*iv);
+    }
+    if (!v) format_error(path, where, cat("'", s, "' in field ", f.name, " is not a number"));
+    return *v;
+  };
+  pcd_point q;
+  for (int a = 0; a < 3; ++a) q.position[a] = value(*w.xyz[a]);
+  if (w.normal[0])
+    q.normal =
+        vec3f(static_cast<float>(value(*w.normal[0])), static_cast<float>(value(*w.normal[1])),
+              static_cast<float>(value(*w.normal[2])));
+  if (w.rgb) {
+    // The packed value is written as the float whose bits it is (TYPE F) or as an integer.
+    const std::string_view s = tok[w.rgb->value_index];
+    std::uint32_t bits = 0;
+    if (w.rgb->type == 'F') {
+      const auto f = parse_number<float>(s);
+      if (!f)
+        format_error(path, where, cat("'", s, "' in field ", w.rgb->name, " is not a number"));
+      bits = std::bit_cast<std::uint32_t>(*f);
+    } else {
+      const auto u = parse_number<std::int64_t>(s);
+      if (!u || *u < std::numeric_limits<std::int32_t>::min() ||
+          *u > std::numeric_limits<std::uint32_t>::max())
+        format_error(path, where,
+                     cat("'", s, "' in field ", w.rgb->name, " is not a 32-bit integer"));
+      bits = static_cast<std::uint32_t>(*u);
+    }
+    q.colour = pcd_unpack_rgb(bits);
+  }
+  return q;
+}
+
+void pcd_ascii_truncated(const std::string& path, std::uint64_t i, std::uint64_t n) {
+  format_error(path, cat("point ", i), cat("the file ends (truncated: POINTS promises ", n, ")"));
+}
+
+std::uint64_t pcd_data_bytes(const std::string& path, const pcd_header& h) {
+  const auto total = mul_checked(h.points, h.point_size);
+  if (!total) format_error(path, "header", "POINTS × point size overflows");
+  return *total;
+}
+
+void pcd_check_binary_size(const std::string& path, const pcd_header& h, std::uint64_t available,
+                           read_report& report) {
+  const std::uint64_t total = pcd_data_bytes(path, h);
+  if (available < total)
+    format_error(path, "data",
+                 cat("truncated: ", h.points, " points of ", h.point_size, " bytes need ", total,
+                     " bytes, the file has ", available, " after the header"));
+  if (available > total)
+    report.warnings.push_back(cat(std::filesystem::path(path).filename().string(), ": ",
+                                  available - total, " bytes after the last point were ignored"));
+}
+
 raw_geometry read_pcd_file(const std::string& path, read_report& report) {
   const std::string bytes = read_file_bytes(path);
-  const pcd_header h = parse_header(path, bytes);
-  const wanted w = find_fields(path, h, report);
-  const std::string name = std::filesystem::path(path).filename().string();
-  const double* vp = h.viewpoint;
-  if (vp[0] != 0 || vp[1] != 0 || vp[2] != 0 || vp[3] != 1 || vp[4] != 0 || vp[5] != 0 ||
-      vp[6] != 0)
-    report.warnings.push_back(cat(name,
-                                  ": VIEWPOINT is not the identity; points are returned as "
-                                  "stored (in the sensor frame), the pose is not applied"));
+  const pcd_header h = parse_pcd_header(path, bytes);
+  const pcd_wanted w = pcd_fields(path, h, report);
 
   const std::string_view data = std::string_view(bytes).substr(h.data_begin);
   const auto* base = reinterpret_cast<const unsigned char*>(data.data());
   raw_geometry g;
   g.sensor = vec3d::Zero();  // the points are in the sensor's frame (the pose is not applied)
-  const auto total = mul_checked(h.points, h.point_size);
-  if (!total) format_error(path, "header", "POINTS × point size overflows");
+  const std::uint64_t total = pcd_data_bytes(path, h);
 
   switch (h.data) {
     case pcd_header::data_kind::ascii:
       read_ascii(path, data, h, w, g);
       break;
     case pcd_header::data_kind::binary: {
-      if (data.size() < *total)
-        format_error(path, "data",
-                     cat("truncated: ", h.points, " points of ", h.point_size, " bytes need ",
-                         *total, " bytes, the file has ", data.size(), " after the header"));
-      if (data.size() > *total)
-        report.warnings.push_back(
-            cat(name, ": ", data.size() - *total, " bytes after the last point were ignored"));
-      gather(g, w, h.points,
-             [&](const field& f, std::uint64_t i) { return base + i * h.point_size + f.offset; });
+      pcd_check_binary_size(path, h, data.size(), report);
+      gather(g, w, h.points, [&](const pcd_field& f, std::uint64_t i) {
+        return base + i * h.point_size + f.offset;
+      });
       break;
     }
     case pcd_header::data_kind::compressed: {
@@ -364,10 +358,10 @@ raw_geometry read_pcd_file(const std::string& path, read_report& report) {
         format_error(path, "data",
                      cat("compressed size ", csize, " runs past the end of the file (",
                          data.size() - 8, " bytes follow)"));
-      if (usize != *total)
+      if (usize != total)
         format_error(path, "data",
                      cat("uncompressed size ", usize, " does not match POINTS × point size = ",
-                         h.points, " × ", h.point_size, " = ", *total));
+                         h.points, " × ", h.point_size, " = ", total));
       // LZF expands at most ~88:1 (a 3-byte back reference yields 264 bytes); a larger claim
       // is a lie, and must not make us allocate it.
       if (usize > std::uint64_t{csize} * 90 + 64)
@@ -389,8 +383,8 @@ raw_geometry read_pcd_file(const std::string& path, read_report& report) {
       std::vector<std::uint64_t> block(h.fields.size());
       for (std::size_t k = 1; k < h.fields.size(); ++k)
         block[k] = block[k - 1] + h.points * h.fields[k - 1].size * h.fields[k - 1].count;
-      const field* first = h.fields.data();
-      gather(g, w, h.points, [&](const field& f, std::uint64_t i) {
+      const pcd_field* first = h.fields.data();
+      gather(g, w, h.points, [&](const pcd_field& f, std::uint64_t i) {
         return raw.data() + block[static_cast<std::size_t>(&f - first)] + i * f.size * f.count;
       });
       break;

@@ -24,34 +24,10 @@
 #include <limits>
 #include <type_traits>
 
-#include "io_internal.hpp"
+#include "ply_format.hpp"
 
 namespace pbr_lod::detail {
 namespace {
-
-enum class scalar : std::uint8_t { i8, u8, i16, u16, i32, u32, f32, f64 };
-
-std::size_t scalar_size(scalar t) {
-  switch (t) {
-    case scalar::i8:
-    case scalar::u8:
-      return 1;
-    case scalar::i16:
-    case scalar::u16:
-      return 2;
-    case scalar::i32:
-    case scalar::u32:
-    case scalar::f32:
-      return 4;
-    case scalar::f64:
-      return 8;
-  }
-  return 8;
-}
-
-bool is_integer(scalar t) {
-  return t != scalar::f32 && t != scalar::f64;
-}
 
 std::optional<scalar> parse_scalar(std::string_view s) {
   if (s == "char" || s == "int8") return scalar::i8;
@@ -65,66 +41,7 @@ std::optional<scalar> parse_scalar(std::string_view s) {
   return std::nullopt;
 }
 
-std::pair<std::int64_t, std::int64_t> integer_range(scalar t) {
-  switch (t) {
-    case scalar::i8:
-      return {-128, 127};
-    case scalar::u8:
-      return {0, 255};
-    case scalar::i16:
-      return {-32768, 32767};
-    case scalar::u16:
-      return {0, 65535};
-    case scalar::i32:
-      return {std::numeric_limits<std::int32_t>::min(), std::numeric_limits<std::int32_t>::max()};
-    default:
-      return {0, std::numeric_limits<std::uint32_t>::max()};
-  }
-}
-
-enum class encoding : std::uint8_t { ascii, binary_le, binary_be };
-
-/// What a property feeds. Everything not listed is read and discarded.
-enum class slot : std::uint8_t {
-  skip,
-  x,
-  y,
-  z,
-  nx,
-  ny,
-  nz,
-  red,
-  green,
-  blue,
-  tu,
-  tv,
-  indices,
-  texcoords
-};
-
-struct property {
-  std::string name;
-  scalar type = scalar::f32;
-  bool is_list = false;
-  scalar count_type = scalar::u8;
-  slot role = slot::skip;
-};
-
-struct element {
-  std::string name;
-  std::uint64_t count = 0;
-  std::vector<property> props;
-  std::size_t header_line = 0;
-};
-
-struct header {
-  encoding format = encoding::ascii;
-  std::vector<element> elements;
-  std::size_t data_begin = 0;       ///< byte offset of the first data byte
-  std::size_t first_data_line = 0;  ///< 1-based line number where ASCII data starts
-  std::optional<vec3d> origin;      ///< "comment pbr_lod_origin X Y Z"
-  std::string texture_file;         ///< "comment TextureFile NAME"
-};
+}  // namespace
 
 std::string printable_prefix(std::string_view s) {
   std::string out;
@@ -132,9 +49,9 @@ std::string printable_prefix(std::string_view s) {
   return out;
 }
 
-header parse_header(const std::string& path, std::string_view bytes) {
+ply_header parse_ply_header(const std::string& path, std::string_view bytes) {
   if (bytes.empty()) format_error(path, "", "the file is empty; expected a PLY header");
-  header h;
+  ply_header h;
   std::vector<std::string_view> tok;
   std::size_t pos = 0, line_no = 0;
   bool have_format = false, ended = false;
@@ -227,157 +144,135 @@ header parse_header(const std::string& path, std::string_view bytes) {
   return h;
 }
 
-/// Binary rows: a cursor over the data bytes; every read is bounds-checked.
-class binary_source {
- public:
-  binary_source(const unsigned char* b, const unsigned char* e, bool swap)
-      : p_(b), end_(e), swap_(swap) {}
+namespace {
 
-  [[nodiscard]] bool has(std::uint64_t n) const {
-    return static_cast<std::uint64_t>(end_ - p_) >= n;
-  }
-  [[nodiscard]] std::size_t remaining() const { return static_cast<std::size_t>(end_ - p_); }
-  bool begin_row() { return true; }
-  [[nodiscard]] bool end_row() const { return true; }
-  [[nodiscard]] std::size_t line() const { return 0; }
+slot vertex_role(const std::string& n) {
+  if (n == "x") return slot::x;
+  if (n == "y") return slot::y;
+  if (n == "z") return slot::z;
+  if (n == "nx" || n == "normal_x") return slot::nx;
+  if (n == "ny" || n == "normal_y") return slot::ny;
+  if (n == "nz" || n == "normal_z") return slot::nz;
+  if (n == "red" || n == "r" || n == "diffuse_red") return slot::red;
+  if (n == "green" || n == "g" || n == "diffuse_green") return slot::green;
+  if (n == "blue" || n == "b" || n == "diffuse_blue") return slot::blue;
+  if (n == "s" || n == "u" || n == "texture_u" || n == "texture_s") return slot::tu;
+  if (n == "t" || n == "v" || n == "texture_v" || n == "texture_t") return slot::tv;
+  return slot::skip;
+}
 
-  /// false when the file ends first.
-  /// Reads one scalar of type t into out; an integer target refuses float types (the header
-  /// check keeps them out of lists and indices anyway).
-  template <class Out>
-  bool read_scalar(scalar t, Out& out) {
-    if (!has(scalar_size(t))) return false;
-    switch (t) {
-      case scalar::i8:
-        out = static_cast<Out>(get<std::int8_t>());
-        break;
-      case scalar::u8:
-        out = static_cast<Out>(get<std::uint8_t>());
-        break;
-      case scalar::i16:
-        out = static_cast<Out>(get<std::int16_t>());
-        break;
-      case scalar::u16:
-        out = static_cast<Out>(get<std::uint16_t>());
-        break;
-      case scalar::i32:
-        out = static_cast<Out>(get<std::int32_t>());
-        break;
-      case scalar::u32:
-        out = static_cast<Out>(get<std::uint32_t>());
-        break;
-      case scalar::f32:
-      case scalar::f64:
-        if constexpr (std::is_floating_point_v<Out>) {
-          out = t == scalar::f32 ? static_cast<Out>(get<float>()) : static_cast<Out>(get<double>());
-          break;
-        } else {
-          return false;
-        }
-    }
-    return true;
-  }
-  bool real(scalar t, double& out) { return read_scalar(t, out); }
-  bool integer(scalar t, std::int64_t& out) { return read_scalar(t, out); }
-  /// Can a list of n items of type t still be read?
-  [[nodiscard]] bool list_fits(std::uint64_t n, scalar t) const {
-    const auto bytes = mul_checked(n, scalar_size(t));
-    return bytes && has(*bytes);
-  }
-  [[nodiscard]] const char* truncated_what() const { return "the file ends (truncated)"; }
+}  // namespace
 
- private:
-  template <class T>
-  T get() {
-    T v;
-    std::memcpy(&v, p_, sizeof(T));
-    p_ += sizeof(T);
-    return swap_ ? byte_swapped(v) : v;
-  }
-  const unsigned char* p_;
-  const unsigned char* end_;
-  bool swap_;
-};
-
-/// ASCII rows: one row per non-empty line, values separated by spaces.
-class ascii_source {
- public:
-  ascii_source(std::string_view data, std::size_t first_line)
-      : data_(data), line_(first_line - 1) {}
-
-  /// Moves to the next non-empty line; false when there is none.
-  bool begin_row() {
-    while (pos_ < data_.size()) {
-      std::size_t nl = data_.find('\n', pos_);
-      if (nl == std::string_view::npos) nl = data_.size();
-      const std::string_view l = data_.substr(pos_, nl - pos_);
-      pos_ = nl + 1;
-      ++line_;
-      if (split_ws(l, tok_) > 0) {
-        next_ = 0;
-        return true;
+ply_plan plan_ply(const std::string& path, ply_header& h, read_report& report) {
+  ply_plan pl;
+  const auto warn = [&](const std::string& what) {
+    report.warnings.push_back(cat(std::filesystem::path(path).filename().string(), ": ", what));
+  };
+  for (element& e : h.elements) {
+    const std::string where = cat("header line ", e.header_line);
+    // A row without properties takes no bytes: a huge count would loop for nothing.
+    if (e.count > 0 && e.props.empty())
+      format_error(path, where, cat("element ", e.name, " has rows but no properties"));
+    if (e.name == "vertex") {
+      if (pl.vertex != nullptr) format_error(path, where, "a second 'vertex' element");
+      pl.vertex = &e;
+      if (e.count > std::numeric_limits<std::uint32_t>::max())
+        format_error(path, where,
+                     cat(e.count, " vertices: more than 32-bit face indices can address"));
+      for (property& p : e.props) {
+        p.role = vertex_role(p.name);
+        if (p.role != slot::skip && p.is_list)
+          format_error(path, where, cat("vertex property '", p.name, "' must not be a list"));
       }
+      const auto has = [&](slot s) {
+        return std::any_of(e.props.begin(), e.props.end(),
+                           [s](const property& p) { return p.role == s; });
+      };
+      if (!has(slot::x) || !has(slot::y) || !has(slot::z))
+        format_error(path, where, "element vertex needs properties x, y and z");
+      pl.has_normals = has(slot::nx) && has(slot::ny) && has(slot::nz);
+      pl.has_colours = has(slot::red) && has(slot::green) && has(slot::blue);
+      pl.has_vertex_tc = has(slot::tu) && has(slot::tv);
+      if (!pl.has_normals && (has(slot::nx) || has(slot::ny) || has(slot::nz)))
+        warn("vertex normals are incomplete (need nx, ny and nz) and were ignored");
+      if (!pl.has_colours && (has(slot::red) || has(slot::green) || has(slot::blue)))
+        warn("vertex colours are incomplete (need red, green and blue) and were ignored");
+    } else if (e.name == "face") {
+      if (pl.face != nullptr) format_error(path, where, "a second 'face' element");
+      pl.face = &e;
+      for (property& p : e.props) {
+        if (p.is_list && (p.name == "vertex_indices" || p.name == "vertex_index")) {
+          if (!is_integer(p.type))
+            format_error(path, where, cat("'", p.name, "' must be a list of integers"));
+          p.role = slot::indices;
+        } else if (p.is_list && p.name == "texcoord") {
+          p.role = slot::texcoords;
+        }
+      }
+      const bool ok = std::any_of(e.props.begin(), e.props.end(),
+                                  [](const property& p) { return p.role == slot::indices; });
+      pl.has_face_tc = std::any_of(e.props.begin(), e.props.end(),
+                                   [](const property& p) { return p.role == slot::texcoords; });
+      if (!ok && e.count > 0)
+        format_error(path, where, "element face has no 'vertex_indices' list");
     }
-    return false;
   }
-  /// True when the row had no values left over.
-  [[nodiscard]] bool end_row() const { return next_ == tok_.size(); }
-  [[nodiscard]] std::size_t line() const { return line_; }
+  return pl;
+}
 
-  bool real(scalar t, double& out) {
-    if (next_ >= tok_.size()) return false;
-    const std::string_view s = tok_[next_++];
-    if (t == scalar::f32) {
-      const auto v = parse_number<float>(s);
-      if (!v) return bad(s, t);
-      out = *v;
-    } else if (t == scalar::f64) {
-      const auto v = parse_number<double>(s);
-      if (!v) return bad(s, t);
-      out = *v;
-    } else {
-      std::int64_t i = 0;
-      if (!parse_int(s, t, i)) return false;
-      out = static_cast<double>(i);
-    }
-    return true;
+// Checked before anything is allocated, so a lying count cannot make us reserve gigabytes.
+std::uint64_t check_binary_size(const std::string& path, const ply_header& h,
+                                std::uint64_t available) {
+  std::uint64_t need = 0;
+  for (const element& e : h.elements) {
+    std::uint64_t row = 0;
+    for (const property& p : e.props) row += scalar_size(p.is_list ? p.count_type : p.type);
+    const auto bytes = mul_checked(e.count, row);
+    const auto total = bytes ? add_checked(need, *bytes) : std::nullopt;
+    if (!total)
+      format_error(path, cat("header line ", e.header_line),
+                   cat("element ", e.name, " count ", e.count, " is impossibly large"));
+    need = *total;
   }
-  bool integer(scalar t, std::int64_t& out) {
-    if (next_ >= tok_.size()) return false;
-    return parse_int(tok_[next_++], t, out);
-  }
-  [[nodiscard]] bool list_fits(std::uint64_t n, scalar) const { return n <= tok_.size() - next_; }
-  [[nodiscard]] std::string truncated_what() const {
-    return bad_value_.empty() ? cat("expected more values on the line (found ", tok_.size(), ")")
-                              : bad_value_;
-  }
+  if (need > available)
+    format_error(path, "data",
+                 cat("truncated: the header needs at least ", need,
+                     " bytes of binary data, the file has ", available, " after the header"));
+  return need;
+}
 
- private:
-  bool parse_int(std::string_view s, scalar t, std::int64_t& out) {
-    const auto v = parse_number<std::int64_t>(s);
-    const auto [lo, hi] = integer_range(t);
-    if (!v || *v < lo || *v > hi) return bad(s, t);
-    out = *v;
-    return true;
+std::uint64_t ascii_rows(const std::string& path, const ply_header& h) {
+  std::uint64_t rows = 0;
+  for (const element& e : h.elements) {
+    const auto r = add_checked(rows, e.count);
+    if (!r)
+      format_error(path, cat("header line ", e.header_line),
+                   cat("element ", e.name, " count ", e.count, " is impossibly large"));
+    rows = *r;
   }
-  bool bad(std::string_view s, scalar t) {
-    bad_value_ = cat("value '", printable_prefix(s), "' is not ",
-                     is_integer(t) ? "an integer of the declared type" : "a number");
-    return false;
-  }
-  std::string_view data_;
-  std::size_t pos_ = 0, line_ = 0, next_ = 0;
-  std::vector<std::string_view> tok_;
-  std::string bad_value_;
-};
+  return rows;
+}
+
+void ascii_truncated(const std::string& path, const ply_header& h, std::uint64_t rows,
+                     std::uint64_t lines) {
+  std::string promised;
+  for (const element& e : h.elements)
+    promised += cat(promised.empty() ? "" : ", ", e.count, " ", e.name);
+  format_error(path, "data",
+               cat("truncated: the header promises ", rows, " data lines (", promised,
+                   ") but the file has only ", lines));
+}
+
+namespace {
 
 class ply_parser {
  public:
-  ply_parser(const std::string& path, read_report& report, header& h)
-      : path_(path), report_(report), h_(h) {}
+  ply_parser(const std::string& path, read_report& report, ply_header& h)
+      : path_(path), report_(report), h_(h), rows_(path, h.format) {}
 
   raw_geometry run(std::string_view bytes) {
-    plan();
+    plan_ = plan_ply(path_, h_, report_);
+    vertex_count_ = plan_.vertex ? plan_.vertex->count : 0;
     const std::string_view data = bytes.substr(h_.data_begin);
     if (h_.format == encoding::ascii) {
       check_ascii_lines(data);
@@ -387,7 +282,7 @@ class ply_parser {
       while (src.begin_row()) ++extra;
       if (extra > 0) warn(cat(extra, " non-empty lines after the last element were ignored"));
     } else {
-      check_binary_size(data.size());
+      check_binary_size(path_, h_, data.size());
       const auto* b = reinterpret_cast<const unsigned char*>(data.data());
       const bool swap =
           (h_.format == encoding::binary_be) != (std::endian::native == std::endian::big);
@@ -401,105 +296,9 @@ class ply_parser {
   }
 
  private:
-  // Assigns each property its role and checks that the vertex/face elements are usable.
-  void plan() {
-    for (element& e : h_.elements) {
-      const std::string where = cat("header line ", e.header_line);
-      // A row without properties takes no bytes: a huge count would loop for nothing.
-      if (e.count > 0 && e.props.empty())
-        format_error(path_, where, cat("element ", e.name, " has rows but no properties"));
-      if (e.name == "vertex") {
-        if (vertex_ != nullptr) format_error(path_, where, "a second 'vertex' element");
-        vertex_ = &e;
-        if (e.count > std::numeric_limits<std::uint32_t>::max())
-          format_error(path_, where,
-                       cat(e.count, " vertices: more than 32-bit face indices can address"));
-        for (property& p : e.props) {
-          p.role = vertex_role(p.name);
-          if (p.role != slot::skip && p.is_list)
-            format_error(path_, where, cat("vertex property '", p.name, "' must not be a list"));
-        }
-        const auto has = [&](slot s) {
-          return std::any_of(e.props.begin(), e.props.end(),
-                             [s](const property& p) { return p.role == s; });
-        };
-        if (!has(slot::x) || !has(slot::y) || !has(slot::z))
-          format_error(path_, where, "element vertex needs properties x, y and z");
-        has_normals_ = has(slot::nx) && has(slot::ny) && has(slot::nz);
-        has_colours_ = has(slot::red) && has(slot::green) && has(slot::blue);
-        has_vertex_tc_ = has(slot::tu) && has(slot::tv);
-        if (!has_normals_ && (has(slot::nx) || has(slot::ny) || has(slot::nz)))
-          warn("vertex normals are incomplete (need nx, ny and nz) and were ignored");
-        if (!has_colours_ && (has(slot::red) || has(slot::green) || has(slot::blue)))
-          warn("vertex colours are incomplete (need red, green and blue) and were ignored");
-      } else if (e.name == "face") {
-        if (face_ != nullptr) format_error(path_, where, "a second 'face' element");
-        face_ = &e;
-        for (property& p : e.props) {
-          if (p.is_list && (p.name == "vertex_indices" || p.name == "vertex_index")) {
-            if (!is_integer(p.type))
-              format_error(path_, where, cat("'", p.name, "' must be a list of integers"));
-            p.role = slot::indices;
-          } else if (p.is_list && p.name == "texcoord") {
-            p.role = slot::texcoords;
-          }
-        }
-        const bool ok = std::any_of(e.props.begin(), e.props.end(),
-                                    [](const property& p) { return p.role == slot::indices; });
-        has_face_tc_ = std::any_of(e.props.begin(), e.props.end(),
-                                   [](const property& p) { return p.role == slot::texcoords; });
-        if (!ok && e.count > 0)
-          format_error(path_, where, "element face has no 'vertex_indices' list");
-      }
-    }
-    vertex_count_ = vertex_ ? vertex_->count : 0;
-  }
-
-  static slot vertex_role(const std::string& n) {
-    if (n == "x") return slot::x;
-    if (n == "y") return slot::y;
-    if (n == "z") return slot::z;
-    if (n == "nx" || n == "normal_x") return slot::nx;
-    if (n == "ny" || n == "normal_y") return slot::ny;
-    if (n == "nz" || n == "normal_z") return slot::nz;
-    if (n == "red" || n == "r" || n == "diffuse_red") return slot::red;
-    if (n == "green" || n == "g" || n == "diffuse_green") return slot::green;
-    if (n == "blue" || n == "b" || n == "diffuse_blue") return slot::blue;
-    if (n == "s" || n == "u" || n == "texture_u" || n == "texture_s") return slot::tu;
-    if (n == "t" || n == "v" || n == "texture_v" || n == "texture_t") return slot::tv;
-    return slot::skip;
-  }
-
-  // Binary: the least number of bytes the header implies (lists empty) must be in the file.
-  // Checked before anything is allocated, so a lying count cannot make us reserve gigabytes.
-  void check_binary_size(std::size_t available) const {
-    std::uint64_t need = 0;
-    for (const element& e : h_.elements) {
-      std::uint64_t row = 0;
-      for (const property& p : e.props) row += scalar_size(p.is_list ? p.count_type : p.type);
-      const auto bytes = mul_checked(e.count, row);
-      const auto total = bytes ? add_checked(need, *bytes) : std::nullopt;
-      if (!total)
-        format_error(path_, cat("header line ", e.header_line),
-                     cat("element ", e.name, " count ", e.count, " is impossibly large"));
-      need = *total;
-    }
-    if (need > available)
-      format_error(path_, "data",
-                   cat("truncated: the header needs at least ", need,
-                       " bytes of binary data, the file has ", available, " after the header"));
-  }
-
   // ASCII: one row per line, so there must be at least as many non-empty lines as rows.
   void check_ascii_lines(std::string_view data) const {
-    std::uint64_t rows = 0;
-    for (const element& e : h_.elements) {
-      const auto r = add_checked(rows, e.count);
-      if (!r)
-        format_error(path_, cat("header line ", e.header_line),
-                     cat("element ", e.name, " count ", e.count, " is impossibly large"));
-      rows = *r;
-    }
+    const std::uint64_t rows = ascii_rows(path_, h_);
     std::uint64_t lines = 0;
     std::size_t pos = 0;
     while (pos < data.size() && lines < rows) {
@@ -512,139 +311,72 @@ class ply_parser {
         }
       pos = nl + 1;
     }
-    if (lines < rows) {
-      std::string promised;
-      for (const element& e : h_.elements)
-        promised += cat(promised.empty() ? "" : ", ", e.count, " ", e.name);
-      format_error(path_, "data",
-                   cat("truncated: the header promises ", rows, " data lines (", promised,
-                       ") but the file has only ", lines));
-    }
-  }
-
-  template <class Src>
-  [[noreturn]] void row_error(const Src& src, const element& e, std::uint64_t row,
-                              const std::string& what) const {
-    std::string where = cat(e.name, " ", row);
-    if (h_.format == encoding::ascii) where += cat(" (line ", src.line(), ")");
-    format_error(path_, where, what);
+    if (lines < rows) ascii_truncated(path_, h_, rows, lines);
   }
 
   template <class Src>
   void parse_all(Src& src) {
     for (const element& e : h_.elements) {
-      if (&e == vertex_) {
+      if (&e == plan_.vertex) {
         g_.positions.reserve(e.count);
-        if (has_normals_) g_.normals.reserve(e.count);
-        if (has_colours_) g_.colours.reserve(e.count);
-        if (has_vertex_tc_) vertex_tc_.reserve(e.count);
-      } else if (&e == face_) {
+        if (plan_.has_normals) g_.normals.reserve(e.count);
+        if (plan_.has_colours) g_.colours.reserve(e.count);
+        if (plan_.has_vertex_tc) vertex_tc_.reserve(e.count);
+      } else if (&e == plan_.face) {
         g_.faces.reserve(e.count);
-        if (has_face_tc_) face_tc_.reserve(e.count);
+        if (plan_.has_face_tc) face_tc_.reserve(e.count);
       }
-      for (std::uint64_t row = 0; row < e.count; ++row) parse_row(src, e, row);
-    }
-  }
-
-  template <class Src>
-  void parse_row(Src& src, const element& e, std::uint64_t row) {
-    if (!src.begin_row()) row_error(src, e, row, "the file ends (truncated)");
-    double v[16] = {};  // indexed by slot
-    poly_.clear();
-    tc_.clear();
-    for (const property& p : e.props) {
-      if (!p.is_list) {
-        double x = 0;
-        if (!src.real(p.type, x)) row_error(src, e, row, src.truncated_what());
-        v[static_cast<int>(p.role)] = x;
-        if (p.role == slot::red || p.role == slot::green || p.role == slot::blue)
-          v[static_cast<int>(p.role)] = colour_channel(x, p.type);
-        continue;
-      }
-      std::int64_t n = 0;
-      if (!src.integer(p.count_type, n)) row_error(src, e, row, src.truncated_what());
-      if (n < 0) row_error(src, e, row, cat("negative list length ", n, " for ", p.name));
-      if (!src.list_fits(static_cast<std::uint64_t>(n), p.type))
-        row_error(src, e, row,
-                  cat("list ", p.name, " of length ", n, " runs past the end of the ",
-                      h_.format == encoding::ascii ? "line" : "file (truncated)"));
-      if (p.role == slot::indices) {
-        poly_.resize(static_cast<std::size_t>(n));
-        for (auto& i : poly_)
-          if (!src.integer(p.type, i)) row_error(src, e, row, src.truncated_what());
-      } else if (p.role == slot::texcoords) {
-        tc_.resize(static_cast<std::size_t>(n));
-        for (auto& t : tc_) {
-          double x = 0;
-          if (!src.real(p.type, x)) row_error(src, e, row, src.truncated_what());
-          t = static_cast<float>(x);
-        }
-      } else {
-        for (std::int64_t k = 0; k < n; ++k) {
-          double x = 0;
-          if (!src.real(p.type, x)) row_error(src, e, row, src.truncated_what());
-        }
+      double v[16];
+      for (std::uint64_t row = 0; row < e.count; ++row) {
+        rows_.read(src, e, row, v);
+        if (&e == plan_.vertex)
+          add_vertex(make_ply_vertex(v));
+        else if (&e == plan_.face)
+          add_face(src, e, row);
       }
     }
-    if (!src.end_row())
-      row_error(src, e, row, cat("more values on the line than the header declares"));
-    if (&e == vertex_)
-      add_vertex(v);
-    else if (&e == face_)
-      add_face(src, e, row);
   }
 
-  static double colour_channel(double x, scalar t) {
-    if (t == scalar::f32 || t == scalar::f64) return unit_to_u8(x);
-    if (t == scalar::u16) return std::floor(x / 256.0);
-    return std::clamp(x, 0.0, 255.0);
-  }
-
-  void add_vertex(const double* v) {
-    const auto at = [&](slot s) { return v[static_cast<int>(s)]; };
-    g_.positions.emplace_back(at(slot::x), at(slot::y), at(slot::z));
-    if (has_normals_)
-      g_.normals.emplace_back(static_cast<float>(at(slot::nx)), static_cast<float>(at(slot::ny)),
-                              static_cast<float>(at(slot::nz)));
-    if (has_colours_)
-      g_.colours.push_back({static_cast<std::uint8_t>(at(slot::red)),
-                            static_cast<std::uint8_t>(at(slot::green)),
-                            static_cast<std::uint8_t>(at(slot::blue))});
-    if (has_vertex_tc_)
-      vertex_tc_.emplace_back(static_cast<float>(at(slot::tu)), static_cast<float>(at(slot::tv)));
+  void add_vertex(const ply_vertex& v) {
+    g_.positions.push_back(v.position);
+    if (plan_.has_normals) g_.normals.push_back(v.normal);
+    if (plan_.has_colours) g_.colours.push_back(v.colour);
+    if (plan_.has_vertex_tc) vertex_tc_.push_back(v.tc);
   }
 
   template <class Src>
   void add_face(const Src& src, const element& e, std::uint64_t row) {
-    for (const std::int64_t i : poly_)
+    const std::vector<std::int64_t>& poly = rows_.poly;
+    const std::vector<float>& tc = rows_.tc;
+    for (const std::int64_t i : poly)
       if (i < 0 || static_cast<std::uint64_t>(i) >= vertex_count_)
-        row_error(
+        rows_.row_error(
             src, e, row,
             cat("vertex index ", i, " is out of range: the file has ", vertex_count_, " vertices"));
-    const std::size_t n = poly_.size();
+    const std::size_t n = poly.size();
     if (n < 3 || has_repeats()) {
       ++degenerate_;
       report_.faces_dropped += n < 3 ? 1 : n - 2;
       return;
     }
-    const bool tc_ok = tc_.size() == 2 * n;
-    if (has_face_tc_ && !tc_ok) ++tc_mismatch_;
+    const bool tc_ok = tc.size() == 2 * n;
+    if (plan_.has_face_tc && !tc_ok) ++tc_mismatch_;
     if (tc_ok) any_face_tc_ = true;
     const auto corner = [&](std::size_t k) {
-      return tc_ok ? vec2f(tc_[2 * k], tc_[2 * k + 1]) : vec2f::Zero();
+      return tc_ok ? vec2f(tc[2 * k], tc[2 * k + 1]) : vec2f::Zero();
     };
     for (std::size_t k = 1; k + 1 < n; ++k) {
-      g_.faces.push_back({static_cast<std::uint32_t>(poly_[0]),
-                          static_cast<std::uint32_t>(poly_[k]),
-                          static_cast<std::uint32_t>(poly_[k + 1])});
-      if (has_face_tc_) face_tc_.push_back({corner(0), corner(k), corner(k + 1)});
+      g_.faces.push_back({static_cast<std::uint32_t>(poly[0]), static_cast<std::uint32_t>(poly[k]),
+                          static_cast<std::uint32_t>(poly[k + 1])});
+      if (plan_.has_face_tc) face_tc_.push_back({corner(0), corner(k), corner(k + 1)});
     }
   }
 
   bool has_repeats() {
-    const std::size_t n = poly_.size();
-    if (n == 3) return poly_[0] == poly_[1] || poly_[1] == poly_[2] || poly_[0] == poly_[2];
-    sorted_.assign(poly_.begin(), poly_.end());  // O(n log n): a face may have millions of corners
+    const std::vector<std::int64_t>& poly = rows_.poly;
+    const std::size_t n = poly.size();
+    if (n == 3) return poly[0] == poly[1] || poly[1] == poly[2] || poly[0] == poly[2];
+    sorted_.assign(poly.begin(), poly.end());  // O(n log n): a face may have millions of corners
     std::sort(sorted_.begin(), sorted_.end());
     return std::adjacent_find(sorted_.begin(), sorted_.end()) != sorted_.end();
   }
@@ -657,7 +389,7 @@ class ply_parser {
       g_.face_texcoords = std::move(face_tc_);
       if (tc_mismatch_ > 0)
         warn(cat(tc_mismatch_, " faces have a texcoord list of the wrong length; set to (0, 0)"));
-    } else if (has_vertex_tc_ && !g_.faces.empty()) {
+    } else if (plan_.has_vertex_tc && !g_.faces.empty()) {
       // Per-vertex texture coordinates become per-corner ones (what triangle_mesh stores).
       g_.face_texcoords.reserve(g_.faces.size());
       for (const auto& f : g_.faces)
@@ -677,16 +409,14 @@ class ply_parser {
 
   const std::string& path_;
   read_report& report_;
-  header& h_;
+  ply_header& h_;
+  ply_row_reader rows_;
+  ply_plan plan_;
   raw_geometry g_;
-  const element* vertex_ = nullptr;
-  const element* face_ = nullptr;
   std::uint64_t vertex_count_ = 0;
-  bool has_normals_ = false, has_colours_ = false, has_vertex_tc_ = false, has_face_tc_ = false;
   bool any_face_tc_ = false;
   std::size_t degenerate_ = 0, tc_mismatch_ = 0;
-  std::vector<std::int64_t> poly_, sorted_;
-  std::vector<float> tc_;
+  std::vector<std::int64_t> sorted_;
   std::vector<vec2f> vertex_tc_;
   std::vector<std::array<vec2f, 3>> face_tc_;
 };
@@ -695,7 +425,7 @@ class ply_parser {
 
 raw_geometry read_ply_file(const std::string& path, read_report& report) {
   const std::string bytes = read_file_bytes(path);
-  header h = parse_header(path, bytes);
+  ply_header h = parse_ply_header(path, bytes);
   return ply_parser(path, report, h).run(bytes);
 }
 

@@ -9,6 +9,7 @@ target_sources(pbr_lod PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/openmesh_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/pcd_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/las_reader.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/point_source_file.cpp
   ${CMAKE_CURRENT_LIST_DIR}/png_read.cpp)
 
 # Debian's liblzf-dev ships a config defining liblzf::liblzf (include dir /usr/include/liblzf);

@@ -6,6 +6,8 @@
 //   .off  via OpenMesh (ASCII; binary "OFF BINARY" without colours/normals)
 //   .pcd  PCL point cloud: ascii, binary, binary_compressed (LZF)   — read_points only
 //   .las  LAS 1.0–1.4, point formats 0–10                          — read_points only
+// (.ply, .pcd and .las can also be read in blocks, for inputs larger than memory:
+// io/point_source_file.hpp.)
 //   .laz  rejected with a FormatError (compressed; convert to LAS first)
 //
 // What every reader guarantees:
