@@ -213,6 +213,13 @@ int cmd_build(const std::string& method, const std::string& input, const std::st
               << ") is not available in pbr_lod " << version() << " yet\n";
     return 2;
   }
+  if (method == "point-octree" && wants_chunked_build(params)) {
+    json report;
+    const auto l = build_chunked_point_octree(params, input, output, interactive(as_json), report);
+    std::cout << (as_json ? "" : "wrote " + output + "/: ") << l->stats(output).merge(report).text()
+              << "\n";
+    return 0;
+  }
   const auto l = it->build(params, build_input(input), interactive(as_json));
   l->save(output);
   std::cout << (as_json ? "" : "wrote " + output + ": ") << l->stats(output).text() << "\n";

@@ -15,7 +15,9 @@ const std::vector<method_entry>& methods() {
 const method_entry& lod_method(const std::string& path) {
   const auto h = peek_lod(path);
   for (const auto& m : methods())
-    if (!m.magic.empty() && m.magic == h.magic && m.load) return m;
+    if (m.load && ((!m.magic.empty() && m.magic == h.magic) ||
+                   (!m.dir_magic.empty() && m.dir_magic == h.magic)))
+      return m;
   throw FormatError(path +
                     ": not a hierarchy file written by this version of pbrlod (unknown magic)");
 }

@@ -128,6 +128,7 @@ method_entry pca_octree_method() {
   return {.name = "pca-octree",
           .paper = "Kalaiah & Varshney 2003",
           .magic = "PBRLODSG",
+          .dir_magic = {},
           .build = &build,
           .load = &load,
           .demo_tolerances = {4, 2, 1}};

@@ -129,6 +129,7 @@ method_entry pmr_method() {
   return {.name = "pmr",
           .paper = "Dey & Hudson 2002",
           .magic = "PBRLODPM",
+          .dir_magic = {},
           .build = &build,
           .load = &load,
           .demo_tolerances = {8, 3, 1},

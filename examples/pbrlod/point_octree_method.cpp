@@ -2,13 +2,27 @@
 #include <limits>
 
 #include "lod.hpp"
+#include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/builders/point_octree.hpp"
+#include "pbr_lod/core/point_source.hpp"
 
 namespace pbrlod_tool {
 namespace {
 
-point_octree_options octree_options(const std::vector<std::string>& items, bool on_terminal) {
+/// What a chunked (out-of-core) build adds to the options: memory=SIZE (and chunk_points=N).
+struct chunking {
+  std::optional<std::uint64_t> memory;
+  std::uint64_t chunk_points = 0;
+};
+
+point_octree_options octree_options(const std::vector<std::string>& items, bool on_terminal,
+                                    chunking* chunked = nullptr) {
   params m(items);
+  if (chunked) {
+    chunked->memory = m.bytes("memory");
+    chunked->chunk_points =
+        static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1L << 31) - 1));
+  }
   point_octree_options o;
   o.leaf_size = static_cast<std::uint32_t>(m.integer("leaf_size", 8, 1, 1 << 20));
   o.max_depth = static_cast<std::uint32_t>(m.integer("max_depth", 48, 1, 250));
@@ -27,7 +41,7 @@ point_octree_options octree_options(const std::vector<std::string>& items, bool 
   o.circle_guard = m.flag("circle_guard", true);
   m.finish("point-octree",
            "leaf_size, max_depth, normal_bits, knn, knn_ellipses, viewpoint, threads, covariance, "
-           "axes, circle_guard");
+           "axes, circle_guard, memory, chunk_points");
   o.progress = progress_callback("point-octree", on_terminal);
   return o;
 }
@@ -92,6 +106,68 @@ struct octree_method {
   }
 };
 
+/// A chunked point-octree folder (build_point_octree_chunked): framed by the input sphere its top
+/// file records, drawn like a point-octree, its chunks read as the views need them.
+struct chunked_method {
+  template <class Tree>
+  std::pair<vec3d, double> input_bounds(const Tree& t) const {
+    return {t.origin() + t.input_sphere().centre.template cast<double>(),
+            static_cast<double>(t.input_sphere().radius)};
+  }
+  template <class Tree>
+  frame draw(const Tree& t, const frame_request& r) const {
+    const view v(r.cam, t.origin());
+    const render_options o = lod_render_options(r.view, Tree::attrs.colour);
+    const traverse_options topt{.tolerance_px = r.tolerance,
+                                .backface_cull = o.fx.backface_cull,
+                                .cull_volume = traverse_options::volume::view_cone};
+    frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r, t.origin());
+    f.extra.num("fraction_drawn",
+                static_cast<double>(f.st.splats) / static_cast<double>(t.input_points()));
+    f.extra.integer("chunks_read", static_cast<long long>(t.chunks_loaded()));
+    return f;
+  }
+  template <class Tree>
+  json stats(const Tree& t, const std::string& path) const {
+    const double n = static_cast<double>(t.input_points());
+    const double bytes = static_cast<double>(t.file_bytes());
+    json j;
+    j.str("file", path).str("method", "point-octree").boolean("chunked", true);
+    j.integer("chunks", static_cast<long long>(t.chunk_count()));
+    j.integer("top_nodes", static_cast<long long>(t.top_node_count()));
+    j.integer("nodes", static_cast<long long>(t.node_count()));
+    j.integer("samples", static_cast<long long>(t.input_points()));
+    j.num("nodes_per_point", static_cast<double>(t.node_count()) / n);
+    j.integer("normal_bits", t.normal_bits());
+    j.boolean("colour", Tree::attrs.colour);
+    j.integer("file_bytes", static_cast<long long>(t.file_bytes()));
+    j.num("bytes_per_point", bytes / n);
+    j.num("bytes_per_point_file", bytes / n);
+    j.num("bits_per_sample", 8.0 * bytes / n);
+    return j;
+  }
+  template <class Tree>
+  std::size_t samples(const Tree& t) const {
+    return static_cast<std::size_t>(t.input_points());
+  }
+  template <class Tree>
+  std::size_t file_bytes(const Tree& t) const {
+    return static_cast<std::size_t>(t.file_bytes());
+  }
+  /// The folder is written by the build; it is not copied elsewhere.
+  template <class Tree>
+  void save(const Tree&, const std::string&) const {}
+};
+
+std::unique_ptr<lod> open_chunked(const std::string& dir) {
+  if (chunked_point_octree_has_colours(dir))
+    return make_lod(
+        chunked_method{},
+        chunked_point_octree<point_octree_attributes(attributes{.colour = true})>::open(dir));
+  return make_lod(chunked_method{},
+                  chunked_point_octree<point_octree_attributes(positions_only)>::open(dir));
+}
+
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool on_terminal) {
   auto opt = octree_options(items, on_terminal);
@@ -103,6 +179,7 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
 }
 
 std::unique_ptr<lod> load(const std::string& path) {
+  if (is_chunked_point_octree(path)) return open_chunked(path);
   if (peek_lod(path).flags & 1u)
     return make_lod(octree_method{},
                     point_octree<point_octree_attributes(attributes{.colour = true})>::load(path));
@@ -112,10 +189,39 @@ std::unique_ptr<lod> load(const std::string& path) {
 
 }  // namespace
 
+bool wants_chunked_build(const std::vector<std::string>& items) {
+  for (const auto& p : items)
+    if (p.rfind("memory=", 0) == 0 || p.rfind("chunk_points=", 0) == 0) return true;
+  return false;
+}
+
+std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& items,
+                                                const std::string& input, const std::string& output,
+                                                bool on_terminal, json& report) {
+  chunking ch;
+  chunked_build_options o;
+  o.octree = octree_options(items, on_terminal, &ch);
+  if (ch.memory) o.memory_bytes = *ch.memory;
+  o.chunk_points = ch.chunk_points;
+  const std::unique_ptr<point_source> src = open_build_source(input);
+  if (!o.octree.viewpoint) o.octree.viewpoint = src->sensor();
+  const chunked_build_report r = build_point_octree_chunked(*src, output, o);
+  report.integer("chunk_points_limit", static_cast<long long>(r.chunk_points))
+      .integer("largest_chunk", static_cast<long long>(r.largest_chunk))
+      .integer("halo_points", static_cast<long long>(r.halo_points))
+      .integer("passes", r.passes)
+      .num("build_seconds", r.seconds)
+      .num("pass_seconds", r.pass_seconds)
+      .num("estimation_seconds", r.estimation_seconds)
+      .num("chunk_build_seconds", r.chunk_build_seconds);
+  return open_chunked(output);
+}
+
 method_entry point_octree_method() {
   return {.name = "point-octree",
           .paper = "Pajarola 2003",
           .magic = "PBRLODPO",
+          .dir_magic = "PBRLODPC",
           .build = &build,
           .load = &load,
           .demo_tolerances = {16, 4, 1}};

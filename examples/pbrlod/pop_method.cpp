@@ -107,6 +107,7 @@ method_entry pop_method() {
   return {.name = "pop",
           .paper = "Chen & Nguyen 2001",
           .magic = "PBRLODPP",
+          .dir_magic = {},
           .builds_from_mesh = true,
           .build = &build,
           .load = &load,

@@ -146,6 +146,7 @@ method_entry rho_grid_method() {
   return {.name = "rho-grid",
           .paper = "Duguet & Drettakis 2004",
           .magic = "PBRLODRG",
+          .dir_magic = {},
           .builds_from_mesh = true,
           .build = &build,
           .load = &load,

@@ -1,6 +1,9 @@
 // pbrlod — the command-line tool's shared parts (tool.hpp).
 #include "tool.hpp"
 
+#include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/io/point_source_file.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -16,13 +19,16 @@ namespace pbrlod_tool {
 namespace fs = std::filesystem;
 
 bool is_hierarchy_file(const std::string& path) {
-  return fs::path(path).extension() == ".lod";
+  return fs::path(path).extension() == ".lod" || is_chunked_point_octree(path);
 }
 
 lod_header peek_lod(const std::string& path) {
   // The head every format shares (core/binary.hpp): magic, version, then (all but the ρ-grid)
   // the flags; the method's own load() validates the rest.
-  const auto bytes = detail::load_file_prefix(path, 16);
+  std::error_code ec;
+  const std::string file =
+      fs::is_directory(path, ec) ? (fs::path(path) / chunked_top_file).string() : path;
+  const auto bytes = detail::load_file_prefix(file, 16);
   if (bytes.size() < 16) throw FormatError(path + ": too short for a pbr_lod hierarchy file");
   detail::byte_reader r{bytes, 0, path};
   lod_header h;
@@ -30,6 +36,22 @@ lod_header peek_lod(const std::string& path) {
   h.version = r.get<std::uint32_t>("version");
   h.flags = r.get<std::uint32_t>("flags");
   return h;
+}
+
+std::unique_ptr<point_source> open_build_source(const std::string& input) {
+  const std::string gen = "generated-points:";
+  if (input.rfind(gen, 0) == 0) {
+    std::uint64_t n = 0;
+    try {
+      std::size_t used = 0;
+      n = std::stoull(input.substr(gen.size()), &used);
+      if (used + gen.size() != input.size() || n == 0) throw std::invalid_argument(input);
+    } catch (const std::exception&) {
+      throw InvalidArgument(input + ": expected generated-points:N with N > 0 points");
+    }
+    return std::make_unique<generated_point_source>(n, 1, false, true);
+  }
+  return open_point_source(input);
 }
 
 loaded_input load(const std::string& path) {
@@ -165,6 +187,33 @@ std::string params::choice(const std::string& key, const std::string& fallback,
   }
   m_.erase(it);
   return v;
+}
+
+std::optional<std::uint64_t> params::bytes(const std::string& key) {
+  const auto it = m_.find(key);
+  if (it == m_.end()) return std::nullopt;
+  const std::string v = it->second;
+  std::uint64_t n = 0;
+  std::size_t i = 0;
+  for (; i < v.size() && v[i] >= '0' && v[i] <= '9'; ++i) {
+    if (n > (std::numeric_limits<std::uint64_t>::max() - 9) / 10)
+      i = v.size() + 1;
+    else
+      n = n * 10 + static_cast<std::uint64_t>(v[i] - '0');
+  }
+  int shift = -1;
+  if (i == v.size())
+    shift = 0;
+  else if (i > 0 && i + 1 == v.size())
+    shift = std::string("KMGT").find(static_cast<char>(std::toupper(v[i]))) == std::string::npos
+                ? -1
+                : 10 * (1 + static_cast<int>(
+                                std::string("KMGT").find(static_cast<char>(std::toupper(v[i])))));
+  if (i == 0 || shift < 0 || (shift > 0 && n > (std::uint64_t{1} << (63 - shift))))
+    throw InvalidArgument("--param " + key + "=" + v +
+                          ": expected a size such as 4G, 512M or 1000000 (bytes)");
+  m_.erase(it);
+  return n << shift;
 }
 
 std::optional<std::array<double, 3>> params::point(const std::string& key) {

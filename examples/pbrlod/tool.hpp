@@ -21,6 +21,7 @@
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/point_set.hpp"
+#include "pbr_lod/core/point_source.hpp"
 #include "pbr_lod/core/triangle_mesh.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/effects.hpp"
@@ -199,6 +200,9 @@ class params {
   std::string choice(const std::string& key, const std::string& fallback,
                      const std::vector<std::string>& choices);
   bool flag(const std::string& key, bool fallback);
+  /// A size in bytes: a whole number with an optional K, M, G or T suffix (powers of 1024),
+  /// e.g. memory=4G; nullopt when the key is absent.
+  std::optional<std::uint64_t> bytes(const std::string& key);
   /// "x,y,z" (three finite numbers), or nullopt when the key is absent.
   std::optional<std::array<double, 3>> point(const std::string& key);
   /// Throws InvalidArgument naming the first parameter no getter asked for.
@@ -236,6 +240,7 @@ class build_input {
 struct method_entry {
   std::string name, paper;
   std::string magic;              ///< the 8 bytes its .lod files start with
+  std::string dir_magic;          ///< its chunked folders' top file's, when it builds them
   bool builds_from_mesh = false;  ///< the demo gives it the mesh, not the sampled points
   /// Checks the --param items, then reads the input and builds. Throws InvalidArgument naming
   /// a bad parameter or an input the method cannot build from.
@@ -256,6 +261,16 @@ method_entry rho_grid_method();
 method_entry pop_method();
 method_entry pmr_method();
 method_entry pca_octree_method();
+
+/// The point-octree built out of core into the folder `output` (`--param memory=SIZE` or
+/// `chunk_points=N`; builders/chunked_point_octree.hpp), its build figures added to `report`.
+bool wants_chunked_build(const std::vector<std::string>& params);
+std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& params,
+                                                const std::string& input, const std::string& output,
+                                                bool on_terminal, json& report);
+/// An input read block by block: `generated-points:N` (N points of a generated surface with
+/// colours, made from their indices), or a point file.
+std::unique_ptr<point_source> open_build_source(const std::string& input);
 
 /// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,
 /// ellipses: eight instantiations), so a builder is compiled for exactly what the scene has.
