@@ -58,8 +58,10 @@ loaded_input load(const std::string& path) {
   loaded_input in;
   const auto t0 = clock_type::now();
   const auto ext = fs::path(path).extension().string();
-  if (ext == ".ply" || ext == ".obj" || ext == ".off" || ext == ".PLY" || ext == ".OBJ" ||
-      ext == ".OFF")
+  if (path.rfind("generated-points:", 0) == 0)
+    in.mesh.vertices = read_all(*open_build_source(path));  // the in-memory twin of a chunked build
+  else if (ext == ".ply" || ext == ".obj" || ext == ".off" || ext == ".PLY" || ext == ".OBJ" ||
+           ext == ".OFF")
     in.mesh = read_mesh(path, &in.report);
   else
     in.mesh.vertices = read_points(path, &in.report);

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
@@ -86,10 +87,12 @@ std::vector<point_record> read_records(const std::string& path) {
 /// mapping of the range they span, read back in input order.
 class index_file {
  public:
-  index_file(std::string path, std::uint64_t n) : path_(std::move(path)) {
-    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644);
-    if (fd_ < 0 || ::ftruncate(fd_, static_cast<off_t>(n * 12)) != 0)
-      throw IoError(path_ + ": cannot create: " + std::strerror(errno));
+  /// create: make the file (one process); else open the one another process made.
+  index_file(std::string path, std::uint64_t n, bool create) : path_(std::move(path)) {
+    fd_ = create ? ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644)
+                 : ::open(path_.c_str(), O_RDONLY);
+    if (fd_ < 0 || (create && ::ftruncate(fd_, static_cast<off_t>(n * 12)) != 0))
+      throw IoError(path_ + ": cannot open: " + std::strerror(errno));
   }
   ~index_file() {
     if (fd_ >= 0) ::close(fd_);
@@ -107,7 +110,11 @@ class index_file {
     auto* base = static_cast<unsigned char*>(m);
     for (std::size_t i = 0; i < at.size(); ++i)
       std::memcpy(base + (at[i].index * 12 - lo), v[i].data(), 12);
+    // Written through to the file before another process (on another machine, through a
+    // shared file system) reads it.
+    const int synced = ::msync(m, hi - lo, MS_SYNC);
     ::munmap(m, hi - lo);
+    if (synced != 0) throw IoError(path_ + ": cannot write: " + std::strerror(errno));
   }
   void read(std::uint64_t first, std::size_t count, std::vector<vec3f>& out) const {
     out.resize(count);
@@ -130,9 +137,10 @@ class index_file {
 /// Removes the temporary folder however the build ends.
 struct temp_dir {
   fs::path path;
+  bool owner = false;  // rank 0 removes it (after the last barrier)
   ~temp_dir() {
     std::error_code ec;
-    fs::remove_all(path, ec);
+    if (owner) fs::remove_all(path, ec);
   }
 };
 
@@ -231,9 +239,20 @@ struct chunked_point_octree_builder {
   double sphere_r2 = 0;  // about box.centre() (the distribution pass)
   std::vector<std::uint64_t> chunk_nodes;
 
+  int rank = 0, ranks = 1;
+
+  void barrier() const {
+    if (ranks > 1) opt.distributed.barrier();
+  }
+
   chunked_point_octree_builder(const point_source& s, const std::string& d,
                                const chunked_build_options& o)
       : src(s), dir(d), opt(o), oo(o.octree), n(s.size()) {
+    rank = o.distributed.rank;
+    ranks = o.distributed.ranks;
+    if (ranks < 1 || rank < 0 || rank >= ranks || (ranks > 1 && !o.distributed.barrier))
+      throw InvalidArgument("build_point_octree_chunked: rank " + std::to_string(rank) + " of " +
+                            std::to_string(ranks) + " (and a barrier when more than one)");
     oo.progress = {};
     threads = oo.threads ? oo.threads : std::max(1u, std::thread::hardware_concurrency());
     chunk_points = opt.chunk_points
@@ -340,33 +359,42 @@ struct chunked_point_octree_builder {
     return (tmp.path / (std::string(kind) + std::to_string(c))).string();
   }
 
-  /// Step 2: every point into its chunk's file.
+  /// Step 2: every point into its chunk's file (rank 0; the others learn the chunks' sizes from
+  /// the files once it is done).
   void distribute() {
     for (std::uint32_t i = 0; i < nodes.size(); ++i)
       if (nodes[i].st == top_node::state::chunk) {
         nodes[i].chunk = static_cast<std::uint32_t>(chunks.size());
         chunks.push_back({.top = i});
       }
-    std::vector<append_file> files;
-    files.reserve(chunks.size());
-    for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("chunk", c));
-    stream([&](std::uint64_t first, const point_block& b) {
-      for (std::size_t k = 0; k < b.size(); ++k) {
-        const std::uint32_t c = nodes[descend(b.positions[k].cast<double>())].chunk;
-        sphere_r2 =
-            std::max(sphere_r2, (b.positions[k] - box.centre()).cast<double>().squaredNorm());
-        chunk_info& ci = chunks[c];
-        ci.lo = ci.lo.cwiseMin(b.positions[k]);
-        ci.hi = ci.hi.cwiseMax(b.positions[k]);
-        files[c].put({first + k, b.positions[k], In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
-                      In.colour ? b.colours[k] : rgb8{}});
-      }
-    });
+    if (rank == 0) {
+      std::vector<append_file> files;
+      files.reserve(chunks.size());
+      for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("chunk", c));
+      stream([&](std::uint64_t first, const point_block& b) {
+        for (std::size_t k = 0; k < b.size(); ++k) {
+          const std::uint32_t c = nodes[descend(b.positions[k].cast<double>())].chunk;
+          sphere_r2 =
+              std::max(sphere_r2, (b.positions[k] - box.centre()).cast<double>().squaredNorm());
+          chunk_info& ci = chunks[c];
+          ci.lo = ci.lo.cwiseMin(b.positions[k]);
+          ci.hi = ci.hi.cwiseMax(b.positions[k]);
+          files[c].put({first + k, b.positions[k], In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                        In.colour ? b.colours[k] : rgb8{}});
+        }
+      });
+      for (auto& f : files) f.flush();
+    }
+    barrier();
     for (std::size_t c = 0; c < chunks.size(); ++c) {
-      files[c].flush();
-      chunks[c].count = files[c].count();
+      chunks[c].count = fs::file_size(temp_path("chunk", c)) / record_bytes;
       rep.largest_chunk = std::max(rep.largest_chunk, chunks[c].count);
     }
+  }
+
+  /// The chunks this process builds: every ranks-th from its rank.
+  [[nodiscard]] bool mine(std::size_t c) const {
+    return c % static_cast<std::size_t>(ranks) == static_cast<std::size_t>(rank);
   }
 
   [[nodiscard]] int knn_needed() const {
@@ -380,34 +408,44 @@ struct chunked_point_octree_builder {
     return d.squaredNorm();
   }
 
-  /// Step 3: each chunk's halo radius from its own k-th neighbour distances (a true neighbour
-  /// is no farther from the chunk's box than that), then one pass collecting the halos.
+  /// Step 3: each chunk's halo radius from its own k-th neighbour distances (by the rank that
+  /// owns the chunk, into a file), then one pass (rank 0) collecting the halos.
   void halos() {
     if (chunks.size() < 2) return;
     const int k = knn_needed();
-    std::vector<char> known(chunks.size(), 0);
     for (std::size_t c = 0; c < chunks.size(); ++c) {
-      if (chunks[c].count < static_cast<std::uint64_t>(k)) continue;
-      const auto recs = read_records(temp_path("chunk", c));
-      std::vector<vec3f> pts(recs.size());
-      for (std::size_t i = 0; i < recs.size(); ++i) pts[i] = recs[i].position;
-      const knn_graph g = nearest_neighbour_graph(pts, k, threads);
-      float worst = 0;
-      for (std::size_t i = 0; i < pts.size(); ++i)
-        worst = std::max(worst, g.dist2[i * g.k + g.k - 1]);
-      // A chunk point p has its k neighbours within h = max d_k of it, so within h of the box.
-      // Its splat is also bounded by its neighbours' own neighbourhood radii (ellipse_rule::
-      // local_spacing): a neighbour q's k-th neighbour is within |q − p| + d_k(p) ≤ 2h of q
-      // (p's ball holds k points), so within 3h of the box. A hair wider than the float
-      // distances, so rounding never leaves a point out.
-      chunks[c].halo = 3 * std::sqrt(static_cast<double>(worst)) * (1 + 1e-5) + 1e-30;
-      known[c] = 1;
+      if (!mine(c)) continue;
+      // A chunk with fewer than k points takes every point: too few to bound its neighbours'
+      // distance by its own, and such chunks are rare and small.
+      double h = std::numeric_limits<double>::infinity();
+      if (chunks[c].count >= static_cast<std::uint64_t>(k)) {
+        const auto recs = read_records(temp_path("chunk", c));
+        std::vector<vec3f> pts(recs.size());
+        for (std::size_t i = 0; i < recs.size(); ++i) pts[i] = recs[i].position;
+        const knn_graph g = nearest_neighbour_graph(pts, k, threads);
+        float worst = 0;
+        for (std::size_t i = 0; i < pts.size(); ++i)
+          worst = std::max(worst, g.dist2[i * g.k + g.k - 1]);
+        // A chunk point p has its k neighbours within h = max d_k of it, so within h of the
+        // box. Its splat is also bounded by its neighbours' own neighbourhood radii
+        // (ellipse_rule::local_spacing): a neighbour q's k-th neighbour is within
+        // |q − p| + d_k(p) ≤ 2h of q (p's ball holds k points), so within 3h of the box. A hair
+        // wider than the float distances, so rounding never leaves a point out.
+        h = 3 * std::sqrt(static_cast<double>(worst)) * (1 + 1e-5) + 1e-30;
+      }
+      std::ofstream(temp_path("radius", c), std::ios::binary)
+          .write(reinterpret_cast<const char*>(&h), sizeof h);
     }
-    // A chunk with fewer than k points takes every point: too few to bound its neighbours'
-    // distance by its own, and such chunks are rare and small.
-    for (std::size_t c = 0; c < chunks.size(); ++c)
-      if (!known[c]) chunks[c].halo = std::numeric_limits<double>::infinity();
-    collect_halos();
+    barrier();
+    if (rank == 0) {
+      for (std::size_t c = 0; c < chunks.size(); ++c) {
+        std::ifstream f(temp_path("radius", c), std::ios::binary);
+        f.read(reinterpret_cast<char*>(&chunks[c].halo), sizeof(double));
+        if (!f) throw IoError(temp_path("radius", c) + ": read failed");
+      }
+      collect_halos();
+    }
+    barrier();
   }
 
   void collect_halos() {
@@ -459,10 +497,11 @@ struct chunked_point_octree_builder {
     }
   }
 
-  /// Step 4: per chunk, the estimation over the chunk and its halo, the quantisation, and the
-  /// prepared samples saved for step 6; the quantised normals go to `normals` in input order.
-  void estimate(index_file& normals) {
+  /// Step 4: per chunk (by its rank), the estimation over the chunk and its halo, the
+  /// quantisation, and the prepared samples saved for step 6.
+  void estimate() {
     for (std::size_t c = 0; c < chunks.size(); ++c) {
+      if (!mine(c)) continue;
       const auto recs = read_records(temp_path("chunk", c));
       std::vector<point_record> halo;
       if (chunks.size() > 1) halo = read_records(temp_path("halo", c));
@@ -480,12 +519,21 @@ struct chunked_point_octree_builder {
         }
       point_octree_build_stats st;
       point_set<A> work = prepare_samples<A>(set, oo, threads, st, recs.size());
-      rep.estimated_normals = st.estimated_normals;
       std::vector<code_t> codes;
       if (quant) quantize_samples(work, *quant, codes, threads);
-      normals.scatter(recs, work.normals);
       save_prepared(temp_path("prep", c), work, codes);
       progress(0.2 + 0.3 * static_cast<double>(c + 1) / static_cast<double>(chunks.size()));
+    }
+  }
+
+  /// The quantised normals of every chunk into `normals`, in input order (rank 0).
+  void gather_normals(index_file& normals) const {
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      const auto recs = read_records(temp_path("chunk", c));
+      point_set<A> w;
+      std::vector<code_t> codes;
+      load_prepared(temp_path("prep", c), recs.size(), w, codes);
+      normals.scatter(recs, w.normals);
     }
   }
 
@@ -621,6 +669,45 @@ struct chunked_point_octree_builder {
     return out;
   }
 
+  /// A chunk's root for the top (rank 0), through a file: the chunk may be built elsewhere.
+  void save_root(std::size_t c, const chunk_root& r) const {
+    byte_writer w;
+    point_octree_io<A>::put_node(w, oo.normal_bits, r.record, quant ? &r.code : nullptr, r.colour);
+    w.put(chunk_nodes[c]);
+    const auto put = [&](const auto& m) {
+      for (Eigen::Index i = 0; i < m.size(); ++i) w.put(m.data()[i]);
+    };
+    w.put(r.sum.scatter.n);
+    put(r.sum.scatter.mean);
+    put(r.sum.scatter.scatter);
+    put(r.sum.gd.sum);
+    put(r.sum.gf.sum);
+    put(r.sum.disk);
+    w.put(r.sum.n);
+    save_file_bytes(temp_path("root", c), w.bytes);
+  }
+  chunk_root load_root(std::size_t c) {
+    const std::string path = temp_path("root", c);
+    const std::vector<unsigned char> bytes = load_file_bytes(path);
+    byte_reader r{bytes, 0, path};
+    chunk_root out;
+    point_octree_io<A>::get_node(r, quant.get(), c, out.record, quant ? &out.code : nullptr,
+                                 out.colour);
+    chunk_nodes[c] = r.get<std::uint64_t>("nodes");
+    const auto get = [&](auto& m) {
+      using T = std::remove_reference_t<decltype(m.data()[0])>;
+      for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = r.get<T>("summary");
+    };
+    out.sum.scatter.n = r.get<double>("summary");
+    get(out.sum.scatter.mean);
+    get(out.sum.scatter.scatter);
+    get(out.sum.gd.sum);
+    get(out.sum.gf.sum);
+    get(out.sum.disk);
+    out.sum.n = r.get<double>("summary");
+    return out;
+  }
+
   /// Step 7: the top nodes bottom up (children come after their parent), as build() finishes
   /// an inner node: centre and cone, then EQ 4 and EQ 5–6 over the children.
   typename B::local finish_top(const std::vector<chunk_root>& roots) {
@@ -699,11 +786,16 @@ struct chunked_point_octree_builder {
     if (ec || !fs::is_directory(dir))
       throw IoError(dir.string() + ": cannot create the output folder");
     tmp.path = dir / "tmp-build";
-    fs::remove_all(tmp.path, ec);
-    fs::create_directories(tmp.path, ec);
-    if (ec) throw IoError(tmp.path.string() + ": cannot create: " + ec.message());
+    tmp.owner = rank == 0;
+    if (rank == 0) {
+      fs::remove_all(tmp.path, ec);
+      fs::create_directories(tmp.path, ec);
+      if (ec) throw IoError(tmp.path.string() + ": cannot create: " + ec.message());
+    }
+    barrier();
     rep.input_points = n;
     rep.chunk_points = chunk_points;
+    rep.estimated_normals = !In.normal;
     progress(0);
     structure();
     distribute();
@@ -711,23 +803,38 @@ struct chunked_point_octree_builder {
     progress(0.2);
     double pass_s = std::chrono::duration<double>(clock::now() - t0).count();
     const auto t1 = clock::now();
-    index_file normals((tmp.path / "normals").string(), n);
-    estimate(normals);
+    estimate();
+    barrier();
     rep.estimation_seconds = std::chrono::duration<double>(clock::now() - t1).count();
     const auto t2 = clock::now();
-    attribute_passes(normals);
+    {
+      const std::string path = (tmp.path / "normals").string();
+      std::optional<index_file> normals;
+      if (rank == 0) {
+        normals.emplace(path, n, true);
+        gather_normals(*normals);
+      }
+      barrier();
+      if (rank != 0) normals.emplace(path, n, false);
+      attribute_passes(*normals);  // every rank: each needs its chunks' inputs
+    }
     pass_s += std::chrono::duration<double>(clock::now() - t2).count();
     rep.pass_seconds = pass_s;
     const auto t3 = clock::now();
-    std::vector<chunk_root> roots;
-    roots.reserve(chunks.size());
     chunk_nodes.assign(chunks.size(), 0);
     for (std::size_t c = 0; c < chunks.size(); ++c) {
-      roots.push_back(build_chunk(c));
+      if (mine(c)) save_root(c, build_chunk(c));
       progress(0.5 + 0.5 * static_cast<double>(c + 1) / static_cast<double>(chunks.size()));
     }
+    barrier();
     rep.chunk_build_seconds = std::chrono::duration<double>(clock::now() - t3).count();
-    write_top(finish_top(roots));
+    if (rank == 0) {
+      std::vector<chunk_root> roots;
+      roots.reserve(chunks.size());
+      for (std::size_t c = 0; c < chunks.size(); ++c) roots.push_back(load_root(c));
+      write_top(finish_top(roots));
+    }
+    barrier();  // the folder is whole when any rank returns
     rep.chunks = chunks.size();
     rep.top_nodes = nodes.size();
     rep.seconds = std::chrono::duration<double>(clock::now() - t0).count();

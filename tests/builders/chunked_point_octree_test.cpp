@@ -3,10 +3,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <barrier>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <thread>
 
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/synthetic.hpp"
@@ -226,6 +228,46 @@ TEST(ChunkedPointOctreeEstimated, GraphOrientationDiffersOnlyInSign) {
   }
   EXPECT_EQ(off, 0u) << "normals differing by more than their sign";
   fs::remove_all(dir);
+}
+
+/// Every file of folder a equals b's, and they hold the same file names.
+void expect_same_folders(const std::string& a, const std::string& b) {
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(a)) names.push_back(e.path().filename().string());
+  std::size_t in_b = 0;
+  for (const auto& e : fs::directory_iterator(b)) in_b += e.is_regular_file() ? 1 : 0;
+  EXPECT_EQ(names.size(), in_b);
+  for (const auto& f : names) EXPECT_EQ(bytes_of(a + "/" + f), bytes_of(b + "/" + f)) << f;
+}
+
+TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
+  // Three "ranks" as threads with a barrier: the halo radii, estimation and chunk builds are
+  // shared round robin, rank 0 writes the chunk files and the top — the same bytes as one process.
+  const generated_point_source src(30000, 9, false, true);
+  chunked_build_options o;
+  o.chunk_points = 2000;
+  o.octree.threads = 1;
+  const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
+  const chunked_build_report r1 = build_point_octree_chunked(src, one, o);
+  ASSERT_GE(r1.chunks, 8u);
+  std::barrier sync(3);
+  std::vector<chunked_build_report> reports(3);
+  std::vector<std::thread> ranks;
+  for (int rank = 0; rank < 3; ++rank)
+    ranks.emplace_back([&, rank] {
+      chunked_build_options mine = o;
+      mine.distributed.rank = rank;
+      mine.distributed.ranks = 3;
+      mine.distributed.barrier = [&] { sync.arrive_and_wait(); };
+      reports[static_cast<std::size_t>(rank)] = build_point_octree_chunked(src, many, mine);
+    });
+  for (auto& t : ranks) t.join();
+  EXPECT_EQ(reports[0].chunks, r1.chunks);
+  EXPECT_EQ(reports[0].halo_points, r1.halo_points);
+  expect_same_folders(one, many);
+  EXPECT_FALSE(fs::exists(fs::path(many) / "tmp-build"));
+  fs::remove_all(one);
+  fs::remove_all(many);
 }
 
 TEST(ChunkedPointOctreeFiles, OneChunkWhenTheInputFits) {

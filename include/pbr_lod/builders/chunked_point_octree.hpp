@@ -40,6 +40,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <ranges>
@@ -60,6 +61,16 @@ struct chunked_build_options {
   std::uint64_t chunk_points = 0;
   /// Points per block read from the source in the streaming passes.
   std::size_t block_points = std::size_t{1} << 20;
+  /// A build shared by `ranks` processes (MPI ranks, say) that see `dir` on a shared file
+  /// system: each calls build_point_octree_chunked with its rank and a barrier over all of them.
+  /// Every rank reads the source in the structure and attribute passes; rank 0 writes the
+  /// chunk and halo files and the top; halo radii, estimation and chunk builds go round robin
+  /// (chunk c to rank c mod ranks). The folder is byte-identical to a one-process build. A rank
+  /// that throws leaves the others waiting at the barrier: the caller aborts the job.
+  struct {
+    int rank = 0, ranks = 1;
+    std::function<void()> barrier = {};
+  } distributed{};
 };
 
 /// Peak bytes of a chunk's build per sample, measured (docs/scale.md): the chunk's records and
