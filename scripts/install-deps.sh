@@ -10,6 +10,8 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
+  # pbrlod build --distributed (the tool only; the library never links MPI).
+  libopenmpi-dev openmpi-bin
   # examples/gl_viewer (optional; built when present): GLFW windows, EGL for the headless
   # renderer, Mesa's llvmpipe driver when the machine has no GPU; a virtual X server to test
   # its window.

@@ -21,6 +21,7 @@
 
 #include "child_build.hpp"
 #include "contact_sheet.hpp"
+#include "distributed.hpp"
 #include "lod.hpp"
 #include "papers.hpp"
 #include "pbr_lod/core/error.hpp"
@@ -460,6 +461,9 @@ int main(int argc, char** argv) {
   build->add_option("input", build_input, "mesh or point cloud file")->required();
   build->add_option("-o,--output", build_output, "hierarchy file to write (.lod)")->required();
   build->add_flag("--json", as_json, "print one JSON object");
+  bool distributed = false;
+  build->add_flag("--distributed", distributed,
+                  "share a chunked point-octree build among MPI ranks (run under mpirun)");
 
   std::string render_input_path, render_output = "render.png";
   float tolerance = 1;
@@ -538,6 +542,8 @@ int main(int argc, char** argv) {
 
   CLI11_PARSE(app, argc, argv);
   try {
+    if (*build && distributed)
+      return cmd_build_distributed(method, build_input, build_output, params, as_json);
     if (*build) return cmd_build(method, build_input, build_output, params, as_json);
     if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json, seed);
     if (*stats) return cmd_stats(stats_input, as_json);

@@ -197,12 +197,18 @@ bool wants_chunked_build(const std::vector<std::string>& items) {
 
 std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& items,
                                                 const std::string& input, const std::string& output,
-                                                bool on_terminal, json& report) {
+                                                bool on_terminal, json& report,
+                                                const distributed_rank* part) {
   chunking ch;
   chunked_build_options o;
   o.octree = octree_options(items, on_terminal, &ch);
   if (ch.memory) o.memory_bytes = *ch.memory;
   o.chunk_points = ch.chunk_points;
+  if (part) {
+    o.distributed.rank = part->rank;
+    o.distributed.ranks = part->ranks;
+    o.distributed.barrier = part->barrier;
+  }
   const std::unique_ptr<point_source> src = open_build_source(input);
   if (!o.octree.viewpoint) o.octree.viewpoint = src->sensor();
   const chunked_build_report r = build_point_octree_chunked(*src, output, o);

@@ -265,9 +265,15 @@ method_entry pca_octree_method();
 /// The point-octree built out of core into the folder `output` (`--param memory=SIZE` or
 /// `chunk_points=N`; builders/chunked_point_octree.hpp), its build figures added to `report`.
 bool wants_chunked_build(const std::vector<std::string>& params);
+/// This process's part in a distributed build (chunked_build_options::distributed).
+struct distributed_rank {
+  int rank = 0, ranks = 1;
+  std::function<void()> barrier;
+};
 std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& params,
                                                 const std::string& input, const std::string& output,
-                                                bool on_terminal, json& report);
+                                                bool on_terminal, json& report,
+                                                const distributed_rank* part = nullptr);
 /// An input read block by block: `generated-points:N` (N points of a generated surface with
 /// colours, made from their indices), or a point file.
 std::unique_ptr<point_source> open_build_source(const std::string& input);
