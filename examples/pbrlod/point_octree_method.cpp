@@ -78,7 +78,19 @@ json octree_stats_json(const Tree& t, const std::string& path) {
 }
 
 /// What the point-octree contributes to a frame: the view-cone culling of §6 and back-face
-/// culling by normal cones when the effects ask for it.
+/// culling by normal cones when the effects ask for it. `samples`: the input's points.
+template <class Tree>
+frame draw_octree(const Tree& t, const frame_request& r, std::uint64_t samples) {
+  const view v(r.cam, t.origin());
+  const render_options o = lod_render_options(r.view, Tree::attrs.colour);
+  const traverse_options topt{.tolerance_px = r.tolerance,
+                              .backface_cull = o.fx.backface_cull,
+                              .cull_volume = traverse_options::volume::view_cone};
+  frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r, t.origin());
+  f.extra.num("fraction_drawn", static_cast<double>(f.st.splats) / static_cast<double>(samples));
+  return f;
+}
+
 struct octree_method {
   template <class Tree>
   std::pair<vec3d, double> input_bounds(const Tree& t) const {
@@ -86,15 +98,7 @@ struct octree_method {
   }
   template <class Tree>
   frame draw(const Tree& t, const frame_request& r) const {
-    const view v(r.cam, t.origin());
-    const render_options o = lod_render_options(r.view, Tree::attrs.colour);
-    const traverse_options topt{.tolerance_px = r.tolerance,
-                                .backface_cull = o.fx.backface_cull,
-                                .cull_volume = traverse_options::volume::view_cone};
-    frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r, t.origin());
-    f.extra.num("fraction_drawn",
-                static_cast<double>(f.st.splats) / static_cast<double>(t.samples().size()));
-    return f;
+    return draw_octree(t, r, t.samples().size());
   }
   template <class Tree>
   json stats(const Tree& t, const std::string& path) const {
@@ -116,14 +120,7 @@ struct chunked_method {
   }
   template <class Tree>
   frame draw(const Tree& t, const frame_request& r) const {
-    const view v(r.cam, t.origin());
-    const render_options o = lod_render_options(r.view, Tree::attrs.colour);
-    const traverse_options topt{.tolerance_px = r.tolerance,
-                                .backface_cull = o.fx.backface_cull,
-                                .cull_volume = traverse_options::volume::view_cone};
-    frame f = draw_frame(t, v, o, topt, point_octree_policy{}, r, t.origin());
-    f.extra.num("fraction_drawn",
-                static_cast<double>(f.st.splats) / static_cast<double>(t.input_points()));
+    frame f = draw_octree(t, r, t.input_points());
     f.extra.integer("chunks_read", static_cast<long long>(t.chunks_loaded()));
     return f;
   }
