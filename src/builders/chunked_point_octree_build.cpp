@@ -220,7 +220,6 @@ struct chunked_point_octree_builder {
     std::uint64_t count = 0;
     vec3f lo = vec3f::Constant(std::numeric_limits<float>::infinity());
     vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
-    double halo = 0;  // radius of the halo about [lo, hi]
   };
 
   const point_source& src;
@@ -401,59 +400,106 @@ struct chunked_point_octree_builder {
     return In.normal ? oo.knn_ellipses : std::max(oo.knn, oo.knn_ellipses);
   }
 
-  static double box_distance2(const vec3f& p, const chunk_info& c) {
-    const vec3d q = p.cast<double>(), lo = c.lo.template cast<double>(),
-                hi = c.hi.template cast<double>();
-    const vec3d d = (lo - q).cwiseMax(q - hi).cwiseMax(vec3d::Zero());
+  /// Part of a chunk for its halo: the box of some of its points and how far from that box the
+  /// halo must reach for them.
+  struct halo_cell {
+    vec3f lo, hi;
+    double reach;
+  };
+  static constexpr int cells_per_axis = 8;
+
+  static double box_distance2(const vec3f& p, const vec3f& lo, const vec3f& hi) {
+    const vec3d q = p.cast<double>();
+    const vec3d d = (lo.cast<double>() - q).cwiseMax(q - hi.cast<double>()).cwiseMax(vec3d::Zero());
     return d.squaredNorm();
   }
 
-  /// Step 3: each chunk's halo radius from its own k-th neighbour distances (by the rank that
-  /// owns the chunk, into a file), then one pass (rank 0) collecting the halos.
+  /// Chunk c's halo cells. A chunk point p has its k neighbours within its k-th neighbour
+  /// distance d_k(p), and its splat is also bounded by its neighbours' own neighbourhood radii
+  /// (ellipse_rule::local_spacing): a neighbour q has d_k(q) ≤ |q − p| + d_k(p) ≤ 2·d_k(p) (p's
+  /// ball holds k points), so everything p's estimate reads lies within 3·d_k(p) of p. d_k over
+  /// the chunk alone bounds the true one from above. Per cell of an 8³ grid over the chunk's box
+  /// the largest 3·d_k — so that one isolated point (a bird above a LiDAR tile) widens the halo
+  /// around itself only — a hair wider than the float distances. A chunk of fewer than k points
+  /// cannot bound its neighbours by its own: one cell that takes every point.
+  std::vector<halo_cell> halo_cells(std::size_t c) const {
+    const int k = knn_needed();
+    const chunk_info& ci = chunks[c];
+    if (ci.count < static_cast<std::uint64_t>(k))
+      return {{ci.lo, ci.hi, std::numeric_limits<double>::infinity()}};
+    const auto recs = read_records(temp_path("chunk", c));
+    std::vector<vec3f> pts(recs.size());
+    vec3f lo = recs[0].position, hi = lo;
+    for (std::size_t i = 0; i < recs.size(); ++i) {
+      pts[i] = recs[i].position;
+      lo = lo.cwiseMin(pts[i]);
+      hi = hi.cwiseMax(pts[i]);
+    }
+    const knn_graph g = nearest_neighbour_graph(pts, k, threads);
+    constexpr int m = cells_per_axis;
+    const vec3f ext = (hi - lo).cwiseMax(vec3f::Constant(1e-30f));
+    std::vector<halo_cell> cells(
+        m * m * m, halo_cell{vec3f::Constant(INFINITY), vec3f::Constant(-INFINITY), 0.0});
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      int at = 0;
+      for (int ax = 2; ax >= 0; --ax)
+        at = at * m + std::clamp(static_cast<int>((pts[i][ax] - lo[ax]) / ext[ax] * m), 0, m - 1);
+      halo_cell& h = cells[static_cast<std::size_t>(at)];
+      h.lo = h.lo.cwiseMin(pts[i]);
+      h.hi = h.hi.cwiseMax(pts[i]);
+      const double dk = std::sqrt(static_cast<double>(g.dist2[i * g.k + g.k - 1]));
+      h.reach = std::max(h.reach, 3 * dk * (1 + 1e-5) + 1e-30);
+    }
+    std::erase_if(cells, [](const halo_cell& h) { return h.lo.x() > h.hi.x(); });
+    return cells;
+  }
+
+  /// Step 3: each chunk's halo cells (by the rank that owns the chunk, into a file), then one
+  /// pass (rank 0) collecting the halos.
   void halos() {
     if (chunks.size() < 2) return;
-    const int k = knn_needed();
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       if (!mine(c)) continue;
-      // A chunk with fewer than k points takes every point: too few to bound its neighbours'
-      // distance by its own, and such chunks are rare and small.
-      double h = std::numeric_limits<double>::infinity();
-      if (chunks[c].count >= static_cast<std::uint64_t>(k)) {
-        const auto recs = read_records(temp_path("chunk", c));
-        std::vector<vec3f> pts(recs.size());
-        for (std::size_t i = 0; i < recs.size(); ++i) pts[i] = recs[i].position;
-        const knn_graph g = nearest_neighbour_graph(pts, k, threads);
-        float worst = 0;
-        for (std::size_t i = 0; i < pts.size(); ++i)
-          worst = std::max(worst, g.dist2[i * g.k + g.k - 1]);
-        // A chunk point p has its k neighbours within h = max d_k of it, so within h of the
-        // box. Its splat is also bounded by its neighbours' own neighbourhood radii
-        // (ellipse_rule::local_spacing): a neighbour q's k-th neighbour is within
-        // |q − p| + d_k(p) ≤ 2h of q (p's ball holds k points), so within 3h of the box. A hair
-        // wider than the float distances, so rounding never leaves a point out.
-        h = 3 * std::sqrt(static_cast<double>(worst)) * (1 + 1e-5) + 1e-30;
+      const std::vector<halo_cell> cells = halo_cells(c);
+      byte_writer w;
+      w.put(static_cast<std::uint64_t>(cells.size()));
+      for (const halo_cell& h : cells) {
+        w.put_vec(h.lo);
+        w.put_vec(h.hi);
+        w.put(h.reach);
       }
-      std::ofstream(temp_path("radius", c), std::ios::binary)
-          .write(reinterpret_cast<const char*>(&h), sizeof h);
+      save_file_bytes(temp_path("cells", c), w.bytes);
     }
     barrier();
-    if (rank == 0) {
-      for (std::size_t c = 0; c < chunks.size(); ++c) {
-        std::ifstream f(temp_path("radius", c), std::ios::binary);
-        f.read(reinterpret_cast<char*>(&chunks[c].halo), sizeof(double));
-        if (!f) throw IoError(temp_path("radius", c) + ": read failed");
-      }
-      collect_halos();
-    }
+    if (rank == 0) collect_halos();
     barrier();
   }
 
+  /// One pass: every point into the halo of each other chunk that has a cell within its reach.
   void collect_halos() {
+    struct entry {
+      std::uint32_t chunk;
+      halo_cell cell;
+    };
+    std::vector<entry> all;
+    for (std::uint32_t c = 0; c < chunks.size(); ++c) {
+      const std::string path = temp_path("cells", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      const auto m = r.get<std::uint64_t>("cells");
+      for (std::uint64_t i = 0; i < m; ++i) {
+        entry e{c, {}};
+        e.cell.lo = r.get_vec("cell", i);
+        e.cell.hi = r.get_vec("cell", i);
+        e.cell.reach = r.get<double>("cell");
+        all.push_back(e);
+      }
+    }
     std::vector<append_file> files;
     files.reserve(chunks.size());
     for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("halo", c));
-    // Chunks by cell of a coarse grid over the data, each listed in every cell its halo box
-    // touches: a point tests only the chunks of its cell.
+    // Cells by cell of a coarse grid over the data, each listed in every grid cell its reach
+    // touches: a point tests only the entries of its grid cell.
     vec3f lo = chunks[0].lo, hi = chunks[0].hi;
     for (const auto& c : chunks) {
       lo = lo.cwiseMin(c.lo);
@@ -466,26 +512,31 @@ struct chunked_point_octree_builder {
       return std::clamp(static_cast<int>(std::floor(std::clamp(t, -1.0, double(g)))), 0, g - 1);
     };
     std::vector<std::vector<std::uint32_t>> grid(g * g * g);
-    for (std::uint32_t c = 0; c < chunks.size(); ++c) {
-      const double h = chunks[c].halo;
+    for (std::uint32_t e = 0; e < all.size(); ++e) {
+      const halo_cell& h = all[e].cell;
+      const bool fin = std::isfinite(h.reach);
       std::array<int, 3> a{}, b{};
       for (int ax = 0; ax < 3; ++ax) {
-        a[ax] = std::isfinite(h) ? cell(chunks[c].lo[ax] - h, ax) : 0;
-        b[ax] = std::isfinite(h) ? cell(chunks[c].hi[ax] + h, ax) : g - 1;
+        a[ax] = fin ? cell(h.lo[ax] - h.reach, ax) : 0;
+        b[ax] = fin ? cell(h.hi[ax] + h.reach, ax) : g - 1;
       }
       for (int z = a[2]; z <= b[2]; ++z)
         for (int y = a[1]; y <= b[1]; ++y)
-          for (int x = a[0]; x <= b[0]; ++x) grid[(z * g + y) * g + x].push_back(c);
+          for (int x = a[0]; x <= b[0]; ++x) grid[(z * g + y) * g + x].push_back(e);
     }
+    std::vector<std::uint32_t> taken;  // chunks this point already went to
     stream([&](std::uint64_t first, const point_block& b) {
       for (std::size_t k = 0; k < b.size(); ++k) {
         const vec3f& p = b.positions[k];
         const std::uint32_t own = nodes[descend(p.cast<double>())].chunk;
-        const auto& list = grid[(cell(p.z(), 2) * g + cell(p.y(), 1)) * g + cell(p.x(), 0)];
-        for (const std::uint32_t c : list) {
-          if (c == own) continue;
-          const double h = chunks[c].halo;
-          if (std::isfinite(h) && box_distance2(p, chunks[c]) > h * h) continue;
+        taken.clear();
+        for (const std::uint32_t e :
+             grid[(cell(p.z(), 2) * g + cell(p.y(), 1)) * g + cell(p.x(), 0)]) {
+          const std::uint32_t c = all[e].chunk;
+          const halo_cell& h = all[e].cell;
+          if (c == own || std::find(taken.begin(), taken.end(), c) != taken.end()) continue;
+          if (std::isfinite(h.reach) && box_distance2(p, h.lo, h.hi) > h.reach * h.reach) continue;
+          taken.push_back(c);
           files[c].put({first + k, p, In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
                         In.colour ? b.colours[k] : rgb8{}});
         }
