@@ -38,7 +38,8 @@ constexpr std::size_t record_bytes = 8 + 12 + 12 + 3;
 /// A file appended to through a buffer: the passes write to every chunk's file at once.
 class append_file {
  public:
-  explicit append_file(std::string path) : path_(std::move(path)) {
+  /// `buffer`: bytes held before a write; the passes share ≈ 64 MiB among all their files.
+  append_file(std::string path, std::size_t buffer) : path_(std::move(path)), limit_(buffer) {
     std::ofstream f(path_, std::ios::binary | std::ios::trunc);
     if (!f) throw IoError(path_ + ": cannot open for writing");
   }
@@ -51,7 +52,7 @@ class append_file {
     std::memcpy(p + 20, r.normal.data(), 12);
     std::memcpy(p + 32, &r.colour, 3);
     ++count_;
-    if (buf_.size() >= (1u << 18)) flush();
+    if (buf_.size() >= limit_) flush();
   }
   void flush() {
     if (buf_.empty()) return;
@@ -65,6 +66,7 @@ class append_file {
 
  private:
   std::string path_;
+  std::size_t limit_;
   std::vector<unsigned char> buf_;
   std::uint64_t count_ = 0;
 };
@@ -369,7 +371,8 @@ struct chunked_point_octree_builder {
     if (rank == 0) {
       std::vector<append_file> files;
       files.reserve(chunks.size());
-      for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("chunk", c));
+      for (std::size_t c = 0; c < chunks.size(); ++c)
+        files.emplace_back(temp_path("chunk", c), buffer_bytes());
       stream([&](std::uint64_t first, const point_block& b) {
         for (std::size_t k = 0; k < b.size(); ++k) {
           const std::uint32_t c = nodes[descend(b.positions[k].cast<double>())].chunk;
@@ -394,6 +397,13 @@ struct chunked_point_octree_builder {
   /// The chunks this process builds: every ranks-th from its rank.
   [[nodiscard]] bool mine(std::size_t c) const {
     return c % static_cast<std::size_t>(ranks) == static_cast<std::size_t>(rank);
+  }
+
+  /// Each file's write buffer in the distribution and halo passes: 64 MiB shared among the
+  /// chunks' files, between 4 KiB and 256 KiB each.
+  [[nodiscard]] std::size_t buffer_bytes() const {
+    return std::clamp<std::size_t>(
+        (std::size_t{64} << 20) / std::max<std::size_t>(1, chunks.size()), 4096, 256 * 1024);
   }
 
   [[nodiscard]] int knn_needed() const {
@@ -497,7 +507,8 @@ struct chunked_point_octree_builder {
     }
     std::vector<append_file> files;
     files.reserve(chunks.size());
-    for (std::size_t c = 0; c < chunks.size(); ++c) files.emplace_back(temp_path("halo", c));
+    for (std::size_t c = 0; c < chunks.size(); ++c)
+      files.emplace_back(temp_path("halo", c), buffer_bytes());
     // Cells by cell of a coarse grid over the data, each listed in every grid cell its reach
     // touches: a point tests only the entries of its grid cell.
     vec3f lo = chunks[0].lo, hi = chunks[0].hi;
