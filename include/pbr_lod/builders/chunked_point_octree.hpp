@@ -16,8 +16,9 @@
 //  2. Distribution pass: every point is appended to its chunk's file (input order kept).
 //  3. Halo pass: normals and splat ellipses come from the k nearest neighbours (§4 end), which
 //     may lie in other chunks (and a splat is bounded by its neighbours' own spacing). Three times
-//     a chunk's largest own k-th neighbour distance bounds how far either can be from its box;
-//     one pass collects, for every chunk, the points of other chunks that near (its halo).
+//     a point's k-th neighbour distance within its chunk bounds how far either can be from it;
+//     per cell of an 8³ grid over each chunk the largest such reach, and one pass collects, for
+//     every chunk, the points of other chunks within reach of its cells (its halo).
 //  4. Per chunk: estimation over chunk + halo, quantisation (§5); the quantised normals go back
 //     to a file in input order.
 //  5. Two attribute passes give every top node its normal and colour sums (in the in-memory
