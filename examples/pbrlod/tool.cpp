@@ -5,6 +5,7 @@
 #include "pbr_lod/io/point_source_file.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -196,22 +197,17 @@ std::optional<std::uint64_t> params::bytes(const std::string& key) {
   if (it == m_.end()) return std::nullopt;
   const std::string v = it->second;
   std::uint64_t n = 0;
-  std::size_t i = 0;
-  for (; i < v.size() && v[i] >= '0' && v[i] <= '9'; ++i) {
-    if (n > (std::numeric_limits<std::uint64_t>::max() - 9) / 10)
-      i = v.size() + 1;
-    else
-      n = n * 10 + static_cast<std::uint64_t>(v[i] - '0');
-  }
+  const char* end = v.data() + v.size();
+  const auto [at, ec] = std::from_chars(v.data(), end, n);  // digits only: no sign, no space
   int shift = -1;
-  if (i == v.size())
+  if (ec == std::errc() && at == end) {
     shift = 0;
-  else if (i > 0 && i + 1 == v.size())
-    shift = std::string("KMGT").find(static_cast<char>(std::toupper(v[i]))) == std::string::npos
-                ? -1
-                : 10 * (1 + static_cast<int>(
-                                std::string("KMGT").find(static_cast<char>(std::toupper(v[i])))));
-  if (i == 0 || shift < 0 || (shift > 0 && n > (std::uint64_t{1} << (63 - shift))))
+  } else if (ec == std::errc() && at + 1 == end) {
+    const auto unit = std::string_view("KMGT").find(
+        static_cast<char>(std::toupper(static_cast<unsigned char>(*at))));
+    if (unit != std::string_view::npos) shift = 10 * static_cast<int>(unit + 1);
+  }
+  if (shift < 0 || (shift > 0 && n > (std::uint64_t{1} << (63 - shift))))
     throw InvalidArgument("--param " + key + "=" + v +
                           ": expected a size such as 4G, 512M or 1000000 (bytes)");
   m_.erase(it);

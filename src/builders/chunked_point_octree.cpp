@@ -15,12 +15,6 @@ std::string top_path(const std::string& dir) {
   return (fs::path(dir) / chunked_top_file).string();
 }
 
-bool same_record(const auto& a, const auto& b) {
-  return a.centre == b.centre && a.radius == b.radius && a.normal == b.normal &&
-         a.cone_angle == b.cone_angle && a.axis_u == b.axis_u && a.axis_v == b.axis_v &&
-         a.first == b.first && a.count == b.count && a.leaf == b.leaf && a.depth == b.depth;
-}
-
 }  // namespace
 
 bool is_chunked_point_octree(const std::string& dir) {
@@ -143,7 +137,7 @@ const typename chunked_point_octree<A>::tree& chunked_point_octree<A>::chunk(
     const node& root = top_nodes_[chunk_top_[c]];
     bool same = t->origin() == origin_ && t->normal_bits() == normal_bits_ &&
                 t->samples().size() == chunk_samples_[c] && t->nodes().size() == chunk_nodes_[c] &&
-                same_record(t->at(0), root);
+                t->at(0) == root;
     if constexpr (A.colour) same = same && t->node_colour(0) == top_colours_[chunk_top_[c]];
     if (!same) throw FormatError(path + ": does not match its record in the top file");
     s.t = std::move(t);

@@ -592,10 +592,13 @@ struct chunked_point_octree_builder {
   void gather_normals(index_file& normals) const {
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       const auto recs = read_records(temp_path("chunk", c));
-      point_set<A> w;
-      std::vector<code_t> codes;
-      load_prepared(temp_path("prep", c), recs.size(), w, codes);
-      normals.scatter(recs, w.normals);
+      // The prepared file starts with the positions, then the normals (save_prepared).
+      std::ifstream f(temp_path("prep", c), std::ios::binary);
+      f.seekg(static_cast<std::streamoff>(recs.size() * sizeof(vec3f)));
+      std::vector<vec3f> nrm;
+      get_vector(f, nrm, recs.size());
+      if (!f) throw IoError(temp_path("prep", c) + ": read failed");
+      normals.scatter(recs, nrm);
     }
   }
 

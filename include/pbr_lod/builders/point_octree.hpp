@@ -156,6 +156,7 @@ class point_octree {
     std::uint32_t count;  ///< inner: children (1..8, contiguous); leaf: samples (contiguous)
     std::uint8_t leaf;    ///< 1 for a leaf
     std::uint8_t depth;   ///< root = 0
+    friend bool operator==(const node&, const node&) = default;
   };
 
   /// With quantisation, per node and per sample: the table indices of the normal and the major

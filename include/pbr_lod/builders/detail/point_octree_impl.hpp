@@ -909,14 +909,7 @@ std::size_t point_octree<A>::memory_bytes() const {
 
 template <attributes A>
 bool point_octree<A>::equal(const point_octree& o) const {
-  const auto same_nodes = [](const node& a, const node& b) {
-    return a.centre == b.centre && a.radius == b.radius && a.normal == b.normal &&
-           a.cone_angle == b.cone_angle && a.axis_u == b.axis_u && a.axis_v == b.axis_v &&
-           a.first == b.first && a.count == b.count && a.leaf == b.leaf && a.depth == b.depth;
-  };
-  if (nodes_.size() != o.nodes_.size() || normal_bits_ != o.normal_bits_) return false;
-  for (std::size_t i = 0; i < nodes_.size(); ++i)
-    if (!same_nodes(nodes_[i], o.nodes_[i])) return false;
+  if (nodes_ != o.nodes_ || normal_bits_ != o.normal_bits_) return false;
   bool same = samples_.origin == o.samples_.origin && samples_.positions == o.samples_.positions &&
               samples_.normals == o.samples_.normals && samples_.axis_u == o.samples_.axis_u &&
               samples_.axis_v == o.samples_.axis_v && node_codes_ == o.node_codes_ &&
