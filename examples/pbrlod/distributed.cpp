@@ -1,5 +1,5 @@
-// pbrlod build --distributed: the chunked point-octree shared among MPI ranks (Open MPI from
-// Debian). The library knows no MPI: it takes a rank, a rank count and a barrier
+// pbrlod build --distributed: a chunked build (point-octree, PMR) shared among MPI ranks (Open MPI
+// from Debian). The library knows no MPI: it takes a rank, a rank count and a barrier
 // (chunked_build_options::distributed); this file gives it MPI's. Every rank runs the same
 // command line over a folder on a shared file system; rank 0 prints the report.
 #include "distributed.hpp"
@@ -27,8 +27,9 @@ int cmd_build_distributed(const std::string& method, const std::string& input,
                           const std::string& output, const std::vector<std::string>& params,
                           bool as_json) {
 #ifdef PBRLOD_HAVE_MPI
-  if (method != "point-octree")
-    throw InvalidArgument("--distributed builds the point-octree only (got " + method + ")");
+  const method_entry& m = method_named(method);
+  if (!m.build_chunked)
+    throw InvalidArgument("--distributed builds point-octree and pmr (got " + method + ")");
   MPI_Init(nullptr, nullptr);
   int rank = 0, ranks = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
@@ -37,8 +38,8 @@ int cmd_build_distributed(const std::string& method, const std::string& input,
     json report;
     report.integer("ranks", ranks);
     distributed_rank me{rank, ranks, [] { MPI_Barrier(MPI_COMM_WORLD); }};
-    const auto l = build_chunked_point_octree(params, input, output,
-                                              rank == 0 && interactive(as_json), report, &me);
+    const auto l =
+        m.build_chunked(params, input, output, rank == 0 && interactive(as_json), report, &me);
     if (rank == 0)
       std::cout << (as_json ? "" : "wrote " + output + "/: ")
                 << l->stats(output).merge(report).text() << "\n";

@@ -214,9 +214,13 @@ int cmd_build(const std::string& method, const std::string& input, const std::st
               << ") is not available in pbr_lod " << version() << " yet\n";
     return 2;
   }
-  if (method == "point-octree" && wants_chunked_build(params)) {
+  if (wants_chunked_build(params)) {
+    if (!it->build_chunked)
+      throw InvalidArgument("pbrlod build: method '" + method +
+                            "' has no chunked build (memory=, chunk_points=): point-octree and "
+                            "pmr have");
     json report;
-    const auto l = build_chunked_point_octree(params, input, output, interactive(as_json), report);
+    const auto l = it->build_chunked(params, input, output, interactive(as_json), report, nullptr);
     std::cout << (as_json ? "" : "wrote " + output + "/: ") << l->stats(output).merge(report).text()
               << "\n";
     return 0;
@@ -463,7 +467,7 @@ int main(int argc, char** argv) {
   build->add_flag("--json", as_json, "print one JSON object");
   bool distributed = false;
   build->add_flag("--distributed", distributed,
-                  "share a chunked point-octree build among MPI ranks (run under mpirun)");
+                  "share a chunked build (point-octree, pmr) among MPI ranks (run under mpirun)");
 
   std::string render_input_path, render_output = "render.png";
   float tolerance = 1;

@@ -12,6 +12,15 @@ const std::vector<method_entry>& methods() {
   return m;
 }
 
+const method_entry& method_named(const std::string& name) {
+  std::string names;
+  for (const auto& m : methods()) {
+    if (m.name == name) return m;
+    names += (names.empty() ? "" : ", ") + m.name;
+  }
+  throw InvalidArgument("unknown method '" + name + "' (expected one of " + names + ")");
+}
+
 const method_entry& lod_method(const std::string& path) {
   const auto h = peek_lod(path);
   for (const auto& m : methods())

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "lod.hpp"
+#include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/builders/pmr.hpp"
 
 namespace pbrlod_tool {
@@ -94,8 +95,74 @@ struct pmr_method_traits {
   std::size_t samples(const pmr_hierarchy& h) const { return h.positions().size(); }
 };
 
-std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
-                           bool on_terminal) {
+/// A chunked PMR folder (build_pmr_chunked): framed by the input sphere its top file records,
+/// drawn as PMR, its chunks read as the views need them.
+struct chunked_pmr_traits {
+  template <class H>
+  std::pair<vec3d, double> input_bounds(const H& h) const {
+    return {h.origin() + h.input_sphere().centre.template cast<double>(),
+            static_cast<double>(h.input_sphere().radius)};
+  }
+  template <class H>
+  frame draw(const H& h, const frame_request& r) const {
+    const view v(r.cam, h.origin());
+    const render_options o = lod_render_options(r.view, H::attrs.colour);
+    traverse_options topt;
+    topt.tolerance_px = r.tolerance;
+    std::vector<std::uint32_t> used(h.leaf_count(), 0);
+    pmr_policy policy;
+    policy.levels_used = &used;
+    frame f = draw_frame(h, v, o, topt, policy, r, h.origin());
+    std::vector<std::size_t> hist(h.levels(), 0);
+    for (const auto u : used) ++hist[u];
+    f.extra.raw("leaves_per_level", list(hist));
+    f.extra.integer("chunks_read", static_cast<long long>(h.chunks_loaded()));
+    return f;
+  }
+  template <class H>
+  json stats(const H& h, const std::string& path) const {
+    const auto& st = h.stats();
+    const double n = static_cast<double>(h.input_points());
+    json j;
+    j.str("file", path).str("method", "pmr").boolean("chunked", true);
+    j.integer("chunks", static_cast<long long>(h.chunk_count()));
+    j.integer("top_nodes", static_cast<long long>(h.top_node_count()));
+    j.integer("points", static_cast<long long>(h.input_points()));
+    j.integer("nodes", static_cast<long long>(h.node_count()));
+    j.integer("leaves", static_cast<long long>(h.leaf_count()));
+    j.integer("levels", h.levels());
+    j.integer("duplicates", static_cast<long long>(st.duplicates));
+    j.integer("triangulated_points", static_cast<long long>(st.triangulated_points));
+    j.integer("removals", static_cast<long long>(st.removals));
+    j.integer("hull_points", static_cast<long long>(st.hull_points));
+    j.integer("flat_leaves", static_cast<long long>(st.flat_leaves));
+    j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
+    j.num("bytes_per_point", static_cast<double>(h.file_bytes()) / n);
+    j.boolean("colours", H::attrs.colour);
+    return j;
+  }
+  template <class H>
+  std::size_t samples(const H& h) const {
+    return static_cast<std::size_t>(h.input_points());
+  }
+  template <class H>
+  std::size_t file_bytes(const H& h) const {
+    return static_cast<std::size_t>(h.file_bytes());
+  }
+  /// The folder is written by the build; it is not copied elsewhere.
+  template <class H>
+  void save(const H&, const std::string&) const {}
+};
+
+std::unique_ptr<lod> open_chunked(const std::string& dir) {
+  if (chunked_pmr_has_colours(dir))
+    return make_lod(chunked_pmr_traits{}, chunked_pmr<with_normals_colours>::open(dir));
+  return make_lod(chunked_pmr_traits{}, chunked_pmr<with_normals>::open(dir));
+}
+
+/// The PMR options from the --param items; `memory`/`chunk_points` only for a chunked build.
+pmr_options pmr_params(const std::vector<std::string>& items, bool on_terminal,
+                       chunked_pmr_options* chunked = nullptr) {
   params m(items);
   pmr_options o;
   o.max_leaf_points = static_cast<std::uint32_t>(m.integer("leaf_points", 10000, 8, 1 << 24));
@@ -106,15 +173,37 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   for (long i = 1; i <= nrho; ++i)
     o.rho.push_back(static_cast<float>(step * static_cast<double>(i)));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
-  m.finish("pmr", "leaf_points, margin, levels, rho_step, threads");
+  if (chunked) {
+    if (const auto b = m.bytes("memory")) chunked->memory_bytes = *b;
+    chunked->chunk_points =
+        static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1ll << 31) - 1));
+  }
+  m.finish("pmr", "leaf_points, margin, levels, rho_step, threads, memory, chunk_points");
   o.progress = progress_callback("pmr", on_terminal);
+  return o;
+}
+
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool on_terminal) {
+  const pmr_options o = pmr_params(items, on_terminal);
   pmr_hierarchy h = build_pmr(in.get().mesh.vertices, o);
   pmr_method_traits method;
   method.build_seconds = h.stats().build_seconds;
   return make_lod(method, std::move(h));
 }
 
+std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const std::string& input,
+                                   const std::string& output, bool on_terminal, json& report,
+                                   const distributed_rank* part) {
+  chunked_pmr_options o;
+  o.pmr = pmr_params(items, on_terminal, &o);
+  if (part) o.distributed = {part->rank, part->ranks, part->barrier};
+  chunked_report_json(build_pmr_chunked(*open_build_source(input), output, o), report);
+  return open_chunked(output);
+}
+
 std::unique_ptr<lod> load(const std::string& path) {
+  if (is_chunked_pmr(path)) return open_chunked(path);
   pmr_method_traits method;
   if (std::ifstream t(timing_path(path)); t) {
     double s = 0;
@@ -129,9 +218,10 @@ method_entry pmr_method() {
   return {.name = "pmr",
           .paper = "Dey & Hudson 2002",
           .magic = "PBRLODPM",
-          .dir_magic = {},
+          .dir_magic = "PBRLODMC",
           .build = &build,
           .load = &load,
+          .build_chunked = &build_chunked,
           .demo_tolerances = {8, 3, 1},
           .tolerance_key = "factor"};
 }

@@ -184,6 +184,21 @@ std::unique_ptr<lod> load(const std::string& path) {
                   point_octree<point_octree_attributes(positions_only)>::load(path));
 }
 
+std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const std::string& input,
+                                   const std::string& output, bool on_terminal, json& report,
+                                   const distributed_rank* part) {
+  chunking ch;
+  chunked_build_options o;
+  o.octree = octree_options(items, on_terminal, &ch);
+  if (ch.memory) o.memory_bytes = *ch.memory;
+  o.chunk_points = ch.chunk_points;
+  if (part) o.distributed = {part->rank, part->ranks, part->barrier};
+  const std::unique_ptr<point_source> src = open_build_source(input);
+  if (!o.octree.viewpoint) o.octree.viewpoint = src->sensor();
+  chunked_report_json(build_point_octree_chunked(*src, output, o), report);
+  return open_chunked(output);
+}
+
 }  // namespace
 
 bool wants_chunked_build(const std::vector<std::string>& items) {
@@ -192,23 +207,7 @@ bool wants_chunked_build(const std::vector<std::string>& items) {
   return false;
 }
 
-std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& items,
-                                                const std::string& input, const std::string& output,
-                                                bool on_terminal, json& report,
-                                                const distributed_rank* part) {
-  chunking ch;
-  chunked_build_options o;
-  o.octree = octree_options(items, on_terminal, &ch);
-  if (ch.memory) o.memory_bytes = *ch.memory;
-  o.chunk_points = ch.chunk_points;
-  if (part) {
-    o.distributed.rank = part->rank;
-    o.distributed.ranks = part->ranks;
-    o.distributed.barrier = part->barrier;
-  }
-  const std::unique_ptr<point_source> src = open_build_source(input);
-  if (!o.octree.viewpoint) o.octree.viewpoint = src->sensor();
-  const chunked_build_report r = build_point_octree_chunked(*src, output, o);
+void chunked_report_json(const chunked_build_report& r, json& report) {
   report.integer("chunk_points_limit", static_cast<long long>(r.chunk_points))
       .integer("largest_chunk", static_cast<long long>(r.largest_chunk))
       .integer("halo_points", static_cast<long long>(r.halo_points))
@@ -217,7 +216,6 @@ std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& 
       .num("pass_seconds", r.pass_seconds)
       .num("estimation_seconds", r.estimation_seconds)
       .num("chunk_build_seconds", r.chunk_build_seconds);
-  return open_chunked(output);
 }
 
 method_entry point_octree_method() {
@@ -227,6 +225,7 @@ method_entry point_octree_method() {
           .dir_magic = "PBRLODPC",
           .build = &build,
           .load = &load,
+          .build_chunked = &build_chunked,
           .demo_tolerances = {16, 4, 1}};
 }
 

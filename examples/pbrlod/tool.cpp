@@ -1,6 +1,7 @@
 // pbrlod — the command-line tool's shared parts (tool.hpp).
 #include "tool.hpp"
 
+#include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 
@@ -20,7 +21,8 @@ namespace pbrlod_tool {
 namespace fs = std::filesystem;
 
 bool is_hierarchy_file(const std::string& path) {
-  return fs::path(path).extension() == ".lod" || is_chunked_point_octree(path);
+  return fs::path(path).extension() == ".lod" || is_chunked_point_octree(path) ||
+         is_chunked_pmr(path);
 }
 
 lod_header peek_lod(const std::string& path) {
@@ -40,17 +42,23 @@ lod_header peek_lod(const std::string& path) {
 }
 
 std::unique_ptr<point_source> open_build_source(const std::string& input) {
-  const std::string gen = "generated-points:";
+  const std::string gen = "generated-points:", with_normals = ":normals";
   if (input.rfind(gen, 0) == 0) {
+    const bool normals =
+        input.size() > gen.size() + with_normals.size() &&
+        input.compare(input.size() - with_normals.size(), with_normals.size(), with_normals) == 0;
+    const std::string count =
+        input.substr(gen.size(), input.size() - gen.size() - (normals ? with_normals.size() : 0));
     std::uint64_t n = 0;
     try {
       std::size_t used = 0;
-      n = std::stoull(input.substr(gen.size()), &used);
-      if (used + gen.size() != input.size() || n == 0) throw std::invalid_argument(input);
+      n = std::stoull(count, &used);
+      if (used != count.size() || n == 0) throw std::invalid_argument(input);
     } catch (const std::exception&) {
-      throw InvalidArgument(input + ": expected generated-points:N with N > 0 points");
+      throw InvalidArgument(input +
+                            ": expected generated-points:N or generated-points:N:normals, N > 0");
     }
-    return std::make_unique<generated_point_source>(n, 1, false, true);
+    return std::make_unique<generated_point_source>(n, 1, normals, true);
   }
   return open_point_source(input);
 }

@@ -28,6 +28,10 @@
 #include "pbr_lod/raster/image.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 
+namespace pbr_lod {
+struct chunked_build_report;
+}
+
 namespace pbrlod_tool {
 using namespace pbr_lod;
 
@@ -236,6 +240,12 @@ class build_input {
   mutable std::optional<loaded_input> in_;
 };
 
+/// This process's part in a distributed build (chunked_build_options::distributed).
+struct distributed_rank {
+  int rank = 0, ranks = 1;
+  std::function<void()> barrier;
+};
+
 /// One builder as the tool sees it. A method without build is listed but not available.
 struct method_entry {
   std::string name, paper;
@@ -246,8 +256,15 @@ struct method_entry {
   /// a bad parameter or an input the method cannot build from.
   std::unique_ptr<lod> (*build)(const std::vector<std::string>& params, const build_input& in,
                                 bool on_terminal) = nullptr;
-  /// Reads one of its .lod files (throws IoError / FormatError).
+  /// Reads one of its .lod files or chunked folders (throws IoError / FormatError).
   std::unique_ptr<lod> (*load)(const std::string& path) = nullptr;
+  /// Builds out of core into the folder `output` (`--param memory=SIZE` or `chunk_points=N`),
+  /// its build figures added to `report`; shared among ranks when `part` is given. Null when
+  /// the method has no chunked build.
+  std::unique_ptr<lod> (*build_chunked)(const std::vector<std::string>& params,
+                                        const std::string& input, const std::string& output,
+                                        bool on_terminal, json& report,
+                                        const distributed_rank* part) = nullptr;
   std::vector<float> demo_tolerances;          ///< what `demo` draws, coarse to fine
   std::string tolerance_key = "tolerance_px";  ///< the --tolerance field in `render --json`
 };
@@ -262,20 +279,15 @@ method_entry pop_method();
 method_entry pmr_method();
 method_entry pca_octree_method();
 
-/// The point-octree built out of core into the folder `output` (`--param memory=SIZE` or
-/// `chunk_points=N`; builders/chunked_point_octree.hpp), its build figures added to `report`.
+/// Whether the --param items ask for a chunked build (memory=SIZE or chunk_points=N).
 bool wants_chunked_build(const std::vector<std::string>& params);
-/// This process's part in a distributed build (chunked_build_options::distributed).
-struct distributed_rank {
-  int rank = 0, ranks = 1;
-  std::function<void()> barrier;
-};
-std::unique_ptr<lod> build_chunked_point_octree(const std::vector<std::string>& params,
-                                                const std::string& input, const std::string& output,
-                                                bool on_terminal, json& report,
-                                                const distributed_rank* part = nullptr);
+/// The entry of a method by name (throws InvalidArgument naming the methods).
+const method_entry& method_named(const std::string& name);
+/// A chunked build's report fields (chunked_build_report) into `report`.
+void chunked_report_json(const chunked_build_report& r, json& report);
 /// An input read block by block: `generated-points:N` (N points of a generated surface with
-/// colours, made from their indices), or a point file.
+/// colours, made from their indices; `generated-points:N:normals` with its normals too), or a
+/// point file.
 std::unique_ptr<point_source> open_build_source(const std::string& input);
 
 /// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,

@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <functional>
 
+#include "chunk_files.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
 
@@ -89,42 +90,10 @@ chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
   return t;
 }
 
-/// Chunks and top nodes refer to each other one to one; an inner top node's children come
-/// after it and each is reached once; the chunks' samples add up to the input.
 template <attributes A>
 void chunked_point_octree<A>::validate(const std::string& path) const {
-  const std::size_t n = top_nodes_.size();
-  std::uint64_t samples = 0;
-  for (std::size_t c = 0; c < chunk_top_.size(); ++c) {
-    if (chunk_top_[c] >= n || frontier_[chunk_top_[c]] != c || chunk_samples_[c] == 0 ||
-        chunk_nodes_[c] == 0)
-      throw FormatError(path + ": chunk " + std::to_string(c) + " and its top node disagree");
-    samples += chunk_samples_[c];
-  }
-  if (samples != input_points_)
-    throw FormatError(path + ": the chunks hold " + std::to_string(samples) +
-                      " samples, the input " + std::to_string(input_points_));
-  std::vector<char> reached(n, 0);
-  reached[0] = 1;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!reached[i])
-      throw FormatError(path + ": top node " + std::to_string(i) + " is unreachable");
-    if (frontier_[i] != top) {
-      if (frontier_[i] >= chunk_top_.size() || chunk_top_[frontier_[i]] != i)
-        throw FormatError(path + ": top node " + std::to_string(i) + " names a bad chunk");
-      continue;
-    }
-    const node& nd = top_nodes_[i];
-    const std::uint64_t end = std::uint64_t{nd.first} + nd.count;
-    if (nd.leaf || nd.count == 0 || nd.count > 8 || nd.first <= i || end > n)
-      throw FormatError(path + ": top node " + std::to_string(i) +
-                        " is not an inner node with 1..8 children after it");
-    for (std::uint64_t k = nd.first; k < end; ++k) {
-      if (reached[k])
-        throw FormatError(path + ": top node " + std::to_string(k) + " has two parents");
-      reached[k] = 1;
-    }
-  }
+  detail::validate_chunked_top(path, top_nodes_, frontier_, chunk_top_, chunk_samples_,
+                               chunk_nodes_, input_points_);
 }
 
 template <attributes A>

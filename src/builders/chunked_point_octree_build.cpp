@@ -16,6 +16,7 @@
 #include <limits>
 #include <optional>
 
+#include "chunk_files.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"
@@ -26,125 +27,6 @@ namespace detail {
 namespace {
 
 namespace fs = std::filesystem;
-
-/// A point as the distribution and halo passes store it in a chunk's temporary file.
-struct point_record {
-  std::uint64_t index;
-  vec3f position, normal;
-  rgb8 colour;
-};
-constexpr std::size_t record_bytes = 8 + 12 + 12 + 3;
-
-/// A file appended to through a buffer: the passes write to every chunk's file at once.
-class append_file {
- public:
-  /// `buffer`: bytes held before a write; the passes share ≈ 64 MiB among all their files.
-  append_file(std::string path, std::size_t buffer) : path_(std::move(path)), limit_(buffer) {
-    std::ofstream f(path_, std::ios::binary | std::ios::trunc);
-    if (!f) throw IoError(path_ + ": cannot open for writing");
-  }
-  void put(const point_record& r) {
-    const std::size_t at = buf_.size();
-    buf_.resize(at + record_bytes);
-    unsigned char* p = buf_.data() + at;
-    std::memcpy(p, &r.index, 8);
-    std::memcpy(p + 8, r.position.data(), 12);
-    std::memcpy(p + 20, r.normal.data(), 12);
-    std::memcpy(p + 32, &r.colour, 3);
-    ++count_;
-    if (buf_.size() >= limit_) flush();
-  }
-  void flush() {
-    if (buf_.empty()) return;
-    std::ofstream f(path_, std::ios::binary | std::ios::app);
-    f.write(reinterpret_cast<const char*>(buf_.data()), static_cast<std::streamsize>(buf_.size()));
-    if (!f) throw IoError(path_ + ": write failed");
-    buf_.clear();
-  }
-  [[nodiscard]] std::uint64_t count() const { return count_; }
-  [[nodiscard]] const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-  std::size_t limit_;
-  std::vector<unsigned char> buf_;
-  std::uint64_t count_ = 0;
-};
-
-std::vector<point_record> read_records(const std::string& path) {
-  const std::vector<unsigned char> bytes = load_file_bytes(path);
-  if (bytes.size() % record_bytes != 0) throw IoError(path + ": temporary file cut short");
-  std::vector<point_record> out(bytes.size() / record_bytes);
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    const unsigned char* p = bytes.data() + i * record_bytes;
-    std::memcpy(&out[i].index, p, 8);
-    std::memcpy(out[i].position.data(), p + 8, 12);
-    std::memcpy(out[i].normal.data(), p + 20, 12);
-    std::memcpy(&out[i].colour, p + 32, 3);
-  }
-  return out;
-}
-
-/// One vec3f per input point, written scattered (a chunk's points, ascending indices) through a
-/// mapping of the range they span, read back in input order.
-class index_file {
- public:
-  /// create: make the file (one process); else open the one another process made.
-  index_file(std::string path, std::uint64_t n, bool create) : path_(std::move(path)) {
-    fd_ = create ? ::open(path_.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644)
-                 : ::open(path_.c_str(), O_RDONLY);
-    if (fd_ < 0 || (create && ::ftruncate(fd_, static_cast<off_t>(n * 12)) != 0))
-      throw IoError(path_ + ": cannot open: " + std::strerror(errno));
-  }
-  ~index_file() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  index_file(const index_file&) = delete;
-  index_file& operator=(const index_file&) = delete;
-
-  void scatter(const std::vector<point_record>& at, const std::vector<vec3f>& v) {
-    if (at.empty()) return;
-    const auto page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
-    const std::uint64_t lo = at.front().index * 12 / page * page, hi = (at.back().index + 1) * 12;
-    void* m =
-        ::mmap(nullptr, hi - lo, PROT_READ | PROT_WRITE, MAP_SHARED, fd_, static_cast<off_t>(lo));
-    if (m == MAP_FAILED) throw IoError(path_ + ": cannot map: " + std::strerror(errno));
-    auto* base = static_cast<unsigned char*>(m);
-    for (std::size_t i = 0; i < at.size(); ++i)
-      std::memcpy(base + (at[i].index * 12 - lo), v[i].data(), 12);
-    // Written through to the file before another process (on another machine, through a
-    // shared file system) reads it.
-    const int synced = ::msync(m, hi - lo, MS_SYNC);
-    ::munmap(m, hi - lo);
-    if (synced != 0) throw IoError(path_ + ": cannot write: " + std::strerror(errno));
-  }
-  void read(std::uint64_t first, std::size_t count, std::vector<vec3f>& out) const {
-    out.resize(count);
-    auto* dst = reinterpret_cast<char*>(out.data());
-    std::size_t done = 0;
-    const std::size_t want = count * 12;
-    while (done < want) {
-      const ssize_t got =
-          ::pread(fd_, dst + done, want - done, static_cast<off_t>(first * 12 + done));
-      if (got <= 0) throw IoError(path_ + ": read failed");
-      done += static_cast<std::size_t>(got);
-    }
-  }
-
- private:
-  std::string path_;
-  int fd_ = -1;
-};
-
-/// Removes the temporary folder however the build ends.
-struct temp_dir {
-  fs::path path;
-  bool owner = false;  // rank 0 removes it (after the last barrier)
-  ~temp_dir() {
-    std::error_code ec;
-    if (owner) fs::remove_all(path, ec);
-  }
-};
 
 int octant_of(const vec3d& p, const vec3d& m) {
   return (p.x() >= m.x() ? 1 : 0) | (p.y() >= m.y() ? 2 : 0) | (p.z() >= m.z() ? 4 : 0);
@@ -196,7 +78,7 @@ struct stream_acc {
 };
 
 template <attributes In>
-struct chunked_point_octree_builder {
+struct chunked_point_octree_builder : chunked_pass_base {
   static constexpr attributes A = point_octree_attributes(In);
   using tree = point_octree<A>;
   using node = typename tree::node;
@@ -224,8 +106,6 @@ struct chunked_point_octree_builder {
     vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
   };
 
-  const point_source& src;
-  fs::path dir;
   const chunked_build_options& opt;
   point_octree_options oo;  // the octree options without the progress callback
   unsigned threads;
@@ -235,25 +115,16 @@ struct chunked_point_octree_builder {
   std::vector<top_node> nodes;
   std::vector<chunk_info> chunks;
   chunked_build_report rep;
-  temp_dir tmp;
   box3 box;              // of the input's positions (the root pass)
   double sphere_r2 = 0;  // about box.centre() (the distribution pass)
   std::vector<std::uint64_t> chunk_nodes;
 
-  int rank = 0, ranks = 1;
-
-  void barrier() const {
-    if (ranks > 1) opt.distributed.barrier();
-  }
-
   chunked_point_octree_builder(const point_source& s, const std::string& d,
                                const chunked_build_options& o)
-      : src(s), dir(d), opt(o), oo(o.octree), n(s.size()) {
-    rank = o.distributed.rank;
-    ranks = o.distributed.ranks;
-    if (ranks < 1 || rank < 0 || rank >= ranks || (ranks > 1 && !o.distributed.barrier))
-      throw InvalidArgument("build_point_octree_chunked: rank " + std::to_string(rank) + " of " +
-                            std::to_string(ranks) + " (and a barrier when more than one)");
+      : chunked_pass_base(s, d, o.block_points, o.distributed, "build_point_octree_chunked"),
+        opt(o),
+        oo(o.octree),
+        n(s.size()) {
     oo.progress = {};
     threads = oo.threads ? oo.threads : std::max(1u, std::thread::hardware_concurrency());
     chunk_points = opt.chunk_points
@@ -266,22 +137,6 @@ struct chunked_point_octree_builder {
   void progress(double f) const {
     if (opt.octree.progress && !opt.octree.progress(f))
       throw Cancelled("build_point_octree_chunked: cancelled");
-  }
-
-  /// f(first index, block) over the whole source, block by block; one full pass.
-  template <class F>
-  void stream(F&& f) {
-    ++rep.passes;
-    point_block b;
-    for (std::uint64_t first = 0; first < n; first += opt.block_points) {
-      const auto count =
-          static_cast<std::size_t>(std::min<std::uint64_t>(opt.block_points, n - first));
-      src.read(first, count, b);
-      if (b.size() != count || (In.normal && b.normals.size() != count) ||
-          (In.colour && b.colours.size() != count))
-        throw IoError(src.name() + ": a block came back with the wrong number of points");
-      f(first, b);
-    }
   }
 
   [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
@@ -356,10 +211,6 @@ struct chunked_point_octree_builder {
     }
   }
 
-  [[nodiscard]] std::string temp_path(const char* kind, std::size_t c) const {
-    return (tmp.path / (std::string(kind) + std::to_string(c))).string();
-  }
-
   /// Step 2: every point into its chunk's file (rank 0; the others learn the chunks' sizes from
   /// the files once it is done).
   void distribute() {
@@ -394,16 +245,8 @@ struct chunked_point_octree_builder {
     }
   }
 
-  /// The chunks this process builds: every ranks-th from its rank.
-  [[nodiscard]] bool mine(std::size_t c) const {
-    return c % static_cast<std::size_t>(ranks) == static_cast<std::size_t>(rank);
-  }
-
-  /// Each file's write buffer in the distribution and halo passes: 64 MiB shared among the
-  /// chunks' files, between 4 KiB and 256 KiB each.
   [[nodiscard]] std::size_t buffer_bytes() const {
-    return std::clamp<std::size_t>(
-        (std::size_t{64} << 20) / std::max<std::size_t>(1, chunks.size()), 4096, 256 * 1024);
+    return chunked_pass_base::buffer_bytes(chunks.size());
   }
 
   [[nodiscard]] int knn_needed() const {
@@ -842,22 +685,7 @@ struct chunked_point_octree_builder {
   chunked_build_report run() {
     using clock = std::chrono::steady_clock;
     const auto t0 = clock::now();
-    if (n == 0)
-      throw InvalidArgument("build_point_octree_chunked: " + src.name() + " has no points");
-    if (!all_finite(src.origin()))
-      throw InvalidArgument("build_point_octree_chunked: " + src.name() + ": origin not finite");
-    std::error_code ec;
-    fs::create_directories(dir, ec);
-    if (ec || !fs::is_directory(dir))
-      throw IoError(dir.string() + ": cannot create the output folder");
-    tmp.path = dir / "tmp-build";
-    tmp.owner = rank == 0;
-    if (rank == 0) {
-      fs::remove_all(tmp.path, ec);
-      fs::create_directories(tmp.path, ec);
-      if (ec) throw IoError(tmp.path.string() + ": cannot create: " + ec.message());
-    }
-    barrier();
+    start();
     rep.input_points = n;
     rep.chunk_points = chunk_points;
     rep.estimated_normals = !In.normal;
@@ -900,6 +728,7 @@ struct chunked_point_octree_builder {
       write_top(finish_top(roots));
     }
     barrier();  // the folder is whole when any rank returns
+    rep.passes = passes;
     rep.chunks = chunks.size();
     rep.top_nodes = nodes.size();
     rep.seconds = std::chrono::duration<double>(clock::now() - t0).count();

@@ -11,3 +11,6 @@ target_link_libraries(pbr_lod_pmr_cgal PRIVATE CGAL::CGAL Eigen3::Eigen pbr_lod_
 
 target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/pmr_build.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pmr_io.cpp $<TARGET_OBJECTS:pbr_lod_pmr_cgal>)
+# The chunked (out-of-core) build and the lazily opened directory it writes.
+target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/chunked_pmr_build.cpp
+               ${CMAKE_CURRENT_LIST_DIR}/chunked_pmr.cpp)

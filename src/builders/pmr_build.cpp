@@ -18,6 +18,7 @@
 #include "pbr_lod/builders/pmr.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/parallel.hpp"
+#include "pmr_internal.hpp"
 
 namespace pbr_lod::detail {
 namespace {
@@ -27,6 +28,12 @@ void validate(const point_cloud& cloud, const pmr_options& o) {
   if (cloud.empty()) throw InvalidArgument("build_pmr: the input has no points");
   if (cloud.size() >= std::numeric_limits<std::uint32_t>::max() - 1)
     throw InvalidArgument("build_pmr: more than 2^32 - 2 points");
+  validate_pmr_options(o);
+}
+
+}  // namespace
+
+void validate_pmr_options(const pmr_options& o) {
   if (o.max_leaf_points < 8)
     throw InvalidArgument("build_pmr: max_leaf_points must be at least 8, got " +
                           std::to_string(o.max_leaf_points));
@@ -41,7 +48,16 @@ void validate(const point_cloud& cloud, const pmr_options& o) {
     throw InvalidArgument("build_pmr: neighbour_margin must lie in [0, 2]");
 }
 
-/// An octree cell during the build, in double, in the frame of the new origin.
+namespace {
+
+/// A float radius at least r (the conversion rounds up, plus a relative ulp of slack).
+float outward(double r) {
+  float f = static_cast<float>(r);
+  if (static_cast<double>(f) < r) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f * (1 + 1e-6f) + 1e-30f;
+}
+
+/// An octree node during the build, in double, in the frame of the new origin.
 struct build_node {
   vec3d lo;
   double size;
@@ -53,29 +69,20 @@ struct build_node {
 
 /// §2 Spatial decomposition: cells split into octants while they hold more than
 /// max_leaf_points samples; breadth-first, so every node's children are contiguous. Empty
-/// octants get no node.
-std::vector<build_node> build_octree(const std::vector<vec3d>& local,
-                                     std::vector<std::uint32_t>& order, const pmr_options& o) {
-  vec3d lo = local[0], hi = local[0];
-  for (const auto& p : local) {
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
-  double size = (hi - lo).maxCoeff();
-  if (!(size > 0)) size = 1;
-  order.resize(local.size());
+/// octants get no node. The tree holds samples [0, owned) of `local` below the cell `root`.
+std::vector<build_node> build_octree(const std::vector<vec3d>& local, std::uint32_t owned,
+                                     const pmr_cell& root, std::vector<std::uint32_t>& order,
+                                     const pmr_options& o) {
+  order.resize(owned);
   std::iota(order.begin(), order.end(), 0u);
   std::vector<build_node> nodes;
-  nodes.push_back({lo, size, 0, static_cast<std::uint32_t>(local.size()), 0});
+  nodes.push_back({root.lo, root.size, 0, owned, root.depth});
   std::vector<std::uint32_t> tmp;
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const build_node nd = nodes[k];
     if (nd.end - nd.begin <= o.max_leaf_points || nd.depth >= o.max_depth) continue;
-    const vec3d mid = nd.lo + vec3d::Constant(nd.size / 2);
-    const auto octant = [&](std::uint32_t i) {
-      const vec3d& p = local[i];
-      return (p.x() >= mid.x() ? 1 : 0) | (p.y() >= mid.y() ? 2 : 0) | (p.z() >= mid.z() ? 4 : 0);
-    };
+    const vec3d mid = pmr_cell_mid(nd.lo, nd.size);
+    const auto octant = [&](std::uint32_t i) { return pmr_octant(local[i], mid); };
     std::array<std::uint32_t, 9> start{};
     for (std::uint32_t j = nd.begin; j < nd.end; ++j) ++start[octant(order[j]) + 1];
     for (int c = 0; c < 8; ++c) start[c + 1] += start[c];
@@ -87,10 +94,8 @@ std::vector<build_node> build_octree(const std::vector<vec3d>& local,
     nodes[k].first = static_cast<std::uint32_t>(nodes.size());
     for (int c = 0; c < 8; ++c) {
       if (start[c + 1] == start[c]) continue;
-      const vec3d clo = nd.lo + vec3d((c & 1) ? nd.size / 2 : 0, (c & 2) ? nd.size / 2 : 0,
-                                      (c & 4) ? nd.size / 2 : 0);
-      nodes.push_back(
-          {clo, nd.size / 2, nd.begin + start[c], nd.begin + start[c + 1], nd.depth + 1});
+      const pmr_cell ch = pmr_child_cell({nd.lo, nd.size, nd.depth}, c);
+      nodes.push_back({ch.lo, ch.size, nd.begin + start[c], nd.begin + start[c + 1], ch.depth});
     }
     nodes[k].count = static_cast<std::uint32_t>(nodes.size()) - nodes[k].first;
   }
@@ -118,14 +123,21 @@ struct leaf_result {
 struct builder {
   const point_cloud& cloud;
   const pmr_options& opt;
-  std::vector<vec3d> local;          // world − origin, double
-  std::vector<std::uint32_t> rep;    // representative of each sample's duplicates (itself)
-  std::vector<std::uint32_t> order;  // octree order of the samples
+  std::uint32_t owned;                   // the tree's samples: [0, owned); the rest is halo
+  std::span<const std::uint64_t> input;  // input index per sample (a part); empty: itself
+  std::vector<vec3d> local;              // world − origin, double
+  std::vector<std::uint32_t> rep;        // representative of each sample's duplicates (itself)
+  std::vector<std::uint32_t> order;      // octree order of the samples
   std::vector<build_node> nodes;
   std::vector<std::uint32_t> leaf_nodes;
   std::vector<leaf_result> results;
 
-  builder(const point_cloud& c, const pmr_options& o) : cloud(c), opt(o) {}
+  builder(const point_cloud& c, const pmr_options& o, std::uint32_t own,
+          std::span<const std::uint64_t> in = {})
+      : cloud(c), opt(o), owned(own), input(in) {}
+
+  /// A sample's index in the whole input: ties and neighbour order follow it.
+  [[nodiscard]] std::uint64_t key(std::uint32_t i) const { return input.empty() ? i : input[i]; }
 
   /// Samples equal to an earlier one (exactly, as stored) are duplicates: one triangulation
   /// vertex for all of them, the others at level 0 only.
@@ -138,7 +150,7 @@ struct builder {
       if (P[a].x() != P[b].x()) return P[a].x() < P[b].x();
       if (P[a].y() != P[b].y()) return P[a].y() < P[b].y();
       if (P[a].z() != P[b].z()) return P[a].z() < P[b].z();
-      return a < b;
+      return key(a) < key(b);
     };
     std::sort(idx.begin(), idx.end(), less);
     rep.resize(n);
@@ -146,7 +158,7 @@ struct builder {
     for (std::size_t k = 0; k < n; ++k) {
       if (k > 0 && P[idx[k]] == P[idx[k - 1]]) {
         rep[idx[k]] = rep[idx[k - 1]];
-        ++dups;
+        dups += idx[k] < owned ? 1 : 0;  // a part counts its own, not its halo's
       } else {
         rep[idx[k]] = idx[k];
       }
@@ -154,8 +166,10 @@ struct builder {
     return dups;
   }
 
-  /// The leaf's own unique samples, then every unique sample of other leaves within the
-  /// margin of its cube; relative to the cube's centre.
+  /// The leaf's own unique samples, then every unique sample of other leaves (and of the halo)
+  /// within the margin of its cube, in input order; relative to the cube's centre. A node whose
+  /// cell misses the margin box is skipped; its cell is widened by a millionth of its size, as
+  /// a sample on its upper face may lie an ulp outside it.
   void gather(std::uint32_t leaf, std::vector<std::uint32_t>& ids, std::vector<vec3d>& pts,
               std::uint32_t& own) const {
     const build_node& L = nodes[leaf_nodes[leaf]];
@@ -171,8 +185,10 @@ struct builder {
       const std::uint32_t k = stack.back();
       stack.pop_back();
       if (k == leaf_nodes[leaf]) continue;
-      const vec3d nhi = nd.lo + vec3d::Constant(nd.size);
-      if ((nhi.array() < lo.array()).any() || (nd.lo.array() > hi.array()).any()) continue;
+      const double slack = nd.size * 1e-6;
+      const vec3d nhi = nd.lo + vec3d::Constant(nd.size + slack);
+      const vec3d nlo = nd.lo - vec3d::Constant(slack);
+      if ((nhi.array() < lo.array()).any() || (nlo.array() > hi.array()).any()) continue;
       if (!nd.leaf) {
         for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) stack.push_back(c);
         continue;
@@ -184,9 +200,15 @@ struct builder {
         if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) ids.push_back(i);
       }
     }
+    for (auto i = owned; i < local.size(); ++i) {
+      const vec3d& p = local[i];
+      if (rep[i] == i && (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all())
+        ids.push_back(i);
+    }
     // Neighbours in input order, so the triangulation's insertion does not depend on the
-    // traversal above.
-    std::sort(ids.begin() + own, ids.end());
+    // traversal above (nor on which chunk a neighbour came from).
+    std::sort(ids.begin() + own, ids.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return key(a) < key(b); });
     const vec3d c = L.lo + vec3d::Constant(L.size / 2);
     pts.resize(ids.size());
     for (std::size_t k = 0; k < ids.size(); ++k) pts[k] = local[ids[k]] - c;
@@ -280,14 +302,16 @@ struct builder {
         d.source.push_back(i);
       }
     }
-    d.positions.resize(n);
-    d.normals.resize(n);
-    for (std::size_t g = 0; g < n; ++g) d.positions[g] = local[d.source[g]].cast<float>();
+    add_foreign(d, global);
+    const std::size_t total = d.source.size();
+    d.positions.resize(total);
+    d.normals.assign(total, vec3f::Zero());
+    for (std::size_t g = 0; g < total; ++g) d.positions[g] = local[d.source[g]].cast<float>();
     // Colours travel with their samples (every level is a subset of the input).
     d.colours.clear();
     if (!cloud.colours.empty()) {
-      d.colours.resize(n);
-      for (std::size_t g = 0; g < n; ++g) d.colours[g] = cloud.colours[d.source[g]];
+      d.colours.resize(total);
+      for (std::size_t g = 0; g < total; ++g) d.colours[g] = cloud.colours[d.source[g]];
     }
     for (const auto& r : results)
       for (std::size_t k = 0; k < r.own.size(); ++k) d.normals[global[r.own[k]]] = r.normal[k];
@@ -352,10 +376,29 @@ struct builder {
       }
     }
     orient(d, levels);
-    for (std::size_t g = 0; g < n; ++g) {
+    for (std::size_t g = 0; g < owned; ++g) {
       const std::uint32_t i = d.source[g];
       if (rep[i] != i) d.normals[g] = d.normals[global[rep[i]]];
     }
+  }
+
+  /// A part's triangle vertices in its halo: samples after the own ones, in input order.
+  void add_foreign(pmr_data& d, std::vector<std::uint32_t>& global) const {
+    if (owned == local.size()) return;
+    std::vector<std::uint32_t> f;
+    for (const auto& r : results)
+      for (const auto& lv : r.lv)
+        for (const auto& t : lv.tris)
+          for (const std::uint32_t i : t)
+            if (i >= owned) f.push_back(i);
+    std::sort(f.begin(), f.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return key(a) < key(b); });
+    f.erase(std::unique(f.begin(), f.end()), f.end());
+    for (const std::uint32_t i : f) {
+      global[i] = static_cast<std::uint32_t>(d.source.size());
+      d.source.push_back(i);
+    }
+    d.foreign = static_cast<std::uint32_t>(f.size());
   }
 
   /// The pole vector gives a normal's line, not its side (the farthest Voronoi vertex may be
@@ -365,7 +408,7 @@ struct builder {
   /// the normal pointing away from it. Then each triangle is wound counter-clockwise about its
   /// vertices' normals (the rasteriser shades a triangle seen from its back as such).
   void orient(pmr_data& d, std::uint32_t levels) const {
-    const std::size_t n = d.positions.size();
+    const std::size_t n = owned;  // a part's foreign samples are oriented by their own chunk
     if (n >= std::numeric_limits<std::uint32_t>::max()) return;  // validated; bounds n for GCC
     if (!cloud.normals.empty()) {
       for (std::size_t g = 0; g < n; ++g)
@@ -377,6 +420,7 @@ struct builder {
         for (std::uint32_t t = L.first_tri; t < L.first_tri + L.tris; ++t) {
           const auto& T = d.triangles[t];
           for (int k = 0; k < 3; ++k) {
+            if (T[k] >= n || T[(k + 1) % 3] >= n) continue;
             edges.emplace_back(T[k], T[(k + 1) % 3]);
             edges.emplace_back(T[(k + 1) % 3], T[k]);
           }
@@ -419,11 +463,7 @@ struct builder {
         }
       }
     }
-    for (auto& T : d.triangles) {
-      const vec3f g =
-          (d.positions[T[1]] - d.positions[T[0]]).cross(d.positions[T[2]] - d.positions[T[0]]);
-      if (g.dot(d.normals[T[0]] + d.normals[T[1]] + d.normals[T[2]]) < 0) std::swap(T[1], T[2]);
-    }
+    if (d.foreign == 0) pmr_wind_triangles(d);
   }
 
   /// Bounding spheres: a leaf's holds its samples and every vertex of its umbrella triangles
@@ -474,37 +514,65 @@ struct builder {
     // Children come after their parent (breadth-first): bottom-up is a reverse sweep.
     for (std::size_t k = nodes.size(); k-- > 0;) {
       pmr_node& nd = d.nodes[k];
-      if (nd.leaf) continue;
-      vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
-        const vec3d cc = d.nodes[c].centre.cast<double>();
-        lo = lo.cwiseMin(cc - vec3d::Constant(d.nodes[c].radius));
-        hi = hi.cwiseMax(cc + vec3d::Constant(d.nodes[c].radius));
-      }
-      const vec3d c = 0.5 * (lo + hi);
-      double r = 0;
-      for (std::uint32_t ch = nd.first; ch < nd.first + nd.count; ++ch)
-        r = std::max(r, (d.nodes[ch].centre.cast<double>() - c).norm() + d.nodes[ch].radius);
-      nd.centre = c.cast<float>();
-      nd.radius = outward(r + (c - nd.centre.cast<double>()).norm());
+      if (!nd.leaf)
+        pmr_bound_inner(nd, std::span<const pmr_node>(d.nodes).subspan(nd.first, nd.count));
     }
-  }
-
-  /// A float radius at least r (the conversion rounds up, plus a relative ulp of slack).
-  static float outward(double r) {
-    float f = static_cast<float>(r);
-    if (static_cast<double>(f) < r) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-    return f * (1 + 1e-6f) + 1e-30f;
   }
 };
 
+/// The octree, the leaves' Voronoi work and the records of d (its origin, bounds and options
+/// set).
+void build_into(builder& b, pmr_data& d, const pmr_cell& root) {
+  const pmr_options& opt = b.opt;
+  d.max_leaf_points = opt.max_leaf_points;
+  d.neighbour_margin = opt.neighbour_margin;
+  d.rho = opt.rho;
+  b.local.resize(b.cloud.size());
+  for (std::size_t i = 0; i < b.cloud.size(); ++i) b.local[i] = b.cloud.world(i) - d.origin;
+  d.stats.input_points = b.owned;
+  d.stats.duplicates = b.find_duplicates();
+  b.nodes = build_octree(b.local, b.owned, root, b.order, opt);
+  for (std::uint32_t k = 0; k < b.nodes.size(); ++k)
+    if (b.nodes[k].leaf) b.leaf_nodes.push_back(k);
+  b.process_leaves(d.stats);
+  b.assemble(d);
+  b.node_records(d);
+}
+
 }  // namespace
+
+void pmr_wind_triangles(pmr_data& d) {
+  for (auto& T : d.triangles) {
+    // Vertices in input order first: a chunk of a chunked build numbers its samples otherwise
+    // but stores the same vertex order, so both draw the same triangle the same way.
+    std::sort(T.begin(), T.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return d.source[a] < d.source[b]; });
+    const vec3f g =
+        (d.positions[T[1]] - d.positions[T[0]]).cross(d.positions[T[2]] - d.positions[T[0]]);
+    if (g.dot(d.normals[T[0]] + d.normals[T[1]] + d.normals[T[2]]) < 0) std::swap(T[1], T[2]);
+  }
+}
+
+void pmr_bound_inner(pmr_node& nd, std::span<const pmr_node> children) {
+  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const pmr_node& ch : children) {
+    const vec3d cc = ch.centre.cast<double>();
+    lo = lo.cwiseMin(cc - vec3d::Constant(ch.radius));
+    hi = hi.cwiseMax(cc + vec3d::Constant(ch.radius));
+  }
+  const vec3d c = 0.5 * (lo + hi);
+  double r = 0;
+  for (const pmr_node& ch : children)
+    r = std::max(r, (ch.centre.cast<double>() - c).norm() + ch.radius);
+  nd.centre = c.cast<float>();
+  nd.radius = outward(r + (c - nd.centre.cast<double>()).norm());
+}
 
 pmr_data build_pmr_data(const point_cloud& cloud, const pmr_options& opt) {
   const auto t0 = std::chrono::steady_clock::now();
   validate(cloud, opt);
   if (opt.progress && !opt.progress(0)) throw Cancelled("build_pmr: cancelled");
-  builder b(cloud, opt);
+  builder b(cloud, opt, static_cast<std::uint32_t>(cloud.size()));
   pmr_data d;
   // A double-precision origin at the centre of the input's box: everything below (octree,
   // triangulations, stored floats) is relative to it.
@@ -517,22 +585,27 @@ pmr_data build_pmr_data(const point_cloud& cloud, const pmr_options& opt) {
   d.origin = 0.5 * (lo + hi);
   d.input_min = lo;
   d.input_max = hi;
-  d.max_leaf_points = opt.max_leaf_points;
-  d.neighbour_margin = opt.neighbour_margin;
-  d.rho = opt.rho;
-  b.local.resize(cloud.size());
-  for (std::size_t i = 0; i < cloud.size(); ++i) b.local[i] = cloud.world(i) - d.origin;
-  d.stats.input_points = cloud.size();
-  d.stats.duplicates = b.find_duplicates();
-  b.nodes = build_octree(b.local, b.order, opt);
-  for (std::uint32_t k = 0; k < b.nodes.size(); ++k)
-    if (b.nodes[k].leaf) b.leaf_nodes.push_back(k);
-  b.process_leaves(d.stats);
-  b.assemble(d);
-  b.node_records(d);
+  // The local box is the world box moved by the origin: rounding is monotonic, so the extremes
+  // of the moved points are the moved extremes (the chunked build relies on it).
+  build_into(b, d, pmr_root_cell(lo - d.origin, hi - d.origin));
   if (opt.progress && !opt.progress(1)) throw Cancelled("build_pmr: cancelled");
   d.stats.build_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return d;
+}
+
+pmr_data build_pmr_part(const pmr_part_input& in, const pmr_options& opt) {
+  validate_pmr_options(opt);
+  if (in.owned == 0 || in.owned > in.cloud.size() || in.input.size() != in.cloud.size())
+    throw InvalidArgument("build_pmr_part: inconsistent chunk");
+  builder b(in.cloud, opt, in.owned, in.input);
+  pmr_data d;
+  d.origin = in.origin;
+  d.input_min = in.input_min;
+  d.input_max = in.input_max;
+  build_into(b, d, in.root);
+  for (auto& s : d.source) s = static_cast<std::uint32_t>(in.input[s]);
+  d.input_total = in.input_total;
   return d;
 }
 

@@ -1,10 +1,12 @@
 // pbr_lod — PMR (Dey & Hudson, IEEE Vis 2002) §2 Records and §3 (the file is mapped with
 // mmap): the versioned file "PBRLODPM" v1.
 //
-// Layout (little-endian): magic "PBRLODPM", u32 version, u32 flags (bit 0: colours); f64×3 origin,
+// Layout (little-endian): magic "PBRLODPM", u32 version, u32 flags (bit 0: colours, bit 1: a
+// chunk of a chunked build); f64×3 origin,
 // input min, input max; u32 max_leaf_points, f32 neighbour_margin; u32 thresholds, f32 each; u64 ×
 // 6 build counts (input points, duplicates, triangulated, removals, flat leaves, hull points); u32
-// counts of samples, nodes, leaves, triangles, umbrellas, umbrella indices; then the arrays in
+// counts of samples, nodes, leaves, triangles, umbrellas, umbrella indices; with flag bit 1, u32
+// foreign samples and u64 input size (pmr_data); then the arrays in
 // that order of pmr_data (positions, normals, source, colours as RGB bytes when flag bit 0 is
 // set, nodes, leaves, levels, triangles, umbrellas, umbrella indices); u64 FNV-1a of everything
 // before. A file without colours is the same bytes as before colours existed. No timings: the same
@@ -14,6 +16,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -23,6 +26,7 @@
 #include "pbr_lod/builders/pmr.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pmr_internal.hpp"
 
 namespace pbr_lod::detail {
 
@@ -33,35 +37,74 @@ bool operator==(const pmr_data& a, const pmr_data& b) {
          a.colours == b.colours && a.source == b.source && a.nodes == b.nodes &&
          a.leaf_list == b.leaf_list && a.levels == b.levels && a.triangles == b.triangles &&
          a.umbrellas == b.umbrellas && a.umbrella_index == b.umbrella_index &&
+         a.foreign == b.foreign && a.input_total == b.input_total &&
          a.stats.input_points == b.stats.input_points && a.stats.duplicates == b.stats.duplicates &&
          a.stats.triangulated_points == b.stats.triangulated_points &&
          a.stats.removals == b.stats.removals && a.stats.flat_leaves == b.stats.flat_leaves &&
          a.stats.hull_points == b.stats.hull_points;
 }
 
+std::array<std::size_t, 6> stat_counts(const pmr_build_stats& s) {
+  return {s.input_points, s.duplicates,  s.triangulated_points,
+          s.removals,     s.flat_leaves, s.hull_points};
+}
+std::array<std::size_t*, 6> stat_fields(pmr_build_stats& s) {
+  return {&s.input_points, &s.duplicates,  &s.triangulated_points,
+          &s.removals,     &s.flat_leaves, &s.hull_points};
+}
+
+void put_node(byte_writer& w, const pmr_node& n) {
+  w.put_vec(n.cell_min);
+  w.put(n.cell_size);
+  w.put_vec(n.centre);
+  w.put(n.radius);
+  w.put(n.first);
+  w.put(n.count);
+  w.put(n.leaf);
+  w.put(n.depth);
+}
+
+pmr_node get_node(byte_reader& r, std::size_t k) {
+  pmr_node n;
+  n.cell_min = r.get_vec("node cell", k);
+  n.cell_size = r.get_finite("node cell size", k);
+  n.centre = r.get_vec("node centre", k);
+  n.radius = r.get_finite("node radius", k);
+  n.first = r.get<std::uint32_t>("node first");
+  n.count = r.get<std::uint32_t>("node count");
+  n.leaf = r.get<std::uint32_t>("node leaf flag");
+  n.depth = r.get<std::uint32_t>("node depth");
+  if (n.cell_size < 0 || n.radius < 0 || n.leaf > 1)
+    throw FormatError(r.path + ": node " + std::to_string(k) + ": negative size or bad leaf flag");
+  return n;
+}
+
 namespace {
 
 constexpr file_format pmr_format{"PMR", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'M'}, 1};
-constexpr std::uint32_t flag_colours = 1;
+constexpr std::uint32_t flag_colours = 1, flag_part = 2;
 constexpr std::size_t node_bytes = 4 * 8 + 4 * 4, leaf_bytes = 12, level_bytes = 20, tri_bytes = 12,
                       umbrella_bytes = 12;
 
 std::vector<unsigned char> encode(const pmr_data& d) {
   byte_writer w;
   write_head(w, pmr_format);
-  w.put(d.colours.empty() ? std::uint32_t{0} : flag_colours);
+  const bool part = d.input_total != 0;
+  w.put((d.colours.empty() ? std::uint32_t{0} : flag_colours) | (part ? flag_part : 0));
   for (const vec3d* v : {&d.origin, &d.input_min, &d.input_max})
     for (int k = 0; k < 3; ++k) w.put((*v)[k]);
   w.put(d.max_leaf_points);
   w.put(d.neighbour_margin);
   w.put(static_cast<std::uint32_t>(d.rho.size()));
   for (const float r : d.rho) w.put(r);
-  for (const std::size_t s : {d.stats.input_points, d.stats.duplicates, d.stats.triangulated_points,
-                              d.stats.removals, d.stats.flat_leaves, d.stats.hull_points})
-    w.put(static_cast<std::uint64_t>(s));
+  for (const std::size_t s : stat_counts(d.stats)) w.put(static_cast<std::uint64_t>(s));
   for (const std::size_t s : {d.positions.size(), d.nodes.size(), d.leaf_list.size(),
                               d.triangles.size(), d.umbrellas.size(), d.umbrella_index.size()})
     w.put(static_cast<std::uint32_t>(s));
+  if (part) {
+    w.put(d.foreign);
+    w.put(d.input_total);
+  }
   for (const auto& p : d.positions) w.put_vec(p);
   for (const auto& n : d.normals) w.put_vec(n);
   for (const auto s : d.source) w.put(s);
@@ -70,16 +113,7 @@ std::vector<unsigned char> encode(const pmr_data& d) {
     w.put(c.g);
     w.put(c.b);
   }
-  for (const auto& n : d.nodes) {
-    w.put_vec(n.cell_min);
-    w.put(n.cell_size);
-    w.put_vec(n.centre);
-    w.put(n.radius);
-    w.put(n.first);
-    w.put(n.count);
-    w.put(n.leaf);
-    w.put(n.depth);
-  }
+  for (const auto& n : d.nodes) put_node(w, n);
   for (const auto& l : d.leaf_list) {
     w.put(l.first_point);
     w.put(l.point_count);
@@ -188,11 +222,28 @@ class mapping {
   std::size_t size_ = 0;
 };
 
+/// A whole hierarchy's sources are a permutation of its samples; a part's are distinct input
+/// indices.
+void check_sources(const reader& r, const pmr_data& d) {
+  const std::size_t n = d.source.size();
+  if (d.input_total == 0) {
+    std::vector<unsigned char> seen(n, 0);
+    for (std::size_t i = 0; i < n; ++i)
+      if (d.source[i] >= n || seen[d.source[i]]++)
+        r.fail("source index of sample " + std::to_string(i) + " out of range or repeated");
+    return;
+  }
+  std::vector<std::uint32_t> s = d.source;
+  std::sort(s.begin(), s.end());
+  if (s.back() >= d.input_total || std::adjacent_find(s.begin(), s.end()) != s.end())
+    r.fail("source indices out of range or repeated");
+}
+
 pmr_data decode(reader& r, const unsigned char* bytes) {
   pmr_data d;
   r.skip_head();  // checked by read_head() in load_pmr_data
   const auto flags = r.get<std::uint32_t>("flags");
-  if ((flags & ~flag_colours) != 0) r.fail("unknown flags");
+  if ((flags & ~(flag_colours | flag_part)) != 0) r.fail("unknown flags");
   for (vec3d* v : {&d.origin, &d.input_min, &d.input_max})
     for (int k = 0; k < 3; ++k) {
       (*v)[k] = r.get<double>("origin/bounds");
@@ -208,17 +259,22 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
       r.fail("rho[" + std::to_string(i) + "] is not positive and increasing");
   }
   const std::uint32_t levels = nrho + 1;
-  std::size_t* counts[] = {&d.stats.input_points,        &d.stats.duplicates,
-                           &d.stats.triangulated_points, &d.stats.removals,
-                           &d.stats.flat_leaves,         &d.stats.hull_points};
-  for (std::size_t* c : counts) *c = static_cast<std::size_t>(r.get<std::uint64_t>("build counts"));
+  for (std::size_t* c : stat_fields(d.stats))
+    *c = static_cast<std::size_t>(r.get<std::uint64_t>("build counts"));
   const auto npts = r.get<std::uint32_t>("sample count");
   const auto nnodes = r.get<std::uint32_t>("node count");
   const auto nleaves = r.get<std::uint32_t>("leaf count");
   const auto ntris = r.get<std::uint32_t>("triangle count");
   const auto numb = r.get<std::uint32_t>("umbrella count");
   const auto nidx = r.get<std::uint32_t>("umbrella index count");
-  if (d.stats.input_points != npts) r.fail("sample count differs from the input count");
+  if (flags & flag_part) {
+    d.foreign = r.get<std::uint32_t>("foreign vertex count");
+    d.input_total = r.get<std::uint64_t>("input size");
+    if (d.foreign >= npts || d.input_total == 0)
+      r.fail("foreign vertex count or input size out of range");
+  }
+  const std::uint32_t own = npts - d.foreign;
+  if (d.stats.input_points != own) r.fail("sample count differs from the input count");
   if (npts == 0 || nnodes == 0 || nleaves == 0) r.fail("empty hierarchy");
 
   r.need(npts, 28, "samples");
@@ -227,12 +283,8 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
   d.source.resize(npts);
   for (std::uint32_t i = 0; i < npts; ++i) d.positions[i] = r.vec("position", i);
   for (std::uint32_t i = 0; i < npts; ++i) d.normals[i] = r.vec("normal", i);
-  std::vector<unsigned char> seen(npts, 0);
-  for (std::uint32_t i = 0; i < npts; ++i) {
-    d.source[i] = r.get<std::uint32_t>("source index");
-    if (d.source[i] >= npts || seen[d.source[i]]++)
-      r.fail("source index of sample " + std::to_string(i) + " out of range or repeated");
-  }
+  for (std::uint32_t i = 0; i < npts; ++i) d.source[i] = r.get<std::uint32_t>("source index");
+  check_sources(r, d);
   if (flags & flag_colours) {
     r.need(npts, 3, "sample colours");
     d.colours.resize(npts);
@@ -291,7 +343,7 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
     if (L.node >= nnodes || !d.nodes[L.node].leaf || d.nodes[L.node].first != l)
       r.fail("leaf " + std::to_string(l) + ": node does not point back to it");
   }
-  if (expect != npts) r.fail("leaves do not cover every sample");
+  if (expect != own) r.fail("leaves do not cover every sample");
 
   const std::uint64_t nlev = static_cast<std::uint64_t>(nleaves) * levels;
   r.need(nlev, level_bytes, "levels");
@@ -354,7 +406,7 @@ std::size_t pmr_file_bytes(const pmr_data& d) {
   return header + d.positions.size() * 28 + d.colours.size() * 3 + d.nodes.size() * node_bytes +
          d.leaf_list.size() * leaf_bytes + d.levels.size() * level_bytes +
          d.triangles.size() * tri_bytes + d.umbrellas.size() * umbrella_bytes +
-         d.umbrella_index.size() * 4 + 8;
+         d.umbrella_index.size() * 4 + 8 + (d.input_total != 0 ? 12 : 0);
 }
 
 void save_pmr_data(const pmr_data& d, const std::string& path) {

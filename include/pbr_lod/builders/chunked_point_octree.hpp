@@ -68,10 +68,7 @@ struct chunked_build_options {
   /// chunk and halo files and the top; halo radii, estimation and chunk builds go round robin
   /// (chunk c to rank c mod ranks). The folder is byte-identical to a one-process build. A rank
   /// that throws leaves the others waiting at the barrier: the caller aborts the job.
-  struct {
-    int rank = 0, ranks = 1;
-    std::function<void()> barrier = {};
-  } distributed{};
+  distributed_build distributed{};
 };
 
 /// Peak bytes of a chunk's build per sample, measured (docs/scale.md): the chunk's records and

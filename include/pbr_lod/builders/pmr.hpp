@@ -154,6 +154,11 @@ struct pmr_data {
   std::vector<vec3f> normals;         ///< unit, from the level-0 Voronoi diagram (§2 Records)
   std::vector<rgb8> colours;          ///< the input's, per stored sample; empty when it had none
   std::vector<std::uint32_t> source;  ///< input index of each stored sample
+  /// A part of a chunked build (builders/chunked_pmr.hpp): the last `foreign` samples are no
+  /// leaf's, only vertices of umbrella triangles that reach into other chunks, and source holds
+  /// indices into an input of `input_total` points. 0 and 0 for a whole hierarchy.
+  std::uint32_t foreign = 0;
+  std::uint64_t input_total = 0;
   std::vector<pmr_node> nodes;
   std::vector<pmr_leaf> leaf_list;
   std::vector<pmr_level> levels;  ///< leaf_list.size() × (rho.size() + 1), leaf-major
@@ -199,6 +204,7 @@ struct pmr_cell_output {
 
 [[nodiscard]] pmr_data build_pmr_data(const point_cloud& cloud, const pmr_options& options);
 void save_pmr_data(const pmr_data& d, const std::string& path);
+struct chunked_pmr_access;
 [[nodiscard]] pmr_data load_pmr_data(const std::string& path);
 [[nodiscard]] std::size_t pmr_file_bytes(const pmr_data& d);
 
@@ -257,7 +263,9 @@ class pmr_hierarchy {
   // ---- §3 viewing, step by step
   /// World size of a pixel at the corner of the node's octree cell nearest the eye (§3).
   [[nodiscard]] float pixel_size(node_id n, const view& v) const {
-    const auto& nd = d_.nodes[n];
+    return pixel_size_of(d_.nodes[n], v);
+  }
+  [[nodiscard]] static float pixel_size_of(const detail::pmr_node& nd, const view& v) {
     vec3f corner;
     for (int k = 0; k < 3; ++k)
       corner[k] =
@@ -317,6 +325,9 @@ class pmr_hierarchy {
     }
   }
 
+  /// The leaf index of leaf node n (for choose_level and emit_level).
+  [[nodiscard]] std::uint32_t leaf_of(node_id n) const { return d_.nodes[n].first; }
+
   // ---- inspection
   [[nodiscard]] std::uint32_t levels() const {
     return static_cast<std::uint32_t>(d_.rho.size() + 1);
@@ -347,6 +358,10 @@ class pmr_hierarchy {
   [[nodiscard]] std::uint32_t max_leaf_points() const { return d_.max_leaf_points; }
   [[nodiscard]] float neighbour_margin() const { return d_.neighbour_margin; }
   [[nodiscard]] const pmr_build_stats& stats() const { return d_.stats; }
+  /// A chunk of a chunked build (builders/chunked_pmr.hpp): its last foreign() samples are other
+  /// chunks' (umbrella vertices only), and source() indexes an input of input_total() points.
+  [[nodiscard]] std::uint32_t foreign() const { return d_.foreign; }
+  [[nodiscard]] std::uint64_t input_total() const { return d_.input_total; }
   /// Samples over all leaves at level i.
   [[nodiscard]] std::size_t points_at_level(std::uint32_t i) const {
     std::size_t n = 0;
@@ -376,6 +391,7 @@ class pmr_hierarchy {
 
  private:
   friend pmr_hierarchy build_pmr(const point_cloud&, const pmr_options&);
+  friend struct detail::chunked_pmr_access;
   detail::pmr_data d_;
 };
 
@@ -406,6 +422,7 @@ class pmr_colour_view {
   // What pmr_policy uses besides the Hierarchy interface.
   [[nodiscard]] const std::vector<detail::pmr_node>& nodes() const { return h_->nodes(); }
   [[nodiscard]] float pixel_size(node_id n, const view& v) const { return h_->pixel_size(n, v); }
+  [[nodiscard]] std::uint32_t leaf_of(node_id n) const { return h_->leaf_of(n); }
   [[nodiscard]] std::uint32_t choose_level(std::uint32_t leaf, float pixel, float factor) const {
     return h_->choose_level(leaf, pixel, factor);
   }
@@ -449,7 +466,7 @@ struct pmr_policy : default_policy {
       h.emit(n, v, sink);
       return;
     }
-    const std::uint32_t leaf = h.nodes()[n].first;
+    const std::uint32_t leaf = h.leaf_of(n);
     const float ps = h.pixel_size(n, v);
     const std::uint32_t lvl = h.choose_level(leaf, ps, o.tolerance_px);
     if (levels_used) (*levels_used)[leaf] = lvl;

@@ -13,6 +13,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,6 +30,13 @@ struct point_block {
   std::vector<vec3f> normals;
   std::vector<rgb8> colours;
   [[nodiscard]] std::size_t size() const { return positions.size(); }
+};
+
+/// A chunked build shared by `ranks` processes (MPI ranks, say) that see the output folder on a
+/// shared file system: each calls the build with its rank and a barrier over all of them.
+struct distributed_build {
+  int rank = 0, ranks = 1;
+  std::function<void()> barrier = {};
 };
 
 class point_source {

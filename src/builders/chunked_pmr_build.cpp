@@ -1,0 +1,544 @@
+// The chunked (out-of-core) PMR build: see include/pbr_lod/builders/chunked_pmr.hpp for the
+// steps and why the result equals build_pmr's.
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <optional>
+#include <queue>
+
+#include "chunk_files.hpp"
+#include "pbr_lod/builders/chunked_pmr.hpp"
+#include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/bounds.hpp"
+#include "pmr_internal.hpp"
+
+namespace pbr_lod {
+namespace detail {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr std::uint32_t none = 0xffffffffu;
+
+/// A cell of the octree above the chunks.
+struct top_cell {
+  pmr_cell cell;
+  std::uint64_t count = 0;
+  enum class state : std::uint8_t { chunk, pending, split } st = state::chunk;
+  std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
+  std::array<std::uint64_t, 8> octant_count{};
+  std::uint32_t first_child = 0, children = 0, chunk = none;
+};
+
+/// What step 5 keeps of a chunk for the top: its root's record and counts.
+struct chunk_root {
+  pmr_node record;
+  std::uint64_t leaves = 0, nodes = 0;
+  pmr_build_stats stats;
+};
+
+struct chunked_pmr_builder : chunked_pass_base {
+  const chunked_pmr_options& opt;
+  pmr_options po;  // the PMR options without the progress callback
+  std::uint64_t n;
+  std::uint64_t chunk_points;
+  vec3d origin = vec3d::Zero(), wlo = vec3d::Zero(), whi = vec3d::Zero();
+  std::vector<top_cell> nodes;
+  std::vector<std::uint32_t> chunk_top;  // per chunk: its top cell
+  std::vector<std::uint64_t> chunk_count;
+  chunked_build_report rep;
+  vec3f sphere_centre = vec3f::Zero();  // of the input's float positions' box (rank 0)
+  double sphere_r2 = 0;
+  // The chunk of the sample farthest from the origin (first in input order among equals): the
+  // seed of build_pmr's orientation (rank 0).
+  std::uint32_t far_chunk = 0;
+  float far_d2 = -1;
+
+  chunked_pmr_builder(const point_source& s, const std::string& d, const chunked_pmr_options& o)
+      : chunked_pass_base(s, d, o.block_points, o.distributed, "build_pmr_chunked"),
+        opt(o),
+        po(o.pmr),
+        n(s.size()) {
+    validate_pmr_options(po);
+    po.progress = {};
+    if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
+      throw InvalidArgument("build_pmr_chunked: more than 2^32 - 2 points");
+    chunk_points = opt.chunk_points
+                       ? opt.chunk_points
+                       : std::max<std::uint64_t>(1, opt.memory_bytes / chunked_pmr_bytes_per_point);
+    chunk_points = std::clamp<std::uint64_t>(chunk_points, po.max_leaf_points, (1u << 31) - 1);
+  }
+
+  void progress(double f) const {
+    if (opt.pmr.progress && !opt.pmr.progress(f)) throw Cancelled("build_pmr_chunked: cancelled");
+  }
+
+  [[nodiscard]] vec3d local(const vec3f& p) const {
+    return (src.origin() + p.cast<double>()) - origin;
+  }
+
+  [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
+    std::uint32_t x = 0;
+    while (nodes[x].st == top_cell::state::split) {
+      const pmr_cell& c = nodes[x].cell;
+      x = nodes[x].child[static_cast<std::size_t>(pmr_octant(p, pmr_cell_mid(c.lo, c.size)))];
+    }
+    return x;
+  }
+
+  /// Steps 1–2: the input's box and origin, then one pass per level splitting every cell above
+  /// chunk size (and above max_depth, as build_pmr's octree stops there).
+  void structure() {
+    wlo = vec3d::Constant(std::numeric_limits<double>::infinity());
+    whi = -wlo;
+    stream([&](std::uint64_t first, const point_block& b) {
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        if (!all_finite(b.positions[k]))
+          throw InvalidArgument("build_pmr_chunked: " + src.name() + ": position " +
+                                std::to_string(first + k) + " is not finite");
+        const vec3d w = src.origin() + b.positions[k].cast<double>();
+        wlo = wlo.cwiseMin(w);
+        whi = whi.cwiseMax(w);
+      }
+    });
+    origin = 0.5 * (wlo + whi);
+    nodes.assign(1, top_cell{});
+    nodes[0].cell = pmr_root_cell(wlo - origin, whi - origin);
+    nodes[0].count = n;
+    for (;;) {
+      bool any = false;
+      for (auto& x : nodes)
+        if (x.st == top_cell::state::chunk && x.count > chunk_points &&
+            x.cell.depth < po.max_depth) {
+          x.st = top_cell::state::pending;
+          any = true;
+        }
+      if (!any) break;
+      stream([&](std::uint64_t, const point_block& b) {
+        for (const vec3f& pf : b.positions) {
+          const vec3d p = local(pf);
+          top_cell& x = nodes[descend(p)];
+          if (x.st != top_cell::state::pending) continue;
+          ++x.octant_count[static_cast<std::size_t>(
+              pmr_octant(p, pmr_cell_mid(x.cell.lo, x.cell.size)))];
+        }
+      });
+      split_pending();
+    }
+    for (std::uint32_t i = 0; i < nodes.size(); ++i)
+      if (nodes[i].st == top_cell::state::chunk) {
+        nodes[i].chunk = static_cast<std::uint32_t>(chunk_top.size());
+        chunk_top.push_back(i);
+      }
+  }
+
+  /// Children in octant order, empty octants skipped (as build_pmr's octree).
+  void split_pending() {
+    const std::size_t end = nodes.size();
+    for (std::size_t i = 0; i < end; ++i) {
+      if (nodes[i].st != top_cell::state::pending) continue;
+      nodes[i].st = top_cell::state::split;
+      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
+      for (std::size_t o = 0; o < 8; ++o) {
+        if (nodes[i].octant_count[o] == 0) continue;
+        top_cell c;
+        c.cell = pmr_child_cell(nodes[i].cell, static_cast<int>(o));
+        c.count = nodes[i].octant_count[o];
+        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
+        nodes.push_back(c);
+      }
+      nodes[i].children = static_cast<std::uint32_t>(nodes.size()) - nodes[i].first_child;
+    }
+  }
+
+  /// The box a chunk's leaves gather neighbours from: its cell widened by the margin of a leaf
+  /// as large as the cell (leaves below it are no larger, and their margins no wider), plus a
+  /// ten-millionth of the cell for the rounding of the leaves' own boxes.
+  [[nodiscard]] std::array<vec3d, 2> halo_box(std::uint32_t c) const {
+    const pmr_cell& cell = nodes[chunk_top[c]].cell;
+    const double m = static_cast<double>(po.neighbour_margin) * cell.size + 1e-7 * cell.size;
+    return {cell.lo - vec3d::Constant(m), cell.lo + vec3d::Constant(cell.size + m)};
+  }
+
+  /// Step 3 (rank 0): every point into its chunk's file and into the halo of every other chunk
+  /// whose halo box holds it; a coarse grid over the root cell lists the boxes.
+  void distribute() {
+    const std::size_t m = chunk_top.size();
+    if (rank == 0) {
+      std::vector<append_file> files, halos;
+      files.reserve(m);
+      halos.reserve(m);
+      for (std::size_t c = 0; c < m; ++c) {
+        files.emplace_back(temp_path("chunk", c), buffer_bytes(2 * m));
+        halos.emplace_back(temp_path("halo", c), buffer_bytes(2 * m));
+      }
+      const halo_grid grid(*this);
+      const attributes a = src.attrs();
+      // The stored positions are the local ones in float; their box is the local box in float
+      // (rounding is monotonic), so its centre is known before the pass.
+      sphere_centre =
+          box3::of(std::vector<vec3f>{(wlo - origin).cast<float>(), (whi - origin).cast<float>()})
+              .centre();
+      stream([&](std::uint64_t first, const point_block& b) {
+        for (std::size_t k = 0; k < b.size(); ++k) {
+          const vec3d p = local(b.positions[k]);
+          const std::uint32_t own = nodes[descend(p)].chunk;
+          const vec3f pf = p.cast<float>();
+          sphere_r2 = std::max(sphere_r2, (pf - sphere_centre).cast<double>().squaredNorm());
+          if (pf.squaredNorm() > far_d2) {
+            far_d2 = pf.squaredNorm();
+            far_chunk = own;
+          }
+          const point_record r{first + k, b.positions[k],
+                               a.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                               a.colour ? b.colours[k] : rgb8{}};
+          files[own].put(r);
+          for (const std::uint32_t c : grid.at(p)) {
+            const auto box = halo_box(c);
+            if (c != own && (p.array() >= box[0].array()).all() &&
+                (p.array() <= box[1].array()).all())
+              halos[c].put(r);
+          }
+        }
+      });
+      for (auto& f : files) f.flush();
+      for (auto& f : halos) {
+        f.flush();
+        rep.halo_points += f.count();
+      }
+    }
+    barrier();
+    chunk_count.resize(m);
+    for (std::size_t c = 0; c < m; ++c) {
+      chunk_count[c] = fs::file_size(temp_path("chunk", c)) / record_bytes;
+      rep.largest_chunk = std::max(rep.largest_chunk, chunk_count[c]);
+    }
+    if (rank != 0)
+      for (std::size_t c = 0; c < m; ++c)
+        rep.halo_points += fs::file_size(temp_path("halo", c)) / record_bytes;
+  }
+
+  /// Chunks by the cells of a 32³ grid over the root cell their halo boxes touch.
+  struct halo_grid {
+    static constexpr int g = 32;
+    vec3d lo;
+    double cell;
+    std::vector<std::vector<std::uint32_t>> lists;
+    explicit halo_grid(const chunked_pmr_builder& b)
+        : lo(b.nodes[0].cell.lo), cell(b.nodes[0].cell.size / g), lists(g * g * g) {
+      for (std::uint32_t c = 0; c < b.chunk_top.size(); ++c) {
+        const auto box = b.halo_box(c);
+        std::array<int, 3> a{}, e{};
+        for (int ax = 0; ax < 3; ++ax) {
+          a[ax] = index(box[0][ax], ax);
+          e[ax] = index(box[1][ax], ax);
+        }
+        for (int z = a[2]; z <= e[2]; ++z)
+          for (int y = a[1]; y <= e[1]; ++y)
+            for (int x = a[0]; x <= e[0]; ++x) lists[(z * g + y) * g + x].push_back(c);
+      }
+    }
+    [[nodiscard]] int index(double v, int axis) const {
+      const double t = std::floor((v - lo[axis]) / cell);
+      return static_cast<int>(std::clamp(t, 0.0, double(g - 1)));
+    }
+    [[nodiscard]] const std::vector<std::uint32_t>& at(const vec3d& p) const {
+      return lists[(index(p.z(), 2) * g + index(p.y(), 1)) * g + index(p.x(), 0)];
+    }
+  };
+
+  /// Step 4 for chunk c: the part over chunk + halo, saved; its own normals in input order.
+  void build_part(std::size_t c) {
+    const auto recs = read_records(temp_path("chunk", c));
+    const std::vector<point_record> halo = read_records(temp_path("halo", c));
+    const attributes a = src.attrs();
+    point_cloud cloud;
+    cloud.origin = src.origin();
+    std::vector<std::uint64_t> input;
+    for (const std::vector<point_record>* part : {&recs, &halo})
+      for (const point_record& r : *part) {
+        cloud.positions.push_back(r.position);
+        if (a.normal) cloud.normals.push_back(r.normal);
+        if (a.colour) cloud.colours.push_back(r.colour);
+        input.push_back(r.index);
+      }
+    const pmr_data d = build_pmr_part({cloud, static_cast<std::uint32_t>(recs.size()), input, n,
+                                       origin, wlo, whi, nodes[chunk_top[c]].cell},
+                                      po);
+    save_pmr_data(d, temp_path("part", c));
+    if (!a.normal) save_crossings(c, d, halo);
+    // The own samples' normals in the chunk file's order (input order).
+    std::vector<std::pair<std::uint32_t, vec3f>> own(recs.size());
+    for (std::size_t g = 0; g < recs.size(); ++g) own[g] = {d.source[g], d.normals[g]};
+    std::sort(own.begin(), own.end(),
+              [](const auto& x, const auto& y) { return x.first < y.first; });
+    byte_writer w;
+    for (const auto& [i, nrm] : own) w.put_vec(nrm);
+    save_file_bytes(temp_path("normals", c), w.bytes);
+  }
+
+  /// Without input normals each chunk orients its own by propagation (build_pmr's rule); whether
+  /// two chunks agree is seen where their level-0 umbrella edges meet. Per such edge from an own
+  /// sample to another chunk's: that chunk, the other sample's input index, the own normal.
+  void save_crossings(std::size_t c, const pmr_data& d,
+                      const std::vector<point_record>& halo) const {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> owner;  // (input index, chunk)
+    owner.reserve(halo.size());
+    for (const point_record& r : halo)
+      owner.emplace_back(r.index, nodes[descend(local(r.position))].chunk);
+    std::sort(owner.begin(), owner.end());
+    const std::size_t own = d.positions.size() - d.foreign;
+    const std::size_t levels = d.rho.size() + 1;
+    byte_writer w;
+    for (std::size_t l = 0; l < d.leaf_list.size(); ++l) {
+      const pmr_level& L = d.levels[l * levels];
+      for (std::uint32_t t = L.first_tri; t < L.first_tri + L.tris; ++t)
+        for (int k = 0; k < 3; ++k) {
+          std::uint32_t a = d.triangles[t][k], b = d.triangles[t][(k + 1) % 3];
+          if ((a < own) == (b < own)) continue;
+          if (a >= own) std::swap(a, b);
+          const auto it = std::lower_bound(owner.begin(), owner.end(),
+                                           std::pair<std::uint64_t, std::uint32_t>{d.source[b], 0});
+          w.put(it->second);
+          w.put(d.source[b]);
+          w.put_vec(d.normals[a]);
+        }
+    }
+    save_file_bytes(temp_path("cross", c), w.bytes);
+  }
+
+  /// Rank 0: which chunks to flip so that neighbouring chunks agree, decided as build_pmr
+  /// decides between samples (Hoppe et al. 1992), one level up: over the chunk graph weighted by
+  /// the summed n·n' of the umbrella edges between two chunks, most agreeing first, from the
+  /// chunk of the sample farthest from the centre (which that chunk oriented outwards). The
+  /// flipped chunks' normals are rewritten in `normals`.
+  std::vector<std::uint8_t> orient_chunks(index_file& normals) const {
+    const std::size_t m = chunk_top.size();
+    std::map<std::pair<std::uint32_t, std::uint32_t>, double> w;
+    std::vector<vec3f> nb;
+    for (std::uint32_t c = 0; c < m; ++c) {
+      const std::string path = temp_path("cross", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      for (std::size_t e = 0; r.pos < bytes.size(); ++e) {
+        const auto d = r.get<std::uint32_t>("chunk");
+        const auto i = r.get<std::uint32_t>("input index");
+        const vec3f na = r.get_vec("normal", e);
+        if (d >= m || i >= n) throw IoError(path + ": bad crossing");
+        normals.read(i, 1, nb);
+        w[{std::min(c, d), std::max(c, d)}] += static_cast<double>(na.dot(nb[0]));
+      }
+    }
+    std::vector<std::vector<std::pair<std::uint32_t, double>>> adj(m);
+    for (const auto& [cd, x] : w) {
+      adj[cd.first].emplace_back(cd.second, x);
+      adj[cd.second].emplace_back(cd.first, x);
+    }
+    std::vector<std::uint8_t> flip(m, 0), done(m, 0);
+    using item = std::pair<double, std::pair<std::uint32_t, std::uint32_t>>;  // (|w|, (to, from))
+    std::priority_queue<item> q;
+    q.push({0, {far_chunk, far_chunk}});
+    for (std::uint32_t seed = 0; seed <= m; ++seed) {
+      while (!q.empty()) {
+        const auto [x, e] = q.top();
+        q.pop();
+        const auto [to, from] = e;
+        if (done[to]) continue;
+        done[to] = 1;
+        if (to != from) {
+          double agree = 0;
+          for (const auto& [k, v] : adj[to])
+            if (k == from) agree = v;
+          flip[to] = static_cast<std::uint8_t>(flip[from] ^ (agree < 0 ? 1 : 0));
+        }
+        for (const auto& [k, v] : adj[to])
+          if (!done[k]) q.push({std::abs(v), {k, to}});
+      }
+      if (seed < m && !done[seed]) q.push({0, {seed, seed}});  // a part of its own: as it is
+    }
+    for (std::uint32_t c = 0; c < m; ++c)
+      if (flip[c]) {
+        const auto recs = read_records(temp_path("chunk", c));
+        std::vector<vec3f> nrm;
+        normals.read_scattered(recs, nrm);
+        for (auto& v : nrm) v = -v;
+        normals.scatter(recs, nrm);
+      }
+    return flip;
+  }
+
+  /// Every chunk's normals into one file in input order (rank 0).
+  void gather_normals(index_file& normals) const {
+    for (std::size_t c = 0; c < chunk_top.size(); ++c) {
+      const auto recs = read_records(temp_path("chunk", c));
+      const std::string path = temp_path("normals", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      std::vector<vec3f> nrm(recs.size());
+      for (std::size_t k = 0; k < nrm.size(); ++k) nrm[k] = r.get_vec("normal", k);
+      normals.scatter(recs, nrm);
+    }
+  }
+
+  /// Step 5 for chunk c: the foreign samples' normals, the triangles wound, the chunk's file.
+  void finish_part(std::size_t c, const index_file& normals, bool flip) const {
+    pmr_data d = load_pmr_data(temp_path("part", c));
+    const std::size_t own = d.positions.size() - d.foreign;
+    if (flip)
+      for (std::size_t g = 0; g < own; ++g) d.normals[g] = -d.normals[g];
+    std::vector<vec3f> one;
+    for (std::size_t g = own; g < d.positions.size(); ++g) {
+      normals.read(d.source[g], 1, one);
+      d.normals[g] = one[0];
+    }
+    pmr_wind_triangles(d);
+    save_pmr_data(d, (dir / pmr_chunk_file_name(static_cast<std::uint32_t>(c))).string());
+    byte_writer w;
+    put_node(w, d.nodes[0]);
+    w.put(static_cast<std::uint64_t>(d.leaf_list.size()));
+    w.put(static_cast<std::uint64_t>(d.nodes.size()));
+    for (const std::size_t s : stat_counts(d.stats)) w.put(static_cast<std::uint64_t>(s));
+    save_file_bytes(temp_path("root", c), w.bytes);
+  }
+
+  [[nodiscard]] chunk_root load_root(std::size_t c) const {
+    const std::string path = temp_path("root", c);
+    const std::vector<unsigned char> bytes = load_file_bytes(path);
+    byte_reader r{bytes, 0, path};
+    chunk_root out;
+    out.record = get_node(r, c);
+    out.leaves = r.get<std::uint64_t>("leaves");
+    out.nodes = r.get<std::uint64_t>("nodes");
+    for (std::size_t* s : stat_fields(out.stats)) *s = r.get<std::uint64_t>("build counts");
+    return out;
+  }
+
+  /// Step 6: the top cells' records, bottom up from the chunks' roots (rank 0).
+  void write_top(const std::vector<chunk_root>& roots) const {
+    std::vector<pmr_node> rec(nodes.size());
+    for (std::size_t i = nodes.size(); i-- > 0;) {
+      const top_cell& x = nodes[i];
+      if (x.st == top_cell::state::chunk) {
+        rec[i] = roots[x.chunk].record;
+        continue;
+      }
+      rec[i].cell_min = x.cell.lo.cast<float>();
+      rec[i].cell_size = static_cast<float>(x.cell.size);
+      rec[i].first = x.first_child;
+      rec[i].count = x.children;
+      rec[i].depth = x.cell.depth;
+      pmr_bound_inner(rec[i], std::span<const pmr_node>(rec).subspan(x.first_child, x.children));
+    }
+    pmr_build_stats total;
+    for (const chunk_root& r : roots) {
+      const auto from = stat_counts(r.stats);
+      const auto to = stat_fields(total);
+      for (std::size_t k = 0; k < from.size(); ++k) *to[k] += from[k];
+    }
+    byte_writer w;
+    write_head(w, chunked_pmr_format);
+    w.put(static_cast<std::uint32_t>(src.attrs().colour ? 1u : 0u));
+    for (const vec3d* v : {&origin, &wlo, &whi})
+      for (int k = 0; k < 3; ++k) w.put((*v)[k]);
+    w.put(po.max_leaf_points);
+    w.put(po.neighbour_margin);
+    w.put(static_cast<std::uint32_t>(po.rho.size()));
+    for (const float r : po.rho) w.put(r);
+    for (const std::size_t s : stat_counts(total)) w.put(static_cast<std::uint64_t>(s));
+    // The input's bounding sphere as bounding_sphere_about_box_centre gives it for the stored
+    // positions: a view frames the folder as the in-memory hierarchy, without reading chunks.
+    w.put_vec(sphere_centre);
+    w.put(static_cast<float>(std::sqrt(sphere_r2)));
+    w.put(static_cast<std::uint64_t>(nodes.size()));
+    w.put(static_cast<std::uint64_t>(chunk_top.size()));
+    for (const pmr_node& r : rec) put_node(w, r);
+    for (const auto& x : nodes) w.put(x.chunk);
+    for (std::size_t c = 0; c < chunk_top.size(); ++c) {
+      w.put(chunk_top[c]);
+      w.put(chunk_count[c]);
+      w.put(roots[c].leaves);
+      w.put(roots[c].nodes);
+    }
+    append_checksum(w);
+    save_file_bytes((dir / chunked_top_file).string(), w.bytes);
+  }
+
+  chunked_build_report run() {
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
+    start();
+    rep.input_points = n;
+    rep.chunk_points = chunk_points;
+    rep.estimated_normals = true;
+    progress(0);
+    structure();
+    distribute();
+    rep.pass_seconds = std::chrono::duration<double>(clock::now() - t0).count();
+    const auto t1 = clock::now();
+    const std::size_t m = chunk_top.size();
+    for (std::size_t c = 0; c < m; ++c) {
+      if (mine(c)) build_part(c);
+      progress(0.05 + 0.85 * static_cast<double>(c + 1) / static_cast<double>(m));
+    }
+    barrier();
+    rep.estimation_seconds = std::chrono::duration<double>(clock::now() - t1).count();
+    const auto t2 = clock::now();
+    {
+      const std::string path = (tmp.path / "normals").string();
+      std::optional<index_file> normals;
+      std::vector<std::uint8_t> flip(m, 0);
+      const bool orient = !src.attrs().normal && m > 1;
+      if (rank == 0) {
+        normals.emplace(path, n, true);
+        gather_normals(*normals);
+        if (orient) {
+          flip = orient_chunks(*normals);
+          save_file_bytes(temp_path("flips", 0), {flip.begin(), flip.end()});
+        }
+      }
+      barrier();
+      if (rank != 0) {
+        normals.emplace(path, n, false);
+        if (orient) flip = load_file_bytes(temp_path("flips", 0));
+        if (flip.size() != m) throw IoError(temp_path("flips", 0) + ": cut short");
+      }
+      for (std::size_t c = 0; c < m; ++c)
+        if (mine(c)) finish_part(c, *normals, flip[c] != 0);
+    }
+    barrier();
+    rep.chunk_build_seconds = std::chrono::duration<double>(clock::now() - t2).count();
+    if (rank == 0) {
+      std::vector<chunk_root> roots;
+      roots.reserve(m);
+      for (std::size_t c = 0; c < m; ++c) roots.push_back(load_root(c));
+      write_top(roots);
+    }
+    barrier();  // the folder is whole when any rank returns
+    progress(1);
+    rep.passes = passes;
+    rep.chunks = m;
+    rep.top_nodes = nodes.size();
+    rep.seconds = std::chrono::duration<double>(clock::now() - t0).count();
+    return rep;
+  }
+};
+
+}  // namespace
+
+}  // namespace detail
+
+std::string pmr_chunk_file_name(std::uint32_t c) {
+  std::string s = std::to_string(c);
+  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".pmr";
+}
+
+chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
+                                       const chunked_pmr_options& options) {
+  return detail::chunked_pmr_builder(src, dir, options).run();
+}
+
+}  // namespace pbr_lod
