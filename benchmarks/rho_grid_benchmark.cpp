@@ -267,8 +267,9 @@ camera bench_camera(const rho_grid<3>& g, double dist, int size = 512) {
   return camera::orbit(c, 0.5 * g.cube_side(), 30, 20, dist, 1, {size, size});
 }
 
-// §4.1 / §5.1: the flexible traversal (the common traverse with rho_grid_policy), float vs
-// fixed, splat size s. prims = 0: the traversal's decisions alone (the policy's emit only counts
+// §4.1 / §5.1: the flexible traversal (the common traverse with rho_grid_policy) in float (0),
+// int64 fixed point (1) and the paper's 32-bit fixed point with the reciprocal table (2), splat
+// size s. prims = 0: the traversal's decisions alone (the policy's emit only counts
 // the cells, what Render() costs without drawing); prims = 1: the cells' points (centre,
 // positions only) sent to a counting sink, what a renderer gets.
 template <rho_grid_arithmetic Ar>
@@ -302,8 +303,9 @@ void bm_traverse(benchmark::State& state) {
   const bool prims = state.range(3) != 0;
   traverse_stats st;
   for (auto _ : state)
-    st = state.range(0) ? traverse_once<rho_grid_arithmetic::fixed>(g, v, s, prims)
-                        : traverse_once<rho_grid_arithmetic::floating>(g, v, s, prims);
+    st = state.range(0) == 2   ? traverse_once<rho_grid_arithmetic::fixed32>(g, v, s, prims)
+         : state.range(0) == 1 ? traverse_once<rho_grid_arithmetic::fixed>(g, v, s, prims)
+                               : traverse_once<rho_grid_arithmetic::floating>(g, v, s, prims);
   state.counters["visited"] = double(st.visited);
   state.counters["splats"] = double(st.emitted_nodes);
   state.counters["points"] = double(st.emitted_leaves);
@@ -311,26 +313,21 @@ void bm_traverse(benchmark::State& state) {
                                                  benchmark::Counter::kIsRate);
 }
 BENCHMARK(bm_traverse)
-    ->ArgNames({"fixed", "s", "dist10", "prims"})
-    ->Args({0, 1, 25, 0})
-    ->Args({1, 1, 25, 0})
-    ->Args({0, 1, 80, 0})
-    ->Args({1, 1, 80, 0})
-    ->Args({0, 4, 25, 0})
-    ->Args({1, 4, 25, 0})
-    ->Args({0, 1, 25, 1})
-    ->Args({1, 1, 25, 1})
+    ->ArgNames({"arith", "s", "dist10", "prims"})
+    ->ArgsProduct({{0, 1, 2}, {1}, {25, 80}, {0}})
+    ->ArgsProduct({{0, 1, 2}, {4}, {25}, {0}})
+    ->ArgsProduct({{0, 1, 2}, {1}, {25}, {1}})
     ->Unit(benchmark::kMillisecond);
 
 /// One frame of g through the shared rasteriser: with the one-pass shadows of §4.2 when `order`
 /// (the light's child order) is given and g has normals, else the traversal with policy p.
-template <class H>
+template <class H, rho_grid_arithmetic Ar>
 image rho_frame(const H& h, const rho_grid<3>& g, const view& v, const render_options& o,
                 const traverse_options& t, const std::array<int, 27>* order,
-                const rho_grid_policy<3>& p, traverse_stats& st) {
+                const rho_grid_policy<3, Ar>& p, traverse_stats& st) {
   constexpr attributes A = H::attrs;
   if constexpr (A.normal) {
-    if (order) return render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, order), &st);
+    if (order) return render_one_pass_shadows(h, v, o, t, rho_grid_policy<3, Ar>(g, v, order), &st);
   }
   return render<A>(v, o, [&](auto& sink) { st = traverse(h, v, t, sink, p); });
 }
@@ -405,7 +402,8 @@ BENCHMARK(bm_off_frame_casters)
 // "Shadows" (flexible + the one-pass shadows of §4.2), tri-grid levels 4 and 5 of the bunny and
 // Buddha res3, at the iPAQ's 240×320, shading on, from a far view (8 half sides of the cube from
 // its centre, the model ≈ 110 px tall: Fig. 5's top row) and a close one (3 half sides, the model
-// fills the screen and level 5's leaves are ≈ 0.4 px).
+// fills the screen and level 5's leaves are ≈ 0.4 px). `arith`: the policy's arithmetic as in
+// bm_traverse (the paper's iPAQ ran 32-bit fixed point, 2).
 const rho_grid<3>& tri_grid(int model_index, int level) {
   static std::map<std::pair<int, int>, rho_grid<3>> cache;
   const auto key = std::pair{model_index, level};
@@ -416,8 +414,23 @@ const rho_grid<3>& tri_grid(int model_index, int level) {
   return it->second;
 }
 
+/// Frames of g until the benchmark stops, the policy in arithmetic Ar (as in bm_traverse).
+template <rho_grid_arithmetic Ar>
+void table3_frames(benchmark::State& state, const rho_grid<3>& g, const view& v,
+                   const render_options& o, const traverse_options& t,
+                   const std::array<int, 27>* order, bool points_only, traverse_stats& st) {
+  with_rho_grid_hierarchy(g, [&](const auto& h) {
+    for (auto _ : state) {
+      rho_grid_policy<3, Ar> p(g, v);
+      p.points_only = points_only;
+      const image img = rho_frame(h, g, v, o, t, order, p, st);
+      benchmark::DoNotOptimize(img.colour.data());
+    }
+  });
+}
+
 void bm_table3(benchmark::State& state) {
-  const int mode = int(state.range(2));
+  const int mode = int(state.range(2)), arith = int(state.range(4));
   const double dist = double(state.range(3));
   const auto& g = tri_grid(int(state.range(0)), int(state.range(1)));
   const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
@@ -428,14 +441,13 @@ void bm_table3(benchmark::State& state) {
   const traverse_options t{.tolerance_px = 1};
   const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
   traverse_stats st;
-  with_rho_grid_hierarchy(g, [&](const auto& h) {
-    for (auto _ : state) {
-      rho_grid_policy<3> p(g, v);
-      p.points_only = mode == 0;
-      const image img = rho_frame(h, g, v, o, t, mode == 2 ? &order : nullptr, p, st);
-      benchmark::DoNotOptimize(img.colour.data());
-    }
-  });
+  const auto* ord = mode == 2 ? &order : nullptr;
+  if (arith == 2)
+    table3_frames<rho_grid_arithmetic::fixed32>(state, g, v, o, t, ord, mode == 0, st);
+  else if (arith == 1)
+    table3_frames<rho_grid_arithmetic::fixed>(state, g, v, o, t, ord, mode == 0, st);
+  else
+    table3_frames<rho_grid_arithmetic::floating>(state, g, v, o, t, ord, mode == 0, st);
   state.SetLabel(std::string(model_name(int(state.range(0)))) + " tri/" +
                  std::to_string(state.range(1)) + " " +
                  (mode == 0   ? "points"
@@ -447,8 +459,8 @@ void bm_table3(benchmark::State& state) {
       benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(bm_table3)
-    ->ArgsProduct({{0, 1}, {4, 5}, {0, 1, 2}, {8, 3}})
-    ->ArgNames({"model", "level", "mode_0points_1splats_2shadows", "dist"})
+    ->ArgsProduct({{0, 1}, {4, 5}, {0, 1, 2}, {8, 3}, {0, 1, 2}})
+    ->ArgNames({"model", "level", "mode_0points_1splats_2shadows", "dist", "arith"})
     ->Unit(benchmark::kMillisecond);
 
 // §4.1's close views: leaves as one-pixel points (0) or as squares of their projected cell

@@ -132,10 +132,16 @@ image render_grid(const rho_grid<Rho>& g, const camera& cam, float s, const rend
     constexpr attributes A = std::decay_t<decltype(h)>::attrs;
     const traverse_options t{.tolerance_px = s};
     traverse_stats ts;
+    const auto run = [&]<rho_grid_arithmetic Ar>(auto& sink) {
+      ts = traverse(h, v, t, sink, rho_grid_policy<Rho, Ar>(g, v));
+    };
     const image img = render<A>(v, ro, [&](auto& sink) {
-      ts = a == rho_grid_arithmetic::fixed
-               ? traverse(h, v, t, sink, rho_grid_policy<Rho, rho_grid_arithmetic::fixed>(g, v))
-               : traverse(h, v, t, sink, rho_grid_policy<Rho>(g, v));
+      if (a == rho_grid_arithmetic::fixed)
+        run.template operator()<rho_grid_arithmetic::fixed>(sink);
+      else if (a == rho_grid_arithmetic::fixed32)
+        run.template operator()<rho_grid_arithmetic::fixed32>(sink);
+      else
+        run.template operator()<rho_grid_arithmetic::floating>(sink);
     });
     if (st) *st = ts;
     return img;
@@ -1029,38 +1035,56 @@ TEST(RhoGridHierarchy, ChildrenSpheresAndTheDefaultTraversal) {
   EXPECT_THROW((void)(rho_grid_hierarchy<2, with_normals>(gb)), InvalidArgument);
 }
 
-// The float and the fixed-point traversals make the same decisions: the cells drawn agree except
-// where a test is within rounding of equality (bounded here to 0.1 % of the cells), and the
-// images agree to the same degree.
-TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
+/// The cells the traversal draws, sorted.
+template <int Rho, rho_grid_arithmetic Ar = rho_grid_arithmetic::floating>
+std::vector<std::uint32_t> drawn_set(const rho_grid<Rho>& g, const view& v, float s) {
+  std::vector<drawn_cell> d;
+  (void)traverse_cells<Rho, Ar>(g, v, s, &d);
+  std::vector<std::uint32_t> out;
+  for (const auto& c : d) out.push_back(c.cell.cell);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+/// How many cells one of the sorted sets a, b draws and the other does not.
+std::size_t set_difference_size(const std::vector<std::uint32_t>& a,
+                                const std::vector<std::uint32_t>& b) {
+  std::vector<std::uint32_t> diff;
+  std::set_symmetric_difference(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(diff));
+  return diff.size();
+}
+
+/// The float and the fixed-point traversal Ar make the same decisions over 9 views (s = 1, 2, 4;
+/// 1.2, 2.5, 6 radii): the cells drawn agree except where a test is within rounding of equality
+/// (bounded here to 0.1 % of the cells), and the images agree to the same degree.
+template <rho_grid_arithmetic Ar>
+void expect_same_cells_as_float() {
   const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
   for (float s : {1.0f, 2.0f, 4.0f}) {
     for (double dist : {1.2, 2.5, 6.0}) {
       const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
       const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 40, 15, dist, 1, {200, 150});
       const view v(cam, g.origin());
-      std::vector<drawn_cell> dfl, dfx;
-      (void)traverse_cells(g, v, s, &dfl);
-      (void)traverse_cells<3, rho_grid_arithmetic::fixed>(g, v, s, &dfx);
-      std::vector<std::uint32_t> fl, fx;
-      for (const auto& d : dfl) fl.push_back(d.cell.cell);
-      for (const auto& d : dfx) fx.push_back(d.cell.cell);
-      std::vector<std::uint32_t> diff;
-      std::sort(fl.begin(), fl.end());
-      std::sort(fx.begin(), fx.end());
-      std::set_symmetric_difference(fl.begin(), fl.end(), fx.begin(), fx.end(),
-                                    std::back_inserter(diff));
+      const auto fl = drawn_set(g, v, s), fx = drawn_set<3, Ar>(g, v, s);
       EXPECT_GT(fl.size(), 100u);
-      EXPECT_LE(double(diff.size()), 1e-3 * double(fl.size())) << "s " << s << " dist " << dist;
+      EXPECT_LE(double(set_difference_size(fl, fx)), 1e-3 * double(fl.size()))
+          << "s " << s << " dist " << dist;
       render_options of;
       of.fx.shading = true;
       const image a = render_grid(g, cam, s, of);
-      const image b = render_grid(g, cam, s, of, rho_grid_arithmetic::fixed);
+      const image b = render_grid(g, cam, s, of, Ar);
       std::size_t differ = 0;
       for (std::size_t i = 0; i < a.size(); ++i) differ += a.colour[i] == b.colour[i] ? 0 : 1;
       EXPECT_LE(double(differ), 1e-3 * double(a.size()));
     }
   }
+}
+TEST(RhoGridRender, FloatAndFixedPointSelectTheSameCells) {
+  expect_same_cells_as_float<rho_grid_arithmetic::fixed>();
+}
+// §5.1's 32 bits: the same bound, although x = X/W comes from the reciprocal table (2^-13).
+TEST(RhoGridRender, FloatAndFixed32SelectTheSameCells) {
+  expect_same_cells_as_float<rho_grid_arithmetic::fixed32>();
 }
 
 // The splat condition: far away the traversal stops high in the tree (few splats), close up it
@@ -1151,12 +1175,18 @@ TEST(RhoGridRender, LeafSplatsCloseTheHolesOfCloseViews) {
   EXPECT_EQ(points_st.emitted_leaves, splats_st.emitted_leaves);  // the same cut
   EXPECT_GT(with_points, 0.3);
   EXPECT_LT(with_splats, 0.02);
-  // The fixed-point path measures the same widths (the ratio is free of its scale).
-  rho_grid_policy<3, rho_grid_arithmetic::fixed> fixed(g, v);
-  fixed.leaf_splats = true;
-  const image fx = render<positions_only>(
-      v, ro, [&](auto& sink) { traverse(h, v, traverse_options{.tolerance_px = 1}, sink, fixed); });
-  EXPECT_LT(compare_images(reference, fx).hole_fraction, 0.02);
+  // The fixed-point paths measure the same widths (int64: the ratio is free of its scale;
+  // fixed32: divided through the reciprocal table, within 2^-13).
+  const auto fixed_holes = [&]<rho_grid_arithmetic Ar>() {
+    rho_grid_policy<3, Ar> fixed(g, v);
+    fixed.leaf_splats = true;
+    const image fx = render<positions_only>(v, ro, [&](auto& sink) {
+      traverse(h, v, traverse_options{.tolerance_px = 1}, sink, fixed);
+    });
+    return compare_images(reference, fx).hole_fraction;
+  };
+  EXPECT_LT(fixed_holes.template operator()<rho_grid_arithmetic::fixed>(), 0.02);
+  EXPECT_LT(fixed_holes.template operator()<rho_grid_arithmetic::fixed32>(), 0.02);
 }
 
 // Conservative bounds: every drawn inner cell's projected cube (its 8 corners, exactly) is at
@@ -1188,6 +1218,193 @@ TEST(RhoGridRender, SplatConditionIsConservative) {
     ++checked;
   }
   EXPECT_GT(checked, 100u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// §5.1 in 32 bits: the reciprocal table, the range rule, saturation
+// ---------------------------------------------------------------------------------------------
+
+// Brute force: every v below 2^22 and 2·10^6 random ones up to 2^31 − 1. t·v against 2^shift is
+// exact in 64 bits, so the relative error is measured, not estimated. The bound is attained
+// (at the powers of two, the left end of the first interval), so the entries are the midpoint
+// reciprocals the bound assumes and the index does take the bits after the leading one.
+TEST(RhoGridFixed32, ReciprocalTableMeetsItsBound) {
+  using rr = detail::rho_reciprocal;
+  double worst = 0;
+  const auto check = [&](std::uint32_t v) {
+    const auto r = rr::of(v);
+    const std::int64_t d = std::int64_t(std::uint64_t(r.t) * v) - (std::int64_t(1) << r.shift);
+    const double err = std::abs(double(d)) / std::ldexp(1.0, r.shift);
+    worst = std::max(worst, err);
+    return err <= rr::max_relative_error;
+  };
+  for (std::uint32_t v = 1; v < (1u << 22); ++v) ASSERT_TRUE(check(v)) << v;
+  std::mt19937 rng(5);  // random v fine: the table sees only v's top 13 bits and its magnitude
+  std::uniform_int_distribution<std::uint32_t> big(1u << 22, 0x7fffffffu);
+  for (int i = 0; i < 2000000; ++i) {
+    const std::uint32_t v = big(rng);
+    ASSERT_TRUE(check(v)) << v;
+  }
+  EXPECT_TRUE(check(0x7fffffffu));
+  EXPECT_GT(worst, 0.99 * rr::max_relative_error);
+  EXPECT_LE(worst, 0x1p-13);
+}
+
+// divide() against exact division (long double, 64-bit mantissa): within the table's relative
+// bound plus half a unit of rounding (and 2^-30 for cutting num to 31 bits); quotients beyond
+// ±2^30 saturate there and say so, including the int64 extremes; nothing else saturates.
+TEST(RhoGridFixed32, DivisionAgainstExactDivision) {
+  using rr = detail::rho_reciprocal;
+  std::mt19937_64 rng(9);  // log-uniform magnitudes: every shift of the table is exercised
+  std::uniform_real_distribution<double> lg(0, 1);
+  std::size_t saturated_count = 0;
+  for (int i = 0; i < 1000000; ++i) {
+    const auto num = std::int64_t(std::ldexp(lg(rng), int(rng() % 47))) * (rng() % 2 ? 1 : -1);
+    const auto v = std::uint32_t(std::max(1.0, std::ldexp(lg(rng), int(rng() % 32))));
+    const long double exact = (long double)num / v;
+    bool sat = false;
+    const std::int32_t q = rr::divide(num, rr::of(v), sat);
+    const long double mag = std::abs(exact);
+    if (mag < 0x1p30 * (1 - 0x1p-12)) {
+      ASSERT_FALSE(sat) << num << " / " << v;
+      ASSERT_LE(std::abs(q - exact), mag * (rr::max_relative_error + 0x1p-30) + 0.5)
+          << num << " / " << v;
+    } else if (mag > 0x1p30 * (1 + 0x1p-12)) {
+      ASSERT_TRUE(sat) << num << " / " << v;
+      ASSERT_EQ(q, num < 0 ? -(1 << 30) : 1 << 30);
+      ++saturated_count;
+    }
+  }
+  EXPECT_GT(saturated_count, 1000u);
+  for (const auto& [num, v] : {std::pair{std::numeric_limits<std::int64_t>::min(), 1u},
+                               std::pair{std::numeric_limits<std::int64_t>::max(), 0x7fffffffu},
+                               std::pair{-(std::int64_t(1) << 62), 3u}}) {
+    bool sat = false;
+    EXPECT_EQ(rr::divide(num, rr::of(v), sat), num < 0 ? -(1 << 30) : 1 << 30);
+    EXPECT_TRUE(sat);
+  }
+  bool sat = false;
+  EXPECT_EQ(rr::divide(0, rr::of(1), sat), 0);
+  EXPECT_FALSE(sat);
+}
+
+/// The largest |value| among the fixed32 tables and root of v's traversal of g.
+template <int Rho>
+std::int64_t fixed32_table_max(const rho_grid<Rho>& g, const view& v) {
+  const detail::rho_traversal<Rho, detail::rho_fixed32_arith> t(g, v);
+  std::int64_t m = std::max({std::abs(std::int64_t(t.root.x)), std::abs(std::int64_t(t.root.y)),
+                             std::abs(std::int64_t(t.root.w))});
+  for (const auto& l : t.levels) {
+    m = std::max({m, std::int64_t(l.ax), std::int64_t(l.ay), std::int64_t(l.b)});
+    for (const auto& d : l.disp)
+      m = std::max({m, std::abs(std::int64_t(d.x)), std::abs(std::int64_t(d.y)),
+                    std::abs(std::int64_t(d.w))});
+  }
+  return m;
+}
+
+// The range rule (F from the view's bound, ≤ 2^30) on scenes that do not fit one fixed F: the
+// bunny 10^7 units from the origin (positions are relative to the grid's origin, so nothing
+// changes) and scaled by 2^40 and 2^100 (1.3·10^30 units: F moves by −40 and −100 and, the
+// scaling being exact, every table entry is the unit scene's). The tables use the range without
+// leaving it and the drawn cells are the unit scene's. They agree with the float path's up to
+// 2^40; at 2^100 the float path's products (|H|² ≈ 10^65) overflow float, so it is not compared.
+// (The builder maps extents below 10^-12 to a unit cube, so tiny scales are not a grid to test.)
+TEST(RhoGridFixed32, FarAndHugeScenesKeepTheirDecisions) {
+  const triangle_mesh& unit = bunny_small();
+  const auto at = [&](double scale, const vec3d& offset, bool with_float = true) {
+    triangle_mesh m = unit;
+    m.vertices.origin = m.vertices.origin * scale + offset;
+    for (auto& p : m.vertices.positions) p *= float(scale);
+    const auto g = build_rho_grid<3>(m, {.level = 3});
+    const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+    const view v(camera::orbit(c, 0.5 * g.cube_side(), 40, 15, 1.5, 1, {200, 150}), g.origin());
+    const std::int64_t vmax = fixed32_table_max(g, v);
+    EXPECT_LE(vmax, std::int64_t(1) << 30) << "scale " << scale;
+    EXPECT_GE(vmax, std::int64_t(1) << 28) << "scale " << scale;
+    const auto fx = drawn_set<3, rho_grid_arithmetic::fixed32>(g, v, 1);
+    if (with_float) {
+      EXPECT_LE(double(set_difference_size(drawn_set(g, v, 1), fx)), 1e-3 * double(fx.size()))
+          << "scale " << scale;
+    }
+    return fx;
+  };
+  const auto reference = at(1, vec3d::Zero());
+  EXPECT_GT(reference.size(), 100u);
+  EXPECT_EQ(at(1, vec3d(1e7, -2e7, 1e7)), reference);
+  EXPECT_EQ(at(0x1p40, vec3d::Zero()), reference);
+  EXPECT_EQ(at(0x1p100, vec3d::Zero(), false), reference);
+}
+
+/// The §4.1 verdict from the same fixed-point inputs in long double (the file comment's tests
+/// divided by W), with the centre's screen position x moved by sx·(|x|·e + one unit) and y by
+/// sy·(|y|·e + one unit): the brute-force reference of test_projected.
+using rho32_traversal = detail::rho_traversal<3, detail::rho_fixed32_arith>;
+rho32_traversal::verdict exact_verdict(const rho32_traversal& t, const rho32_traversal::hom& h,
+                                       bool leaf, float s, bool cull, long double e = 0, int sx = 0,
+                                       int sy = 0) {
+  using verdict = rho32_traversal::verdict;
+  const auto& l = t.levels[0];
+  const long double w = h.w, b = l.b, den = w - b, g = std::ldexp(1.0L, t.screen_g);
+  if (w + b < t.znear) return verdict::cull;
+  if (!(den > t.znear)) return leaf ? verdict::draw : verdict::refine;
+  const long double x0 = h.x / w, y0 = h.y / w;
+  const long double x = x0 + sx * (std::abs(x0) * e + 1 / g),
+                    y = y0 + sy * (std::abs(y0) * e + 1 / g);
+  const long double ex = (l.ax + b * std::abs(x)) / den, ey = (l.ay + b * std::abs(y)) / den;
+  const long double cx = t.cx / g, cy = t.cy / g;
+  if (cull && (den > t.zfar || x + ex < -cx || x - ex > cx || y + ey < -cy || y - ey > cy))
+    return verdict::cull;
+  if (2 * ex <= s && 2 * ey <= s) return verdict::draw;
+  return leaf ? verdict::draw : verdict::refine;
+}
+
+// Random states and bounds tables (magnitudes log-uniform, so many centres project beyond the
+// ±2^30 units where x = X/W saturates) against the exact verdict: every
+// disagreement is either a refinement (saturated centres are never splats: conservative) or a
+// tie, a verdict the exact test gives once the centre moves by the table's 2^-13. A saturated
+// centre is never culled where the exact test keeps it.
+TEST(RhoGridFixed32, SaturatedCentresOnlyRefine) {
+  const auto g = build_rho_grid<3>(bunny_small(), {.level = 2});
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const view v(camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {256, 256}), g.origin());
+  rho32_traversal t(g, v);
+  t.znear = 0;  // a near plane at the eye: W − B can be one unit, x = X/W up to 2^30·2^G
+  using verdict = rho32_traversal::verdict;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> lg(0, 1);
+  const auto mag = [&](int bits) { return std::int32_t(std::ldexp(lg(rng), int(rng() % bits))); };
+  std::size_t saturated = 0, refined = 0, ties = 0, n = 0;
+  for (int i = 0; i < 400000; ++i) {
+    auto& l = t.levels[0];
+    l.ax = mag(20), l.ay = mag(20), l.b = mag(24);
+    const rho32_traversal::hom h{mag(30) * (rng() % 2 ? 1 : -1), mag(30) * (rng() % 2 ? 1 : -1),
+                                 std::max(1, mag(30))};
+    const bool leaf = rng() % 2, cull = rng() % 2;
+    const float s = float(1 + rng() % 4);
+    if (!(h.w - l.b > t.znear)) continue;
+    ++n;
+    const bool sat = t.project(h, l).saturated;
+    saturated += sat;
+    const verdict got = t.test(h, 0, leaf, s, cull), want = exact_verdict(t, h, leaf, s, cull);
+    if (got == want) continue;
+    if (sat) {  // kept where the exact test culls, or refined where it draws a splat
+      ASSERT_NE(got, verdict::cull) << "saturated: culled where the exact test keeps";
+      ASSERT_TRUE(got == verdict::refine || leaf) << "saturated: an inner cell drawn";
+      ++refined;
+      continue;
+    }
+    bool tie = false;
+    for (const int sx : {-1, 1})
+      for (const int sy : {-1, 1})
+        tie = tie || exact_verdict(t, h, leaf, s, cull, 0x1p-13L + 0x1p-29L, sx, sy) == got;
+    ASSERT_TRUE(tie) << h.x << " " << h.y << " " << h.w << " b " << l.b;
+    ++ties;
+  }
+  std::cout << n << " states, " << saturated << " saturated, " << refined << " refined, " << ties
+            << " ties\n";
+  EXPECT_GT(saturated, n / 20);
+  EXPECT_LT(ties, n / 1000);
 }
 
 // ---------------------------------------------------------------------------------------------

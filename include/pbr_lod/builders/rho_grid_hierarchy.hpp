@@ -26,8 +26,15 @@
 //
 // §5.1 fixed point: rho_grid_policy<ρ, rho_grid_arithmetic::fixed> runs the same tests with H,
 // the displacement and bounds tables in 64-bit fixed point (F fractional bits chosen per view so
-// every |value| < 2^40) and 128-bit products. Cells where the two disagree are those whose test
-// is within rounding of equality (measured in docs/rho-grid.md; the tests bound it).
+// every |value| < 2^40) and 128-bit products. rho_grid_arithmetic::fixed32 is §5.1 as the paper
+// has it, for a 32-bit CPU: H and the tables in int32 (F chosen so every |value| ≤ 2^30), no
+// product wider than int32 × int32 → int64, and the tests divided by W through a reciprocal
+// look-up table (detail::rho_reciprocal): on the projected centre x = X/W, y = Y/W
+//   splat condition   2·(A_x + B·|x|) ≤ s·(W − B)  (and y)
+//   frustum culling   x·(W − B) + A_x + B·|x| < −c_x·(W − B)  (left; likewise the others)
+// which are the tests above divided by W > 0. Cells where the arithmetics disagree are those
+// whose test is within rounding (or, for fixed32, the table's 2^-13) of equality (measured in
+// docs/rho-grid.md; the tests bound it).
 //
 // §4.2: the policy visits children in any fixed order; rho_grid_light_order() gives the one that
 // is front to back from a directional light, which raster/one_pass_shadows.hpp needs.
@@ -54,7 +61,9 @@
 
 namespace pbr_lod {
 
-enum class rho_grid_arithmetic { floating, fixed };
+/// The number type of rho_grid_policy's tests (§5.1): float, int64 fixed point with int128
+/// products, or the paper's 32-bit fixed point with a reciprocal table.
+enum class rho_grid_arithmetic { floating, fixed, fixed32 };
 
 /// A node of a ρ-grid hierarchy: the cell index (rho_grid numbering), its depth below the root
 /// cube (the paper's level + 1, see rho_grid) and its integer position in [0, ρ^depth)³ — the
@@ -180,6 +189,8 @@ struct rho_float_arith {
   [[nodiscard]] static wide splat_scale(float s) { return s; }
   static constexpr int splat_shift = 1;  // 2·E ≤ s·W·(W − B)
   [[nodiscard]] static wide lhs(wide e) { return 2 * e; }
+  /// 2^F for a view whose values stay within ±bound (float: no scale).
+  [[nodiscard]] static double choose_scale(double, const view&) { return 1; }
 };
 
 __extension__ using int128 = __int128;
@@ -195,6 +206,92 @@ struct rho_fixed_arith {
   /// s in 1/256 pixels: 512·E ≤ s₂₅₆·W·(W − B).
   [[nodiscard]] static wide splat_scale(float s) { return wide(std::llround(double(s) * 256)); }
   [[nodiscard]] static wide lhs(wide e) { return 512 * e; }
+  /// F fractional bits so that every value, the far plane and the half screen included, stays
+  /// below 2^40 (products below 2^81 in int128).
+  [[nodiscard]] static double choose_scale(double bound, const view& v) {
+    bound = std::max({bound, double(v.z_far), 0.5 * double(v.width), 0.5 * double(v.height)});
+    return std::ldexp(1.0,
+                      std::clamp(40 - int(std::ceil(std::log2(std::max(bound, 1e-300)))), 0, 40));
+  }
+};
+
+/// §5.1's reciprocal look-up table for a 32-bit CPU: 1/v for a positive int32 v as t·2^-shift.
+/// v = m·2^(n−1) with m in [1, 2) (n = bit_width(v), one count-leading-zeros); the 12 bits of m
+/// after its leading one index 4096 entries t ≈ 2^30/m (16 KiB), each the reciprocal of its
+/// interval's midpoint, which minimises the worst relative error over the interval. Bound:
+/// |t·2^-shift·v − 1| ≤ h/(2 + h) + 2^-30 < 2^-13 with h = 2^-12 (interval, then the entry's
+/// rounding), whatever v's magnitude: the "shift on numbers" of §5.1 makes one table serve all.
+struct rho_reciprocal {
+  static constexpr int index_bits = 12;
+  static constexpr int entry_bits = 30;
+  static constexpr double max_relative_error = 0x1p-13;
+  struct value {
+    std::uint32_t t;  ///< ≈ 2^shift / v
+    int shift;
+  };
+  /// v ≥ 1.
+  [[nodiscard]] static value of(std::uint32_t v) {
+    const int n = std::bit_width(v);
+    constexpr std::uint32_t mask = (1u << index_bits) - 1;
+    const std::uint32_t i = n - 1 >= index_bits ? (v >> (n - 1 - index_bits)) & mask
+                                                : (v << (index_bits - (n - 1))) & mask;
+    return {table()[i], entry_bits + n - 1};
+  }
+  /// round(num / v) with 1/v from the table, saturated at ±2^30 (`saturated` set). num is first
+  /// cut to 31 significant bits so the product stays in 64 bits (a relative 2^-30 more).
+  [[nodiscard]] static std::int32_t divide(std::int64_t num, value r, bool& saturated) {
+    constexpr std::uint64_t sat = std::uint64_t(1) << 30;
+    const std::uint64_t mag = num < 0 ? 0 - std::uint64_t(num) : std::uint64_t(num);
+    const int k = std::max(0, int(std::bit_width(mag)) - 31);
+    // sh < 1 needs k ≥ shift = 29 + bit_width(v), i.e. |num| ≥ 2^(30 + k): a quotient ≥ 2^59.
+    const int sh = r.shift - k;
+    const std::uint64_t p = (mag >> k) * r.t;
+    std::uint64_t q = sh < 1 ? sat : (p + (std::uint64_t(1) << (sh - 1))) >> sh;
+    if (q >= sat) {
+      q = sat;
+      saturated = true;
+    }
+    return num < 0 ? -std::int32_t(q) : std::int32_t(q);
+  }
+
+ private:
+  [[nodiscard]] static const std::array<std::uint32_t, 1u << index_bits>& table() {
+    static const auto t = [] {
+      std::array<std::uint32_t, 1u << index_bits> e{};
+      const double h = std::ldexp(1.0, -index_bits);
+      for (std::size_t i = 0; i < e.size(); ++i)  // 1 / midpoint of [1 + i·h, 1 + (i+1)·h)
+        e[i] =
+            std::uint32_t(std::llround(std::ldexp(1.0, entry_bits) / (1 + (double(i) + 0.5) * h)));
+      return e;
+    }();
+    return t;
+  }
+};
+
+/// §5.1 in 32 bits: values int32, products int64 (a 32-bit CPU's one-instruction multiply).
+struct rho_fixed32_arith {
+  using value = std::int32_t;
+  using wide = std::int64_t;
+  double scale = 1;  // 2^F
+  /// Rounded and saturated at ±(2^31 − 1): only the view's near and far distances can reach it
+  /// (H and the tables are ≤ 2^30 by choose_scale), and every W ± B they are compared with is
+  /// within ±2^30 + a few units, so a saturated plane compares as the exact one.
+  [[nodiscard]] value from(double x) const {
+    constexpr double lim = std::numeric_limits<std::int32_t>::max();
+    return static_cast<value>(std::llround(std::clamp(x * scale, -lim, lim)));
+  }
+  [[nodiscard]] static wide mul(value a, value b) { return wide(a) * wide(b); }
+  /// F fractional bits so that |H| + B ≤ 2^30 anywhere in the tree (one bit of headroom for the
+  /// rounding of ≤ 22 accumulated displacements); any F, negative for a huge scene.
+  [[nodiscard]] static double choose_scale(double bound, const view&) {
+    return std::ldexp(1.0, 30 - int(std::ceil(std::log2(std::max(bound, 1e-200)))));
+  }
+  /// Screen positions x = X/W carry G fractional bits of a pixel: 16, fewer for a half screen
+  /// c > 256 px so that c·2^G ≤ 2^24, i.e. a saturated |x| (2^30 units) is ≥ 64·c off-centre.
+  [[nodiscard]] static int screen_bits(const view& v) {
+    const double c = std::max({1.0, 0.5 * double(v.width), 0.5 * double(v.height)});
+    return std::clamp(24 - int(std::ceil(std::log2(c))), 0, 16);
+  }
 };
 
 template <int Rho, class Arith>
@@ -208,7 +305,10 @@ struct rho_traversal {
     std::array<hom, R3> disp;  ///< H offset of child j's centre from its parent's
     value ax, ay, b;           ///< bounds table: max |ΔX|, |ΔY|, |ΔW| over the cell's corners
   };
+  /// fixed32 tests on the projected centre (X/W, Y/W) instead of in homogeneous coordinates.
+  static constexpr bool projective = std::is_same_v<Arith, rho_fixed32_arith>;
   Arith arith;
+  int screen_g = 0;  ///< fixed32: fractional bits of the screen positions (and of cx, cy)
   hom root{};
   std::vector<level_tables> levels;  // indexed by cell depth (0 = root cube)
   value cx{}, cy{}, znear{}, zfar{};
@@ -227,7 +327,7 @@ struct rho_traversal {
             v.forward.cast<double>()};
   }
 
-  rho_traversal(const rho_grid<Rho>& g, const view& v, bool fixed) {
+  rho_traversal(const rho_grid<Rho>& g, const view& v) {
     const auto [r, u, f] = rows(v);
     const vec3d c0 = vec3d::Constant(0.5 * g.cube_side()) - v.eye.cast<double>();
     const std::array<double, 3> h0{r.dot(c0), u.dot(c0), f.dot(c0)};
@@ -253,12 +353,7 @@ struct rho_traversal {
       }
       bound += dmax + std::max({e.ax, e.ay, e.b});
     }
-    bound = std::max({bound, double(v.z_far), 0.5 * double(v.width), 0.5 * double(v.height)});
-    if (fixed) {
-      // F fractional bits so that every value stays below 2^40 (products below 2^81 in int128).
-      const int f_bits = std::clamp(40 - int(std::ceil(std::log2(std::max(bound, 1e-300)))), 0, 40);
-      arith.scale = std::ldexp(1.0, f_bits);
-    }
+    arith.scale = Arith::choose_scale(bound, v);
     root = {arith.from(h0[0]), arith.from(h0[1]), arith.from(h0[2])};
     levels.resize(dt.size());
     for (std::size_t l = 0; l < dt.size(); ++l) {
@@ -270,10 +365,18 @@ struct rho_traversal {
       levels[l].ay = arith.from(dt[l].ay);
       levels[l].b = arith.from(dt[l].b);
     }
-    cx = arith.from(0.5 * v.width);
-    cy = arith.from(0.5 * v.height);
+    if constexpr (projective) {
+      screen_g = Arith::screen_bits(v);
+      cx = value(std::llround(std::ldexp(0.5 * v.width, screen_g)));  // ≤ 2^24
+      cy = value(std::llround(std::ldexp(0.5 * v.height, screen_g)));
+    } else {
+      cx = arith.from(0.5 * v.width);
+      cy = arith.from(0.5 * v.height);
+    }
     znear = arith.from(double(v.z_near));
     zfar = arith.from(double(v.z_far));
+    // fixed32: W − B > z_near ≥ 0 then gives W ≥ 1, what the reciprocal table takes.
+    if constexpr (projective) znear = std::max(znear, value(0));
   }
 
   /// Keeps the cells that can shadow the view volume from a directional light (`to_light`, in
@@ -302,6 +405,61 @@ struct rho_traversal {
 
   /// The §4.1 tests for a cell at depth l with homogeneous centre h.
   [[nodiscard]] verdict test(const hom& h, int l, bool leaf, float s, bool cull) const {
+    if constexpr (projective)
+      return test_projected(h, l, leaf, s, cull);
+    else
+      return test_homogeneous(h, l, leaf, s, cull);
+  }
+
+  /// fixed32: the centre projected through the reciprocal table, x = X/W and y = Y/W with
+  /// screen_g fractional bits, and A + B·|x|, A + B·|y| (the cell's projected half extents times
+  /// W − B) in units of 2^(F + screen_g). W ≥ 1 unit: only called when W − B > z_near ≥ 0.
+  struct projection {
+    std::int32_t x, y;
+    std::int64_t ex, ey;
+    bool saturated = false;  ///< |x| or |y| reached 2^30 units (≥ 64 half screens off-centre)
+  };
+  [[nodiscard]] projection project(const hom& h, const level_tables& t) const {
+    projection p{};
+    const auto r = rho_reciprocal::of(std::uint32_t(h.w));
+    p.x = rho_reciprocal::divide(std::int64_t(h.x) << screen_g, r, p.saturated);
+    p.y = rho_reciprocal::divide(std::int64_t(h.y) << screen_g, r, p.saturated);
+    p.ex = (std::int64_t(t.ax) << screen_g) + Arith::mul(t.b, p.x < 0 ? -p.x : p.x);
+    p.ey = (std::int64_t(t.ay) << screen_g) + Arith::mul(t.b, p.y < 0 ? -p.y : p.y);
+    return p;
+  }
+
+  /// test() in 32-bit fixed point: the homogeneous tests divided by W (see the file comment).
+  /// A saturated centre is never a splat (refined instead) and is culled only when its clamped
+  /// position is: the culling test grows monotonically towards the exact one when W − 2B > 0 and
+  /// never culls otherwise, so saturation only keeps cells the exact tests might drop.
+  [[nodiscard]] verdict test_projected(const hom& h, int l, bool leaf, float s, bool cull) const {
+    const auto& t = levels[std::size_t(l)];
+    if (h.w + t.b < znear) return may_cull.near ? verdict::cull : caster(l, leaf);
+    const value den = h.w - t.b;
+    if (!(den > znear)) return leaf ? verdict::draw : verdict::refine;
+    const projection p = project(h, t);
+    const auto small = [&] {  // s·2^G inline (s > 0; ldexp and llround are library calls)
+      const double sg = std::min(double(s) * double(1 << screen_g), 0x1p30);
+      const std::int64_t rhs = Arith::mul(den, value(sg + 0.5));
+      return !p.saturated && 2 * p.ex <= rhs && 2 * p.ey <= rhs;
+    };
+    if (cull) {
+      const std::int64_t xd = Arith::mul(p.x, den), yd = Arith::mul(p.y, den);
+      const std::int64_t cxd = Arith::mul(cx, den), cyd = Arith::mul(cy, den);
+      const bool far = den > zfar, left = (xd + p.ex < -cxd), right = (xd - p.ex > cxd),
+                 top = (yd + p.ey < -cyd), bottom = (yd - p.ey > cyd);
+      if ((far && may_cull.far) || (left && may_cull.left) || (right && may_cull.right) ||
+          (top && may_cull.top) || (bottom && may_cull.bottom))
+        return verdict::cull;
+      if (far || left || right || top || bottom) return small() ? verdict::draw : caster(l, leaf);
+    }
+    if (small()) return verdict::draw;
+    return leaf ? verdict::draw : verdict::refine;
+  }
+
+  /// test() in float or int64: products of two and three values, no division.
+  [[nodiscard]] verdict test_homogeneous(const hom& h, int l, bool leaf, float s, bool cull) const {
     const auto& t = levels[std::size_t(l)];
     if (h.w + t.b < znear)  // wholly behind the viewer
       return may_cull.near ? verdict::cull : caster(l, leaf);
@@ -343,6 +501,17 @@ struct rho_traversal {
     const auto& t = levels[std::size_t(l)];
     const value den = h.w - t.b;
     if (!(den > znear)) return std::numeric_limits<float>::infinity();
+    if constexpr (projective) {  // 2·max(E)/(W − B) through the table, screen_g fraction bits
+      const projection p = project(h, t);
+      bool sat = p.saturated;
+      const std::int32_t w = rho_reciprocal::divide(2 * std::max(p.ex, p.ey),
+                                                    rho_reciprocal::of(std::uint32_t(den)), sat);
+      return std::ldexp(float(sat ? 1 << 30 : w), -screen_g);  // saturated: ≥ 64 half screens
+    } else {
+      return width_homogeneous(h, t, den);
+    }
+  }
+  [[nodiscard]] float width_homogeneous(const hom& h, const level_tables& t, value den) const {
     const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
     const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
     const double wd = static_cast<double>(Arith::mul(h.w, den));
@@ -397,8 +566,10 @@ template <int Rho>
 template <int Rho, rho_grid_arithmetic Arith = rho_grid_arithmetic::floating>
 class rho_grid_policy {
   static constexpr int R3 = Rho * Rho * Rho;
-  using arith = std::conditional_t<Arith == rho_grid_arithmetic::fixed, detail::rho_fixed_arith,
-                                   detail::rho_float_arith>;
+  using arith =
+      std::conditional_t<Arith == rho_grid_arithmetic::fixed, detail::rho_fixed_arith,
+                         std::conditional_t<Arith == rho_grid_arithmetic::fixed32,
+                                            detail::rho_fixed32_arith, detail::rho_float_arith>>;
   using tables = detail::rho_traversal<Rho, arith>;
 
  public:
@@ -407,7 +578,7 @@ class rho_grid_policy {
   /// Tables for grid g seen by v (relative to g.origin()); children visited in `order` (a
   /// permutation of 0..ρ³−1, e.g. rho_grid_light_order) or in digit order.
   rho_grid_policy(const rho_grid<Rho>& g, const view& v, const std::array<int, R3>* order = nullptr)
-      : t_(g, v, Arith == rho_grid_arithmetic::fixed), digit_order_(order == nullptr) {
+      : t_(g, v), digit_order_(order == nullptr) {
     if (order)
       order_ = *order;
     else
