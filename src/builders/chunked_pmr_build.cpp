@@ -2,6 +2,7 @@
 // steps and why the result equals build_pmr's.
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -10,11 +11,13 @@
 #include <map>
 #include <optional>
 #include <queue>
+#include <thread>
 
 #include "chunk_files.hpp"
 #include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/parallel.hpp"
 #include "pmr_internal.hpp"
 
 namespace pbr_lod {
@@ -46,6 +49,7 @@ struct chunked_pmr_builder : chunked_pass_base {
   pmr_options po;  // the PMR options without the progress callback
   std::uint64_t n;
   std::uint64_t chunk_points;
+  unsigned workers = 1;
   vec3d origin = vec3d::Zero(), wlo = vec3d::Zero(), whi = vec3d::Zero();
   std::vector<top_cell> nodes;
   std::vector<std::uint32_t> chunk_top;  // per chunk: its top cell
@@ -67,9 +71,12 @@ struct chunked_pmr_builder : chunked_pass_base {
     po.progress = {};
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pmr_chunked: more than 2^32 - 2 points");
+    workers = po.threads ? po.threads : std::max(1u, std::thread::hardware_concurrency());
+    // Chunks are built `workers` at a time: the budget is theirs together.
     chunk_points = opt.chunk_points
                        ? opt.chunk_points
-                       : std::max<std::uint64_t>(1, opt.memory_bytes / chunked_pmr_bytes_per_point);
+                       : std::max<std::uint64_t>(
+                             1, opt.memory_bytes / (chunked_pmr_bytes_per_point * workers));
     chunk_points = std::clamp<std::uint64_t>(chunk_points, po.max_leaf_points, (1u << 31) - 1);
   }
 
@@ -251,8 +258,28 @@ struct chunked_pmr_builder : chunked_pass_base {
     }
   };
 
+  /// Step 4 over this rank's chunks: a chunk's leaves are few (chunk / max_leaf_points), so the
+  /// chunks are built side by side, one thread each, when there are enough of them; else one at a
+  /// time on every thread. (The output does not depend on the threads.)
+  void build_parts() {
+    std::vector<std::size_t> list;
+    for (std::size_t c = 0; c < chunk_top.size(); ++c)
+      if (mine(c)) list.push_back(c);
+    const bool side_by_side = list.size() >= workers;
+    pmr_options part = po;
+    part.threads = side_by_side ? 1 : workers;
+    std::atomic<std::size_t> done{0};
+    const auto caller = std::this_thread::get_id();
+    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
+      build_part(list[k], part);
+      const std::size_t d = ++done;
+      if (std::this_thread::get_id() == caller)
+        progress(0.05 + 0.85 * static_cast<double>(d) / static_cast<double>(list.size()));
+    });
+  }
+
   /// Step 4 for chunk c: the part over chunk + halo, saved; its own normals in input order.
-  void build_part(std::size_t c) {
+  void build_part(std::size_t c, const pmr_options& part_options) const {
     const auto recs = read_records(temp_path("chunk", c));
     const std::vector<point_record> halo = read_records(temp_path("halo", c));
     const attributes a = src.attrs();
@@ -268,7 +295,7 @@ struct chunked_pmr_builder : chunked_pass_base {
       }
     const pmr_data d = build_pmr_part({cloud, static_cast<std::uint32_t>(recs.size()), input, n,
                                        origin, wlo, whi, nodes[chunk_top[c]].cell},
-                                      po);
+                                      part_options);
     save_pmr_data(d, temp_path("part", c));
     if (!a.normal) save_crossings(c, d, halo);
     // The own samples' normals in the chunk file's order (input order).
@@ -480,10 +507,7 @@ struct chunked_pmr_builder : chunked_pass_base {
     rep.pass_seconds = std::chrono::duration<double>(clock::now() - t0).count();
     const auto t1 = clock::now();
     const std::size_t m = chunk_top.size();
-    for (std::size_t c = 0; c < m; ++c) {
-      if (mine(c)) build_part(c);
-      progress(0.05 + 0.85 * static_cast<double>(c + 1) / static_cast<double>(m));
-    }
+    build_parts();
     barrier();
     rep.estimation_seconds = std::chrono::duration<double>(clock::now() - t1).count();
     const auto t2 = clock::now();

@@ -314,6 +314,20 @@ TEST(ChunkedPmrFiles, BadInputAndDamagedDirectoriesAreErrors) {
   }
   std::ofstream(top, std::ios::binary | std::ios::trunc)
       .write(good.data(), static_cast<std::streamsize>(good.size()));
+  // A chunk's file (a PMR file with foreign samples) cut or flipped: an error when it is read.
+  const std::string chunk0 = dir + "/" + pmr_chunk_file_name(0);
+  const std::vector<char> part = bytes_of(chunk0);
+  for (std::size_t at = 0; at < part.size(); at += part.size() / 97 + 1) {
+    std::vector<char> b = part;
+    b[at] = static_cast<char>(b[at] ^ 0x21);
+    for (const std::size_t keep : {at, b.size()}) {
+      std::ofstream(chunk0, std::ios::binary | std::ios::trunc)
+          .write(b.data(), static_cast<std::streamsize>(keep));
+      EXPECT_THROW((void)H::open(dir).chunk(0), Error) << "byte " << at << ", kept " << keep;
+    }
+  }
+  std::ofstream(chunk0, std::ios::binary | std::ios::trunc)
+      .write(part.data(), static_cast<std::streamsize>(part.size()));
   const H h = H::open(dir);
   ASSERT_GE(h.chunk_count(), 2u);
   fs::rename(dir + "/" + pmr_chunk_file_name(0), dir + "/swap");

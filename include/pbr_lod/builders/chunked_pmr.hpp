@@ -56,8 +56,9 @@ namespace pbr_lod {
 
 struct chunked_pmr_options {
   pmr_options pmr{};
-  /// The memory a chunk's build may use; chunk_points = memory_bytes / chunked_pmr_bytes_per_point
-  /// unless chunk_points is given.
+  /// The memory the chunk builds may use together: chunks are built pmr.threads at a time (one
+  /// thread each) when there are at least that many, so chunk_points = memory_bytes /
+  /// (chunked_pmr_bytes_per_point × threads) unless chunk_points is given.
   std::uint64_t memory_bytes = std::uint64_t{4} << 30;
   /// Most samples in one chunk (0: from memory_bytes). At least pmr.max_leaf_points.
   std::uint64_t chunk_points = 0;
@@ -70,9 +71,10 @@ struct chunked_pmr_options {
   distributed_build distributed{};
 };
 
-/// Peak bytes of a chunk's build per own sample, measured (docs/scale.md): its records, its
-/// halo, the leaves' triangulations on pmr.threads threads, the part's records.
-inline constexpr std::uint64_t chunked_pmr_bytes_per_point = 1024;
+/// Peak bytes of a chunk's build per own sample: its records and halo, one leaf's triangulation
+/// at a time, the part's records. Measured ≈ 340 with halos of half the chunk (docs/scale.md);
+/// the rest is room for denser halos.
+inline constexpr std::uint64_t chunked_pmr_bytes_per_point = 512;
 
 /// Builds PMR of `src` into the directory `dir` (created; files already there with the names it
 /// writes are replaced). Throws InvalidArgument on an empty source, non-finite positions, more
