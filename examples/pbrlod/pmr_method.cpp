@@ -27,6 +27,14 @@ std::string list(const std::vector<std::size_t>& v) {
   return s.str();
 }
 
+void build_counts_json(const pmr_build_stats& st, json& j) {
+  j.integer("duplicates", static_cast<long long>(st.duplicates));
+  j.integer("triangulated_points", static_cast<long long>(st.triangulated_points));
+  j.integer("removals", static_cast<long long>(st.removals));
+  j.integer("hull_points", static_cast<long long>(st.hull_points));
+  j.integer("flat_leaves", static_cast<long long>(st.flat_leaves));
+}
+
 json pmr_stats_json(const pmr_hierarchy& h, const std::string& path, double build_seconds) {
   const auto& st = h.stats();
   std::vector<std::size_t> points, tris;
@@ -44,11 +52,7 @@ json pmr_stats_json(const pmr_hierarchy& h, const std::string& path, double buil
   j.raw("triangles_per_level", list(tris));
   j.integer("max_leaf_points", h.max_leaf_points());
   j.num("neighbour_margin", h.neighbour_margin());
-  j.integer("duplicates", static_cast<long long>(st.duplicates));
-  j.integer("triangulated_points", static_cast<long long>(st.triangulated_points));
-  j.integer("removals", static_cast<long long>(st.removals));
-  j.integer("hull_points", static_cast<long long>(st.hull_points));
-  j.integer("flat_leaves", static_cast<long long>(st.flat_leaves));
+  build_counts_json(st, j);
   j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
   j.num("bytes_per_point",
         static_cast<double>(h.file_bytes()) / static_cast<double>(h.positions().size()));
@@ -131,11 +135,7 @@ struct chunked_pmr_traits {
     j.integer("nodes", static_cast<long long>(h.node_count()));
     j.integer("leaves", static_cast<long long>(h.leaf_count()));
     j.integer("levels", h.levels());
-    j.integer("duplicates", static_cast<long long>(st.duplicates));
-    j.integer("triangulated_points", static_cast<long long>(st.triangulated_points));
-    j.integer("removals", static_cast<long long>(st.removals));
-    j.integer("hull_points", static_cast<long long>(st.hull_points));
-    j.integer("flat_leaves", static_cast<long long>(st.flat_leaves));
+    build_counts_json(st, j);
     j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
     j.num("bytes_per_point", static_cast<double>(h.file_bytes()) / n);
     j.boolean("colours", H::attrs.colour);

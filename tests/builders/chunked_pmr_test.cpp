@@ -9,6 +9,7 @@
 #include <iterator>
 #include <thread>
 
+#include "chunked_test_util.hpp"
 #include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
@@ -20,16 +21,10 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string temp_dir(const std::string& what) {
-  const fs::path p =
-      fs::temp_directory_path() / ("pbr_lod_cpmr_" + std::to_string(::getpid()) + "_" + what);
-  fs::remove_all(p);
-  return p.string();
+  return test::temp_dir("pbr_lod_cpmr_", what);
 }
-
-std::vector<char> bytes_of(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
-}
+using test::bytes_of;
+using test::expect_same_folders;
 
 pmr_options small_leaves() {
   pmr_options o;
@@ -232,16 +227,6 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
   }
   EXPECT_LT(flipped * 100, whole.normals().size()) << flipped << " normals flipped";
   fs::remove_all(dir);
-}
-
-/// Every file of folder a equals b's, and they hold the same file names.
-void expect_same_folders(const std::string& a, const std::string& b) {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(a)) names.push_back(e.path().filename().string());
-  std::size_t in_b = 0;
-  for (const auto& e : fs::directory_iterator(b)) in_b += e.is_regular_file() ? 1 : 0;
-  EXPECT_EQ(names.size(), in_b);
-  for (const auto& f : names) EXPECT_EQ(bytes_of(a + "/" + f), bytes_of(b + "/" + f)) << f;
 }
 
 TEST(ChunkedPmrDistributed, ThreeRanksWriteTheOneProcessFolder) {

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <thread>
 
+#include "chunked_test_util.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 
@@ -19,16 +20,10 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string temp_dir(const std::string& what) {
-  const fs::path p =
-      fs::temp_directory_path() / ("pbr_lod_chunked_" + std::to_string(::getpid()) + "_" + what);
-  fs::remove_all(p);
-  return p.string();
+  return test::temp_dir("pbr_lod_chunked_", what);
 }
-
-std::vector<char> bytes_of(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
-}
+using test::bytes_of;
+using test::expect_same_folders;
 
 /// The wavy surface with normals and colours, plus a few returns far off it: their chunks hold
 /// fewer points than a neighbourhood, so their halo is everything.
@@ -228,16 +223,6 @@ TEST(ChunkedPointOctreeEstimated, GraphOrientationDiffersOnlyInSign) {
   }
   EXPECT_EQ(off, 0u) << "normals differing by more than their sign";
   fs::remove_all(dir);
-}
-
-/// Every file of folder a equals b's, and they hold the same file names.
-void expect_same_folders(const std::string& a, const std::string& b) {
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(a)) names.push_back(e.path().filename().string());
-  std::size_t in_b = 0;
-  for (const auto& e : fs::directory_iterator(b)) in_b += e.is_regular_file() ? 1 : 0;
-  EXPECT_EQ(names.size(), in_b);
-  for (const auto& f : names) EXPECT_EQ(bytes_of(a + "/" + f), bytes_of(b + "/" + f)) << f;
 }
 
 TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
