@@ -682,6 +682,37 @@ struct chunked_point_octree_builder : chunked_pass_base {
     save_file_bytes((dir / chunked_top_file).string(), w.bytes);
   }
 
+  /// An input that fits one chunk is that chunk: build_point_octree of the whole input, which is
+  /// what the chunk's build would make (the same folder, byte for byte), without the passes and
+  /// temporary files that would double its time.
+  chunked_build_report build_whole(std::chrono::steady_clock::time_point t0) {
+    using clock = std::chrono::steady_clock;
+    const point_cloud all = read_all(src);
+    ++passes;
+    point_octree_options whole = oo;
+    whole.threads = threads;
+    tree t = build_point_octree(point_set<In>::from(all), whole);
+    for (const vec3f& p : all.positions)
+      sphere_r2 = std::max(sphere_r2, (p - box.centre()).cast<double>().squaredNorm());
+    chunks.push_back({.top = 0, .count = n});
+    nodes[0].chunk = 0;
+    chunk_nodes.assign(1, t.nodes_.size());
+    t.save((dir / chunk_file_name(0)).string());
+    chunk_root r;
+    r.record = t.nodes_[0];
+    if constexpr (A.colour) r.colour = t.node_colours_[0];
+    if (quant) r.code = t.node_codes_[0];
+    write_top(finish_top({r}));
+    progress(1);
+    rep.passes = passes;
+    rep.chunks = 1;
+    rep.top_nodes = 1;
+    rep.largest_chunk = n;
+    rep.chunk_build_seconds = rep.seconds =
+        std::chrono::duration<double>(clock::now() - t0).count();
+    return rep;
+  }
+
   chunked_build_report run() {
     using clock = std::chrono::steady_clock;
     const auto t0 = clock::now();
@@ -691,6 +722,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
     rep.estimated_normals = !In.normal;
     progress(0);
     structure();
+    if (nodes.size() == 1 && ranks == 1) return build_whole(t0);
     distribute();
     halos();
     progress(0.2);

@@ -256,15 +256,29 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
 }
 
 TEST(ChunkedPointOctreeFiles, OneChunkWhenTheInputFits) {
+  // One process builds an input that fits one chunk in memory, without the passes; two ranks go
+  // the chunked way. Both write the same folder, whose tree is build_point_octree's.
   const point_cloud c = make_wavy_surface(3000, 2);
-  const std::string dir = temp_dir("one");
+  const std::string dir = temp_dir("one"), ranks_dir = temp_dir("one_ranks");
   const auto r = build_point_octree_chunked(cloud_point_source(c), dir, {});
   EXPECT_EQ(r.chunks, 1u);
   EXPECT_EQ(r.top_nodes, 1u);
+  EXPECT_EQ(r.passes, 2) << "the bounds pass and the read of the whole input";
   using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
   EXPECT_TRUE(H::open(dir).assemble() ==
               build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(c)));
+  std::barrier sync(2);
+  std::vector<std::thread> ranks;
+  for (int rank = 0; rank < 2; ++rank)
+    ranks.emplace_back([&, rank] {
+      chunked_build_options o;
+      o.distributed = {rank, 2, [&] { sync.arrive_and_wait(); }};
+      (void)build_point_octree_chunked(cloud_point_source(c), ranks_dir, o);
+    });
+  for (auto& t : ranks) t.join();
+  expect_same_folders(dir, ranks_dir);
   fs::remove_all(dir);
+  fs::remove_all(ranks_dir);
 }
 
 TEST(ChunkedPointOctreeFiles, BadInputAndDamagedDirectoriesAreErrors) {

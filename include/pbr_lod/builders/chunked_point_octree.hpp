@@ -27,6 +27,9 @@
 //     saved; its root's covariance summary is kept.
 //  7. The top nodes are finished bottom up from the chunks' roots (EQ 4, EQ 5–6) and written.
 //
+// An input that fits one chunk (and one process) skips steps 2–7: it is read whole and built by
+// build_point_octree, which writes the folder those steps would.
+//
 // Equal to the in-memory build: every chunk's subtree, its samples and every top node equal
 // build_point_octree's (chunked_point_octree::assemble() returns that tree), given
 //  * normals in the input, or normals oriented towards a viewpoint (options.octree.viewpoint):
