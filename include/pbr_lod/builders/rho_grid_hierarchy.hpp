@@ -65,6 +65,13 @@ namespace pbr_lod {
 /// products, or the paper's 32-bit fixed point with a reciprocal table.
 enum class rho_grid_arithmetic { floating, fixed, fixed32 };
 
+/// The screen bound of a cell in rho_grid_policy's tests (§4.1). `symmetric`: a half extent
+/// E/(W·(W − B)) about the projected centre from one max-|Δ| entry per axis (all arithmetics).
+/// `per_corner`: the paper's bounds table — per depth the min and max over the cell's corners of
+/// ΔX, ΔY, ΔW — giving the rectangle [min x, max x] × [min y, max y] with the minimum z/w, which
+/// lies inside the symmetric one (float and int64 only: fixed32 would need a second reciprocal).
+enum class rho_grid_bounds { symmetric, per_corner };
+
 /// A node of a ρ-grid hierarchy: the cell index (rho_grid numbering), its depth below the root
 /// cube (the paper's level + 1, see rho_grid) and its integer position in [0, ρ^depth)³ — the
 /// path the implicit positions need.
@@ -301,9 +308,18 @@ struct rho_traversal {
   struct hom {
     value x, y, w;
   };
+  /// Min and max of (ΔX, ΔY, ΔW) over the corners of a box, from the centre of its cell.
+  struct corner_box {
+    std::array<value, 3> mn, mx;
+  };
   struct level_tables {
     std::array<hom, R3> disp;  ///< H offset of child j's centre from its parent's
     value ax, ay, b;           ///< bounds table: max |ΔX|, |ΔY|, |ΔW| over the cell's corners
+    /// per-corner bounds table, split by axis (the box's corners are sums of one offset per
+    /// axis): span[a][i0·ρ + i1] = min and max of (ΔX, ΔY, ΔW) over the offsets along axis a
+    /// of the faces of child slabs i0 … i1 from the cell centre. Summed over the axes for the
+    /// occupied children's span, they bound the corners of the box of the sampled children.
+    std::array<std::array<corner_box, Rho * Rho>, 3> span;
   };
   /// fixed32 tests on the projected centre (X/W, Y/W) instead of in homogeneous coordinates.
   static constexpr bool projective = std::is_same_v<Arith, rho_fixed32_arith>;
@@ -312,6 +328,7 @@ struct rho_traversal {
   hom root{};
   std::vector<level_tables> levels;  // indexed by cell depth (0 = root cube)
   value cx{}, cy{}, znear{}, zfar{};
+  value unit{};  ///< 1 in the arithmetic (2^F): lifts a value to a product's scale
   /// Shadow casters (§4.2 with frustum culling): which planes of the view volume may still cull
   /// a cell — those the cell cannot cross by moving away from the light — and from which depth
   /// a cell kept only as a caster is fine enough to emit. All true / unused when not casting.
@@ -364,7 +381,9 @@ struct rho_traversal {
       levels[l].ax = arith.from(dt[l].ax);
       levels[l].ay = arith.from(dt[l].ay);
       levels[l].b = arith.from(dt[l].b);
+      span_table(r, u, f, g.cell_side(int(l)), levels[l].span);
     }
+    unit = arith.from(1.0);
     if constexpr (projective) {
       screen_g = Arith::screen_bits(v);
       cx = value(std::llround(std::ldexp(0.5 * v.width, screen_g)));  // ≤ 2^24
@@ -377,6 +396,63 @@ struct rho_traversal {
     zfar = arith.from(double(v.z_far));
     // fixed32: W − B > z_near ≥ 0 then gives W ≥ 1, what the reciprocal table takes.
     if constexpr (projective) znear = std::max(znear, value(0));
+  }
+
+  /// The per-corner table of one depth (cells of side `side`): for each axis a and slab span
+  /// i0 ≤ i1, the min and max of (ΔX, ΔY, ΔW) = rows · e_a·o over the two face offsets
+  /// o = −side/2 + i0·side/ρ and −side/2 + (i1 + 1)·side/ρ.
+  void span_table(const vec3d& r, const vec3d& u, const vec3d& f, double side,
+                  std::array<std::array<corner_box, Rho * Rho>, 3>& out) const {
+    const double cs = side / Rho;
+    for (int a = 0; a < 3; ++a)
+      for (int i0 = 0; i0 < Rho; ++i0)
+        for (int i1 = i0; i1 < Rho; ++i1) {
+          const double lo = -0.5 * side + i0 * cs, hi = -0.5 * side + (i1 + 1) * cs;
+          auto& e = out[std::size_t(a)][std::size_t(i0 * Rho + i1)];
+          const std::array<double, 3> row{r[a], u[a], f[a]};
+          for (std::size_t k = 0; k < 3; ++k) {
+            e.mn[k] = arith.from(std::min(row[k] * lo, row[k] * hi));
+            e.mx[k] = arith.from(std::max(row[k] * lo, row[k] * hi));
+          }
+        }
+  }
+
+  /// The span i0·ρ + i1 per axis of the children set in `code`; a leaf (empty code) spans
+  /// the whole cell.
+  [[nodiscard]] static std::array<int, 3> spans(const child_code<Rho>& code) {
+    static const auto slabs = [] {  // slabs[a][i]: the bits of the children with digit_a = i
+      std::array<std::array<child_code<Rho>, Rho>, 3> m{};
+      for (int j = 0; j < R3; ++j) {
+        m[0][std::size_t(j % Rho)].set(j);
+        m[1][std::size_t((j / Rho) % Rho)].set(j);
+        m[2][std::size_t(j / (Rho * Rho))].set(j);
+      }
+      return m;
+    }();
+    std::array<int, 3> out{};
+    for (std::size_t a = 0; a < 3; ++a) {
+      unsigned occ = 0;
+      for (std::size_t i = 0; i < std::size_t(Rho); ++i) {
+        bool any = false;
+        for (std::size_t k = 0; k < code.w.size(); ++k) any |= (code.w[k] & slabs[a][i].w[k]) != 0;
+        occ |= unsigned(any) << i;
+      }
+      out[a] = occ == 0 ? Rho - 1 : std::countr_zero(occ) * Rho + std::bit_width(occ) - 1;
+    }
+    return out;
+  }
+
+  /// The corner box of the sampled children of a cell at depth l with those spans.
+  [[nodiscard]] corner_box children_box(int l, const std::array<int, 3>& sp) const {
+    const auto& t = levels[std::size_t(l)].span;
+    corner_box b{};
+    for (std::size_t k = 0; k < 3; ++k) {
+      b.mn[k] = t[0][std::size_t(sp[0])].mn[k] + t[1][std::size_t(sp[1])].mn[k] +
+                t[2][std::size_t(sp[2])].mn[k];
+      b.mx[k] = t[0][std::size_t(sp[0])].mx[k] + t[1][std::size_t(sp[1])].mx[k] +
+                t[2][std::size_t(sp[2])].mx[k];
+    }
+    return b;
   }
 
   /// Keeps the cells that can shadow the view volume from a directional light (`to_light`, in
@@ -489,6 +565,72 @@ struct rho_traversal {
     return leaf ? verdict::draw : verdict::refine;
   }
 
+  /// One screen axis of a cell's per-corner rectangle as fractions: every corner's
+  /// x = (X + ΔX_k)/(W + ΔW_k) has its numerator in [X + mn, X + mx] and its denominator in
+  /// [W + mnw, W + mxw] (positive: the cell is in front of the eye), so by interval division
+  /// x ≤ (X + mx)/(W + mnw) when that numerator is ≥ 0, else ≤ (X + mx)/(W + mxw); likewise
+  /// the minimum. With mn = −A, mnw = −B this is never wider than the symmetric bound, and
+  /// narrower on the side away from the screen centre (its denominator W + B, not W − B).
+  struct fraction {
+    value n, d;
+  };
+  struct interval {
+    fraction lo, hi;
+  };
+  [[nodiscard]] static interval corner_interval(value c, value mn, value mx, value dlo, value dhi) {
+    const value lo = c + mn, hi = c + mx;
+    return {{lo, lo >= value(0) ? dhi : dlo}, {hi, hi >= value(0) ? dlo : dhi}};
+  }
+
+  /// test() with the per-corner bounds table (float and int64; cross-multiplied, no division):
+  ///   splat condition   hi.n·lo.d − lo.n·hi.d ≤ s·hi.d·lo.d  (x and y; Eq. 6 on max x − min x)
+  ///   frustum culling   hi.n < −c_x·hi.d (left), lo.n > c_x·lo.d (right), likewise y;
+  ///                     W + min ΔW > z_far (beyond), W + max ΔW < z_near (behind)
+  [[nodiscard]] verdict test_per_corner(const hom& h, int l, bool leaf, float s, bool cull,
+                                        const corner_box& b) const {
+    static_assert(!projective, "the per-corner bounds are float and int64 only");
+    const value dlo = h.w + b.mn[2], dhi = h.w + b.mx[2];  // the minimum and maximum z/w
+    if (dhi < znear) return may_cull.near ? verdict::cull : caster(l, leaf);
+    if (!(dlo > znear)) return leaf ? verdict::draw : verdict::refine;
+    const interval ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
+    const interval iy = corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi);
+    const auto narrow = [&](const interval& i) {
+      const auto spread = Arith::mul(i.hi.n, i.lo.d) - Arith::mul(i.lo.n, i.hi.d);
+      return Arith::lhs(spread) <= 2 * Arith::splat_scale(s) * Arith::mul(i.hi.d, i.lo.d);
+    };
+    const auto small = [&] { return narrow(ix) && narrow(iy); };
+    if (cull) {
+      const bool far = dlo > zfar;
+      const bool left = Arith::mul(ix.hi.n, unit) < -Arith::mul(cx, ix.hi.d);
+      const bool right = Arith::mul(ix.lo.n, unit) > Arith::mul(cx, ix.lo.d);
+      const bool top = Arith::mul(iy.hi.n, unit) < -Arith::mul(cy, iy.hi.d);
+      const bool bottom = Arith::mul(iy.lo.n, unit) > Arith::mul(cy, iy.lo.d);
+      if ((far && may_cull.far) || (left && may_cull.left) || (right && may_cull.right) ||
+          (top && may_cull.top) || (bottom && may_cull.bottom))
+        return verdict::cull;
+      if (far || left || right || top || bottom) return small() ? verdict::draw : caster(l, leaf);
+    }
+    if (small()) return verdict::draw;
+    return leaf ? verdict::draw : verdict::refine;
+  }
+
+  /// The per-corner rectangle of a cell in pixels from the principal point (y down), what
+  /// test_per_corner() compares: empty (all NaN) when the cell reaches behind the near plane.
+  struct rectangle {
+    double x0, x1, y0, y1;
+  };
+  [[nodiscard]] rectangle corner_rectangle(const hom& h, const corner_box& b) const {
+    const value dlo = h.w + b.mn[2], dhi = h.w + b.mx[2];
+    if (!(dlo > znear)) {
+      constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+      return {nan, nan, nan, nan};
+    }
+    const auto q = [](const fraction& f) { return double(f.n) / double(f.d); };  // scale-free
+    const interval ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
+    const interval iy = corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi);
+    return {q(ix.lo), q(ix.hi), q(iy.lo), q(iy.hi)};
+  }
+
   /// A cell kept only for the shadows it casts.
   [[nodiscard]] verdict caster(int l, bool leaf) const {
     return leaf || l >= caster_depth ? verdict::draw : verdict::refine;
@@ -563,9 +705,16 @@ template <int Rho>
 /// traverse_options: tolerance_px is s, frustum_cull switches the off-screen and far tests;
 /// metric, cull_volume and backface_cull do not apply. Stats: emitted_nodes = inner cells drawn
 /// as splats, emitted_leaves = leaves drawn as points, culled_frustum = subtrees culled.
-template <int Rho, rho_grid_arithmetic Arith = rho_grid_arithmetic::floating>
+/// Bounds picks the cell bound of the tests (rho_grid_bounds): per_corner visits and draws fewer
+/// cells at the same s (docs/rho-grid.md measures it), in float and int64.
+template <int Rho, rho_grid_arithmetic Arith = rho_grid_arithmetic::floating,
+          rho_grid_bounds Bounds = rho_grid_bounds::symmetric>
 class rho_grid_policy {
+  static_assert(Bounds == rho_grid_bounds::symmetric || Arith != rho_grid_arithmetic::fixed32,
+                "per-corner bounds are float and int64 only: fixed32 tests the projected "
+                "centre through one reciprocal per cell, the rectangle needs two (W ± B)");
   static constexpr int R3 = Rho * Rho * Rho;
+  static constexpr bool per_corner = Bounds == rho_grid_bounds::per_corner;
   using arith =
       std::conditional_t<Arith == rho_grid_arithmetic::fixed, detail::rho_fixed_arith,
                          std::conditional_t<Arith == rho_grid_arithmetic::fixed32,
@@ -615,13 +764,13 @@ class rho_grid_policy {
     using verdict = typename tables::verdict;
     const bool leaf = h.is_leaf(n);
     const float s = splat_size(o);
-    const verdict vd = t_.test(hs, n.depth, leaf, s, o.frustum_cull);
+    const verdict vd = test(h, n, hs, leaf, s, o.frustum_cull);
     if (vd == verdict::cull) return {visit_result::verdict::cull, 0};
     if (points_only)
       return leaf ? visit_result{visit_result::verdict::emit, 1.0f}
                   : visit_result{visit_result::verdict::refine, s};
     if (leaf && leaf_splats) {
-      const float w = t_.width_px(hs, n.depth);  // +inf: straddles the eye plane, a point
+      const float w = leaf_width(h, n, hs);  // +inf: straddles the eye plane, a point
       return {visit_result::verdict::emit, std::isfinite(w) ? std::clamp(w, 1.0f, 1e4f) : 1.0f};
     }
     if (vd == verdict::draw) return {visit_result::verdict::emit, leaf ? 1.0f : s};
@@ -654,6 +803,33 @@ class rho_grid_policy {
   void emit(const H& h, const rho_grid_cell& n, const view&, float size_px, const traverse_options&,
             S& sink) const {
     h.emit_sample(n, size_px, sink);
+  }
+
+  template <class H>
+  [[nodiscard]] auto test(const H& h, const rho_grid_cell& n, const state& hs, bool leaf, float s,
+                          bool cull) const {
+    if constexpr (per_corner)
+      return t_.test_per_corner(hs, n.depth, leaf, s, cull, box(h, n, leaf));
+    else
+      return t_.test(hs, n.depth, leaf, s, cull);
+  }
+  /// The per-corner bound's box: the sampled children's, a leaf's whole cell.
+  template <class H>
+  [[nodiscard]] auto box(const H& h, const rho_grid_cell& n, bool leaf) const {
+    const std::array<int, 3> whole{Rho - 1, Rho - 1, Rho - 1};
+    return t_.children_box(n.depth, leaf ? whole : tables::spans(h.grid().code(n.cell)));
+  }
+
+  /// A leaf's projected width for leaf_splats: the larger side of the bound the tests use.
+  template <class H>
+  [[nodiscard]] float leaf_width(const H& h, const rho_grid_cell& n, const state& hs) const {
+    if constexpr (per_corner) {
+      const auto r = t_.corner_rectangle(hs, box(h, n, true));
+      const double w = std::max(r.x1 - r.x0, r.y1 - r.y0);
+      return std::isnan(w) ? std::numeric_limits<float>::infinity() : float(w);
+    } else {
+      return t_.width_px(hs, n.depth);
+    }
   }
 
   /// s: the tolerance, or 1 when it is not a positive number.
