@@ -115,15 +115,6 @@ class index_file {
     ::munmap(m, hi - lo);
     if (synced != 0) throw IoError(path_ + ": cannot write: " + std::strerror(errno));
   }
-  /// The values of the records' points (ascending indices), as scatter() wrote them.
-  void read_scattered(const std::vector<point_record>& at, std::vector<vec3f>& out) const {
-    out.resize(at.size());
-    std::vector<vec3f> one;
-    for (std::size_t i = 0; i < at.size(); ++i) {
-      read(at[i].index, 1, one);
-      out[i] = one[0];
-    }
-  }
   void read(std::uint64_t first, std::size_t count, std::vector<vec3f>& out) const {
     out.resize(count);
     auto* dst = reinterpret_cast<char*>(out.data());

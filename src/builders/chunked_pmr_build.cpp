@@ -330,6 +330,8 @@ struct chunked_pmr_builder : chunked_pass_base {
           if (a >= own) std::swap(a, b);
           const auto it = std::lower_bound(owner.begin(), owner.end(),
                                            std::pair<std::uint64_t, std::uint32_t>{d.source[b], 0});
+          if (it == owner.end() || it->first != d.source[b])
+            throw IoError(temp_path("halo", c) + ": an umbrella vertex is not in the halo");
           w.put(it->second);
           w.put(d.source[b]);
           w.put_vec(d.normals[a]);
@@ -388,27 +390,26 @@ struct chunked_pmr_builder : chunked_pass_base {
       if (seed < m && !done[seed]) q.push({0, {seed, seed}});  // a part of its own: as it is
     }
     for (std::uint32_t c = 0; c < m; ++c)
-      if (flip[c]) {
-        const auto recs = read_records(temp_path("chunk", c));
-        std::vector<vec3f> nrm;
-        normals.read_scattered(recs, nrm);
-        for (auto& v : nrm) v = -v;
-        normals.scatter(recs, nrm);
-      }
+      if (flip[c]) scatter_normals(normals, c, true);
     return flip;
   }
 
   /// Every chunk's normals into one file in input order (rank 0).
   void gather_normals(index_file& normals) const {
-    for (std::size_t c = 0; c < chunk_top.size(); ++c) {
-      const auto recs = read_records(temp_path("chunk", c));
-      const std::string path = temp_path("normals", c);
-      const std::vector<unsigned char> bytes = load_file_bytes(path);
-      byte_reader r{bytes, 0, path};
-      std::vector<vec3f> nrm(recs.size());
-      for (std::size_t k = 0; k < nrm.size(); ++k) nrm[k] = r.get_vec("normal", k);
-      normals.scatter(recs, nrm);
-    }
+    for (std::size_t c = 0; c < chunk_top.size(); ++c) scatter_normals(normals, c, false);
+  }
+
+  /// Chunk c's own normals (as build_part saved them, in input order) into `normals`, negated
+  /// when `flip`.
+  void scatter_normals(index_file& normals, std::size_t c, bool flip) const {
+    const auto recs = read_records(temp_path("chunk", c));
+    const std::string path = temp_path("normals", c);
+    const std::vector<unsigned char> bytes = load_file_bytes(path);
+    byte_reader r{bytes, 0, path};
+    std::vector<vec3f> nrm(recs.size());
+    for (std::size_t k = 0; k < nrm.size(); ++k)
+      nrm[k] = (flip ? -1.0f : 1.0f) * r.get_vec("normal", k);
+    normals.scatter(recs, nrm);
   }
 
   /// Step 5 for chunk c: the foreign samples' normals, the triangles wound, the chunk's file.
