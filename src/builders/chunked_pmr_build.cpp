@@ -98,7 +98,7 @@ struct chunked_pmr_builder : chunked_pass_base {
   }
 
   /// Steps 1–2: the input's box and origin, then one pass per level splitting every cell above
-  /// chunk size (and above max_depth, as build_pmr's octree stops there).
+  /// chunk size that is not at max_depth (where build_pmr's octree stops too).
   void structure() {
     wlo = vec3d::Constant(std::numeric_limits<double>::infinity());
     whi = -wlo;
