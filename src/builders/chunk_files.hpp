@@ -8,7 +8,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -141,6 +143,36 @@ struct temp_dir {
     std::error_code ec;
     if (owner) std::filesystem::remove_all(path, ec);
   }
+};
+
+/// Items by the cells of a 32³ grid over the box [lo, lo + ext] that their boxes touch (a box may
+/// reach beyond the grid, to infinity): a point then tests only the items of its cell.
+class box_grid {
+ public:
+  static constexpr int g = 32;
+  box_grid(const vec3d& lo, const vec3d& ext)
+      : lo_(lo), ext_(ext.cwiseMax(vec3d::Constant(1e-30))), lists_(g * g * g) {}
+  void add(std::uint32_t item, const vec3d& lo, const vec3d& hi) {
+    std::array<int, 3> a{}, b{};
+    for (int ax = 0; ax < 3; ++ax) {
+      a[ax] = index(lo[ax], ax);
+      b[ax] = index(hi[ax], ax);
+    }
+    for (int z = a[2]; z <= b[2]; ++z)
+      for (int y = a[1]; y <= b[1]; ++y)
+        for (int x = a[0]; x <= b[0]; ++x) lists_[(z * g + y) * g + x].push_back(item);
+  }
+  [[nodiscard]] const std::vector<std::uint32_t>& at(const vec3d& p) const {
+    return lists_[(index(p.z(), 2) * g + index(p.y(), 1)) * g + index(p.x(), 0)];
+  }
+
+ private:
+  [[nodiscard]] int index(double v, int axis) const {
+    const double t = (v - lo_[axis]) / ext_[axis] * g;
+    return std::clamp(static_cast<int>(std::floor(std::clamp(t, -1.0, double(g)))), 0, g - 1);
+  }
+  vec3d lo_, ext_;
+  std::vector<std::vector<std::uint32_t>> lists_;
 };
 
 /// What every chunked build does with its source, its ranks and its temporary folder.

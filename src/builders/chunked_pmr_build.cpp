@@ -172,7 +172,7 @@ struct chunked_pmr_builder : chunked_pass_base {
   }
 
   /// Step 3 (rank 0): every point into its chunk's file and into the halo of every other chunk
-  /// whose halo box holds it; a coarse grid over the root cell lists the boxes.
+  /// whose halo box holds it (a coarse grid over the root cell lists the boxes).
   void distribute() {
     const std::size_t m = chunk_top.size();
     if (rank == 0) {
@@ -183,7 +183,11 @@ struct chunked_pmr_builder : chunked_pass_base {
         files.emplace_back(temp_path("chunk", c), buffer_bytes(2 * m));
         halos.emplace_back(temp_path("halo", c), buffer_bytes(2 * m));
       }
-      const halo_grid grid(*this);
+      box_grid grid(nodes[0].cell.lo, vec3d::Constant(nodes[0].cell.size));
+      for (std::uint32_t c = 0; c < m; ++c) {
+        const auto box = halo_box(c);
+        grid.add(c, box[0], box[1]);
+      }
       const attributes a = src.attrs();
       // The stored positions are the local ones in float; their box is the local box in float
       // (rounding is monotonic), so its centre is known before the pass.
@@ -228,35 +232,6 @@ struct chunked_pmr_builder : chunked_pass_base {
       for (std::size_t c = 0; c < m; ++c)
         rep.halo_points += fs::file_size(temp_path("halo", c)) / record_bytes;
   }
-
-  /// Chunks by the cells of a 32³ grid over the root cell their halo boxes touch.
-  struct halo_grid {
-    static constexpr int g = 32;
-    vec3d lo;
-    double cell;
-    std::vector<std::vector<std::uint32_t>> lists;
-    explicit halo_grid(const chunked_pmr_builder& b)
-        : lo(b.nodes[0].cell.lo), cell(b.nodes[0].cell.size / g), lists(g * g * g) {
-      for (std::uint32_t c = 0; c < b.chunk_top.size(); ++c) {
-        const auto box = b.halo_box(c);
-        std::array<int, 3> a{}, e{};
-        for (int ax = 0; ax < 3; ++ax) {
-          a[ax] = index(box[0][ax], ax);
-          e[ax] = index(box[1][ax], ax);
-        }
-        for (int z = a[2]; z <= e[2]; ++z)
-          for (int y = a[1]; y <= e[1]; ++y)
-            for (int x = a[0]; x <= e[0]; ++x) lists[(z * g + y) * g + x].push_back(c);
-      }
-    }
-    [[nodiscard]] int index(double v, int axis) const {
-      const double t = std::floor((v - lo[axis]) / cell);
-      return static_cast<int>(std::clamp(t, 0.0, double(g - 1)));
-    }
-    [[nodiscard]] const std::vector<std::uint32_t>& at(const vec3d& p) const {
-      return lists[(index(p.z(), 2) * g + index(p.y(), 1)) * g + index(p.x(), 0)];
-    }
-  };
 
   /// Step 4 over this rank's chunks: a chunk's leaves are few (chunk / max_leaf_points), so the
   /// chunks are built side by side, one thread each, when there are enough of them; else one at a

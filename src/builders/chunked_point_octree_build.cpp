@@ -352,31 +352,17 @@ struct chunked_point_octree_builder : chunked_pass_base {
     files.reserve(chunks.size());
     for (std::size_t c = 0; c < chunks.size(); ++c)
       files.emplace_back(temp_path("halo", c), buffer_bytes());
-    // Cells by cell of a coarse grid over the data, each listed in every grid cell its reach
-    // touches: a point tests only the entries of its grid cell.
+    // Cells listed by the cells of a coarse grid over the data their reach touches.
     vec3f lo = chunks[0].lo, hi = chunks[0].hi;
     for (const auto& c : chunks) {
       lo = lo.cwiseMin(c.lo);
       hi = hi.cwiseMax(c.hi);
     }
-    constexpr int g = 32;
-    const vec3d glo = lo.cast<double>(), ext = (hi - lo).cast<double>().cwiseMax(1e-30);
-    const auto cell = [&](double v, int axis) {
-      const double t = (v - glo[axis]) / ext[axis] * g;
-      return std::clamp(static_cast<int>(std::floor(std::clamp(t, -1.0, double(g)))), 0, g - 1);
-    };
-    std::vector<std::vector<std::uint32_t>> grid(g * g * g);
+    box_grid grid(lo.cast<double>(), (hi - lo).cast<double>());
     for (std::uint32_t e = 0; e < all.size(); ++e) {
-      const halo_cell& h = all[e].cell;
-      const bool fin = std::isfinite(h.reach);
-      std::array<int, 3> a{}, b{};
-      for (int ax = 0; ax < 3; ++ax) {
-        a[ax] = fin ? cell(h.lo[ax] - h.reach, ax) : 0;
-        b[ax] = fin ? cell(h.hi[ax] + h.reach, ax) : g - 1;
-      }
-      for (int z = a[2]; z <= b[2]; ++z)
-        for (int y = a[1]; y <= b[1]; ++y)
-          for (int x = a[0]; x <= b[0]; ++x) grid[(z * g + y) * g + x].push_back(e);
+      const halo_cell& h = all[e].cell;  // an infinite reach lists it everywhere
+      grid.add(e, h.lo.template cast<double>() - vec3d::Constant(h.reach),
+               h.hi.template cast<double>() + vec3d::Constant(h.reach));
     }
     std::vector<std::uint32_t> taken;  // chunks this point already went to
     stream([&](std::uint64_t first, const point_block& b) {
@@ -384,8 +370,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
         const vec3f& p = b.positions[k];
         const std::uint32_t own = nodes[descend(p.cast<double>())].chunk;
         taken.clear();
-        for (const std::uint32_t e :
-             grid[(cell(p.z(), 2) * g + cell(p.y(), 1)) * g + cell(p.x(), 0)]) {
+        for (const std::uint32_t e : grid.at(p.cast<double>())) {
           const std::uint32_t c = all[e].chunk;
           const halo_cell& h = all[e].cell;
           if (c == own || std::find(taken.begin(), taken.end(), c) != taken.end()) continue;
