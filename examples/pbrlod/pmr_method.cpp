@@ -44,7 +44,10 @@ json pmr_stats_json(const pmr_hierarchy& h, const std::string& path, double buil
   }
   json j;
   j.str("file", path).str("method", "pmr");
-  j.integer("points", static_cast<long long>(h.positions().size()));
+  // A chunk of a chunked folder also holds other chunks' umbrella vertices (foreign samples).
+  const std::size_t own = h.positions().size() - h.foreign();
+  j.integer("points", static_cast<long long>(own));
+  if (h.foreign() > 0) j.integer("foreign_points", static_cast<long long>(h.foreign()));
   j.integer("nodes", static_cast<long long>(h.nodes().size()));
   j.integer("leaves", static_cast<long long>(h.leaf_count()));
   j.integer("levels", h.levels());
@@ -54,8 +57,7 @@ json pmr_stats_json(const pmr_hierarchy& h, const std::string& path, double buil
   j.num("neighbour_margin", h.neighbour_margin());
   build_counts_json(st, j);
   j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
-  j.num("bytes_per_point",
-        static_cast<double>(h.file_bytes()) / static_cast<double>(h.positions().size()));
+  j.num("bytes_per_point", static_cast<double>(h.file_bytes()) / static_cast<double>(own));
   j.boolean("colours", h.has_colours());
   j.num("build_seconds", build_seconds);  // NaN → null: unknown
   return j;

@@ -21,8 +21,16 @@ namespace pbrlod_tool {
 namespace fs = std::filesystem;
 
 bool is_hierarchy_file(const std::string& path) {
-  return fs::path(path).extension() == ".lod" || is_chunked_point_octree(path) ||
-         is_chunked_pmr(path);
+  if (fs::path(path).extension() == ".lod" || is_chunked_point_octree(path) || is_chunked_pmr(path))
+    return true;
+  // Any other file that starts with a method's magic: a chunk of a chunked folder, say.
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return false;
+  const auto head = detail::load_file_prefix(path, 8);
+  const std::string magic(head.begin(), head.end());
+  for (const auto& m : methods())
+    if (!m.magic.empty() && m.magic == magic) return true;
+  return false;
 }
 
 lod_header peek_lod(const std::string& path) {
