@@ -525,13 +525,9 @@ struct rho_traversal {
       const std::int64_t cxd = Arith::mul(cx, den), cyd = Arith::mul(cy, den);
       const bool far = den > zfar, left = (xd + p.ex < -cxd), right = (xd - p.ex > cxd),
                  top = (yd + p.ey < -cyd), bottom = (yd - p.ey > cyd);
-      if ((far && may_cull.far) || (left && may_cull.left) || (right && may_cull.right) ||
-          (top && may_cull.top) || (bottom && may_cull.bottom))
-        return verdict::cull;
-      if (far || left || right || top || bottom) return small() ? verdict::draw : caster(l, leaf);
+      return decide({far, left, right, top, bottom}, l, leaf, small);
     }
-    if (small()) return verdict::draw;
-    return leaf ? verdict::draw : verdict::refine;
+    return decide({}, l, leaf, small);
   }
 
   /// test() in float or int64: products of two and three values, no division.
@@ -555,14 +551,9 @@ struct rho_traversal {
       const auto cxwd = scaled(cx, wd), cywd = scaled(cy, wd);
       const bool far = den > zfar, left = xd + ex<-cxwd, right = xd - ex> cxwd,
                  top = yd + ey<-cywd, bottom = yd - ey> cywd;
-      if ((far && may_cull.far) || (left && may_cull.left) || (right && may_cull.right) ||
-          (top && may_cull.top) || (bottom && may_cull.bottom))
-        return verdict::cull;
-      if (far || left || right || top || bottom)  // out of view, kept as a caster
-        return small() ? verdict::draw : caster(l, leaf);
+      return decide({far, left, right, top, bottom}, l, leaf, small);
     }
-    if (small()) return verdict::draw;
-    return leaf ? verdict::draw : verdict::refine;
+    return decide({}, l, leaf, small);
   }
 
   /// One screen axis of a cell's per-corner rectangle as fractions: every corner's
@@ -605,13 +596,9 @@ struct rho_traversal {
       const bool right = Arith::mul(ix.lo.n, unit) > Arith::mul(cx, ix.lo.d);
       const bool top = Arith::mul(iy.hi.n, unit) < -Arith::mul(cy, iy.hi.d);
       const bool bottom = Arith::mul(iy.lo.n, unit) > Arith::mul(cy, iy.lo.d);
-      if ((far && may_cull.far) || (left && may_cull.left) || (right && may_cull.right) ||
-          (top && may_cull.top) || (bottom && may_cull.bottom))
-        return verdict::cull;
-      if (far || left || right || top || bottom) return small() ? verdict::draw : caster(l, leaf);
+      return decide({far, left, right, top, bottom}, l, leaf, small);
     }
-    if (small()) return verdict::draw;
-    return leaf ? verdict::draw : verdict::refine;
+    return decide({}, l, leaf, small);
   }
 
   /// The per-corner rectangle of a cell in pixels from the principal point (y down), what
@@ -634,6 +621,23 @@ struct rho_traversal {
   /// A cell kept only for the shadows it casts.
   [[nodiscard]] verdict caster(int l, bool leaf) const {
     return leaf || l >= caster_depth ? verdict::draw : verdict::refine;
+  }
+
+  /// Which view tests a cell fails: beyond the far plane, off each side of the screen.
+  struct outside {
+    bool far = false, left = false, right = false, top = false, bottom = false;
+  };
+  /// The verdict once the tests are known: culled when a test that may cull fails; out of view
+  /// but kept as a shadow caster; else drawn when small enough (Eq. 6) or a leaf, refined if not.
+  template <class Small>
+  [[nodiscard]] verdict decide(const outside& o, int l, bool leaf, const Small& small) const {
+    if ((o.far && may_cull.far) || (o.left && may_cull.left) || (o.right && may_cull.right) ||
+        (o.top && may_cull.top) || (o.bottom && may_cull.bottom))
+      return verdict::cull;
+    if (o.far || o.left || o.right || o.top || o.bottom)
+      return small() ? verdict::draw : caster(l, leaf);
+    if (small()) return verdict::draw;
+    return leaf ? verdict::draw : verdict::refine;
   }
 
   /// The cell's conservative projected width in pixels (2·max(E_x, E_y) / (W·(W − B)), what the
