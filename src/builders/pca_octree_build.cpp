@@ -284,10 +284,11 @@ void merge_parts(std::vector<part_node>& top, std::size_t frontier,
 /// then each of that level's subtrees on its own (the points of different subtrees are
 /// disjoint ranges), merged back into breadth-first order. The tree and the order of the
 /// points do not depend on the number of threads. Returns each node's range of points.
-std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned threads) {
+std::vector<build_node> build_octree(octree_points& p, pca_data& d, std::uint8_t root_depth,
+                                     unsigned threads) {
   constexpr std::size_t frontier_nodes = 256;
   std::vector<part_node> top{
-      {{0, static_cast<std::uint32_t>(p.pos.size())}, d.cube_min, 0, 0, 0, 0}};
+      {{0, static_cast<std::uint32_t>(p.pos.size())}, d.cube_min, 0, 0, 0, root_depth}};
   std::size_t level = 0;  // first node of the level being split
   while (level < top.size() && top.size() - level < frontier_nodes) {
     const std::size_t end = top.size();
@@ -319,25 +320,23 @@ std::vector<build_node> build_octree(octree_points& p, pca_data& d, unsigned thr
 /// own frame (the unwrap is about its mean normal), so every node visits its points; the
 /// positions' and colours' moments are summed at the leaves and merged up the tree level by
 /// level (Chan et al.'s update, core/covariance.hpp), so each point is summed once.
-void node_statistics(pca_data& d, const std::vector<build_node>& ranges,
-                     const std::vector<vec3d>& pos, const std::vector<vec3f>& normals,
-                     const std::vector<rgb8>& cols, unsigned threads) {
+pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& ranges,
+                                    const std::vector<vec3d>& pos,
+                                    const std::vector<vec3f>& normals,
+                                    const std::vector<rgb8>& cols, unsigned threads) {
   const std::size_t n = d.nodes.size();
   const bool colour = !cols.empty();
   if (colour) d.colours.resize(n);
   // The normals first: their mean is what the degenerate position rules align z with. If they
   // cancel out, the first sample's normal stands in (deterministic).
-  std::vector<vec3d> mean_normal(n);
+  std::vector<pca_normal_result> normal(n);
   const std::size_t pieces = std::min<std::size_t>(n, 64 * threads);
   parallel_tasks(pieces, threads, [&](std::size_t t, unsigned) {
     const auto [lo_n, hi_n] = piece_range(n, pieces, t);
     for (std::size_t i = lo_n; i < hi_n; ++i) {
       const build_node r = ranges[i];
-      const pca_normal_result pn =
+      normal[i] =
           pca_normals(normals.data() + r.begin, r.end - r.begin, normals[r.begin].cast<double>());
-      d.nodes[i].normal_frame = pn.frame.cast<float>();
-      d.nodes[i].normal_sigma = pn.sigma.cast<float>();
-      mean_normal[i] = pn.frame.col(2);
     }
   });
   // Breadth first: each level is a contiguous range, its children all in the next one, so the
@@ -364,10 +363,7 @@ void node_statistics(pca_data& d, const std::vector<build_node>& ranges,
           mp += below[c - e];
           if (colour) colour_here[i - b] += colour_below[c - e];
         }
-        const pca_position_result pp = pca_positions_from(mp.mean, mp.covariance(), mean_normal[i]);
-        nd.mean = pp.mean.cast<float>();
-        nd.frame = pp.frame.cast<float>();
-        nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
+        pca_set_statistics(nd, mp, normal[i]);
         if (colour)
           d.colours[i] = pca_colours_from(colour_here[i - b].mean, colour_here[i - b].covariance());
       }
@@ -375,9 +371,36 @@ void node_statistics(pca_data& d, const std::vector<build_node>& ranges,
     std::swap(below, here);
     std::swap(colour_below, colour_here);
   }
+  return {below[0], colour ? colour_below[0] : scatter_accumulator{}};
 }
 
 }  // namespace
+
+void pca_set_statistics(pca_node& nd, const scatter_accumulator& positions,
+                        const pca_normal_result& normals) {
+  nd.normal_frame = normals.frame.cast<float>();
+  nd.normal_sigma = normals.sigma.cast<float>();
+  const pca_position_result pp =
+      pca_positions_from(positions.mean, positions.covariance(), normals.frame.col(2));
+  nd.mean = pp.mean.cast<float>();
+  nd.frame = pp.frame.cast<float>();
+  nd.sigma = pp.sigma.cast<float>().cwiseMax(static_cast<float>(sigma_floor));
+}
+
+pca_subtree_moments pca_build_subtree(pca_data& d, pca_points& pts, const vec3d& cell_min,
+                                      std::uint8_t depth, double root_size,
+                                      const pca_octree_options& o, unsigned threads) {
+  d.cube_min = cell_min;
+  d.cube_size = root_size / std::ldexp(1.0, depth);
+  octree_points p{pts.pos, root_size, o.leaf_size, o.max_depth};
+  const std::vector<build_node> ranges = build_octree(p, d, depth, threads);
+  pts.normals = permute_by(pts.normals, p.index, threads);
+  pts.colours = permute_by(pts.colours, p.index, threads);
+  const pca_subtree_moments m =
+      node_statistics(d, ranges, pts.pos, pts.normals, pts.colours, threads);
+  pca_derive_cells(d, threads);
+  return m;
+}
 
 pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   const auto t0 = clock_type::now();
@@ -448,20 +471,15 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   d.cube_size = size;
   d.cube_min = vec3d::Constant(-0.5 * size);
 
-  // ---- §3: top-down octree, breadth first; children contiguous, in octant order.
-  octree_points pts{pos, d.cube_size, o.leaf_size, o.max_depth};
-  const std::vector<build_node> ranges = build_octree(pts, d, threads);
-  normals = permute_by(normals, pts.index, threads);
-  const std::vector<rgb8> cols =
-      permute_by(std::vector<rgb8>(in.colours.begin(), in.colours.end()), pts.index, threads);
+  // ---- §3: top-down octree, breadth first, children contiguous in octant order; the
+  // independent PCA of each node's positions, normals and colours.
+  pca_points pts{std::move(pos), std::move(normals),
+                 std::vector<rgb8>(in.colours.begin(), in.colours.end())};
+  (void)pca_build_subtree(d, pts, vec3d::Constant(-0.5 * size), 0, size, o, threads);
   for (const auto& nd : d.nodes) st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   st.nodes = d.nodes.size();
   for (const auto& nd : d.nodes) st.leaves += nd.count == 0 ? 1 : 0;
   check_progress(o, 0.35);
-
-  // ---- §3: independent PCA of each node's positions, normals and colours.
-  node_statistics(d, ranges, pos, normals, cols, threads);
-  pca_derive_cells(d, threads);
   st.tree_seconds = seconds_since(tt);
   check_progress(o, 0.6);
 
@@ -553,13 +571,19 @@ void derive_node_bounds(pca_data& d, std::size_t i) {
 void pca_derive_bounds(pca_data& d, unsigned threads) {
   if (d.nodes.empty()) return;
   const float root_norm = d.nodes[0].sigma.norm();
-  d.lambda_norm = root_norm > 0 ? root_norm : 1.0f;
+  pca_derive_bounds_with(d, root_norm > 0 ? root_norm : 1.0f, threads);
+}
+
+void pca_derive_bounds_with(pca_data& d, float lambda_norm, unsigned threads,
+                            const std::vector<char>* fixed) {
+  d.lambda_norm = lambda_norm;
+  if (d.nodes.empty()) return;
   const std::vector<std::size_t> level = tree_levels(d);
   for (std::size_t l = level.size() - 1; l-- > 0;)
     parallel_pieces(level[l + 1] - level[l], threads, 8 * threads, 4096,
                     [&](std::size_t lo, std::size_t hi) {
                       for (std::size_t i = level[l] + lo; i < level[l] + hi; ++i)
-                        derive_node_bounds(d, i);
+                        if (fixed == nullptr || !(*fixed)[i]) derive_node_bounds(d, i);
                     });
 }
 

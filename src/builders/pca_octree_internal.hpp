@@ -24,16 +24,68 @@ pca_position_result pca_positions_from(const vec3d& mean, const mat3d& cov,
 scatter_accumulator position_moments(const vec3d* p, std::size_t n);
 scatter_accumulator colour_moments(const rgb8* c, std::size_t n);
 
+/// pca_normals() in its three steps, for a caller that streams a node's normals in two passes
+/// (the chunked build): the frame about the pole from the normals' sum (the first normal as
+/// fallback), each normal's unwrapped second moment added to m (in the order pca_normals adds
+/// them), and the ellipse from m.
+mat3d pca_normal_pole(const vec3d& sum, std::size_t count, const vec3d& fallback);
+void pca_normal_unwrap_add(const mat3d& frame_transposed, const vec3f& normal, Eigen::Matrix2d& m);
+pca_normal_result pca_normal_finish(const mat3d& frame, Eigen::Matrix2d m, std::size_t count);
+
+/// A node's statistics from its accumulated moments and its normals' PCA, as the build stores
+/// them (σ_p floored at 10⁻¹⁵).
+void pca_set_statistics(pca_node& nd, const scatter_accumulator& positions,
+                        const pca_normal_result& normals);
+
+/// The points of a subtree being built: positions relative to the origin (double), unit normals,
+/// colours (or empty). pca_build_subtree() reorders them into octree order.
+struct pca_points {
+  std::vector<vec3d> pos;
+  std::vector<vec3f> normals;
+  std::vector<rgb8> colours;
+};
+/// The root's moments of a subtree (merged into its parent's by the chunked build).
+struct pca_subtree_moments {
+  scatter_accumulator positions, colours;
+};
+/// §3 below one cell: the octree of `pts` under the cell at (cell_min, depth) of a root cube of
+/// edge `root_size` (build_pca_data's rules, so a subtree equals the whole build's subtree at
+/// that cell) into d.nodes (breadth first, absolute depths; d.colours when pts has colours) and
+/// every node's statistics; pts end in octree order. d.cube_min / cube_size become the cell.
+pca_subtree_moments pca_build_subtree(pca_data& d, pca_points& pts, const vec3d& cell_min,
+                                      std::uint8_t depth, double root_size,
+                                      const pca_octree_options& o, unsigned threads);
+
 /// Cells of every node from the root cube and the child masks (top-down). Before decoding:
 /// μ_p is quantised relative to the node's cell.
 void pca_derive_cells(pca_data& d, unsigned threads = 1);
 /// λ, bounding-sphere radii and normal-cone angles (bottom-up), from the decoded statistics.
 void pca_derive_bounds(pca_data& d, unsigned threads = 1);
+/// The same with the unit of ‖σ_p‖ given (a chunk's nodes take the whole tree's root's), and
+/// without touching nodes marked in `fixed` (their bounds are known: a chunk's root in the top).
+void pca_derive_bounds_with(pca_data& d, float lambda_norm, unsigned threads,
+                            const std::vector<char>* fixed = nullptr);
 
 /// §3.1: k-means classification of σ_p, σ_n, σ_c, encoding of every node into its record and
 /// decoding back into d.nodes / d.colours (so the hierarchy holds what the file holds). Fills
 /// the quantisation-error stats and kmeans_seconds.
 void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads);
+
+/// pca_quantise() in its steps, for a build whose nodes are not all in one pca_data (the chunked
+/// build numbers them as build_pca_data would, breadth first):
+/// the classification features of node i (log₂ σ_p / cell edge; σ_n; σ_c when `fc`),
+void pca_features(const pca_data& d, std::size_t i, vec3f& fp, vec3f& fn, vec3f* fc);
+/// which of n nodes k-means samples for codebook `stream` (1: σ_p, 2: σ_n, 3: σ_c), ascending,
+/// and the random state the seeding continues from,
+std::vector<std::uint32_t> pca_kmeans_picks(std::size_t n, const pca_octree_options& o,
+                                            std::uint64_t stream, std::uint64_t& rng);
+/// the codebook trained on the picked nodes' features (in pick order),
+std::vector<vec3f> pca_kmeans_train(const std::vector<vec3f>& xs, std::uint32_t k,
+                                    const pca_octree_options& o, std::uint64_t& rng,
+                                    unsigned threads);
+/// and every node of d encoded against d's codebooks and decoded back (d.records,
+/// d.colour_records, d.nodes, d.colours; the error stats of d.stats over d's nodes).
+void pca_encode(pca_data& d, unsigned threads);
 
 /// Reads/writes `bits` (≤ 32) bits of `v` at bit position `pos` of a little-endian byte
 /// record, a byte at a time (a record holds one node; encode and decode touch every field).

@@ -212,54 +212,6 @@ std::vector<vec3f> seed_centres(const std::vector<vec3f>& xs, std::uint32_t k, s
 /// §3.1 classification: k-means of x into at most k entries (fewer when x has fewer distinct
 /// values). Writes every point's entry to assign. Deterministic for a given seed, whatever the
 /// thread count: assignments are computed per point in parallel, sums sequentially.
-std::vector<vec3f> kmeans(const std::vector<vec3f>& x, std::uint32_t k, const pca_octree_options& o,
-                          std::uint64_t stream, unsigned threads,
-                          std::vector<std::uint32_t>& assign) {
-  const std::size_t n = x.size();
-  std::uint64_t rng = o.kmeans_seed * 0x2545F4914F6CDD1Dull + stream;
-  // A seeded sample (partial Fisher–Yates), in index order.
-  std::vector<std::uint32_t> pick(n);
-  std::iota(pick.begin(), pick.end(), 0u);
-  const std::size_t s = std::min<std::size_t>(n, o.kmeans_sample);
-  if (s < n) {
-    for (std::size_t i = 0; i < s; ++i) {
-      const std::size_t j =
-          i + static_cast<std::size_t>(uniform01(rng) * static_cast<double>(n - i));
-      std::swap(pick[i], pick[std::min(j, n - 1)]);
-    }
-    pick.resize(s);
-    std::sort(pick.begin(), pick.end());
-  }
-  std::vector<vec3f> xs(s);
-  for (std::size_t i = 0; i < s; ++i) xs[i] = x[pick[i]];
-  std::vector<vec3f> centres = seed_centres(xs, k, rng, threads);
-
-  // Lloyd iterations on the sample.
-  const auto nearest = [&](const std::vector<vec3f>& pts, std::vector<std::uint32_t>& out) {
-    const nearest_entry index(centres);
-    out.resize(pts.size());
-    parallel_pieces(pts.size(), threads, 8 * threads, 2048, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t i = lo; i < hi; ++i) out[i] = index(pts[i]);
-    });
-  };
-  std::vector<std::uint32_t> a, prev;
-  for (std::uint32_t it = 0; it < o.kmeans_iterations; ++it) {
-    nearest(xs, a);
-    if (a == prev) break;
-    std::vector<vec3d> sum(centres.size(), vec3d::Zero());
-    std::vector<std::size_t> cnt(centres.size(), 0);
-    for (std::size_t i = 0; i < s; ++i) {
-      sum[a[i]] += xs[i].cast<double>();
-      ++cnt[a[i]];
-    }
-    for (std::size_t c = 0; c < centres.size(); ++c)
-      if (cnt[c] > 0) centres[c] = (sum[c] / static_cast<double>(cnt[c])).cast<float>();
-    prev.swap(a);
-  }
-  nearest(x, assign);
-  return centres;
-}
-
 double angle_deg(const vec3f& a, const vec3f& b) {
   return std::acos(std::clamp(static_cast<double>(a.normalized().dot(b.normalized())), -1.0, 1.0)) *
          180 / std::numbers::pi;
@@ -295,6 +247,59 @@ struct quantise_errors {
 };
 
 }  // namespace
+
+std::vector<std::uint32_t> pca_kmeans_picks(std::size_t n, const pca_octree_options& o,
+                                            std::uint64_t stream, std::uint64_t& rng) {
+  rng = o.kmeans_seed * 0x2545F4914F6CDD1Dull + stream;
+  std::vector<std::uint32_t> pick(n);
+  std::iota(pick.begin(), pick.end(), 0u);
+  const std::size_t s = std::min<std::size_t>(n, o.kmeans_sample);
+  if (s < n) {
+    for (std::size_t i = 0; i < s; ++i) {
+      const std::size_t j =
+          i + static_cast<std::size_t>(uniform01(rng) * static_cast<double>(n - i));
+      std::swap(pick[i], pick[std::min(j, n - 1)]);
+    }
+    pick.resize(s);
+    std::sort(pick.begin(), pick.end());
+  }
+  return pick;
+}
+
+std::vector<vec3f> pca_kmeans_train(const std::vector<vec3f>& xs, std::uint32_t k,
+                                    const pca_octree_options& o, std::uint64_t& rng,
+                                    unsigned threads) {
+  const std::size_t s = xs.size();
+  std::vector<vec3f> centres = seed_centres(xs, k, rng, threads);
+  std::vector<std::uint32_t> a, prev;
+  for (std::uint32_t it = 0; it < o.kmeans_iterations; ++it) {
+    const nearest_entry index(centres);
+    a.resize(s);
+    parallel_pieces(s, threads, 8 * threads, 2048, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t i = lo; i < hi; ++i) a[i] = index(xs[i]);
+    });
+    if (a == prev) break;
+    std::vector<vec3d> sum(centres.size(), vec3d::Zero());
+    std::vector<std::size_t> cnt(centres.size(), 0);
+    for (std::size_t i = 0; i < s; ++i) {
+      sum[a[i]] += xs[i].cast<double>();
+      ++cnt[a[i]];
+    }
+    for (std::size_t c = 0; c < centres.size(); ++c)
+      if (cnt[c] > 0) centres[c] = (sum[c] / static_cast<double>(cnt[c])).cast<float>();
+    prev.swap(a);
+  }
+  return centres;
+}
+
+void pca_features(const pca_data& d, std::size_t i, vec3f& fp, vec3f& fn, vec3f* fc) {
+  const pca_node& nd = d.nodes[i];
+  for (int k = 0; k < 3; ++k)
+    fp[k] = static_cast<float>(
+        std::log2(std::max(static_cast<double>(nd.sigma[k]) / nd.cell_size, 0x1p-60)));
+  fn = vec3f(nd.normal_sigma.x(), nd.normal_sigma.y(), 0);
+  if (fc != nullptr) *fc = d.colours[i].sigma;
+}
 
 std::array<unsigned, 3> pca_mean_bits(const vec3f& f3) {
   Eigen::Index least = 0;
@@ -389,30 +394,34 @@ void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads) {
   const auto t0 = std::chrono::steady_clock::now();
   const std::size_t n = d.nodes.size();
   const bool colour = !d.colours.empty();
-  // Features: σ_p relative to the cell edge, in log₂; σ_n in radians; σ_c in [0, 1].
-  std::vector<vec3f> fp(n), fn(n), fc;
-  for (std::size_t i = 0; i < n; ++i) {
-    const pca_node& nd = d.nodes[i];
-    for (int k = 0; k < 3; ++k)
-      fp[i][k] = static_cast<float>(
-          std::log2(std::max(static_cast<double>(nd.sigma[k]) / nd.cell_size, 0x1p-60)));
-    fn[i] = vec3f(nd.normal_sigma.x(), nd.normal_sigma.y(), 0);
-  }
-  std::vector<std::uint32_t> ap, an, ac;
-  d.codebook_p = kmeans(fp, o.position_codebook, o, 1, threads, ap);
-  const auto cn = kmeans(fn, o.normal_codebook, o, 2, threads, an);
+  std::vector<vec3f> fp(n), fn(n), fc(colour ? n : 0);
+  for (std::size_t i = 0; i < n; ++i) pca_features(d, i, fp[i], fn[i], colour ? &fc[i] : nullptr);
+  // k-means on a sample of each feature (its own random stream per codebook).
+  const auto codebook = [&](const std::vector<vec3f>& x, std::uint32_t k, std::uint64_t stream) {
+    std::uint64_t rng = 0;
+    const std::vector<std::uint32_t> pick = pca_kmeans_picks(n, o, stream, rng);
+    std::vector<vec3f> xs(pick.size());
+    for (std::size_t i = 0; i < pick.size(); ++i) xs[i] = x[pick[i]];
+    return pca_kmeans_train(xs, k, o, rng, threads);
+  };
+  d.codebook_p = codebook(fp, o.position_codebook, 1);
+  const auto cn = codebook(fn, o.normal_codebook, 2);
   d.codebook_n.resize(cn.size());
   for (std::size_t c = 0; c < cn.size(); ++c) d.codebook_n[c] = cn[c].head<2>();
-  if (colour) {
-    fc.resize(n);
-    for (std::size_t i = 0; i < n; ++i) fc[i] = d.colours[i].sigma;
-    d.codebook_c = kmeans(fc, o.colour_codebook, o, 3, threads, ac);
-  }
-  const auto t1 = std::chrono::steady_clock::now();
-  d.stats.kmeans_seconds = std::chrono::duration<double>(t1 - t0).count();
+  if (colour) d.codebook_c = codebook(fc, o.colour_codebook, 3);
+  d.stats.kmeans_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  pca_encode(d, threads);
+}
 
-  // Encode, then decode into the nodes (what load() will reproduce bit for bit), and compare.
-  // Blocks of a fixed size, summed in block order: the error sums do not depend on threads.
+void pca_encode(pca_data& d, unsigned threads) {
+  const auto t1 = std::chrono::steady_clock::now();
+  const std::size_t n = d.nodes.size();
+  const bool colour = !d.colours.empty();
+  std::vector<vec3f> cn(d.codebook_n.size());
+  for (std::size_t c = 0; c < cn.size(); ++c)
+    cn[c] = vec3f(d.codebook_n[c].x(), d.codebook_n[c].y(), 0);
+  const nearest_entry near_p(d.codebook_p), near_n(cn), near_c(d.codebook_c);
   d.records.assign(n, {});
   if (colour) d.colour_records.assign(n, 0);
   constexpr std::size_t block = 4096;
@@ -421,8 +430,10 @@ void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads) {
     for (std::size_t i = b * block; i < std::min(n, (b + 1) * block); ++i) {
       const auto id = static_cast<std::uint32_t>(i);
       const pca_node before = d.nodes[i];
-      encode_node(d, id, ap[i], an[i]);
-      if (colour) d.colour_records[i] = encode_colour(d.colours[i], ac[i]);
+      vec3f fp, fn, fc;
+      pca_features(d, i, fp, fn, colour ? &fc : nullptr);
+      encode_node(d, id, near_p(fp), near_n(fn));
+      if (colour) d.colour_records[i] = encode_colour(d.colours[i], near_c(fc));
       pca_decode_node(d, id, d.nodes[i], colour ? &d.colours[i] : nullptr);
       errors[b].add(before, d.nodes[i]);
     }

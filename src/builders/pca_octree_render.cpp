@@ -89,13 +89,17 @@ float pca_required_points(const pca_data& d, std::uint32_t n, const view& v, flo
 
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
                   std::uint32_t count, pca_sample* out) {
+  pca_generate(d, n, n, seed, first, count, out);
+}
+
+void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
+                  std::uint32_t first, std::uint32_t count, pca_sample* out) {
   const pca_node& nd = d.nodes[n];
   const bool colour = !d.colours.empty();
   const float tmin = std::exp(-0.5f * d.gamma * d.gamma);
   const vec3f sp = nd.lambda * nd.sigma;
   const float pi = std::numbers::pi_v<float>;
-  const std::uint64_t key =
-      mix(mix(seed) ^ (static_cast<std::uint64_t>(n) * 0xD1B54A32D192ED03ull));
+  const std::uint64_t key = mix(mix(seed) ^ (stream_id * 0xD1B54A32D192ED03ull));
   for (std::uint32_t k = 0; k < count; ++k) {
     stream s{mix(key ^ (static_cast<std::uint64_t>(first + k) * 0x9E3779B97F4A7C15ull))};
     pca_sample& o = out[k];

@@ -146,10 +146,7 @@ vec3d wrap_normal(const mat3d& frame, const vec2d& uv) {
   return (frame * vec3d(uv.x() * s, uv.y() * s, std::cos(theta))).normalized();
 }
 
-pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fallback) {
-  pca_normal_result r;
-  vec3d sum = vec3d::Zero();
-  for (std::size_t i = 0; i < count; ++i) sum += n[i].cast<double>();
+mat3d pca_normal_pole(const vec3d& sum, std::size_t count, const vec3d& fallback) {
   // The normals cancel out (a thin sheet seen from both sides): no mean direction exists, use
   // the caller's.
   vec3d z = sum.norm() > 1e-9 * static_cast<double>(count) ? vec3d(sum.normalized()) : fallback;
@@ -159,27 +156,31 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
   f.col(0) = any_orthogonal_d(z);
   f.col(1) = z.cross(f.col(0));
   f.col(2) = z;
-  // Second moments of the unwrapped normals about the pole (the generator of §4 is centred
-  // there): uv·uvᵀ = (θ/r)²·(x, y)(x, y)ᵀ for the normal (x, y, z) in the frame, r = |(x, y)|.
-  const mat3d ft = f.transpose();
-  Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
-  for (std::size_t i = 0; i < count; ++i) {
-    const vec3d l = ft * n[i].cast<double>();
-    const vec2d xy = l.head<2>();
-    const double r2 = xy.squaredNorm(), len2 = r2 + l.z() * l.z();
-    double w;  // (θ/r)²
-    if (l.z() > 0 && r2 <= near_pole * len2) {
-      w = theta_over_sin_squared(r2 / len2) / len2;
-    } else if (r2 > 0) {
-      const double theta = std::atan2(std::sqrt(r2), l.z());
-      w = theta * theta / r2;
-    } else {  // on the axis: the pole adds nothing, the antipode unwraps to (π, 0)
-      const double theta = std::atan2(0.0, l.z());
-      m(0, 0) += theta * theta;
-      continue;
-    }
-    m.noalias() += w * (xy * xy.transpose());
+  return f;
+}
+
+void pca_normal_unwrap_add(const mat3d& ft, const vec3f& normal, Eigen::Matrix2d& m) {
+  // uv·uvᵀ = (θ/r)²·(x, y)(x, y)ᵀ for the normal (x, y, z) in the frame, r = |(x, y)|.
+  const vec3d l = ft * normal.cast<double>();
+  const vec2d xy = l.head<2>();
+  const double r2 = xy.squaredNorm(), len2 = r2 + l.z() * l.z();
+  double w;  // (θ/r)²
+  if (l.z() > 0 && r2 <= near_pole * len2) {
+    w = theta_over_sin_squared(r2 / len2) / len2;
+  } else if (r2 > 0) {
+    const double theta = std::atan2(std::sqrt(r2), l.z());
+    w = theta * theta / r2;
+  } else {  // on the axis: the pole adds nothing, the antipode unwraps to (π, 0)
+    const double theta = std::atan2(0.0, l.z());
+    m(0, 0) += theta * theta;
+    return;
   }
+  m.noalias() += w * (xy * xy.transpose());
+}
+
+pca_normal_result pca_normal_finish(const mat3d& f, Eigen::Matrix2d m, std::size_t count) {
+  pca_normal_result r;
+  const vec3d z = f.col(2);
   if (count > 0) m /= static_cast<double>(count);
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(m);
   const vec2d ev = es.eigenvalues().cwiseMax(0.0);
@@ -193,6 +194,18 @@ pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fa
   r.sigma = vec2d(std::sqrt(ev[1]), std::sqrt(ev[0]));
   if (!all_finite(r.sigma)) r.sigma.setZero();
   return r;
+}
+
+pca_normal_result pca_normals(const vec3f* n, std::size_t count, const vec3d& fallback) {
+  vec3d sum = vec3d::Zero();
+  for (std::size_t i = 0; i < count; ++i) sum += n[i].cast<double>();
+  const mat3d f = pca_normal_pole(sum, count, fallback);
+  // Second moments of the unwrapped normals about the pole (the generator of §4 is centred
+  // there).
+  const mat3d ft = f.transpose();
+  Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
+  for (std::size_t i = 0; i < count; ++i) pca_normal_unwrap_add(ft, n[i], m);
+  return pca_normal_finish(f, m, count);
 }
 
 scatter_accumulator colour_moments(const rgb8* c, std::size_t n) {

@@ -241,6 +241,10 @@ struct pca_sample {
 /// Point k depends only on (seed, n, k).
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
                   std::uint32_t count, pca_sample* out);
+/// The same for node n of d drawing the stream of node `stream_id` of the whole hierarchy (a
+/// chunk of a chunked PCA octree holds a subtree; its nodes draw their whole-tree numbers).
+void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
+                  std::uint32_t first, std::uint32_t count, pca_sample* out);
 /// Decodes one quantised record (used by build and load, so both give the same bits).
 void pca_decode_node(const pca_data& d, std::uint32_t n, pca_node& out, pca_colour* colour);
 
