@@ -8,3 +8,6 @@ target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/pca_octree_build.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pca_octree_quantise.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pca_octree_io.cpp
                ${CMAKE_CURRENT_LIST_DIR}/pca_octree_render.cpp)
+# The chunked (out-of-core) build and the lazily opened directory it writes.
+target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/chunked_pca_octree_build.cpp
+               ${CMAKE_CURRENT_LIST_DIR}/chunked_pca_octree.cpp)

@@ -38,6 +38,26 @@ double seconds_since(clock_type::time_point t0) {
 constexpr double sigma_floor = 1e-15;
 }  // namespace
 
+void pca_validate_options(const pca_octree_options& o, bool input_normals) {
+  const auto need = [](bool ok, const std::string& what) {
+    if (!ok) throw InvalidArgument("pca-octree: " + what);
+  };
+  need(o.leaf_size >= 1, "leaf_size must be at least 1");
+  need(o.max_depth >= 1 && o.max_depth <= 30, "max_depth must lie in 1..30");
+  need(std::isfinite(o.gamma) && o.gamma > 0 && o.gamma <= 10, "gamma must lie in (0, 10]");
+  need(std::isfinite(o.curvature_c) && o.curvature_c >= 0, "curvature_c must be >= 0");
+  need(std::isfinite(o.lambda_max) && o.lambda_max >= 1 && o.lambda_max <= 16,
+       "lambda_max must lie in [1, 16]");
+  need(o.position_codebook >= 1 && o.position_codebook <= 4096,
+       "position_codebook must lie in 1..4096 (12-bit indices)");
+  need(o.normal_codebook >= 1 && o.normal_codebook <= 4096,
+       "normal_codebook must lie in 1..4096 (12-bit indices)");
+  need(o.colour_codebook >= 1 && o.colour_codebook <= 64,
+       "colour_codebook must lie in 1..64 (6-bit indices)");
+  need(o.kmeans_sample >= 1, "kmeans_sample must be at least 1");
+  need(o.knn >= 3 || input_normals, "knn must be at least 3");
+}
+
 unsigned pca_threads(unsigned requested) {
   if (requested != 0) return requested;
   return std::max(1u, std::thread::hardware_concurrency());
@@ -70,23 +90,7 @@ void validate(const pca_input& in, const pca_octree_options& o) {
   for (std::size_t i = 0; i < in.normals.size(); ++i)
     if (!all_finite(in.normals[i]) || !(in.normals[i].squaredNorm() > 0))
       throw InvalidArgument("pca-octree: normal " + std::to_string(i) + " is zero or not finite");
-  const auto need = [](bool ok, const std::string& what) {
-    if (!ok) throw InvalidArgument("pca-octree: " + what);
-  };
-  need(o.leaf_size >= 1, "leaf_size must be at least 1");
-  need(o.max_depth >= 1 && o.max_depth <= 30, "max_depth must lie in 1..30");
-  need(std::isfinite(o.gamma) && o.gamma > 0 && o.gamma <= 10, "gamma must lie in (0, 10]");
-  need(std::isfinite(o.curvature_c) && o.curvature_c >= 0, "curvature_c must be >= 0");
-  need(std::isfinite(o.lambda_max) && o.lambda_max >= 1 && o.lambda_max <= 16,
-       "lambda_max must lie in [1, 16]");
-  need(o.position_codebook >= 1 && o.position_codebook <= 4096,
-       "position_codebook must lie in 1..4096 (12-bit indices)");
-  need(o.normal_codebook >= 1 && o.normal_codebook <= 4096,
-       "normal_codebook must lie in 1..4096 (12-bit indices)");
-  need(o.colour_codebook >= 1 && o.colour_codebook <= 64,
-       "colour_codebook must lie in 1..64 (6-bit indices)");
-  need(o.kmeans_sample >= 1, "kmeans_sample must be at least 1");
-  need(o.knn >= 3 || !in.normals.empty(), "knn must be at least 3");
+  pca_validate_options(o, !in.normals.empty());
 }
 
 /// The points being partitioned (reordered in place, a stable counting sort per node, so that

@@ -9,6 +9,8 @@
 
 namespace pbr_lod::detail {
 
+/// Throws InvalidArgument naming the first bad option (knn matters only without input normals).
+void pca_validate_options(const pca_octree_options& o, bool input_normals);
 /// Number of threads for `requested` (0 = hardware concurrency).
 unsigned pca_threads(unsigned requested);
 
@@ -122,6 +124,18 @@ struct pca_layout {
   static constexpr unsigned sc = 0, muc = 6, fc_axis = 22, fc_angle = 29;
   static constexpr int axis_bits = 16, angle_bits = 8, colour_axis_bits = 7, colour_angle_bits = 3;
 };
+
+/// The file's node part (pca_octree_io.cpp): the child masks breadth first, then the records
+/// (quantised, or the float statistics). get_pca_nodes reads nn nodes below a root at
+/// `root_depth` into d (whose codebooks, options, cube and `quantised` are set), checks the tree
+/// and every record, derives the cells and decodes; bounds are the caller's. Bytes per node
+/// without its mask: pca_record_bytes.
+struct byte_writer;
+struct byte_reader;
+void put_pca_nodes(byte_writer& w, const pca_data& d);
+void get_pca_nodes(byte_reader& r, pca_data& d, std::uint64_t nn, bool colour,
+                   std::uint8_t root_depth, const std::string& path);
+std::size_t pca_record_bytes(bool quantised, bool colour);
 
 /// The bits each axis of μ_p gets, from the decoded f_p³ (10 for the axis least aligned).
 std::array<unsigned, 3> pca_mean_bits(const vec3f& f3);

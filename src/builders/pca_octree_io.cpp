@@ -35,7 +35,7 @@ constexpr file_format pca_format{"PCA octree", {'P', 'B', 'R', 'L', 'O', 'D', 'S
 constexpr std::size_t header_bytes = 8 + 4 * 2 + 4 * 2 + 4 * 3 + 8 * 2 + 4 * 3 + 8 * 8;
 constexpr std::size_t float_node_floats = 26, float_colour_floats = 15;
 
-std::size_t record_bytes(bool quantised, bool colour) {
+std::size_t record_bytes(bool quantised, bool colour) {  // without the child mask
   if (quantised) return 13 + (colour ? 4 : 0);
   return 4 * (float_node_floats + (colour ? float_colour_floats : 0));
 }
@@ -44,10 +44,39 @@ void put_mat(byte_writer& w, const mat3f& m) {
 }
 }  // namespace
 
+std::size_t pca_record_bytes(bool quantised, bool colour) {
+  return record_bytes(quantised, colour);
+}
+
 std::size_t pca_file_bytes(const pca_data& d) {
   const bool colour = !d.colours.empty();
   return header_bytes + 12 * d.codebook_p.size() + 8 * d.codebook_n.size() +
          12 * d.codebook_c.size() + d.nodes.size() * (1 + record_bytes(d.quantised, colour)) + 8;
+}
+
+void put_pca_nodes(byte_writer& w, const pca_data& d) {
+  const bool colour = !d.colours.empty();
+  for (const auto& nd : d.nodes) w.put(nd.mask);
+  for (std::size_t i = 0; i < d.nodes.size(); ++i) {
+    if (d.quantised) {
+      for (auto b : d.records[i]) w.put(b);
+      if (colour) w.put(d.colour_records[i]);
+      continue;
+    }
+    const pca_node& nd = d.nodes[i];
+    w.put_vec(nd.mean);
+    put_mat(w, nd.frame);
+    w.put_vec(nd.sigma);
+    put_mat(w, nd.normal_frame);
+    w.put(nd.normal_sigma.x());
+    w.put(nd.normal_sigma.y());
+    if (colour) {
+      const pca_colour& c = d.colours[i];
+      w.put_vec(c.mean);
+      put_mat(w, c.frame);
+      w.put_vec(c.sigma);
+    }
+  }
 }
 
 void save_pca_data(const pca_data& d, const std::string& path) {
@@ -76,27 +105,7 @@ void save_pca_data(const pca_data& d, const std::string& path) {
     w.put(v.y());
   }
   for (const auto& v : d.codebook_c) w.put_vec(v);
-  for (const auto& nd : d.nodes) w.put(nd.mask);
-  for (std::size_t i = 0; i < d.nodes.size(); ++i) {
-    if (d.quantised) {
-      for (auto b : d.records[i]) w.put(b);
-      if (colour) w.put(d.colour_records[i]);
-      continue;
-    }
-    const pca_node& nd = d.nodes[i];
-    w.put_vec(nd.mean);
-    put_mat(w, nd.frame);
-    w.put_vec(nd.sigma);
-    put_mat(w, nd.normal_frame);
-    w.put(nd.normal_sigma.x());
-    w.put(nd.normal_sigma.y());
-    if (colour) {
-      const pca_colour& c = d.colours[i];
-      w.put_vec(c.mean);
-      put_mat(w, c.frame);
-      w.put_vec(c.sigma);
-    }
-  }
+  put_pca_nodes(w, d);
   append_checksum(w);
   save_file_bytes(path, w.bytes);
 }
@@ -118,6 +127,82 @@ mat3f get_frame(byte_reader& r, const std::string& path, const char* what, std::
 }
 
 }  // namespace
+
+void get_pca_nodes(byte_reader& r, pca_data& d, std::uint64_t nn, bool colour,
+                   std::uint8_t root_depth, const std::string& path) {
+  const auto bad = [&](const std::string& what) { throw FormatError(path + ": " + what); };
+  const auto kp = d.codebook_p.size(), kn = d.codebook_n.size(), kc = d.codebook_c.size();
+  // The tree: breadth first, children contiguous after their parent.
+  d.nodes.assign(nn, pca_node{});
+  d.nodes[0].depth = root_depth;
+  std::uint64_t next = 1;
+  for (std::uint64_t i = 0; i < nn; ++i) {
+    pca_node& nd = d.nodes[i];
+    nd.mask = r.get<std::uint8_t>("child mask");
+    if (i > 0 && i >= next) bad("node " + std::to_string(i) + " is not reachable from the root");
+    nd.count = static_cast<std::uint8_t>(std::popcount(nd.mask));
+    nd.first = nd.count ? static_cast<std::uint32_t>(next) : 0;
+    next += nd.count;
+    if (next > nn)
+      bad("node " + std::to_string(i) + " has children beyond the node count " +
+          std::to_string(nn));
+    for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
+      d.nodes[c].depth = static_cast<std::uint8_t>(nd.depth + 1);
+    if (nd.count && nd.depth + 1u > d.max_depth)
+      bad("node " + std::to_string(i) + " has children below the depth limit " +
+          std::to_string(d.max_depth));
+  }
+  if (next != nn) bad(std::to_string(nn - next) + " nodes are not reachable from the root");
+  pca_derive_cells(d);
+
+  if (colour) d.colours.resize(nn);
+  if (d.quantised) {
+    const auto q16 = normal_quantizer::shared(pca_layout::axis_bits);
+    const auto q7 = normal_quantizer::shared(pca_layout::colour_axis_bits);
+    d.records.resize(nn);
+    if (colour) d.colour_records.resize(nn);
+    for (std::uint64_t i = 0; i < nn; ++i) {
+      auto& rec = d.records[i];
+      for (auto& b : rec) b = r.get<std::uint8_t>("node record");
+      using L = pca_layout;
+      const std::string node = "node " + std::to_string(i);
+      if (get_bits(rec, L::sp, 12) >= kp) bad(node + " has a position class beyond the codebook");
+      if (get_bits(rec, L::sn, 12) >= kn) bad(node + " has a normal class beyond the codebook");
+      if (!q16->valid(get_bits(rec, L::fp_axis, L::axis_bits)))
+        bad(node + " has an invalid f_p axis code");
+      if (!q16->valid(get_bits(rec, L::fn_axis, L::axis_bits)))
+        bad(node + " has an invalid mean normal code");
+      if (colour) {
+        const auto c = r.get<std::uint32_t>("colour record");
+        d.colour_records[i] = c;
+        if ((c >> L::sc & 63u) >= kc) bad(node + " has a colour class beyond the codebook");
+        if (!q7->valid(c >> L::fc_axis & 127u)) bad(node + " has an invalid f_c axis code");
+      }
+      pca_decode_node(d, static_cast<std::uint32_t>(i), d.nodes[i],
+                      colour ? &d.colours[i] : nullptr);
+    }
+  } else {
+    for (std::uint64_t i = 0; i < nn; ++i) {
+      pca_node& nd = d.nodes[i];
+      nd.mean = r.get_vec("mean", i);
+      nd.frame = get_frame(r, path, "position frame", i);
+      nd.sigma = r.get_vec("position sigma", i);
+      nd.normal_frame = get_frame(r, path, "normal frame", i);
+      nd.normal_sigma.x() = r.get_finite("normal sigma", i);
+      nd.normal_sigma.y() = r.get_finite("normal sigma", i);
+      if ((nd.sigma.array() < 0).any() || (nd.normal_sigma.array() < 0).any())
+        bad("node " + std::to_string(i) + " has a negative sigma");
+      if (colour) {
+        pca_colour& c = d.colours[i];
+        c.mean = r.get_vec("colour mean", i);
+        c.frame = get_frame(r, path, "colour frame", i);
+        c.sigma = r.get_vec("colour sigma", i);
+        if ((c.sigma.array() < 0).any())
+          bad("node " + std::to_string(i) + " has a negative colour sigma");
+      }
+    }
+  }
+}
 
 pca_data load_pca_data(const std::string& path, bool colour) {
   const std::vector<unsigned char> bytes = load_file_bytes(path);
@@ -193,75 +278,7 @@ pca_data load_pca_data(const std::string& path, bool colour) {
       bad("colour codebook entry " + std::to_string(i) + " outside [0, 2]");
   }
 
-  // The tree: breadth first, children contiguous after their parent.
-  d.nodes.resize(nn);
-  std::uint64_t next = 1;
-  for (std::uint64_t i = 0; i < nn; ++i) {
-    pca_node& nd = d.nodes[i];
-    nd.mask = r.get<std::uint8_t>("child mask");
-    if (i > 0 && i >= next) bad("node " + std::to_string(i) + " is not reachable from the root");
-    nd.count = static_cast<std::uint8_t>(std::popcount(nd.mask));
-    nd.first = nd.count ? static_cast<std::uint32_t>(next) : 0;
-    next += nd.count;
-    if (next > nn)
-      bad("node " + std::to_string(i) + " has children beyond the node count " +
-          std::to_string(nn));
-    for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
-      d.nodes[c].depth = static_cast<std::uint8_t>(nd.depth + 1);
-    if (nd.count && nd.depth + 1u > d.max_depth)
-      bad("node " + std::to_string(i) + " has children below the depth limit " +
-          std::to_string(d.max_depth));
-  }
-  if (next != nn) bad(std::to_string(nn - next) + " nodes are not reachable from the root");
-  pca_derive_cells(d);
-
-  if (colour) d.colours.resize(nn);
-  if (d.quantised) {
-    const auto q16 = normal_quantizer::shared(pca_layout::axis_bits);
-    const auto q7 = normal_quantizer::shared(pca_layout::colour_axis_bits);
-    d.records.resize(nn);
-    if (colour) d.colour_records.resize(nn);
-    for (std::uint64_t i = 0; i < nn; ++i) {
-      auto& rec = d.records[i];
-      for (auto& b : rec) b = r.get<std::uint8_t>("node record");
-      using L = pca_layout;
-      const std::string node = "node " + std::to_string(i);
-      if (get_bits(rec, L::sp, 12) >= kp) bad(node + " has a position class beyond the codebook");
-      if (get_bits(rec, L::sn, 12) >= kn) bad(node + " has a normal class beyond the codebook");
-      if (!q16->valid(get_bits(rec, L::fp_axis, L::axis_bits)))
-        bad(node + " has an invalid f_p axis code");
-      if (!q16->valid(get_bits(rec, L::fn_axis, L::axis_bits)))
-        bad(node + " has an invalid mean normal code");
-      if (colour) {
-        const auto c = r.get<std::uint32_t>("colour record");
-        d.colour_records[i] = c;
-        if ((c >> L::sc & 63u) >= kc) bad(node + " has a colour class beyond the codebook");
-        if (!q7->valid(c >> L::fc_axis & 127u)) bad(node + " has an invalid f_c axis code");
-      }
-      pca_decode_node(d, static_cast<std::uint32_t>(i), d.nodes[i],
-                      colour ? &d.colours[i] : nullptr);
-    }
-  } else {
-    for (std::uint64_t i = 0; i < nn; ++i) {
-      pca_node& nd = d.nodes[i];
-      nd.mean = r.get_vec("mean", i);
-      nd.frame = get_frame(r, path, "position frame", i);
-      nd.sigma = r.get_vec("position sigma", i);
-      nd.normal_frame = get_frame(r, path, "normal frame", i);
-      nd.normal_sigma.x() = r.get_finite("normal sigma", i);
-      nd.normal_sigma.y() = r.get_finite("normal sigma", i);
-      if ((nd.sigma.array() < 0).any() || (nd.normal_sigma.array() < 0).any())
-        bad("node " + std::to_string(i) + " has a negative sigma");
-      if (colour) {
-        pca_colour& c = d.colours[i];
-        c.mean = r.get_vec("colour mean", i);
-        c.frame = get_frame(r, path, "colour frame", i);
-        c.sigma = r.get_vec("colour sigma", i);
-        if ((c.sigma.array() < 0).any())
-          bad("node " + std::to_string(i) + " has a negative colour sigma");
-      }
-    }
-  }
+  get_pca_nodes(r, d, nn, colour, 0, path);
   pca_derive_bounds(d);
   auto& st = d.stats;
   st.input_points = input_points;

@@ -160,6 +160,7 @@ struct pca_colour {
 };
 
 namespace detail {
+struct chunked_pca_access;
 
 /// Everything a pca_octree holds, independent of its attribute set (colours empty without).
 struct pca_data {
@@ -390,6 +391,7 @@ class pca_octree {
   template <attributes In>
   friend pca_octree<pca_octree_attributes(In)> build_pca_octree(const point_set<In>&,
                                                                 const pca_octree_options&);
+  friend struct detail::chunked_pca_access;
   detail::pca_data d_;
 };
 

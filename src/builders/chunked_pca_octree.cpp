@@ -1,0 +1,322 @@
+// Opening a chunked PCA octree, its lazily read chunks, and assemble(): see
+// include/pbr_lod/builders/chunked_pca_octree.hpp.
+#include <algorithm>
+#include <bit>
+#include <filesystem>
+
+#include "pbr_lod/builders/chunked_pca_octree.hpp"
+#include "pbr_lod/core/binary.hpp"
+#include "pca_octree_internal.hpp"
+
+namespace pbr_lod {
+
+namespace detail {
+struct chunked_pca_access {
+  template <attributes A>
+  static pca_octree<A> make(pca_data&& d) {
+    pca_octree<A> t;
+    t.d_ = std::move(d);
+    return t;
+  }
+};
+
+std::uint64_t pca_chunk::global_id(std::uint32_t i) const {
+  const auto l = static_cast<std::size_t>(
+      std::upper_bound(level_first.begin(), level_first.end(), i) - level_first.begin() - 1);
+  return std::uint64_t{level_global[l]} + (i - level_first[l]);
+}
+
+namespace {
+constexpr std::uint32_t none = 0xffffffffu;
+
+/// The codebooks after their sizes (as the PCA octree file), checked as its load checks them.
+void read_codebooks(byte_reader& r, pca_data& d, std::uint32_t kp, std::uint32_t kn,
+                    std::uint32_t kc, bool colour) {
+  const auto bad = [&](const std::string& what) { throw FormatError(r.path + ": " + what); };
+  if (d.quantised) {
+    if (kp < 1 || kp > 4096 || kn < 1 || kn > 4096 || (colour ? (kc < 1 || kc > 64) : kc != 0))
+      bad("codebook sizes " + std::to_string(kp) + ", " + std::to_string(kn) + ", " +
+          std::to_string(kc) + " out of range");
+  } else if (kp != 0 || kn != 0 || kc != 0) {
+    bad("codebooks in a file without quantisation");
+  }
+  d.codebook_p.resize(kp);
+  for (std::uint32_t i = 0; i < kp; ++i) {
+    d.codebook_p[i] = r.get_vec("position codebook entry", i);
+    if ((d.codebook_p[i].array().abs() > 128).any()) bad("position codebook entry out of range");
+  }
+  d.codebook_n.resize(kn);
+  for (std::uint32_t i = 0; i < kn; ++i) {
+    const float a = r.get_finite("normal codebook entry", i),
+                b = r.get_finite("normal codebook entry", i);
+    if (!(a >= 0 && b >= 0 && a <= 4 && b <= 4)) bad("normal codebook entry out of range");
+    d.codebook_n[i] = vec2f(a, b);
+  }
+  d.codebook_c.resize(kc);
+  for (std::uint32_t i = 0; i < kc; ++i) {
+    d.codebook_c[i] = r.get_vec("colour codebook entry", i);
+    if ((d.codebook_c[i].array() < 0).any() || (d.codebook_c[i].array() > 2).any())
+      bad("colour codebook entry out of range");
+  }
+}
+}  // namespace
+
+pca_chunk load_pca_chunk(const std::string& path, const pca_data& top, std::uint32_t chunk,
+                         bool colour) {
+  const std::vector<unsigned char> bytes = load_file_bytes(path);
+  byte_reader r{bytes, 0, path};
+  read_head(r, pca_chunk_format);
+  const auto bad = [&](const std::string& what) { throw FormatError(path + ": " + what); };
+  const auto flags = r.get<std::uint32_t>("flags");
+  if (flags != ((colour ? 1u : 0u) | (top.quantised ? 2u : 0u)))
+    bad("flags " + std::to_string(flags) + " differ from the top file's");
+  if (r.get<std::uint32_t>("chunk") != chunk) bad("is not chunk " + std::to_string(chunk));
+  const auto depth = r.get<std::uint32_t>("root depth");
+  pca_chunk c;
+  c.points = r.get<std::uint64_t>("points");
+  const auto nn = r.get<std::uint64_t>("nodes");
+  pca_data& d = c.d;
+  for (int k = 0; k < 3; ++k) d.cube_min[k] = r.get<double>("cell");
+  d.cube_size = r.get<double>("cell edge");
+  const auto levels = r.get<std::uint32_t>("levels");
+  const std::uint64_t rb = 1 + pca_record_bytes(top.quantised, colour);
+  const std::uint64_t rest = bytes.size() - r.pos;
+  if (depth > top.max_depth || nn == 0 || levels == 0 || levels > 31 || nn > rest / rb ||
+      4ull * levels + nn * rb + 8 != rest)
+    bad("depth " + std::to_string(depth) + ", " + std::to_string(nn) + " nodes and " +
+        std::to_string(levels) + " levels do not fit the file's " + std::to_string(bytes.size()) +
+        " bytes");
+  if (!checksum_matches(bytes)) bad("checksum mismatch (corrupt file)");
+  c.level_global.resize(levels);
+  for (auto& g : c.level_global) g = r.get<std::uint32_t>("level number");
+  d.origin = top.origin;
+  d.leaf_size = top.leaf_size;
+  d.max_depth = top.max_depth;
+  d.gamma = top.gamma;
+  d.curvature_c = top.curvature_c;
+  d.lambda_max = top.lambda_max;
+  d.quantised = top.quantised;
+  d.codebook_p = top.codebook_p;
+  d.codebook_n = top.codebook_n;
+  d.codebook_c = top.codebook_c;
+  d.input_radius = top.input_radius;
+  get_pca_nodes(r, d, nn, colour, static_cast<std::uint8_t>(depth), path);
+  pca_derive_bounds_with(d, top.lambda_norm, 1);
+  // Level starts from the depths (breadth first: levels contiguous).
+  for (std::uint32_t i = 0; i < nn; ++i)
+    if (i == 0 || d.nodes[i].depth != d.nodes[i - 1].depth) c.level_first.push_back(i);
+  if (c.level_first.size() != levels) bad("level count differs from its tree's");
+  return c;
+}
+
+namespace {
+namespace fs = std::filesystem;
+std::string top_path(const std::string& dir) {
+  return (fs::path(dir) / chunked_top_file).string();
+}
+}  // namespace
+}  // namespace detail
+
+bool is_chunked_pca_octree(const std::string& dir) {
+  std::error_code ec;
+  const std::string path = detail::top_path(dir);
+  if (!std::filesystem::is_directory(dir, ec) || !std::filesystem::is_regular_file(path, ec))
+    return false;
+  const auto head = detail::load_file_prefix(path, 8);
+  return head.size() == 8 && std::equal(head.begin(), head.end(), detail::chunked_pca_format.magic);
+}
+
+bool chunked_pca_octree_has_colours(const std::string& dir) {
+  const std::string path = detail::top_path(dir);
+  const auto head = detail::load_file_prefix(path, 16);
+  if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
+  return (head[12] & 1u) != 0;
+}
+
+template <attributes A>
+chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
+  using namespace detail;
+  const std::string path = top_path(dir);
+  const std::vector<unsigned char> bytes = load_file_bytes(path);
+  byte_reader r{bytes, 0, path};
+  read_head(r, chunked_pca_format);
+  const auto bad = [&](const std::string& what) { throw FormatError(path + ": " + what); };
+  const auto flags = r.get<std::uint32_t>("flags");
+  if ((flags & ~3u) != 0) bad("unknown flags " + std::to_string(flags));
+  check_colour_flag((flags & 1u) != 0, A.colour, path, "chunked_pca_octree");
+  chunked_pca_octree t;
+  t.dir_ = dir;
+  pca_data& d = t.top_;
+  d.quantised = (flags & 2u) != 0;
+  d.leaf_size = r.get<std::uint32_t>("leaf size");
+  d.max_depth = r.get<std::uint32_t>("max depth");
+  d.gamma = r.get_finite("gamma", 0);
+  d.curvature_c = r.get_finite("curvature c", 0);
+  d.lambda_max = r.get_finite("lambda max", 0);
+  d.lambda_norm = r.get_finite("lambda unit", 0);
+  if (d.leaf_size < 1 || d.max_depth < 1 || d.max_depth > 30 || !(d.gamma > 0 && d.gamma <= 10) ||
+      !(d.curvature_c >= 0) || !(d.lambda_max >= 1 && d.lambda_max <= 16) || !(d.lambda_norm > 0))
+    bad("options out of range");
+  d.stats.input_points = r.get<std::uint64_t>("input points");
+  for (int k = 0; k < 3; ++k) d.origin[k] = r.get<double>("origin");
+  for (int k = 0; k < 3; ++k) d.cube_min[k] = r.get<double>("root cube");
+  d.cube_size = r.get<double>("root cube edge");
+  d.input_radius = r.get<double>("input radius");
+  if (!all_finite(d.origin) || !all_finite(d.cube_min) || !std::isfinite(d.cube_size) ||
+      !(d.cube_size > 0) || !std::isfinite(d.input_radius) || d.input_radius < 0)
+    bad("origin, root cube or input radius not finite");
+  const auto kp = r.get<std::uint32_t>("codebook size"), kn = r.get<std::uint32_t>("codebook size"),
+             kc = r.get<std::uint32_t>("codebook size");
+  if (12ull * kp + 8ull * kn + 12ull * kc > bytes.size() - r.pos) bad("codebooks cut short");
+  read_codebooks(r, d, kp, kn, kc, A.colour);
+  const auto nt = r.get<std::uint64_t>("top node count");
+  const auto nc = r.get<std::uint64_t>("chunk count");
+  const std::uint64_t rb = 1 + pca_record_bytes(d.quantised, A.colour) + 8,
+                      cb = 4 + 8 + 8 + 1 + 4 + 4;
+  const std::uint64_t rest = bytes.size() - r.pos;
+  if (nt == 0 || nc == 0 || nt > rest / rb || nc > rest / cb || nt * rb + nc * cb + 8 != rest)
+    bad(std::to_string(nt) + " top nodes and " + std::to_string(nc) +
+        " chunks do not fit the file's " + std::to_string(bytes.size()) + " bytes");
+  if (!checksum_matches(bytes)) bad("checksum mismatch (corrupt file)");
+  get_pca_nodes(r, d, nt, A.colour, 0, path);
+  t.frontier_.resize(nt);
+  t.top_global_.resize(nt);
+  for (std::uint64_t i = 0; i < nt; ++i) {
+    t.frontier_[i] = r.get<std::uint32_t>("chunk of a top node");
+    t.top_global_[i] = r.get<std::uint32_t>("node number");
+  }
+  t.chunk_top_.resize(nc);
+  t.chunk_points_.resize(nc);
+  t.chunk_nodes_.resize(nc);
+  std::vector<std::uint8_t> root_mask(nc);
+  std::vector<std::array<float, 2>> root_bounds(nc);
+  std::vector<char> fixed(nt, 0);
+  std::uint64_t points = 0, total = 0;
+  for (std::uint64_t c = 0; c < nc; ++c) {
+    t.chunk_top_[c] = r.get<std::uint32_t>("top node of a chunk");
+    t.chunk_points_[c] = r.get<std::uint64_t>("chunk points");
+    t.chunk_nodes_[c] = r.get<std::uint64_t>("chunk nodes");
+    root_mask[c] = r.get<std::uint8_t>("chunk root mask");
+    root_bounds[c] = {r.get_finite("chunk root radius", c), r.get_finite("chunk root cone", c)};
+    const std::uint32_t x = t.chunk_top_[c];
+    if (x >= nt || t.frontier_[x] != c || fixed[x] || d.nodes[x].count != 0 ||
+        t.chunk_points_[c] == 0 || t.chunk_nodes_[c] == 0 ||
+        (root_mask[c] == 0) != (t.chunk_nodes_[c] == 1))
+      bad("chunk " + std::to_string(c) + " and its top node disagree");
+    fixed[x] = 1;
+    points += t.chunk_points_[c];
+    total += t.chunk_nodes_[c];
+  }
+  for (std::uint64_t i = 0; i < nt; ++i) {
+    if (!fixed[i] && (t.frontier_[i] != none || d.nodes[i].count == 0))
+      bad("top node " + std::to_string(i) + " is a leaf that is not a chunk");
+    total += fixed[i] ? 0 : 1;
+  }
+  if (points != d.stats.input_points)
+    bad("the chunks hold " + std::to_string(points) + " points, the input " +
+        std::to_string(d.stats.input_points));
+  for (std::uint64_t i = 0; i < nt; ++i)
+    if (t.top_global_[i] >= total) bad("top node " + std::to_string(i) + " has a bad number");
+  // The chunks' roots are leaves of the top tree; their bounds come from the chunks, so the top
+  // is bounded without reading them: with a chunk's root taken as a leaf, and then its own.
+  pca_derive_bounds_with(d, d.lambda_norm, 1);
+  for (std::uint64_t c = 0; c < nc; ++c) {
+    pca_node& nd = d.nodes[t.chunk_top_[c]];
+    nd.radius = root_bounds[c][0];
+    nd.cone_angle = root_bounds[c][1];
+  }
+  pca_derive_bounds_with(d, d.lambda_norm, 1, &fixed);
+  for (std::uint64_t c = 0; c < nc; ++c) {  // then the roots take their chunk's children
+    pca_node& nd = d.nodes[t.chunk_top_[c]];
+    nd.mask = root_mask[c];
+    nd.count = static_cast<std::uint8_t>(std::popcount(nd.mask));
+    nd.first = nd.count ? 1 : 0;
+  }
+  d.stats.nodes = total;
+  for (std::uint64_t c = 0; c < nc; ++c) t.slots_.push_back(std::make_unique<slot>());
+  return t;
+}
+
+template <attributes A>
+const detail::pca_chunk& chunked_pca_octree<A>::chunk(std::uint32_t c) const {
+  slot& s = *slots_.at(c);
+  std::call_once(s.once, [&] {
+    const std::string path = (std::filesystem::path(dir_) / pca_chunk_file_name(c)).string();
+    auto k = std::make_unique<detail::pca_chunk>(detail::load_pca_chunk(path, top_, c, A.colour));
+    // The chunk's root is the top's copy of it (statistics, cell, bounds, children).
+    const pca_node& root = top_.nodes[chunk_top_[c]];
+    const bool same = k->points == chunk_points_[c] && k->d.nodes.size() == chunk_nodes_[c] &&
+                      k->d.nodes[0] == root &&
+                      (!A.colour || k->d.colours[0] == top_.colours[chunk_top_[c]]) &&
+                      k->global_id(0) == top_global_[chunk_top_[c]];
+    if (!same) throw FormatError(path + ": does not match its record in the top file");
+    s.c = std::move(k);
+  });
+  return *s.c;
+}
+
+template <attributes A>
+std::size_t chunked_pca_octree<A>::chunks_loaded() const {
+  std::size_t k = 0;
+  for (const auto& s : slots_) k += s->c != nullptr;
+  return k;
+}
+
+template <attributes A>
+std::uint64_t chunked_pca_octree<A>::node_count() const {
+  return top_.stats.nodes;
+}
+
+template <attributes A>
+std::uint64_t chunked_pca_octree<A>::file_bytes() const {
+  std::uint64_t b = std::filesystem::file_size(detail::top_path(dir_));
+  for (std::uint32_t c = 0; c < chunk_top_.size(); ++c)
+    b += std::filesystem::file_size(std::filesystem::path(dir_) / pca_chunk_file_name(c));
+  return b;
+}
+
+/// build_pca_octree's layout: every node at its whole-tree number, its first child's number as
+/// `first` (a node's children are consecutive there as in its chunk or the top).
+template <attributes A>
+pca_octree<A> chunked_pca_octree<A>::assemble() const {
+  detail::pca_data d = top_;
+  const std::uint64_t n = node_count();
+  d.nodes.assign(n, pca_node{});
+  if (A.colour) d.colours.assign(n, pca_colour{});
+  if (d.quantised) d.records.assign(n, {});
+  if (d.quantised && A.colour) d.colour_records.assign(n, 0);
+  const auto place = [&](const detail::pca_data& from, std::uint32_t i, std::uint64_t g,
+                         std::uint64_t first) {
+    d.nodes[g] = from.nodes[i];
+    d.nodes[g].first = static_cast<std::uint32_t>(first);
+    if (A.colour) d.colours[g] = from.colours[i];
+    if (d.quantised) d.records[g] = from.records[i];
+    if (d.quantised && A.colour) d.colour_records[g] = from.colour_records[i];
+  };
+  for (std::uint32_t i = 0; i < top_.nodes.size(); ++i) {
+    if (frontier_[i] != top) continue;
+    const pca_node& nd = top_.nodes[i];
+    place(top_, i, top_global_[i], top_global_[nd.first]);
+  }
+  for (std::uint32_t c = 0; c < chunk_top_.size(); ++c) {
+    const detail::pca_chunk& k = chunk(c);
+    for (std::uint32_t i = 0; i < k.d.nodes.size(); ++i) {
+      const pca_node& nd = k.d.nodes[i];
+      place(k.d, i, k.global_id(i), nd.count ? k.global_id(nd.first) : 0);
+    }
+  }
+  auto& st = d.stats;
+  st = {};
+  st.input_points = top_.stats.input_points;
+  st.nodes = n;
+  for (const auto& nd : d.nodes) {
+    st.leaves += nd.count == 0 ? 1 : 0;
+    st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
+  }
+  return detail::chunked_pca_access::make<A>(std::move(d));
+}
+
+template class chunked_pca_octree<with_normals>;
+template class chunked_pca_octree<with_normals_colours>;
+
+}  // namespace pbr_lod

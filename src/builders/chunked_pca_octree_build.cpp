@@ -1,0 +1,731 @@
+// The chunked (out-of-core) PCA octree build: see include/pbr_lod/builders/chunked_pca_octree.hpp
+// for the steps and why the result equals build_pca_octree's.
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <thread>
+#include <unordered_map>
+
+#include "chunk_files.hpp"
+#include "pbr_lod/builders/chunked_pca_octree.hpp"
+#include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/parallel.hpp"
+#include "pca_octree_internal.hpp"
+
+namespace pbr_lod {
+namespace detail {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr std::uint32_t none = 0xffffffffu;
+
+/// A cell of the octree above the chunks.
+struct top_cell {
+  vec3d cell_min = vec3d::Zero();
+  std::uint8_t depth = 0;
+  std::uint64_t count = 0;
+  enum class state : std::uint8_t { chunk, pending, split } st = state::chunk;
+  std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
+  std::array<std::uint64_t, 8> octant_count{};
+  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  std::uint32_t first_child = 0, children = 0, chunk = none;
+  bool one_position = false;  // every point of the cell at one position: never split
+};
+
+inline std::size_t octant_of(const vec3d& q, const vec3d& mid) {
+  return (q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) | (q.z() >= mid.z() ? 4u : 0u);
+}
+
+// ---- the statistics a chunk keeps between its steps (temporary files, exact doubles/floats)
+void put_acc(byte_writer& w, const scatter_accumulator& a) {
+  w.put(a.n);
+  for (int k = 0; k < 3; ++k) w.put(a.mean[k]);
+  for (int k = 0; k < 9; ++k) w.put(a.scatter(k));
+}
+scatter_accumulator get_acc(byte_reader& r) {
+  scatter_accumulator a;
+  a.n = r.get<double>("moments");
+  for (int k = 0; k < 3; ++k) a.mean[k] = r.get<double>("moments");
+  for (int k = 0; k < 9; ++k) a.scatter(k) = r.get<double>("moments");
+  return a;
+}
+template <class M>
+void put_m(byte_writer& w, const M& m) {
+  for (Eigen::Index k = 0; k < m.size(); ++k) w.put(m(k));
+}
+template <class M>
+void get_m(byte_reader& r, M& m) {
+  for (Eigen::Index k = 0; k < m.size(); ++k) m(k) = r.get<typename M::Scalar>("statistics");
+}
+/// A chunk's nodes with their undecoded statistics and cells.
+void put_raw(byte_writer& w, const pca_data& d) {
+  w.put(static_cast<std::uint64_t>(d.nodes.size()));
+  w.put(static_cast<std::uint8_t>(d.colours.empty() ? 0 : 1));
+  for (const pca_node& nd : d.nodes) {
+    put_m(w, nd.mean);
+    put_m(w, nd.frame);
+    put_m(w, nd.sigma);
+    put_m(w, nd.normal_frame);
+    put_m(w, nd.normal_sigma);
+    w.put(nd.first);
+    w.put(nd.count);
+    w.put(nd.mask);
+    w.put(nd.depth);
+    put_m(w, nd.cell_min);
+    w.put(nd.cell_size);
+  }
+  for (const pca_colour& c : d.colours) {
+    put_m(w, c.mean);
+    put_m(w, c.frame);
+    put_m(w, c.sigma);
+  }
+}
+void get_raw(byte_reader& r, pca_data& d) {
+  d.nodes.resize(r.get<std::uint64_t>("nodes"));
+  const bool colour = r.get<std::uint8_t>("colour") != 0;
+  for (pca_node& nd : d.nodes) {
+    get_m(r, nd.mean);
+    get_m(r, nd.frame);
+    get_m(r, nd.sigma);
+    get_m(r, nd.normal_frame);
+    get_m(r, nd.normal_sigma);
+    nd.first = r.get<std::uint32_t>("first");
+    nd.count = r.get<std::uint8_t>("count");
+    nd.mask = r.get<std::uint8_t>("mask");
+    nd.depth = r.get<std::uint8_t>("depth");
+    get_m(r, nd.cell_min);
+    nd.cell_size = r.get<double>("cell");
+  }
+  d.colours.resize(colour ? d.nodes.size() : 0);
+  for (pca_colour& c : d.colours) {
+    get_m(r, c.mean);
+    get_m(r, c.frame);
+    get_m(r, c.sigma);
+  }
+}
+
+/// Node counts per level of a breadth-first tree (depths absolute, levels contiguous).
+std::vector<std::uint32_t> level_counts(const pca_data& d) {
+  std::vector<std::uint32_t> c;
+  for (const pca_node& nd : d.nodes) {
+    const std::size_t l = nd.depth - d.nodes[0].depth;
+    if (l >= c.size()) c.resize(l + 1, 0);
+    ++c[l];
+  }
+  return c;
+}
+
+struct chunked_pca_builder : chunked_pass_base {
+  const chunked_pca_octree_options& opt;
+  pca_octree_options po;  // without the progress callback
+  std::uint64_t n;
+  std::uint64_t chunk_points;
+  unsigned workers = 1;
+  attributes in;
+  vec3d centre_rel = vec3d::Zero();  // the origin relative to the source's
+  double size = 0, input_radius = 0;
+  std::vector<top_cell> nodes;
+  std::vector<std::uint32_t> chunk_top;  // per chunk: its top cell
+  std::vector<std::uint64_t> chunk_count;
+  std::vector<std::vector<std::uint32_t>> chunk_levels;  // per chunk: nodes per local level
+  std::vector<std::vector<std::uint32_t>> chunk_global;  // per chunk: whole-tree number per level
+  std::vector<std::uint32_t> top_global;                 // per top cell
+  std::uint64_t total_nodes = 0;
+  pca_data top;  // the top cells as nodes (a chunk's root: a leaf here)
+  chunked_build_report rep;
+
+  chunked_pca_builder(const point_source& s, const std::string& d,
+                      const chunked_pca_octree_options& o)
+      : chunked_pass_base(s, d, o.block_points, o.distributed, "build_pca_octree_chunked"),
+        opt(o),
+        po(o.pca),
+        n(s.size()),
+        in(s.attrs()) {
+    po.progress = {};
+    if (!in.normal)
+      throw InvalidArgument("build_pca_octree_chunked: " + s.name() +
+                            " has no normals (the in-memory build estimates and orients them "
+                            "over the whole input; build_pca_octree does that)");
+    pca_validate_options(po, true);
+    if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
+      throw InvalidArgument("build_pca_octree_chunked: more than 2^32 - 2 points");
+    workers = pca_threads(po.threads);
+    chunk_points = opt.chunk_points
+                       ? opt.chunk_points
+                       : std::max<std::uint64_t>(
+                             1, opt.memory_bytes / (chunked_pca_bytes_per_point * workers));
+    chunk_points = std::clamp<std::uint64_t>(chunk_points, po.leaf_size, (1u << 31) - 1);
+  }
+
+  void progress(double f) const {
+    if (opt.pca.progress && !opt.pca.progress(f))
+      throw Cancelled("build_pca_octree_chunked: cancelled");
+  }
+  [[nodiscard]] vec3d local(const vec3f& p) const { return p.cast<double>() - centre_rel; }
+  [[nodiscard]] double half_of(const top_cell& x) const {
+    return size / std::ldexp(1.0, x.depth + 1);
+  }
+  [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
+    std::uint32_t x = 0;
+    while (nodes[x].st == top_cell::state::split) {
+      const top_cell& c = nodes[x];
+      x = c.child[octant_of(p, c.cell_min + vec3d::Constant(half_of(c)))];
+    }
+    return x;
+  }
+
+  /// Steps 1–2: the box (build_pca_data's origin and root cube) and the checks of every point,
+  /// then one pass per level splitting every cell above chunk size that build_pca_data splits.
+  void structure() {
+    vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    stream([&](std::uint64_t first, const point_block& b) {
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        if (!all_finite(b.positions[k]))
+          throw InvalidArgument("build_pca_octree_chunked: " + src.name() + ": position " +
+                                std::to_string(first + k) + " is not finite");
+        if (!all_finite(b.normals[k]) || !(b.normals[k].squaredNorm() > 0))
+          throw InvalidArgument("build_pca_octree_chunked: " + src.name() + ": normal " +
+                                std::to_string(first + k) + " is zero or not finite");
+        lo = lo.cwiseMin(b.positions[k].cast<double>());
+        hi = hi.cwiseMax(b.positions[k].cast<double>());
+      }
+    });
+    centre_rel = 0.5 * (lo + hi);
+    size = (hi - lo).maxCoeff();
+    size = size > 0 ? size * (1 + 1e-9) : 1e-9 * std::max(1.0, src.origin().cwiseAbs().maxCoeff());
+    nodes.assign(1, top_cell{});
+    nodes[0].cell_min = vec3d::Constant(-0.5 * size);
+    nodes[0].count = n;
+    for (;;) {
+      bool any = false;
+      for (auto& x : nodes)
+        if (x.st == top_cell::state::chunk && !x.one_position && x.count > chunk_points &&
+            x.depth < po.max_depth) {
+          x.st = top_cell::state::pending;
+          any = true;
+        }
+      if (!any) break;
+      stream([&](std::uint64_t, const point_block& b) {
+        for (const vec3f& pf : b.positions) {
+          const vec3d p = local(pf);
+          top_cell& x = nodes[descend(p)];
+          if (x.st != top_cell::state::pending) continue;
+          ++x.octant_count[octant_of(p, x.cell_min + vec3d::Constant(half_of(x)))];
+          x.lo = x.lo.cwiseMin(p);
+          x.hi = x.hi.cwiseMax(p);
+        }
+      });
+      split_pending();
+    }
+    for (std::uint32_t i = 0; i < nodes.size(); ++i)
+      if (nodes[i].st == top_cell::state::chunk) {
+        nodes[i].chunk = static_cast<std::uint32_t>(chunk_top.size());
+        chunk_top.push_back(i);
+      }
+    rep.chunks = chunk_top.size();
+    rep.top_nodes = nodes.size();
+  }
+
+  /// Children in octant order, empty octants skipped; a cell of one repeated position stays
+  /// whole (as build_pca_data's split).
+  void split_pending() {
+    const std::size_t end = nodes.size();
+    for (std::size_t i = 0; i < end; ++i) {
+      if (nodes[i].st != top_cell::state::pending) continue;
+      if (nodes[i].lo == nodes[i].hi) {
+        nodes[i].st = top_cell::state::chunk;
+        nodes[i].one_position = true;
+        continue;
+      }
+      nodes[i].st = top_cell::state::split;
+      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
+      const double half = half_of(nodes[i]);
+      for (std::size_t o = 0; o < 8; ++o) {
+        if (nodes[i].octant_count[o] == 0) continue;
+        top_cell c;
+        c.cell_min =
+            nodes[i].cell_min + vec3d((o & 1) ? half : 0, (o & 2) ? half : 0, (o & 4) ? half : 0);
+        c.depth = static_cast<std::uint8_t>(nodes[i].depth + 1);
+        c.count = nodes[i].octant_count[o];
+        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
+        nodes.push_back(c);
+      }
+      nodes[i].children = static_cast<std::uint32_t>(nodes.size()) - nodes[i].first_child;
+    }
+  }
+
+  /// Step 3 (rank 0): every point into its chunk's file, input order kept.
+  void distribute() {
+    const std::size_t m = chunk_top.size();
+    if (rank == 0) {
+      std::vector<append_file> files;
+      files.reserve(m);
+      for (std::size_t c = 0; c < m; ++c)
+        files.emplace_back(temp_path("chunk", c), buffer_bytes(m));
+      stream([&](std::uint64_t first, const point_block& b) {
+        for (std::size_t k = 0; k < b.size(); ++k) {
+          const vec3d p = local(b.positions[k]);
+          input_radius = std::max(input_radius, p.norm());
+          files[nodes[descend(p)].chunk].put(
+              {first + k, b.positions[k], b.normals[k], in.colour ? b.colours[k] : rgb8{}});
+        }
+      });
+      for (auto& f : files) f.flush();
+    }
+    barrier();
+    chunk_count.resize(m);
+    for (std::size_t c = 0; c < m; ++c) {
+      chunk_count[c] = fs::file_size(temp_path("chunk", c)) / record_bytes;
+      rep.largest_chunk = std::max(rep.largest_chunk, chunk_count[c]);
+    }
+  }
+
+  /// f(chunk, threads) over this rank's chunks: side by side, one thread each, when there are
+  /// enough of them, else one at a time on every thread (the output does not depend on it).
+  template <class F>
+  void over_my_chunks(double p0, double p1, F&& f) {
+    std::vector<std::size_t> list;
+    for (std::size_t c = 0; c < chunk_top.size(); ++c)
+      if (mine(c)) list.push_back(c);
+    const bool side_by_side = list.size() >= workers;
+    std::atomic<std::size_t> done{0};
+    const auto caller = std::this_thread::get_id();
+    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
+      f(list[k], side_by_side ? 1u : workers);
+      const std::size_t d = ++done;
+      if (std::this_thread::get_id() == caller)
+        progress(p0 + (p1 - p0) * static_cast<double>(d) / static_cast<double>(list.size()));
+    });
+  }
+
+  /// Step 4 for chunk c: its subtree and statistics (build_pca_data's code) kept in "raw", its
+  /// normals in octree order in "nrm", its root's moments and level sizes in "sum".
+  void build_chunk(std::size_t c, unsigned threads) const {
+    const std::vector<point_record> recs = read_records(temp_path("chunk", c));
+    if (recs.size() != chunk_count[c]) throw IoError(temp_path("chunk", c) + ": cut short");
+    pca_points pts;
+    pts.pos.resize(recs.size());
+    pts.normals.resize(recs.size());
+    if (in.colour) pts.colours.resize(recs.size());
+    for (std::size_t i = 0; i < recs.size(); ++i) {
+      pts.pos[i] = local(recs[i].position);
+      pts.normals[i] = recs[i].normal.normalized();
+      if (in.colour) pts.colours[i] = recs[i].colour;
+    }
+    const top_cell& x = nodes[chunk_top[c]];
+    pca_data d;
+    const pca_subtree_moments m = pca_build_subtree(d, pts, x.cell_min, x.depth, size, po, threads);
+    byte_writer w;
+    put_raw(w, d);
+    save_file_bytes(temp_path("raw", c), w.bytes);
+    byte_writer nw;
+    for (const vec3f& v : pts.normals) nw.put_vec(v);
+    save_file_bytes(temp_path("nrm", c), nw.bytes);
+    byte_writer sw;
+    put_acc(sw, m.positions);
+    put_acc(sw, m.colours);
+    const std::vector<std::uint32_t> lc = level_counts(d);
+    sw.put(static_cast<std::uint32_t>(lc.size()));
+    for (const std::uint32_t v : lc) sw.put(v);
+    save_file_bytes(temp_path("sum", c), sw.bytes);
+  }
+
+  [[nodiscard]] pca_data load_raw(std::size_t c) const {
+    const std::string path = temp_path("raw", c);
+    const std::vector<unsigned char> bytes = load_file_bytes(path);
+    byte_reader r{bytes, 0, path};
+    pca_data d;
+    get_raw(r, d);
+    return d;
+  }
+
+  /// The chunks from left to right (the in-memory order of their points).
+  [[nodiscard]] std::vector<std::uint32_t> chunks_in_order() const {
+    std::vector<std::uint32_t> out, stack{0};
+    while (!stack.empty()) {
+      const std::uint32_t x = stack.back();
+      stack.pop_back();
+      if (nodes[x].st != top_cell::state::split) {
+        out.push_back(nodes[x].chunk);
+        continue;
+      }
+      for (std::uint32_t k = nodes[x].children; k-- > 0;) stack.push_back(nodes[x].first_child + k);
+    }
+    return out;
+  }
+
+  /// Step 5 (rank 0): the top cells' statistics.
+  void top_statistics(std::vector<scatter_accumulator>& pos_acc,
+                      std::vector<scatter_accumulator>& col_acc) {
+    const std::size_t t = nodes.size();
+    top.nodes.assign(t, pca_node{});
+    if (in.colour) top.colours.assign(t, pca_colour{});
+    pos_acc.assign(t, {});
+    col_acc.assign(t, {});
+    chunk_levels.resize(chunk_top.size());
+    std::vector<std::vector<std::uint32_t>> above(chunk_top.size());  // split ancestors
+    std::vector<std::uint32_t> parent(t, none);
+    for (std::uint32_t x = 0; x < t; ++x)
+      for (std::uint32_t k = 0; k < nodes[x].children; ++k) parent[nodes[x].first_child + k] = x;
+    for (std::uint32_t c = 0; c < chunk_top.size(); ++c) {
+      for (std::uint32_t a = parent[chunk_top[c]]; a != none; a = parent[a]) above[c].push_back(a);
+      // The chunk's root node, its moments and its level sizes.
+      const pca_data d = load_raw(c);
+      top.nodes[chunk_top[c]] = d.nodes[0];
+      top.nodes[chunk_top[c]].first = 0;
+      top.nodes[chunk_top[c]].count = 0;
+      top.nodes[chunk_top[c]].mask = 0;
+      if (in.colour) top.colours[chunk_top[c]] = d.colours[0];
+      const std::string path = temp_path("sum", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      pos_acc[chunk_top[c]] = get_acc(r);
+      col_acc[chunk_top[c]] = get_acc(r);
+      chunk_levels[c].resize(r.get<std::uint32_t>("levels"));
+      for (auto& v : chunk_levels[c]) v = r.get<std::uint32_t>("level");
+    }
+    // The normals: two passes over the chunks' normals in octree order, every split cell's sums
+    // in the order pca_normals adds them.
+    const std::vector<std::uint32_t> order = chunks_in_order();
+    std::vector<vec3d> sum(t, vec3d::Zero()), fallback(t, vec3d::Zero());
+    std::vector<char> seen(t, 0);
+    std::vector<vec3f> nrm;
+    const auto read_normals = [&](std::uint32_t c) {
+      const std::string path = temp_path("nrm", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      nrm.resize(chunk_count[c]);
+      for (std::size_t i = 0; i < nrm.size(); ++i) nrm[i] = r.get_vec("normal", i);
+    };
+    for (const std::uint32_t c : order) {
+      read_normals(c);
+      for (const std::uint32_t a : above[c]) {
+        if (!seen[a]) fallback[a] = nrm[0].cast<double>();
+        seen[a] = 1;
+        for (const vec3f& v : nrm) sum[a] += v.cast<double>();
+      }
+    }
+    std::vector<mat3d> frame(t, mat3d::Identity()), frame_t(t, mat3d::Identity());
+    std::vector<Eigen::Matrix2d> m(t, Eigen::Matrix2d::Zero());
+    for (std::uint32_t x = 0; x < t; ++x)
+      if (nodes[x].st == top_cell::state::split) {
+        frame[x] = pca_normal_pole(sum[x], nodes[x].count, fallback[x]);
+        frame_t[x] = frame[x].transpose();
+      }
+    for (const std::uint32_t c : order) {
+      read_normals(c);
+      for (const std::uint32_t a : above[c])
+        for (const vec3f& v : nrm) pca_normal_unwrap_add(frame_t[a], v, m[a]);
+    }
+    // Positions and colours: the children's moments merged in octant order, bottom up.
+    for (std::uint32_t x = static_cast<std::uint32_t>(t); x-- > 0;) {
+      const top_cell& cell = nodes[x];
+      if (cell.st != top_cell::state::split) continue;
+      for (std::uint32_t k = 0; k < cell.children; ++k) {
+        pos_acc[x] += pos_acc[cell.first_child + k];
+        col_acc[x] += col_acc[cell.first_child + k];
+      }
+      pca_node& nd = top.nodes[x];
+      pca_set_statistics(nd, pos_acc[x], pca_normal_finish(frame[x], m[x], cell.count));
+      if (in.colour) top.colours[x] = pca_colours_from(col_acc[x].mean, col_acc[x].covariance());
+      nd.first = cell.first_child;
+      nd.count = static_cast<std::uint8_t>(cell.children);
+      for (std::size_t o = 0; o < 8; ++o)
+        if (cell.child[o] != none) nd.mask = static_cast<std::uint8_t>(nd.mask | (1u << o));
+      nd.depth = cell.depth;
+      nd.cell_min = cell.cell_min;
+      nd.cell_size = size / std::ldexp(1.0, cell.depth);
+    }
+  }
+
+  /// The whole-tree (breadth-first) number of every top cell and of the first node of every
+  /// level of every chunk: a level of the whole tree lists, left to right, the top cells at that
+  /// depth and the chunks' nodes at that depth.
+  void number_nodes() {
+    top_global.assign(nodes.size(), none);
+    chunk_global.assign(chunk_top.size(), {});
+    for (std::uint32_t c = 0; c < chunk_top.size(); ++c)
+      chunk_global[c].assign(chunk_levels[c].size(), none);
+    std::uint64_t next = 0;
+    for (std::uint32_t level = 0;; ++level) {
+      const std::uint64_t start = next;
+      std::vector<std::uint32_t> stack{0};
+      while (!stack.empty()) {
+        const std::uint32_t x = stack.back();
+        stack.pop_back();
+        const top_cell& cell = nodes[x];
+        if (cell.st == top_cell::state::split) {
+          if (cell.depth == level) {
+            top_global[x] = static_cast<std::uint32_t>(next++);
+          } else {
+            for (std::uint32_t k = cell.children; k-- > 0;) stack.push_back(cell.first_child + k);
+          }
+          continue;
+        }
+        const std::size_t l = level - cell.depth;
+        if (level < cell.depth || l >= chunk_levels[cell.chunk].size()) continue;
+        chunk_global[cell.chunk][l] = static_cast<std::uint32_t>(next);
+        if (l == 0) top_global[x] = static_cast<std::uint32_t>(next);
+        next += chunk_levels[cell.chunk][l];
+      }
+      if (next == start) break;
+    }
+    total_nodes = next;
+  }
+
+  [[nodiscard]] std::uint64_t chunk_global_id(std::uint32_t c,
+                                              const std::vector<std::uint32_t>& level_first,
+                                              std::uint32_t i) const {
+    const auto l = static_cast<std::size_t>(
+        std::upper_bound(level_first.begin(), level_first.end(), i) - level_first.begin() - 1);
+    return chunk_global[c][l] + (i - level_first[l]);
+  }
+  static std::vector<std::uint32_t> firsts(const std::vector<std::uint32_t>& counts) {
+    std::vector<std::uint32_t> f(counts.size(), 0);
+    for (std::size_t l = 1; l < counts.size(); ++l) f[l] = f[l - 1] + counts[l - 1];
+    return f;
+  }
+
+  /// Step 6 (rank 0): the codebooks from the nodes build_pca_data's k-means would sample.
+  void train_codebooks() {
+    std::array<std::uint64_t, 3> rng{};
+    std::array<std::vector<std::uint32_t>, 3> picks;
+    const int books = in.colour ? 3 : 2;
+    std::unordered_map<std::uint64_t, std::array<vec3f, 3>> feature;
+    for (int b = 0; b < books; ++b) {
+      picks[b] = pca_kmeans_picks(total_nodes, po, static_cast<std::uint64_t>(b + 1), rng[b]);
+      for (const std::uint32_t g : picks[b]) feature[g];
+    }
+    const auto take = [&](const pca_data& d, std::size_t i, std::uint64_t g) {
+      const auto it = feature.find(g);
+      if (it == feature.end()) return;
+      pca_features(d, i, it->second[0], it->second[1], in.colour ? &it->second[2] : nullptr);
+    };
+    for (std::uint32_t x = 0; x < nodes.size(); ++x)
+      if (nodes[x].st == top_cell::state::split) take(top, x, top_global[x]);
+    for (std::uint32_t c = 0; c < chunk_top.size(); ++c) {
+      const pca_data d = load_raw(c);
+      const std::vector<std::uint32_t> lf = firsts(chunk_levels[c]);
+      for (std::uint32_t i = 0; i < d.nodes.size(); ++i) take(d, i, chunk_global_id(c, lf, i));
+    }
+    const std::array<std::uint32_t, 3> k{po.position_codebook, po.normal_codebook,
+                                         po.colour_codebook};
+    std::array<std::vector<vec3f>, 3> book;
+    for (int b = 0; b < books; ++b) {
+      std::vector<vec3f> xs(picks[b].size());
+      for (std::size_t i = 0; i < xs.size(); ++i) xs[i] = feature.at(picks[b][i])[b];
+      book[b] = pca_kmeans_train(xs, k[b], po, rng[b], workers);
+    }
+    top.codebook_p = book[0];
+    top.codebook_n.resize(book[1].size());
+    for (std::size_t c = 0; c < book[1].size(); ++c) top.codebook_n[c] = book[1][c].head<2>();
+    top.codebook_c = book[2];
+  }
+
+  void set_options(pca_data& d) const {
+    d.origin = src.origin() + centre_rel;
+    d.leaf_size = po.leaf_size;
+    d.max_depth = po.max_depth;
+    d.gamma = po.gamma;
+    d.curvature_c = po.curvature_c;
+    d.lambda_max = po.lambda_max;
+    d.quantised = po.quantise;
+  }
+
+  /// Step 5–6 on rank 0: the top's statistics, numbering and codebooks, the top encoded; λ's
+  /// unit and the codebooks to the other ranks through a file.
+  void top_and_codebooks() {
+    if (rank == 0) {
+      std::vector<scatter_accumulator> pa, ca;
+      top_statistics(pa, ca);
+      number_nodes();
+      set_options(top);
+      if (po.quantise) {
+        const auto tk = std::chrono::steady_clock::now();
+        train_codebooks();
+        pca_encode(top, workers);  // a chunk's root is encoded in its chunk the same way
+        rep.pass_seconds +=
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - tk).count();
+      }
+      const float root_norm = top.nodes[0].sigma.norm();
+      top.lambda_norm = root_norm > 0 ? root_norm : 1.0f;
+      byte_writer w;
+      w.put(top.lambda_norm);
+      w.put(total_nodes);
+      for (const auto* b : {&top.codebook_p, &top.codebook_c}) {
+        w.put(static_cast<std::uint32_t>(b->size()));
+        for (const vec3f& v : *b) w.put_vec(v);
+      }
+      w.put(static_cast<std::uint32_t>(top.codebook_n.size()));
+      for (const vec2f& v : top.codebook_n) put_m(w, v);
+      for (std::uint32_t c = 0; c < chunk_top.size(); ++c) {
+        w.put(static_cast<std::uint32_t>(chunk_global[c].size()));
+        for (const std::uint32_t v : chunk_global[c]) w.put(v);
+      }
+      save_file_bytes(temp_path("quant", 0), w.bytes);
+    }
+    barrier();
+    if (rank != 0) {
+      const std::string path = temp_path("quant", 0);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      top.lambda_norm = r.get<float>("lambda");
+      total_nodes = r.get<std::uint64_t>("nodes");
+      for (auto* b : {&top.codebook_p, &top.codebook_c}) {
+        b->resize(r.get<std::uint32_t>("codebook"));
+        for (vec3f& v : *b) v = r.get_vec("codebook", 0);
+      }
+      top.codebook_n.resize(r.get<std::uint32_t>("codebook"));
+      for (vec2f& v : top.codebook_n) get_m(r, v);
+      chunk_global.resize(chunk_top.size());
+      for (auto& g : chunk_global) {
+        g.resize(r.get<std::uint32_t>("levels"));
+        for (auto& v : g) v = r.get<std::uint32_t>("level");
+      }
+      set_options(top);
+    }
+  }
+
+  /// Step 6 for chunk c: encoded, decoded, bounded; its file written, its root's bounds kept.
+  void finish_chunk(std::size_t c, unsigned threads) const {
+    pca_data d = load_raw(c);
+    set_options(d);
+    d.codebook_p = top.codebook_p;
+    d.codebook_n = top.codebook_n;
+    d.codebook_c = top.codebook_c;
+    if (po.quantise) pca_encode(d, threads);
+    pca_derive_bounds_with(d, top.lambda_norm, threads);
+    const top_cell& x = nodes[chunk_top[c]];
+    byte_writer w;
+    write_head(w, pca_chunk_format);
+    w.put(static_cast<std::uint32_t>((in.colour ? 1u : 0u) | (po.quantise ? 2u : 0u)));
+    w.put(static_cast<std::uint32_t>(c));
+    w.put(static_cast<std::uint32_t>(x.depth));
+    w.put(chunk_count[c]);
+    w.put(static_cast<std::uint64_t>(d.nodes.size()));
+    for (int k = 0; k < 3; ++k) w.put(x.cell_min[k]);
+    w.put(size / std::ldexp(1.0, x.depth));
+    w.put(static_cast<std::uint32_t>(chunk_global[c].size()));
+    for (const std::uint32_t g : chunk_global[c]) w.put(g);
+    put_pca_nodes(w, d);
+    append_checksum(w);
+    save_file_bytes((dir / pca_chunk_file_name(static_cast<std::uint32_t>(c))).string(), w.bytes);
+    byte_writer rw;
+    rw.put(d.nodes[0].radius);
+    rw.put(d.nodes[0].cone_angle);
+    rw.put(d.nodes[0].lambda);
+    rw.put(d.nodes[0].mask);
+    rw.put(static_cast<std::uint64_t>(d.nodes.size()));
+    save_file_bytes(temp_path("root", c), rw.bytes);
+  }
+
+  /// Step 7 (rank 0): the top's bounds from the chunks' roots; the top file.
+  void write_top() {
+    const std::size_t m = chunk_top.size();
+    std::vector<char> fixed(nodes.size(), 0);
+    std::vector<std::uint8_t> root_mask(m);
+    std::vector<std::uint64_t> chunk_nodes(m);
+    for (std::uint32_t c = 0; c < m; ++c) {
+      const std::string path = temp_path("root", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      pca_node& nd = top.nodes[chunk_top[c]];
+      nd.radius = r.get<float>("radius");
+      nd.cone_angle = r.get<float>("cone");
+      nd.lambda = r.get<float>("lambda");
+      root_mask[c] = r.get<std::uint8_t>("mask");
+      chunk_nodes[c] = r.get<std::uint64_t>("nodes");
+      fixed[chunk_top[c]] = 1;
+    }
+    pca_derive_bounds_with(top, top.lambda_norm, 1, &fixed);
+    byte_writer w;
+    write_head(w, chunked_pca_format);
+    w.put(static_cast<std::uint32_t>((in.colour ? 1u : 0u) | (po.quantise ? 2u : 0u)));
+    w.put(po.leaf_size);
+    w.put(po.max_depth);
+    w.put(po.gamma);
+    w.put(po.curvature_c);
+    w.put(po.lambda_max);
+    w.put(top.lambda_norm);
+    w.put(n);
+    for (int k = 0; k < 3; ++k) w.put(top.origin[k]);
+    for (int k = 0; k < 3; ++k) w.put(nodes[0].cell_min[k]);
+    w.put(size);
+    w.put(input_radius);
+    w.put(static_cast<std::uint32_t>(top.codebook_p.size()));
+    w.put(static_cast<std::uint32_t>(top.codebook_n.size()));
+    w.put(static_cast<std::uint32_t>(top.codebook_c.size()));
+    for (const auto& v : top.codebook_p) w.put_vec(v);
+    for (const auto& v : top.codebook_n) put_m(w, v);
+    for (const auto& v : top.codebook_c) w.put_vec(v);
+    w.put(static_cast<std::uint64_t>(nodes.size()));
+    w.put(static_cast<std::uint64_t>(m));
+    put_pca_nodes(w, top);
+    for (std::uint32_t x = 0; x < nodes.size(); ++x) {
+      w.put(nodes[x].chunk);
+      w.put(top_global[x]);
+    }
+    for (std::uint32_t c = 0; c < m; ++c) {
+      w.put(chunk_top[c]);
+      w.put(chunk_count[c]);
+      w.put(chunk_nodes[c]);
+      w.put(root_mask[c]);
+      w.put(top.nodes[chunk_top[c]].radius);
+      w.put(top.nodes[chunk_top[c]].cone_angle);
+    }
+    append_checksum(w);
+    save_file_bytes((dir / chunked_top_file).string(), w.bytes);
+  }
+
+  chunked_build_report run() {
+    using clk = std::chrono::steady_clock;
+    const auto t0 = clk::now();
+    start();
+    progress(0);
+    structure();
+    distribute();
+    rep.pass_seconds = std::chrono::duration<double>(clk::now() - t0).count();
+    progress(0.1);
+    const auto tc = clk::now();
+    over_my_chunks(0.1, 0.5, [&](std::size_t c, unsigned t) { build_chunk(c, t); });
+    barrier();
+    double chunk_seconds = std::chrono::duration<double>(clk::now() - tc).count();
+    const auto tt = clk::now();
+    top_and_codebooks();
+    rep.pass_seconds += std::chrono::duration<double>(clk::now() - tt).count();
+    const auto tf = clk::now();
+    over_my_chunks(0.6, 0.95, [&](std::size_t c, unsigned t) { finish_chunk(c, t); });
+    barrier();
+    chunk_seconds += std::chrono::duration<double>(clk::now() - tf).count();
+    if (rank == 0) write_top();
+    barrier();
+    rep.chunk_build_seconds = chunk_seconds;
+    rep.input_points = n;
+    rep.chunk_points = chunk_points;
+    rep.passes = passes;
+    rep.seconds = std::chrono::duration<double>(clk::now() - t0).count();
+    progress(1);
+    return rep;
+  }
+};
+
+}  // namespace
+}  // namespace detail
+
+chunked_build_report build_pca_octree_chunked(const point_source& src, const std::string& dir,
+                                              const chunked_pca_octree_options& options) {
+  detail::chunked_pca_builder b(src, dir, options);
+  return b.run();
+}
+
+std::string pca_chunk_file_name(std::uint32_t c) {
+  std::string s = std::to_string(c);
+  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".pca";
+}
+
+}  // namespace pbr_lod

@@ -1,0 +1,266 @@
+// The chunked (out-of-core) PCA octree: equal to the in-memory build node for node and bit for
+// bit, the same points drawn, lazy opening, ranks, damaged directories.
+#include <gtest/gtest.h>
+
+#include <barrier>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "chunked_test_util.hpp"
+#include "pbr_lod/builders/chunked_pca_octree.hpp"
+#include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/traverse/sink.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
+
+namespace pbr_lod {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string temp_dir(const std::string& what) {
+  return test::temp_dir("pbr_lod_cpca_", what);
+}
+using test::bytes_of;
+using test::expect_same_folders;
+
+constexpr attributes NC = with_normals_colours;
+using H = chunked_pca_octree<NC>;
+
+/// The wavy surface (normals, colours) with a few exact duplicates, and 700 copies of one point:
+/// a cell of one repeated position is never split, so it becomes a chunk above chunk_points.
+point_cloud surface_with_duplicates(std::size_t n) {
+  point_cloud c = make_wavy_surface(n, 7);
+  for (std::size_t i = 0; i < n; i += n / 7) {
+    c.positions.push_back(c.positions[i]);
+    c.normals.push_back(c.normals[i]);
+    c.colours.push_back({1, 2, 3});
+  }
+  for (int k = 0; k < 700; ++k) {
+    c.positions.push_back(c.positions[n / 2]);
+    c.normals.push_back(c.normals[(n / 2 + static_cast<std::size_t>(k)) % n]);
+    c.colours.push_back({static_cast<std::uint8_t>(k), 9, 200});
+  }
+  return c;
+}
+
+pca_octree_options small_codebooks() {
+  pca_octree_options o;
+  o.position_codebook = 256;
+  o.normal_codebook = 256;
+  o.kmeans_sample = 4000;  // fewer than the nodes: the sample is a true subset
+  return o;
+}
+
+pca_octree<NC> in_memory(const point_cloud& c, const pca_octree_options& o) {
+  return build_pca_octree(point_set<NC>::from(c), o);
+}
+
+class ChunkedPca : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    cloud_ = new point_cloud(surface_with_duplicates(14000));
+    dir_ = new std::string(temp_dir("equal"));
+    chunked_pca_octree_options o;
+    o.pca = small_codebooks();
+    o.chunk_points = 600;
+    report_ =
+        new chunked_build_report(build_pca_octree_chunked(cloud_point_source(*cloud_), *dir_, o));
+    memory_ = new pca_octree<NC>(in_memory(*cloud_, o.pca));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete cloud_;
+    delete dir_;
+    delete report_;
+    delete memory_;
+  }
+  static point_cloud* cloud_;
+  static std::string* dir_;
+  static chunked_build_report* report_;
+  static pca_octree<NC>* memory_;
+};
+point_cloud* ChunkedPca::cloud_ = nullptr;
+std::string* ChunkedPca::dir_ = nullptr;
+chunked_build_report* ChunkedPca::report_ = nullptr;
+pca_octree<NC>* ChunkedPca::memory_ = nullptr;
+
+TEST_F(ChunkedPca, SplitsIntoChunksAndOpensLazily) {
+  EXPECT_GE(report_->chunks, 20u);
+  EXPECT_EQ(report_->largest_chunk, 701u) << "the repeated point (and its 700 copies) is one chunk";
+  EXPECT_FALSE(fs::exists(fs::path(*dir_) / "tmp-build")) << "temporary files left behind";
+  const H h = H::open(*dir_);
+  EXPECT_EQ(h.chunk_count(), report_->chunks);
+  EXPECT_EQ(h.node_count(), memory_->nodes().size());
+  EXPECT_EQ(h.input_points(), cloud_->size());
+  EXPECT_EQ(h.chunks_loaded(), 0u) << "opening read a chunk";
+  EXPECT_GT(h.top_node_count(), h.chunk_count());
+  // Every node reached through the hierarchy is the in-memory node of its number.
+  std::vector<H::node_id> stack{h.root()};
+  std::size_t visited = 0;
+  while (!stack.empty()) {
+    const H::node_id x = stack.back();
+    stack.pop_back();
+    const std::uint64_t g = h.global_id(x);
+    ASSERT_LT(g, memory_->nodes().size());
+    const pca_node& want = memory_->at(static_cast<std::uint32_t>(g));
+    EXPECT_EQ(h.at(x).mean, want.mean) << "node " << g;
+    EXPECT_EQ(h.at(x).radius, want.radius) << "node " << g;
+    EXPECT_EQ(h.at(x).count, want.count) << "node " << g;
+    ++visited;
+    for (const H::node_id c : h.children(x)) stack.push_back(c);
+  }
+  EXPECT_EQ(visited, memory_->nodes().size());
+}
+
+TEST_F(ChunkedPca, AssemblesToTheInMemoryBuildByteForByte) {
+  const pca_octree<NC> whole = H::open(*dir_).assemble();
+  ASSERT_EQ(whole.nodes().size(), memory_->nodes().size());
+  EXPECT_EQ(whole.data().codebook_p, memory_->data().codebook_p);
+  EXPECT_TRUE(whole.data().records == memory_->data().records);
+  EXPECT_TRUE(whole.nodes() == memory_->nodes());
+  EXPECT_TRUE(whole == *memory_);
+  const std::string a = *dir_ + "/assembled.pca", b = *dir_ + "/memory.pca";
+  whole.save(a);
+  memory_->save(b);
+  EXPECT_EQ(bytes_of(a), bytes_of(b));
+  fs::remove(a);
+  fs::remove(b);
+}
+
+TEST_F(ChunkedPca, DrawsThePointsOfTheInMemoryBuildAndLoadsOnlyWhatItNeeds) {
+  const sphere s = memory_->bounding_sphere(memory_->root());
+  const vec3d centre = memory_->origin() + s.centre.cast<double>();
+  for (const double dist : {3.0, 0.4}) {
+    const H h = H::open(*dir_);
+    const camera cam = camera::orbit(centre, s.radius, 30, 25, dist, 1, {160, 160});
+    buffer_sink<NC> got, want;
+    const pca_octree_policy policy;
+    const traverse_stats sg = traverse(h, view(cam, h.origin()), {}, got, policy);
+    const traverse_stats sw = traverse(*memory_, view(cam, memory_->origin()), {}, want, policy);
+    EXPECT_EQ(sg.visited, sw.visited);
+    ASSERT_EQ(got.points.size(), want.points.size());
+    EXPECT_GT(got.points.size(), 1000u);
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < got.points.size(); ++i) {
+      const auto &p = got.points[i], &q = want.points[i];
+      differ += !(p.position == q.position &&
+                  static_cast<const vec3f&>(p.normal) == static_cast<const vec3f&>(q.normal) &&
+                  static_cast<const rgb8&>(p.colour) == static_cast<const rgb8&>(q.colour));
+    }
+    EXPECT_EQ(differ, 0u);
+    if (dist < 1) {
+      EXPECT_GT(h.chunks_loaded(), 0u);
+      EXPECT_LT(h.chunks_loaded(), h.chunk_count()) << "a close view read every chunk";
+    }
+  }
+}
+
+TEST(ChunkedPcaOptions, UnquantisedAndOneChunkEqualTheInMemoryBuild) {
+  const point_cloud c = make_wavy_surface(6000, 5);
+  pca_octree_options q;
+  q.quantise = false;
+  for (const std::uint64_t chunk : {std::uint64_t{400}, std::uint64_t{0}}) {
+    chunked_pca_octree_options o;
+    o.pca = q;
+    o.chunk_points = chunk;
+    const std::string dir = temp_dir("float" + std::to_string(chunk));
+    const auto r = build_pca_octree_chunked(cloud_point_source(c), dir, o);
+    EXPECT_EQ(r.chunks > 1, chunk != 0);
+    EXPECT_TRUE(H::open(dir).assemble() == in_memory(c, q)) << "chunk points " << chunk;
+    fs::remove_all(dir);
+  }
+}
+
+TEST(ChunkedPcaDistributed, ThreeRanksWriteTheOneProcessFolder) {
+  const point_cloud c = make_wavy_surface(8000, 9);
+  const cloud_point_source src(c);
+  chunked_pca_octree_options o;
+  o.pca = small_codebooks();
+  o.pca.threads = 1;
+  o.chunk_points = 500;
+  const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
+  const chunked_build_report r1 = build_pca_octree_chunked(src, one, o);
+  ASSERT_GE(r1.chunks, 6u);
+  std::barrier sync(3);
+  std::vector<std::thread> ranks;
+  for (int rank = 0; rank < 3; ++rank)
+    ranks.emplace_back([&, rank] {
+      chunked_pca_octree_options mine = o;
+      mine.distributed = {rank, 3, [&] { sync.arrive_and_wait(); }};
+      (void)build_pca_octree_chunked(src, many, mine);
+    });
+  for (auto& t : ranks) t.join();
+  expect_same_folders(one, many);
+  fs::remove_all(one);
+  fs::remove_all(many);
+}
+
+TEST(ChunkedPcaFiles, BadInputAndDamagedDirectoriesAreErrors) {
+  point_cloud empty;
+  EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(empty), temp_dir("e"), {}),
+               InvalidArgument);
+  point_cloud c = make_wavy_surface(4000, 4);
+  point_cloud bare = c;
+  bare.normals.clear();
+  EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(bare), temp_dir("n"), {}),
+               InvalidArgument)
+      << "positions only";
+  point_cloud zero = c;
+  zero.normals[17] = vec3f::Zero();
+  EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(zero), temp_dir("z"), {}),
+               InvalidArgument);
+  chunked_pca_octree_options bad;
+  bad.pca.gamma = 0;
+  EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(c), temp_dir("b"), bad),
+               InvalidArgument);
+  const std::string dir = temp_dir("damage");
+  chunked_pca_octree_options o;
+  o.pca = small_codebooks();
+  o.chunk_points = 600;
+  (void)build_pca_octree_chunked(cloud_point_source(c), dir, o);
+  EXPECT_TRUE(is_chunked_pca_octree(dir));
+  EXPECT_TRUE(chunked_pca_octree_has_colours(dir));
+  EXPECT_THROW((void)chunked_pca_octree<with_normals>::open(dir), FormatError)
+      << "a coloured hierarchy opened as uncoloured";
+  const std::string top = dir + "/" + chunked_top_file;
+  const std::vector<char> good = bytes_of(top);
+  for (std::size_t cut = 0; cut < good.size(); cut += 7) {
+    std::ofstream(top, std::ios::binary | std::ios::trunc)
+        .write(good.data(), static_cast<std::streamsize>(cut));
+    EXPECT_THROW((void)H::open(dir), Error) << "cut at " << cut;
+  }
+  for (std::size_t at = 0; at < good.size(); at += good.size() / 300 + 1) {
+    std::vector<char> b = good;
+    b[at] = static_cast<char>(b[at] ^ 0x5a);
+    std::ofstream(top, std::ios::binary | std::ios::trunc)
+        .write(b.data(), static_cast<std::streamsize>(b.size()));
+    EXPECT_THROW((void)H::open(dir), Error) << "byte " << at << " flipped";
+  }
+  std::ofstream(top, std::ios::binary | std::ios::trunc)
+      .write(good.data(), static_cast<std::streamsize>(good.size()));
+  const std::string chunk0 = dir + "/" + pca_chunk_file_name(0);
+  const std::vector<char> part = bytes_of(chunk0);
+  for (std::size_t at = 0; at < part.size(); at += part.size() / 97 + 1) {
+    std::vector<char> b = part;
+    b[at] = static_cast<char>(b[at] ^ 0x21);
+    for (const std::size_t keep : {at, b.size()}) {
+      std::ofstream(chunk0, std::ios::binary | std::ios::trunc)
+          .write(b.data(), static_cast<std::streamsize>(keep));
+      EXPECT_THROW((void)H::open(dir).chunk(0), Error) << "byte " << at << ", kept " << keep;
+    }
+  }
+  std::ofstream(chunk0, std::ios::binary | std::ios::trunc)
+      .write(part.data(), static_cast<std::streamsize>(part.size()));
+  const H h = H::open(dir);
+  ASSERT_GE(h.chunk_count(), 2u);
+  fs::rename(dir + "/" + pca_chunk_file_name(0), dir + "/swap");
+  fs::rename(dir + "/" + pca_chunk_file_name(1), dir + "/" + pca_chunk_file_name(0));
+  fs::rename(dir + "/swap", dir + "/" + pca_chunk_file_name(1));
+  EXPECT_THROW((void)h.chunk(0), FormatError);
+  EXPECT_THROW((void)h.assemble(), FormatError);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace pbr_lod
