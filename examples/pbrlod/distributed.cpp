@@ -29,7 +29,8 @@ int cmd_build_distributed(const std::string& method, const std::string& input,
 #ifdef PBRLOD_HAVE_MPI
   const method_entry& m = method_named(method);
   if (!m.build_chunked)
-    throw InvalidArgument("--distributed builds point-octree and pmr (got " + method + ")");
+    throw InvalidArgument("--distributed builds point-octree, pca-octree and pmr (got " + method +
+                          ")");
   MPI_Init(nullptr, nullptr);
   int rank = 0, ranks = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);

@@ -217,8 +217,8 @@ int cmd_build(const std::string& method, const std::string& input, const std::st
   if (wants_chunked_build(params)) {
     if (!it->build_chunked)
       throw InvalidArgument("pbrlod build: method '" + method +
-                            "' has no chunked build (memory=, chunk_points=): point-octree and "
-                            "pmr have");
+                            "' has no chunked build (memory=, chunk_points=): point-octree, "
+                            "pca-octree and pmr have");
     json report;
     const auto l = it->build_chunked(params, input, output, interactive(as_json), report, nullptr);
     std::cout << (as_json ? "" : "wrote " + output + "/: ") << l->stats(output).merge(report).text()
@@ -466,8 +466,9 @@ int main(int argc, char** argv) {
   build->add_option("-o,--output", build_output, "hierarchy file to write (.lod)")->required();
   build->add_flag("--json", as_json, "print one JSON object");
   bool distributed = false;
-  build->add_flag("--distributed", distributed,
-                  "share a chunked build (point-octree, pmr) among MPI ranks (run under mpirun)");
+  build->add_flag(
+      "--distributed", distributed,
+      "share a chunked build (point-octree, pca-octree, pmr) among MPI ranks (run under mpirun)");
 
   std::string render_input_path, render_output = "render.png";
   float tolerance = 1;

@@ -6,12 +6,16 @@
 #include <limits>
 
 #include "lod.hpp"
+#include "pbr_lod/builders/chunked_pca_octree.hpp"
 #include "pbr_lod/builders/pca_octree.hpp"
 
 namespace pbrlod_tool {
 namespace {
 
-pca_octree_options pca_options(const std::vector<std::string>& items, bool on_terminal) {
+/// The PCA octree options from the --param items; `memory`/`chunk_points` only for a chunked
+/// build.
+pca_octree_options pca_options(const std::vector<std::string>& items, bool on_terminal,
+                               chunked_pca_octree_options* chunked = nullptr) {
   params m(items);
   pca_octree_options o;
   o.leaf_size = static_cast<std::uint32_t>(m.integer("leaf_size", 8, 1, 1 << 20));
@@ -28,9 +32,15 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
   o.kmeans_seed = static_cast<std::uint64_t>(m.integer("kmeans_seed", 1, 0, 1L << 62));
   o.knn = static_cast<int>(m.integer("knn", 16, 3, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
+  if (chunked) {
+    if (const auto b = m.bytes("memory")) chunked->memory_bytes = *b;
+    chunked->chunk_points =
+        static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1ll << 31) - 1));
+  }
   m.finish("pca-octree",
            "leaf_size, max_depth, gamma, curvature_c, lambda_max, quantise, codebook_p, "
-           "codebook_n, codebook_c, kmeans_iterations, kmeans_sample, kmeans_seed, knn, threads");
+           "codebook_n, codebook_c, kmeans_iterations, kmeans_sample, kmeans_seed, knn, threads, "
+           "memory, chunk_points");
   o.progress = progress_callback("pca-octree", on_terminal);
   return o;
 }
@@ -101,6 +111,62 @@ struct pca_method {
   }
 };
 
+/// A chunked PCA octree folder (build_pca_octree_chunked): drawn as the PCA octree, its chunks
+/// read as the views need them.
+struct chunked_pca_method : pca_method {
+  template <class H>
+  frame draw(const H& h, const frame_request& r) const {
+    frame f = pca_method::draw(h, r);
+    f.extra.integer("chunks_read", static_cast<long long>(h.chunks_loaded()));
+    return f;
+  }
+  template <class H>
+  json stats(const H& h, const std::string& path) const {
+    const auto& top = h.top_data();
+    json j;
+    j.str("file", path).str("method", "pca-octree").boolean("chunked", true);
+    j.integer("chunks", static_cast<long long>(h.chunk_count()));
+    j.integer("top_nodes", static_cast<long long>(h.top_node_count()));
+    j.integer("nodes", static_cast<long long>(h.node_count()));
+    j.integer("input_points", static_cast<long long>(h.input_points()));
+    j.boolean("colour", H::attrs.colour).boolean("quantised", h.quantised());
+    j.integer("codebook_p", static_cast<long long>(top.codebook_p.size()));
+    j.integer("codebook_n", static_cast<long long>(top.codebook_n.size()));
+    j.integer("codebook_c", static_cast<long long>(top.codebook_c.size()));
+    j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
+    j.num("bytes_per_point",
+          static_cast<double>(h.file_bytes()) / static_cast<double>(h.input_points()));
+    return j;
+  }
+  template <class H>
+  std::size_t samples(const H& h) const {
+    return static_cast<std::size_t>(h.input_points());
+  }
+  template <class H>
+  std::size_t file_bytes(const H& h) const {
+    return static_cast<std::size_t>(h.file_bytes());
+  }
+  /// The folder is written by the build; it is not copied elsewhere.
+  template <class H>
+  void save(const H&, const std::string&) const {}
+};
+
+std::unique_ptr<lod> open_chunked(const std::string& dir) {
+  if (chunked_pca_octree_has_colours(dir))
+    return make_lod(chunked_pca_method{}, chunked_pca_octree<with_normals_colours>::open(dir));
+  return make_lod(chunked_pca_method{}, chunked_pca_octree<with_normals>::open(dir));
+}
+
+std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const std::string& input,
+                                   const std::string& output, bool on_terminal, json& report,
+                                   const distributed_rank* part) {
+  chunked_pca_octree_options o;
+  o.pca = pca_options(items, on_terminal, &o);
+  if (part) o.distributed = {part->rank, part->ranks, part->barrier};
+  chunked_report_json(build_pca_octree_chunked(*open_build_source(input), output, o), report);
+  return open_chunked(output);
+}
+
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool on_terminal) {
   const auto opt = pca_options(items, on_terminal);
@@ -117,6 +183,7 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
 }
 
 std::unique_ptr<lod> load(const std::string& path) {
+  if (is_chunked_pca_octree(path)) return open_chunked(path);
   if (peek_lod(path).flags & 1u)
     return make_lod(pca_method{}, pca_octree<with_normals_colours>::load(path));
   return make_lod(pca_method{}, pca_octree<with_normals>::load(path));
@@ -128,9 +195,10 @@ method_entry pca_octree_method() {
   return {.name = "pca-octree",
           .paper = "Kalaiah & Varshney 2003",
           .magic = "PBRLODSG",
-          .dir_magic = {},
+          .dir_magic = "PBRLODSC",
           .build = &build,
           .load = &load,
+          .build_chunked = &build_chunked,
           .demo_tolerances = {4, 2, 1}};
 }
 

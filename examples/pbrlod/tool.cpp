@@ -1,7 +1,6 @@
 // pbrlod — the command-line tool's shared parts (tool.hpp).
 #include "tool.hpp"
 
-#include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 
@@ -21,15 +20,19 @@ namespace pbrlod_tool {
 namespace fs = std::filesystem;
 
 bool is_hierarchy_file(const std::string& path) {
-  if (fs::path(path).extension() == ".lod" || is_chunked_point_octree(path) || is_chunked_pmr(path))
-    return true;
-  // Any other file that starts with a method's magic: a chunk of a chunked folder, say.
+  if (fs::path(path).extension() == ".lod") return true;
+  // A folder whose top file starts with a method's folder magic (a chunked build), or any other
+  // file that starts with a method's magic (a chunk of a chunked folder, say).
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) return false;
-  const auto head = detail::load_file_prefix(path, 8);
+  const bool folder = fs::is_directory(path, ec);
+  const std::string file = folder ? (fs::path(path) / chunked_top_file).string() : path;
+  if (!fs::is_regular_file(file, ec)) return false;
+  const auto head = detail::load_file_prefix(file, 8);
   const std::string magic(head.begin(), head.end());
   for (const auto& m : methods())
-    if (!m.magic.empty() && m.magic == magic) return true;
+    if (folder ? (!m.dir_magic.empty() && m.dir_magic == magic)
+               : (!m.magic.empty() && m.magic == magic))
+      return true;
   return false;
 }
 
