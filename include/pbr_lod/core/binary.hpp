@@ -44,10 +44,20 @@ struct byte_writer {
 /// The whole file at `path`; throws IoError when it cannot be opened or read. Every hierarchy
 /// file's load() starts here, then validates what it reads through a byte_reader.
 inline std::vector<unsigned char> load_file_bytes(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
+  std::ifstream f(path, std::ios::binary | std::ios::ate);
   if (!f) throw IoError(path + ": cannot open");
-  std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(f)),
-                                   std::istreambuf_iterator<char>());
+  // One read of the size the file has (a byte-wise copy through stream iterators was 13 % of a
+  // chunked build); a stream without a size (a pipe) is copied as it comes.
+  const std::streamoff size = f.tellg();
+  std::vector<unsigned char> bytes;
+  if (size >= 0 && f.seekg(0)) {
+    bytes.resize(static_cast<std::size_t>(size));
+    f.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size));
+    if (f.gcount() != size) throw IoError(path + ": read error (file changed while read)");
+  } else {
+    f.clear();
+    bytes.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
   if (f.bad()) throw IoError(path + ": read error");
   return bytes;
 }
