@@ -546,11 +546,8 @@ struct chunked_pca_builder : chunked_pass_base {
       number_nodes();
       set_options(top);
       if (po.quantise) {
-        const auto tk = std::chrono::steady_clock::now();
         train_codebooks();
         pca_encode(top, workers);  // a chunk's root is encoded in its chunk the same way
-        rep.pass_seconds +=
-            std::chrono::duration<double>(std::chrono::steady_clock::now() - tk).count();
       }
       const float root_norm = top.nodes[0].sigma.norm();
       top.lambda_norm = root_norm > 0 ? root_norm : 1.0f;
