@@ -48,8 +48,9 @@
 #include <utility>
 #include <vector>
 
-#include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/builders/chunked.hpp"
 #include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
 namespace pbr_lod {
@@ -64,10 +65,10 @@ struct chunked_pmr_options {
   std::uint64_t chunk_points = 0;
   /// Points per block read from the source in the streaming passes.
   std::size_t block_points = std::size_t{1} << 20;
-  /// Shared among ranks (as chunked_build_options::distributed): every rank reads the source in
-  /// the bounds and structure passes; rank 0 distributes, gathers the normals and writes the
-  /// top; chunk c is built by rank c mod ranks. The folder is byte-identical to a one-process
-  /// build.
+  /// Shared among ranks (as the point-octree's chunked_build_options::distributed): every rank
+  /// reads the source in the bounds and structure passes; rank 0 distributes, gathers the normals
+  /// and writes the top; chunk c is built by rank c mod ranks. The folder is byte-identical to a
+  /// one-process build.
   distributed_build distributed{};
 };
 

@@ -51,6 +51,7 @@
 #include <string>
 #include <vector>
 
+#include "pbr_lod/builders/chunked.hpp"
 #include "pbr_lod/builders/point_octree.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
@@ -77,20 +78,6 @@ struct chunked_build_options {
 /// Peak bytes of a chunk's build per sample, measured (docs/scale.md): the chunk's records and
 /// halo, the k-NN graph of the estimation, the builder's working arrays and the nodes.
 inline constexpr std::uint64_t chunk_bytes_per_point = 512;
-
-struct chunked_build_report {
-  std::uint64_t input_points = 0;
-  std::size_t chunks = 0, top_nodes = 0;
-  std::uint64_t chunk_points = 0;   ///< the limit used
-  std::uint64_t largest_chunk = 0;  ///< samples in the largest chunk
-  std::uint64_t halo_points = 0;    ///< summed over the chunks
-  int passes = 0;                   ///< full passes over the source
-  double seconds = 0;               ///< the whole build
-  double pass_seconds = 0;          ///< streaming passes (1, 2, 3, 5)
-  double estimation_seconds = 0;    ///< step 4
-  double chunk_build_seconds = 0;   ///< step 6
-  bool estimated_normals = false;
-};
 
 /// Builds the point-octree of `src` into the directory `dir` (created; files already there with
 /// the names it writes are replaced). Throws InvalidArgument on an empty source or non-finite
@@ -250,9 +237,8 @@ inline constexpr file_format chunked_top_format{
     "chunked point-octree", {'P', 'B', 'R', 'L', 'O', 'D', 'P', 'C'}, 1};
 }  // namespace detail
 
-/// File name of chunk c in a chunked directory, and of the top file.
+/// File name of chunk c in a chunked point-octree directory.
 [[nodiscard]] std::string chunk_file_name(std::uint32_t c);
-inline constexpr const char* chunked_top_file = "top.pbrlod";
 
 extern template class chunked_point_octree<point_octree_attributes(attributes{})>;
 extern template class chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
