@@ -167,33 +167,17 @@ class chunked_pca_octree {
   [[nodiscard]] std::uint32_t required_points(node_id n, const view& v,
                                               const pca_render_options& o) const {
     const auto [d, i] = where(n);
-    const float p = detail::pca_required_points(*d, i, v, o.point_px, o.c);
-    if (!(p < static_cast<float>(o.max_points))) return o.max_points;
-    return std::max<std::uint32_t>(1, static_cast<std::uint32_t>(std::ceil(p)));
+    return detail::pca_point_count(*d, i, v, o);
   }
   [[nodiscard]] float split_measure(node_id n, const view& v, const pca_render_options& o) const {
-    const float r = projected_radius_exact(v, bounding_sphere(n));
-    if (!std::isfinite(r)) return std::numeric_limits<float>::infinity();
-    const float a = std::numbers::pi_v<float> * r * r / (o.point_px * o.point_px);
-    return a > 1 ? a * std::log(a) + o.c * a : 1.0f;
+    return detail::pca_split_measure(bounding_sphere(n), v, o);
   }
   /// Points [0, count) of node n's random stream: the stream of its whole-tree number, so the
   /// points are those pca_octree draws for the same node.
   template <class S>
   void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink) const {
     const auto [d, i] = where(n);
-    const std::uint64_t id = global_id(n);
-    std::array<detail::pca_sample, 64> buf;
-    for (std::uint32_t first = 0; first < count; first += buf.size()) {
-      const auto k = std::min<std::uint32_t>(buf.size(), count - first);
-      detail::pca_generate(*d, i, id, o.seed, first, k, buf.data());
-      for (std::uint32_t j = 0; j < k; ++j) {
-        point_prim<A> p{buf[j].position, o.point_px};
-        p.normal = buf[j].normal;
-        if constexpr (A.colour) p.colour = buf[j].colour;
-        sink.point(p);
-      }
-    }
+    detail::pca_emit_points<A>(*d, i, global_id(n), count, o, sink);
   }
 
   // ---- inspection

@@ -281,6 +281,39 @@ struct pca_render_options {
   std::uint32_t max_points = 1u << 20;
 };
 
+namespace detail {
+/// What pca_octree and chunked_pca_octree draw for node n of d (see pca_octree's members of the
+/// same names); stream_id is the node's number in the whole hierarchy.
+[[nodiscard]] inline std::uint32_t pca_point_count(const pca_data& d, std::uint32_t n,
+                                                   const view& v, const pca_render_options& o) {
+  const float p = pca_required_points(d, n, v, o.point_px, o.c);
+  if (!(p < static_cast<float>(o.max_points))) return o.max_points;
+  return std::max<std::uint32_t>(1, static_cast<std::uint32_t>(std::ceil(p)));
+}
+[[nodiscard]] inline float pca_split_measure(const sphere& s, const view& v,
+                                             const pca_render_options& o) {
+  const float r = projected_radius_exact(v, s);
+  if (!std::isfinite(r)) return std::numeric_limits<float>::infinity();
+  const float a = std::numbers::pi_v<float> * r * r / (o.point_px * o.point_px);
+  return a > 1 ? a * std::log(a) + o.c * a : 1.0f;
+}
+template <attributes A, class S>
+void pca_emit_points(const pca_data& d, std::uint32_t n, std::uint64_t stream_id,
+                     std::uint32_t count, const pca_render_options& o, S& sink) {
+  std::array<pca_sample, 64> buf;
+  for (std::uint32_t first = 0; first < count; first += buf.size()) {
+    const auto k = std::min<std::uint32_t>(buf.size(), count - first);
+    pca_generate(d, n, stream_id, o.seed, first, k, buf.data());
+    for (std::uint32_t i = 0; i < k; ++i) {
+      point_prim<A> p{buf[i].position, o.point_px};
+      p.normal = buf[i].normal;
+      if constexpr (A.colour) p.colour = buf[i].colour;
+      sink.point(p);
+    }
+  }
+}
+}  // namespace detail
+
 template <attributes A>
 class pca_octree {
   static_assert(A.normal && !A.material && !A.ellipse,
@@ -319,32 +352,17 @@ class pca_octree {
   /// §4: the number of points node n needs in view v, clamped to [1, o.max_points].
   [[nodiscard]] std::uint32_t required_points(node_id n, const view& v,
                                               const pca_render_options& o) const {
-    const float p = detail::pca_required_points(d_, n, v, o.point_px, o.c);
-    if (!(p < static_cast<float>(o.max_points))) return o.max_points;
-    return std::max<std::uint32_t>(1, static_cast<std::uint32_t>(std::ceil(p)));
+    return detail::pca_point_count(d_, n, v, o);
   }
   /// The split test's count (Fig. 6 DoSplit): a·ln a + c·a for the area a of the node's
   /// projected bounding sphere (exact silhouette, in units of point_px²); monotone down the tree.
   [[nodiscard]] float split_measure(node_id n, const view& v, const pca_render_options& o) const {
-    const float r = projected_radius_exact(v, bounding_sphere(n));
-    if (!std::isfinite(r)) return std::numeric_limits<float>::infinity();
-    const float a = std::numbers::pi_v<float> * r * r / (o.point_px * o.point_px);
-    return a > 1 ? a * std::log(a) + o.c * a : 1.0f;
+    return detail::pca_split_measure(bounding_sphere(n), v, o);
   }
   /// Sends points [0, count) of node n's random stream to the sink, as squares of o.point_px.
   template <class S>
   void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink) const {
-    std::array<detail::pca_sample, 64> buf;
-    for (std::uint32_t first = 0; first < count; first += buf.size()) {
-      const auto k = std::min<std::uint32_t>(buf.size(), count - first);
-      detail::pca_generate(d_, n, o.seed, first, k, buf.data());
-      for (std::uint32_t i = 0; i < k; ++i) {
-        point_prim<A> p{buf[i].position, o.point_px};
-        p.normal = buf[i].normal;
-        if constexpr (A.colour) p.colour = buf[i].colour;
-        sink.point(p);
-      }
-    }
+    detail::pca_emit_points<A>(d_, n, n, count, o, sink);
   }
 
   // ---- inspection
