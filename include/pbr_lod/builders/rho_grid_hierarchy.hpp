@@ -36,6 +36,14 @@
 // whose test is within rounding (or, for fixed32, the table's 2^-13) of equality (measured in
 // docs/rho-grid.md; the tests bound it).
 //
+// Drawing (rho_grid_policy::screen_draw, §5.1 and §4.1): by default a drawn cell is a point_prim
+// at its centre, which the sink projects itself (the rasteriser in float). With screen_draw, a
+// sink that takes screen rectangles (ScreenRectSink) gets a screen_rect_prim placed from the
+// traversal's own H divided by W — float a float division, int64 an integer division, fixed32
+// the reciprocal table of its tests, then pixel indices by a shift (§5.1's last paragraph) —
+// and, with the per-corner bounds, an inner cell covers the rectangle of its sampled children
+// that its test measured (§4.1's rectangular splat) instead of an s × s square.
+//
 // §4.2: the policy visits children in any fixed order; rho_grid_light_order() gives the one that
 // is front to back from a directional light, which raster/one_pass_shadows.hpp needs.
 #pragma once
@@ -564,7 +572,8 @@ struct rho_traversal {
       x = std::int64_t(fx + (fx < 0 ? -0.5f : 0.5f));
       y = std::int64_t(fy + (fy < 0 ? -0.5f : 0.5f));
     } else {
-      // |X| < 2^40 (choose_scale), so X·2^8 and 2X·2^8 + W fit in int64: floor((2n + W) / 2W).
+      // |X| < 2^40 by choose_scale, unless a huge scene clamped F at 0: up to 2^52, X·2^9 + W
+      // fits in int64. Rounded to nearest: floor((2·X·2^8 + W) / 2W).
       constexpr std::int64_t big = std::int64_t(1) << 52;
       const auto fits = [](std::int64_t q) { return q > -big && big > q; };
       if (!(fits(h.x) && fits(h.y) && fits(h.w))) return std::nullopt;
