@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <iostream>
 #include <random>
@@ -358,6 +359,46 @@ TEST(RhoGridScreenDraw, SymmetricImagesNearlyUnchangedFloat) {
 }
 TEST(RhoGridScreenDraw, SymmetricImagesNearlyUnchangedFixed32) {
   expect_symmetric_images_nearly_unchanged<rho_grid_arithmetic::fixed32>(0.05);
+}
+
+/// The effects that need world space take rectangles too. Blending draws a rectangle as the
+/// square about its 3-D position (as_point_prim), which for the symmetric bound is the very
+/// point_prim the policy sends without screen_draw: the same image. With two-pass shadows the
+/// light pass casts that square and the camera pass draws the rectangle: the same covered
+/// pixels within 1 %, and a PSNR between the two frames above 25 dB (measured 30.9 dB; 29.5 dB
+/// for the same view without shadows: the few pixels whose front-most cell changes with the
+/// sub-pixel moves show another cell's normal, so the shadows add no difference of their own).
+TEST(RhoGridScreenDraw, ShadowsAndBlendingTakeRectangles) {
+  const auto& g = bunny_level3();
+  const rho_grid_hierarchy<3, with_normals> h(g);
+  for (const bool blend : {false, true}) {
+    const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+    const camera cam = camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {256, 256});
+    const view v(cam, g.origin());
+    render_options ro;
+    ro.fx = {.shading = true, .shadows = !blend, .blending = blend};
+    ro.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+    std::array<image, 2> img;
+    for (int on = 0; on < 2; ++on) {
+      rho_grid_policy<3> p(g, v);
+      p.screen_draw = on != 0;
+      img[std::size_t(on)] = render<with_normals>(
+          v, ro, [&](auto& sink) { traverse(h, v, {.tolerance_px = 2}, sink, p); });
+    }
+    std::size_t covered[2] = {0, 0};
+    for (std::size_t k = 0; k < 2; ++k)
+      for (float d : img[k].depth) covered[k] += std::isfinite(d);
+    const double psnr = compare_images(img[0], img[1]).psnr;
+    std::cout << (blend ? "blending" : "shadows") << ": covered " << covered[0] << " / "
+              << covered[1] << ", PSNR between them " << psnr << " dB\n";
+    EXPECT_GT(covered[0], 1000u);
+    EXPECT_NEAR(double(covered[1]), double(covered[0]), 0.01 * double(covered[0]));
+    if (blend) {
+      EXPECT_EQ(img[0].colour, img[1].colour);
+    } else {
+      EXPECT_GT(psnr, 25);
+    }
+  }
 }
 
 /// §4.1's rectangles against the s × s squares, both with the per-corner bounds (which stop
