@@ -2,7 +2,8 @@
 // sample of the NIS and IS streams and of the in-core structure) on the Stanford bunny and
 // Buddha at oct/7, tri/4, oct/10, tri/6 (the paper's levels, σ = 16); build time and peak memory
 // (tri/6 on the bunny);
-// flexible rendering in float and fixed point (§4.1, §5.1); one-pass shadows against the
+// flexible rendering in float and fixed point (§4.1, §5.1), cells drawn from the traversal's
+// tables as screen rectangles (§5.1, §4.1); one-pass shadows against the
 // rasteriser's two-pass shadow map (§4.2); beyond the paper, the entropy-coded layout (bits per
 // sample of the coded geometry and attributes, encode and decode time, the context choices).
 // docs/rho-grid.md quotes these numbers.
@@ -543,6 +544,71 @@ void bm_bounds(benchmark::State& state) {
 BENCHMARK(bm_bounds)
     ->ArgNames({"per_corner", "s", "dist10", "frame"})
     ->ArgsProduct({{0, 1}, {1, 4}, {25, 80}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+
+// §5.1 and §4.1 drawing (rho_grid_policy::screen_draw): whole shaded frames, bunny tri/5, 512²,
+// with the cells drawn as today (draw 0: point_prims re-projected by the rasteriser in float,
+// inner cells as s × s squares at their samples) or from the traversal's tables (draw 1:
+// screen rectangles placed from H/W in the policy's arithmetic; with per-corner bounds an inner
+// cell is the rectangle of its sampled children). `arith` as in bm_traverse; per-corner bounds
+// are float and int64 only. psnr_vs_mesh: the frame against the mesh drawn by the same
+// rasteriser (the full-detail reference).
+template <rho_grid_arithmetic Ar, rho_grid_bounds Bd>
+void draw_frames(benchmark::State& state, const rho_grid<3>& g, const camera& cam, float s,
+                 bool screen_draw) {
+  const view v(cam, g.origin());
+  render_options o;
+  o.fx = effects{.shading = true};
+  const rho_grid_hierarchy<3, with_normals> h(g);
+  rho_grid_policy<3, Ar, Bd> p(g, v);
+  p.screen_draw = screen_draw;
+  traverse_stats st;
+  image img;
+  for (auto _ : state) {
+    img = render<with_normals>(
+        v, o, [&](auto& sink) { st = traverse(h, v, {.tolerance_px = s}, sink, p); });
+    benchmark::DoNotOptimize(img.colour.data());
+  }
+  static std::map<std::pair<double, int>, image> references;
+  const auto key = std::pair{cam.eye.x(), cam.vp.width};
+  auto it = references.find(key);
+  if (it == references.end())
+    it = references.emplace(key, render_reference(model(model_name(0)), cam, o)).first;
+  const image_error e = compare_images(it->second, img);
+  state.counters["drawn"] = double(st.emitted_nodes + st.emitted_leaves);
+  state.counters["psnr_vs_mesh"] = e.psnr;
+  state.counters["holes"] = e.hole_fraction;
+}
+template <rho_grid_arithmetic Ar>
+void draw_frames_bounds(benchmark::State& state, const rho_grid<3>& g, const camera& cam, float s,
+                        bool screen_draw, bool per_corner) {
+  if constexpr (Ar == rho_grid_arithmetic::fixed32) {
+    if (per_corner) {
+      state.SkipWithError("per-corner bounds are float and int64 only");
+      return;
+    }
+  } else {
+    if (per_corner)
+      return draw_frames<Ar, rho_grid_bounds::per_corner>(state, g, cam, s, screen_draw);
+  }
+  draw_frames<Ar, rho_grid_bounds::symmetric>(state, g, cam, s, screen_draw);
+}
+void bm_draw(benchmark::State& state) {
+  const auto& g = bunny_tri5();
+  const camera cam = bench_camera(g, double(state.range(4)) / 10);
+  const auto s = float(state.range(3));
+  const bool screen_draw = state.range(1) != 0, per_corner = state.range(2) != 0;
+  if (state.range(0) == 2)
+    draw_frames_bounds<rho_grid_arithmetic::fixed32>(state, g, cam, s, screen_draw, per_corner);
+  else if (state.range(0) == 1)
+    draw_frames_bounds<rho_grid_arithmetic::fixed>(state, g, cam, s, screen_draw, per_corner);
+  else
+    draw_frames_bounds<rho_grid_arithmetic::floating>(state, g, cam, s, screen_draw, per_corner);
+}
+BENCHMARK(bm_draw)
+    ->ArgNames({"arith", "draw", "per_corner", "s", "dist10"})
+    ->ArgsProduct({{0, 1, 2}, {0, 1}, {0}, {1, 4}, {25, 80}})
+    ->ArgsProduct({{0, 1}, {0, 1}, {1}, {1, 4}, {25, 80}})
     ->Unit(benchmark::kMillisecond);
 
 }  // namespace

@@ -267,5 +267,102 @@ TEST(Sinks, BufferSinkReplaysInterleavedKindsInOrder) {
   EXPECT_TRUE(empty.got.empty());
 }
 
+// A policy with an emit() that takes the node's state gets it (traverse() prefers that overload
+// when the policy has one): here the state is the node's depth, carried down by
+// for_each_child, so every emitted node's state must equal its depth found by a separate walk
+// of the tree. The same policy sends a screen rectangle to a sink that takes them and a point
+// otherwise; counting_forwarder counts both as points, and forwards the rectangles only to a
+// ScreenRectSink (a sink without the hook never sees one).
+struct depth_state_policy : default_policy {
+  std::vector<std::pair<int, std::uint32_t>>* seen;  // (state, node) per emitted node
+  template <Hierarchy H>
+  [[nodiscard]] int root_state(const H&, const view&, const traverse_options&) const {
+    return 0;
+  }
+  template <Hierarchy H, class F>
+  void for_each_child(const H& h, const typename H::node_id& n, int depth, F&& f) const {
+    for (const auto& c : h.children(n)) f(c, depth + 1);
+  }
+  template <Hierarchy H, class S>
+  void emit(const H&, const typename H::node_id& n, const int& depth, const view&, float,
+            const traverse_options&, S& sink) const {
+    seen->emplace_back(depth, n);
+    if constexpr (ScreenRectSink<S, H::attrs>) {
+      screen_rect_prim<H::attrs> r{depth, 0, depth, 0, 1, vec3f::Zero()};
+      if constexpr (H::attrs.normal) r.normal = vec3f::UnitZ();
+      sink.screen_rect(r);
+    } else {
+      point_prim<H::attrs> p{vec3f::Zero(), float(depth)};
+      if constexpr (H::attrs.normal) p.normal = vec3f::UnitZ();
+      sink.point(p);
+    }
+  }
+};
+
+TEST(Traverse, PolicyEmitGetsTheNodeState) {
+  const auto pts = demo_points(2000);
+  const tree_n tree(pts);
+  const view v(looking_at_scene(), pts.origin);
+  std::vector<int> depth_of(1, 0);  // by node id
+  for (std::vector<std::uint32_t> stack{tree.root()}; !stack.empty();) {
+    const std::uint32_t n = stack.back();
+    stack.pop_back();
+    for (const std::uint32_t c : tree.children(n)) {
+      depth_of.resize(std::max<std::size_t>(depth_of.size(), c + 1));
+      depth_of[c] = depth_of[n] + 1;
+      stack.push_back(c);
+    }
+  }
+  std::vector<std::pair<int, std::uint32_t>> seen;
+  buffer_sink<tree_n::attrs> buf;
+  const auto st = traverse(tree, v, {.tolerance_px = 4}, buf, depth_state_policy{{}, &seen});
+  ASSERT_GT(seen.size(), 10u);
+  int deepest = 0;
+  for (const auto& [state, node] : seen) {
+    EXPECT_EQ(state, depth_of[node]);
+    deepest = std::max(deepest, state);
+  }
+  EXPECT_GT(deepest, 1);
+  EXPECT_EQ(st.points, seen.size());
+  EXPECT_EQ(buf.screen_rects.size(), seen.size());
+  EXPECT_TRUE(buf.points.empty());
+  // Without the hook: points, counted alike.
+  struct point_counter {
+    std::size_t points = 0;
+    void point(const point_prim<tree_n::attrs>&) { ++points; }
+    void splat(const splat_prim<tree_n::attrs>&) {}
+    void triangle(const triangle_prim<tree_n::attrs>&) {}
+  } pc;
+  seen.clear();
+  const auto st2 = traverse(tree, v, {.tolerance_px = 4}, pc, depth_state_policy{{}, &seen});
+  EXPECT_EQ(st2.points, st.points);
+  EXPECT_EQ(pc.points, st.points);
+  // A buffer replays its rectangles to a sink that takes them and as as_point_prim() to one that
+  // does not, in the order received.
+  counting_sink<tree_n::attrs> cs;
+  buf.replay(cs);
+  EXPECT_EQ(cs.points, st.points);
+  point_counter pc2;
+  buf.replay(pc2);
+  EXPECT_EQ(pc2.points, st.points);
+}
+
+// as_point_prim: the rectangle's larger side as the square's size, the 3-D position and the
+// attributes carried over; a degenerate rectangle is a one-pixel point.
+TEST(Sinks, ScreenRectAsPoint) {
+  constexpr attributes NC{.normal = true, .colour = true};
+  screen_rect_prim<NC> r{0, 0, 3 * 256 + 128, 2 * 256, 5, vec3f(1, 2, 3)};
+  r.normal = vec3f::UnitY();
+  r.colour = {1, 2, 3};
+  const point_prim<NC> p = as_point_prim(r);
+  EXPECT_EQ(p.position, vec3f(1, 2, 3));
+  EXPECT_FLOAT_EQ(p.size_px, 3.5f);
+  EXPECT_EQ(p.normal, vec3f::UnitY());
+  EXPECT_EQ(p.colour, (rgb8{1, 2, 3}));
+  r.x1 = r.x0;
+  r.y1 = r.y0;
+  EXPECT_FLOAT_EQ(as_point_prim(r).size_px, 0);
+}
+
 }  // namespace
 }  // namespace pbr_lod

@@ -36,6 +36,14 @@
 // whose test is within rounding (or, for fixed32, the table's 2^-13) of equality (measured in
 // docs/rho-grid.md; the tests bound it).
 //
+// Drawing (rho_grid_policy::screen_draw, §5.1 and §4.1): by default a drawn cell is a point_prim
+// at its centre, which the sink projects itself (the rasteriser in float). With screen_draw, a
+// sink that takes screen rectangles (ScreenRectSink) gets a screen_rect_prim placed from the
+// traversal's own H divided by W — float a float division, int64 an integer division, fixed32
+// the reciprocal table of its tests, then pixel indices by a shift (§5.1's last paragraph) —
+// and, with the per-corner bounds, an inner cell covers the rectangle of its sampled children
+// that its test measured (§4.1's rectangular splat) instead of an s × s square.
+//
 // §4.2: the policy visits children in any fixed order; rho_grid_light_order() gives the one that
 // is front to back from a directional light, which raster/one_pass_shadows.hpp needs.
 #pragma once
@@ -48,6 +56,7 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <ranges>
 #include <type_traits>
 #include <vector>
@@ -79,6 +88,13 @@ struct rho_grid_cell {
   std::uint32_t cell;
   int depth;
   std::array<std::uint32_t, 3> pos;
+};
+
+/// Where rho_grid_policy::screen_draw puts a drawn cell: screen_rect_prim's pixel rectangle
+/// (pixels × 2^8 from the image's top-left corner, y down) and depth.
+struct rho_grid_screen_rect {
+  std::int32_t x0, y0, x1, y1;
+  float depth;
 };
 
 /// The colour of material m (8-entry palette, repeated).
@@ -153,9 +169,16 @@ class rho_grid_hierarchy {
   template <class S>
   void emit_sample(const node_id& n, float size_px, S& sink) const {
     point_prim<A> p{centre(n), size_px};
-    if constexpr (A.normal) p.normal = q_->decode(g_->normal_code(n.cell));
-    if constexpr (A.colour) p.colour = rho_grid_material_colour(g_->material(n.cell));
+    set_attributes(n, p);
     sink.point(p);
+  }
+  /// The cell's sample as the screen rectangle r (its pixels and depth, computed by the caller:
+  /// rho_grid_policy::screen_draw).
+  template <ScreenRectSink<A> S>
+  void emit_rect(const node_id& n, const rho_grid_screen_rect& r, S& sink) const {
+    screen_rect_prim<A> p{r.x0, r.y0, r.x1, r.y1, r.depth, centre(n)};
+    set_attributes(n, p);
+    sink.screen_rect(p);
   }
   /// A leaf as a one-pixel point, an inner cell as a square covering its projected cell (the
   /// projected diameter of its bounding sphere). rho_grid_policy emits inner cells at its splat
@@ -168,6 +191,12 @@ class rho_grid_hierarchy {
   }
 
  private:
+  template <class P>
+  void set_attributes([[maybe_unused]] const node_id& n, [[maybe_unused]] P& p) const {
+    if constexpr (A.normal) p.normal = q_->decode(g_->normal_code(n.cell));
+    if constexpr (A.colour) p.colour = rho_grid_material_colour(g_->material(n.cell));
+  }
+
   const rho_grid<Rho>* g_;
   std::shared_ptr<const normal_quantizer> q_;
   std::vector<double> side_;  // cell side per depth
@@ -329,6 +358,8 @@ struct rho_traversal {
   std::vector<level_tables> levels;  // indexed by cell depth (0 = root cube)
   value cx{}, cy{}, znear{}, zfar{};
   value unit{};  ///< 1 in the arithmetic (2^F): lifts a value to a product's scale
+  /// The principal point in screen_rect_prim's fixed point (pixels × 2^8 from the top-left).
+  std::int64_t cx8 = 0, cy8 = 0;
   /// Shadow casters (§4.2 with frustum culling): which planes of the view volume may still cull
   /// a cell — those the cell cannot cross by moving away from the light — and from which depth
   /// a cell kept only as a caster is fine enough to emit. All true / unused when not casting.
@@ -384,6 +415,8 @@ struct rho_traversal {
       span_table(r, u, f, g.cell_side(int(l)), levels[l].span);
     }
     unit = arith.from(1.0);
+    cx8 = std::int64_t(v.width) << (rect_bits - 1);
+    cy8 = std::int64_t(v.height) << (rect_bits - 1);
     if constexpr (projective) {
       screen_g = Arith::screen_bits(v);
       cx = value(std::llround(std::ldexp(0.5 * v.width, screen_g)));  // ≤ 2^24
@@ -503,6 +536,59 @@ struct rho_traversal {
     p.ex = (std::int64_t(t.ax) << screen_g) + Arith::mul(t.b, p.x < 0 ? -p.x : p.x);
     p.ey = (std::int64_t(t.ay) << screen_g) + Arith::mul(t.b, p.y < 0 ? -p.y : p.y);
     return p;
+  }
+
+  /// Where a drawn cell goes on screen (§5.1): its centre x = X/W, y = Y/W in screen_rect_prim's
+  /// fixed point (pixels × 2^8 from the image's top-left corner, y down) and its depth W in world
+  /// units, each arithmetic dividing in its own numbers — float a float division, int64 an
+  /// integer division rounded to nearest, fixed32 the reciprocal table of its tests (x with
+  /// screen_g fractional bits, then a rounding shift to 8). Empty when W is not beyond z_near,
+  /// or the centre lies ≥ 2^22 pixels off-centre (fixed32: saturated, ≥ 64 half screens): such
+  /// a cell has no usable screen position and is drawn from its 3-D position instead.
+  static constexpr int rect_bits = screen_rect_prim<positions_only>::fraction_bits;
+  static constexpr std::int64_t rect_limit = std::int64_t(1) << 30;  // 2^22 pixels
+  struct screen_point {
+    std::int64_t x, y;
+    float depth;
+  };
+  [[nodiscard]] std::optional<screen_point> screen_position(const hom& h) const {
+    if (!(h.w > znear)) return std::nullopt;
+    std::int64_t x, y;
+    if constexpr (projective) {
+      bool sat = false;
+      const auto r = rho_reciprocal::of(std::uint32_t(h.w));  // W ≥ 1: W > z_near ≥ 0
+      const int sh = screen_g - rect_bits;
+      const auto to_rect = [sh](std::int32_t q) {
+        return sh > 0 ? (std::int64_t(q) + (std::int64_t(1) << (sh - 1))) >> sh
+                      : std::int64_t(q) * (std::int64_t(1) << -sh);
+      };
+      x = to_rect(rho_reciprocal::divide(std::int64_t(h.x) << screen_g, r, sat));
+      y = to_rect(rho_reciprocal::divide(std::int64_t(h.y) << screen_g, r, sat));
+      if (sat) return std::nullopt;
+    } else if constexpr (std::is_same_v<value, float>) {
+      constexpr float lim = float(rect_limit);
+      const float fx = h.x / h.w * float(1 << rect_bits), fy = h.y / h.w * float(1 << rect_bits);
+      if (!(std::abs(fx) < lim && std::abs(fy) < lim)) return std::nullopt;
+      x = std::int64_t(fx + (fx < 0 ? -0.5f : 0.5f));
+      y = std::int64_t(fy + (fy < 0 ? -0.5f : 0.5f));
+    } else {
+      // |X| < 2^40 by choose_scale, unless a huge scene clamped F at 0: up to 2^52, X·2^9 + W
+      // fits in int64. Rounded to nearest: floor((2·X·2^8 + W) / 2W).
+      constexpr std::int64_t big = std::int64_t(1) << 52;
+      const auto fits = [](std::int64_t q) { return q > -big && big > q; };
+      if (!(fits(h.x) && fits(h.y) && fits(h.w))) return std::nullopt;
+      const auto div = [w = std::int64_t(h.w)](std::int64_t n) {
+        const std::int64_t a = 2 * (n << rect_bits) + w, b = 2 * w;
+        const std::int64_t q = a / b;
+        return q - (a % b != 0 && a < 0 ? 1 : 0);
+      };
+      x = div(h.x);
+      y = div(h.y);
+      if (!(std::abs(x) < rect_limit && std::abs(y) < rect_limit)) return std::nullopt;
+    }
+    const float depth =
+        std::is_same_v<value, float> ? float(h.w) : float(double(h.w) / arith.scale);
+    return screen_point{x + cx8, y + cy8, depth};
   }
 
   /// test() in 32-bit fixed point: the homogeneous tests divided by W (see the file comment).
@@ -761,6 +847,16 @@ class rho_grid_policy {
   /// projected width (at least one pixel) instead of a one-pixel point, so that leaves larger
   /// than a pixel still cover their cell. Off by default (docs/rho-grid.md measures both).
   bool leaf_splats = false;
+  /// §5.1 and §4.1 drawing: a drawn cell goes to a sink that takes screen rectangles
+  /// (ScreenRectSink: the rasteriser, buffer_sink) as a screen_rect_prim placed from the
+  /// traversal's H divided by W in the policy's arithmetic (fixed32: through the reciprocal table
+  /// of its tests), not from the sink's float re-projection of the cell centre; with per-corner
+  /// bounds an inner cell, and a leaf_splats leaf, covers its per-corner rectangle (the box of
+  /// its sampled children; a leaf's cell) instead of a square at its centre. A cell without a
+  /// screen position (W not beyond z_near, or saturated) and every cell sent to a sink without
+  /// the hook go as the point_prim they get when this is off. Off by default (docs/rho-grid.md
+  /// measures both).
+  bool screen_draw = false;
 
   template <class H>
   [[nodiscard]] visit_result visit(const H& h, const rho_grid_cell& n, const state& hs, const view&,
@@ -807,6 +903,67 @@ class rho_grid_policy {
   void emit(const H& h, const rho_grid_cell& n, const view&, float size_px, const traverse_options&,
             S& sink) const {
     h.emit_sample(n, size_px, sink);
+  }
+  /// emit() with the cell's H (traverse() calls this one): screen_draw's rectangle to a sink that
+  /// takes it, else emit() above.
+  template <class H, class S>
+  void emit(const H& h, const rho_grid_cell& n, const state& hs, const view& v, float size_px,
+            const traverse_options& o, S& sink) const {
+    if constexpr (ScreenRectSink<S, H::attrs>) {
+      if (screen_draw)
+        if (const auto r = screen_rect(h, n, hs, size_px)) {
+          h.emit_rect(n, *r, sink);
+          return;
+        }
+    }
+    emit(h, n, v, size_px, o, sink);
+  }
+
+  /// The pixels and depth of cell n drawn by screen_draw at visit()'s size_px: a square of
+  /// size_px (≤ 1: the pixel containing the centre) about the centre from H; with per-corner
+  /// bounds, an inner cell's or a leaf_splats leaf's per-corner rectangle. Empty when the cell
+  /// has no screen position (then it is drawn from its 3-D position).
+  template <class H>
+  [[nodiscard]] std::optional<rho_grid_screen_rect> screen_rect(const H& h, const rho_grid_cell& n,
+                                                                const state& hs,
+                                                                float size_px) const {
+    const auto c = t_.screen_position(hs);
+    if (!c) return std::nullopt;
+    constexpr std::int64_t lim = tables::rect_limit + (std::int64_t(1) << 29);
+    const auto fix = [](std::int64_t q) {
+      return std::int32_t(q < -lim ? -lim : q > lim ? lim : q);
+    };
+    rho_grid_screen_rect r{};
+    r.depth = c->depth;
+    if constexpr (per_corner) {
+      const bool leaf = h.is_leaf(n);
+      if (!points_only && (!leaf || leaf_splats)) {
+        const auto b = t_.corner_rectangle(hs, box(h, n, leaf));
+        if (!std::isnan(b.x0)) {  // pixels from the principal point: widened to 1/256 pixel
+          constexpr double one = double(1 << tables::rect_bits), dlim = double(lim);
+          const auto lo = [&](double q, std::int64_t c0) {
+            return fix(std::int64_t(std::floor(std::clamp(q * one, -dlim, dlim))) + c0);
+          };
+          const auto hi = [&](double q, std::int64_t c0) {
+            return fix(std::int64_t(std::ceil(std::clamp(q * one, -dlim, dlim))) + c0);
+          };
+          r.x0 = lo(b.x0, t_.cx8);
+          r.x1 = hi(b.x1, t_.cx8);
+          r.y0 = lo(b.y0, t_.cy8);
+          r.y1 = hi(b.y1, t_.cy8);
+          return r;
+        }
+      }
+    }
+    // size_px ≤ 1: half = 0, the pixel containing the centre (point()'s one-pixel rule).
+    const std::int64_t half =
+        size_px > 1 ? std::int64_t(std::min(size_px, 1e6f) * float(1 << (tables::rect_bits - 1)))
+                    : 0;
+    r.x0 = fix(c->x - half);
+    r.x1 = fix(c->x + half);
+    r.y0 = fix(c->y - half);
+    r.y1 = fix(c->y + half);
+    return r;
   }
 
   template <class H>

@@ -156,6 +156,47 @@ class rasterizer {
                           });
   }
 
+  /// A screen-space rectangle (traverse/primitives.hpp): the pixels whose centres it contains —
+  /// integer coverage by a shift of its fixed-point bounds (Duguet & Drettakis 2004, §5.1's last
+  /// paragraph) — or, thinner than a pixel, the one containing its midpoint, at key 1/depth with
+  /// point()'s depth test and drop behind the near plane; shaded as point() shades (the view
+  /// direction from its 3-D position). With blending, drawn as as_point_prim() (the blending
+  /// passes weigh squares about a 3-D centre).
+  void screen_rect(const screen_rect_prim<A>& r) {
+    if constexpr (fx.blending) {
+      blended_point(as_point_prim(r));
+      return;
+    }
+    const float z = r.depth;
+    if (!(z >= proj_.w_near)) return;  // behind the near plane, or NaN
+    const vec3f d = r.position - proj_.eye;
+    if constexpr (kCullNormals)
+      if (r.normal.dot(d) > 0) return;
+    constexpr int F = screen_rect_prim<A>::fraction_bits;
+    const float key = 1.0f / z;
+    const auto [i0, i1] = detail::rect_pixel_span<F>(r.x0, r.x1, view_.width);
+    const auto [j0, j1] = detail::rect_pixel_span<F>(r.y0, r.y1, view_.height);
+    if (i1 - i0 == 1 && j1 - j0 == 1) [[likely]] {  // a point: shading after the depth test
+      const std::size_t i = static_cast<std::size_t>(j0) * width() + static_cast<std::size_t>(i0);
+      if (!(key > kb_[i])) return;
+      kb_[i] = key;
+      store(i, shade(r, d));
+      return;
+    }
+    if (i0 >= i1 || j0 >= j1) return;
+    const fragment_colour c = shade(r, d);
+    for (int j = j0; j < j1; ++j) {
+      const std::size_t row = static_cast<std::size_t>(j) * width();
+      for (int i = i0; i < i1; ++i) {
+        const std::size_t k = row + static_cast<std::size_t>(i);
+        if (key > kb_[k]) {
+          kb_[k] = key;
+          store(k, c);
+        }
+      }
+    }
+  }
+
   /// An occluder (traverse/primitives.hpp; POP §3.4's first pass): a square like point()'s in the
   /// background colour. Where it is front-most it hides what lies behind; finish() then makes the
   /// pixel a hole (background colour, no depth) before shadows and hole filling, so the filter
@@ -525,6 +566,7 @@ class rasterizer {
 
 static_assert(Sink<rasterizer<positions_only>, positions_only>);
 static_assert(OccluderSink<rasterizer<positions_only>>);
+static_assert(ScreenRectSink<rasterizer<positions_only>, positions_only>);
 static_assert(Sink<rasterizer<all_attributes, all_effects>, all_attributes>);
 
 namespace detail {

@@ -5,7 +5,9 @@
 // receives 16-byte points.
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cstdint>
 
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/math.hpp"
@@ -20,6 +22,45 @@ struct point_prim {
   [[no_unique_address]] detail::maybe<A.normal, vec3f, 0> normal{};
   [[no_unique_address]] detail::maybe<A.colour, rgb8, 1> colour{};
 };
+
+/// A screen-aligned rectangle given in pixels: the screen-space form of a point_prim, for an
+/// emitter that computes screen positions itself (the ρ-grid's displacement tables, Duguet &
+/// Drettakis 2004 §5.1, and its per-corner rectangles, §4.1). Sent only to sinks that take it
+/// (ScreenRectSink in sink.hpp); the others get as_point_prim() of it or, from the emitter,
+/// the point_prim it would have sent anyway.
+///
+/// Coverage: x0, y0, x1, y1 are pixels × 2^fraction_bits from the image's top-left corner
+/// (y down). Pixel (i, j) is covered when its centre (i + ½, j + ½) lies in [x0, x1) × [y0, y1)
+/// — so a pixel index is a shift, (x0 + 2^(F−1) − 1) >> F the first column — and along an axis
+/// where no centre does (a rectangle thinner than a pixel), the pixel containing the midpoint:
+/// x0 = x1 is the pixel containing x0, a one-pixel point as point_prim's size ≤ 1.
+/// depth is the eye-space depth (along the view direction) the z-buffer stores, what the
+/// rasteriser's point() computes from a point_prim's position, so the two z-test against each
+/// other in one frame. position is the sample in 3-D (origin-relative, as point_prim's): for what
+/// needs world space — two-sided shading's view direction, back-face culling, shadow maps,
+/// blending — and for sinks without the hook; coverage and depth do not use it.
+template <attributes A>
+struct screen_rect_prim {
+  static constexpr int fraction_bits = 8;
+  static constexpr std::int32_t one_px = std::int32_t(1) << fraction_bits;
+  std::int32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  float depth = 0;
+  vec3f position;
+  [[no_unique_address]] detail::maybe<A.normal, vec3f, 0> normal{};
+  [[no_unique_address]] detail::maybe<A.colour, rgb8, 1> colour{};
+};
+
+/// The point_prim a sink without screen_rect() gets for r: its 3-D position, as a square of the
+/// rectangle's larger side (≤ 1 pixel: a one-pixel point).
+template <attributes A>
+[[nodiscard]] point_prim<A> as_point_prim(const screen_rect_prim<A>& r) {
+  point_prim<A> p{r.position,
+                  float(std::max(std::int64_t(r.x1) - r.x0, std::int64_t(r.y1) - r.y0)) /
+                      float(screen_rect_prim<A>::one_px)};
+  if constexpr (A.normal) p.normal = r.normal;
+  if constexpr (A.colour) p.colour = r.colour;
+  return p;
+}
 
 /// An object-space elliptical splat: centre, the two semi-axis vectors (tangent to the surface,
 /// orthogonal), and — when A has normals — the shading normal (for a flat splat, ±u×v).

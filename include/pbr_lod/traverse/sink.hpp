@@ -33,12 +33,23 @@ concept OccluderSink = requires(S& s, const occluder_prim& o) {
   s.occluder(o);
 };
 
+/// A sink that also takes screen-space rectangles (screen_rect_prim: a cell whose pixel
+/// rectangle and depth the emitter computed itself, the ρ-grid's §4.1 and §5.1). Optional: an
+/// emitter sends them only to sinks that model this and sends the others the point_prim it
+/// would send without the hook, so a sink that does not take them sees no change.
+template <class S, attributes A>
+concept ScreenRectSink = requires(S& s, const screen_rect_prim<A>& r) {
+  s.screen_rect(r);
+};
+
 /// Counts primitives by kind; the cheapest sink (for traversal benchmarks and cut statistics).
 template <attributes A>
 struct counting_sink {
   std::size_t points = 0, splats = 0, triangles = 0;
   std::size_t occluders = 0;  ///< not primitives of the surface: not in total()
   void point(const point_prim<A>&) { ++points; }
+  /// A screen-space rectangle is a point drawn in screen space: counted as a point.
+  void screen_rect(const screen_rect_prim<A>&) { ++points; }
   void splat(const splat_prim<A>&) { ++splats; }
   void triangle(const triangle_prim<A>&) { ++triangles; }
   void occluder(const occluder_prim&) { ++occluders; }
@@ -54,10 +65,15 @@ struct buffer_sink {
   std::vector<splat_prim<A>> splats;
   std::vector<triangle_prim<A>> triangles;
   std::vector<occluder_prim> occluders;
+  std::vector<screen_rect_prim<A>> screen_rects;
 
   void point(const point_prim<A>& p) {
     points.push_back(p);
     note(kind::point);
+  }
+  void screen_rect(const screen_rect_prim<A>& r) {
+    screen_rects.push_back(r);
+    note(kind::screen_rect);
   }
   void splat(const splat_prim<A>& s) {
     splats.push_back(s);
@@ -76,13 +92,15 @@ struct buffer_sink {
     splats.clear();
     triangles.clear();
     occluders.clear();
+    screen_rects.clear();
     runs_.clear();
   }
   /// Replays the buffered primitives into another sink (e.g. the rasteriser), in the order they
-  /// were received; occluders only to a sink that takes them (OccluderSink).
+  /// were received; occluders only to a sink that takes them (OccluderSink); screen rectangles
+  /// to a sink that takes them (ScreenRectSink), to the others as as_point_prim().
   template <Sink<A> S>
   void replay(S& s) const {
-    std::size_t ip = 0, is = 0, it = 0, io = 0;
+    std::size_t ip = 0, is = 0, it = 0, io = 0, ir = 0;
     for (const run& r : runs_) {
       switch (r.what) {
         case kind::occluder:
@@ -101,12 +119,17 @@ struct buffer_sink {
           for (const std::size_t e = std::min(it + r.count, triangles.size()); it < e; ++it)
             s.triangle(triangles[it]);
           break;
+        case kind::screen_rect:
+          for (const std::size_t e = std::min(ir + r.count, screen_rects.size()); ir < e; ++ir)
+            replay_rect(s, screen_rects[ir]);
+          break;
       }
     }
     // Primitives a caller put into the arrays directly have no recorded order: kind by kind.
     for (; ip < points.size(); ++ip) s.point(points[ip]);
     for (; is < splats.size(); ++is) s.splat(splats[is]);
     for (; it < triangles.size(); ++it) s.triangle(triangles[it]);
+    for (; ir < screen_rects.size(); ++ir) replay_rect(s, screen_rects[ir]);
     if constexpr (OccluderSink<S>)
       for (; io < occluders.size(); ++io) s.occluder(occluders[io]);
   }
@@ -114,7 +137,14 @@ struct buffer_sink {
  private:
   // The order as runs of one kind: a traversal emits long runs (a node's splats, a leaf's
   // triangles), so this costs a few bytes a frame, not a byte a primitive.
-  enum class kind : unsigned char { point, splat, triangle, occluder };
+  enum class kind : unsigned char { point, splat, triangle, occluder, screen_rect };
+  template <class S>
+  static void replay_rect(S& s, const screen_rect_prim<A>& r) {
+    if constexpr (ScreenRectSink<S, A>)
+      s.screen_rect(r);
+    else
+      s.point(as_point_prim(r));
+  }
   struct run {
     kind what;
     std::size_t count;
@@ -130,5 +160,6 @@ struct buffer_sink {
 
 static_assert(Sink<counting_sink<positions_only>, positions_only>);
 static_assert(Sink<buffer_sink<all_attributes>, all_attributes>);
+static_assert(ScreenRectSink<buffer_sink<all_attributes>, all_attributes>);
 
 }  // namespace pbr_lod

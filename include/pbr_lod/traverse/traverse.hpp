@@ -19,6 +19,10 @@
 //                                         refine rule: cull, emit or refine n
 //   p.for_each_child(h, n, state, f)      calls f(child, child_state) for n's children in the
 //                                         order they are to be visited (replaces h.children(n))
+//   p.emit(h, n, state, v, size_px, o, sink)
+//                                         emit() with the node's state (the ρ-grid draws a cell
+//                                         at its screen position from H); used instead of the
+//                                         six-argument emit() when the policy has it
 // A policy without them compiles to the loop it always had: the entry holds no state (an empty
 // member takes no room) and none of the hooks' branches exist.
 #pragma once
@@ -52,7 +56,9 @@ struct traverse_stats {
   std::size_t culled_backface = 0;  ///< subtrees rejected by their normal cone
   std::size_t emitted_nodes = 0;    ///< inner nodes emitted (the cut above the leaves)
   std::size_t emitted_leaves = 0;   ///< leaves emitted at full detail
-  std::size_t points = 0, splats = 0, triangles = 0;  ///< primitives by kind
+  /// Primitives by kind; points counts point_prim and screen_rect_prim alike (the same cell drawn
+  /// from its 3-D position or from its screen rectangle), so the stats do not depend on the sink.
+  std::size_t points = 0, splats = 0, triangles = 0;
   [[nodiscard]] std::size_t primitives() const { return points + splats + triangles; }
 };
 
@@ -106,6 +112,13 @@ concept has_visit = requires(const P& p, const H& h, const typename H::node_id& 
   { p.visit(h, n, s, v, o) } -> std::same_as<visit_result>;
 };
 
+template <class P, class H, class State, class Out>
+concept has_state_emit = requires(const P& p, const H& h, const typename H::node_id& n,
+                                  const State& s, const view& v, float size,
+                                  const traverse_options& o, Out& out) {
+  p.emit(h, n, s, v, size, o, out);
+};
+
 /// Forwards to a sink and counts what passes, so the stats know primitives by kind.
 template <attributes A, class S>
 struct counting_forwarder {
@@ -122,6 +135,11 @@ struct counting_forwarder {
   void triangle(const triangle_prim<A>& t) {
     ++triangles;
     inner.triangle(t);
+  }
+  /// Screen rectangles to a sink that takes them, counted as points (traverse_stats::points).
+  void screen_rect(const screen_rect_prim<A>& r) requires ScreenRectSink<S, A> {
+    ++points;
+    inner.screen_rect(r);
   }
   /// Occluders pass through to a sink that takes them (not counted: they are not primitives).
   void occluder(const occluder_prim& o) requires OccluderSink<S> { inner.occluder(o); }
@@ -207,7 +225,10 @@ traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S&
       ++st.emitted_leaves;
     else
       ++st.emitted_nodes;
-    policy.emit(h, e.node, v, size, o, out);
+    if constexpr (detail::has_state_emit<Policy, H, state_type, decltype(out)>)
+      policy.emit(h, e.node, e.state, v, size, o, out);
+    else
+      policy.emit(h, e.node, v, size, o, out);
   }
   st.points = out.points;
   st.splats = out.splats;

@@ -327,6 +327,23 @@ inline void raster_square(int width, int height, float sx, float sy, float size,
   }
 }
 
+/// The pixels [first, end) along one axis of n pixels that a screen_rect_prim covers between lo
+/// and hi (fixed point, F fractional bits): those whose centres (i + ½)·2^F lie in [lo, hi), by a
+/// shift — first = ⌈(lo − 2^(F−1)) / 2^F⌉ = (lo + 2^(F−1) − 1) >> F, likewise end — or, when no
+/// centre does, the pixel containing the midpoint; clipped to [0, n) (empty when off-screen).
+template <int F>
+[[nodiscard]] inline std::array<int, 2> rect_pixel_span(std::int32_t lo, std::int32_t hi, int n) {
+  constexpr std::int64_t round = (std::int64_t(1) << (F - 1)) - 1;
+  std::int64_t first = (std::int64_t(lo) + round) >> F, end = (std::int64_t(hi) + round) >> F;
+  if (end <= first) {
+    first = (std::int64_t(lo) + std::int64_t(hi)) >> (F + 1);
+    end = first + 1;
+  }
+  first = std::max<std::int64_t>(first, 0);
+  end = std::min<std::int64_t>(end, n);
+  return {int(first), int(std::max(first, end))};
+}
+
 // ---------------------------------------------------------------------------------------------
 // Elliptical splats, exact perspective
 // ---------------------------------------------------------------------------------------------

@@ -53,12 +53,17 @@ template <attributes A>
   // Bounds of everything that can cast a shadow (non-finite primitives are skipped: they draw
   // nothing either).
   box3 b;
-  for (const auto& p : prims.points) {
+  // Screen rectangles cast as the squares about their 3-D positions a sink without them draws.
+  const auto each_point = [&](const auto& f) {
+    for (const auto& p : prims.points) f(p);
+    for (const auto& r : prims.screen_rects) f(as_point_prim(r));
+  };
+  each_point([&](const point_prim<A>& p) {
     const float r = point_radius(p);
-    if (!all_finite(p.position) || !std::isfinite(r)) continue;
+    if (!all_finite(p.position) || !std::isfinite(r)) return;
     b.extend(p.position - vec3f::Constant(r));
     b.extend(p.position + vec3f::Constant(r));
-  }
+  });
   for (const auto& s : prims.splats) {
     const vec3f e = s.u.cwiseAbs() + s.v.cwiseAbs();
     if (!all_finite(s.centre) || !all_finite(e)) continue;
@@ -99,11 +104,11 @@ template <attributes A>
   const auto depth_only = [kb](std::size_t i, float key) {
     if (key > kb[i]) kb[i] = key;
   };
-  for (const auto& p : prims.points) {
+  each_point([&](const point_prim<A>& p) {
     const vec3f e = lp.frame(p.position);
     const float sx = lp.cx + lp.scale * e.x(), sy = lp.cy - lp.scale * e.y();
     raster_square(n, n, sx, sy, 2 * point_radius(p) * lp.scale, -e.z(), depth_only);
-  }
+  });
   const span_target<false, false> depth_target{kb};
   for (const auto& s : prims.splats) raster_ellipse(lp, s.centre, s.u, s.v, depth_target);
   const auto test = [kb](std::size_t i, float key) { return key > kb[i]; };
