@@ -224,41 +224,13 @@ TEST(ChunkedPcaFiles, BadInputAndDamagedDirectoriesAreErrors) {
   EXPECT_THROW((void)chunked_pca_octree<with_normals>::open(dir), FormatError)
       << "a coloured hierarchy opened as uncoloured";
   const std::string top = dir + "/" + chunked_top_file;
-  const std::vector<char> good = bytes_of(top);
-  for (std::size_t cut = 0; cut < good.size(); cut += 7) {
-    std::ofstream(top, std::ios::binary | std::ios::trunc)
-        .write(good.data(), static_cast<std::streamsize>(cut));
-    EXPECT_THROW((void)H::open(dir), Error) << "cut at " << cut;
-  }
-  for (std::size_t at = 0; at < good.size(); at += good.size() / 300 + 1) {
-    std::vector<char> b = good;
-    b[at] = static_cast<char>(b[at] ^ 0x5a);
-    std::ofstream(top, std::ios::binary | std::ios::trunc)
-        .write(b.data(), static_cast<std::streamsize>(b.size()));
-    EXPECT_THROW((void)H::open(dir), Error) << "byte " << at << " flipped";
-  }
-  std::ofstream(top, std::ios::binary | std::ios::trunc)
-      .write(good.data(), static_cast<std::streamsize>(good.size()));
+  test::expect_damage_is_error(top, 7, fs::file_size(top) / 300 + 1, [&] { (void)H::open(dir); });
+  // A chunk's file cut or flipped: an error when it is read.
   const std::string chunk0 = dir + "/" + pca_chunk_file_name(0);
-  const std::vector<char> part = bytes_of(chunk0);
-  for (std::size_t at = 0; at < part.size(); at += part.size() / 97 + 1) {
-    std::vector<char> b = part;
-    b[at] = static_cast<char>(b[at] ^ 0x21);
-    for (const std::size_t keep : {at, b.size()}) {
-      std::ofstream(chunk0, std::ios::binary | std::ios::trunc)
-          .write(b.data(), static_cast<std::streamsize>(keep));
-      EXPECT_THROW((void)H::open(dir).chunk(0), Error) << "byte " << at << ", kept " << keep;
-    }
-  }
-  std::ofstream(chunk0, std::ios::binary | std::ios::trunc)
-      .write(part.data(), static_cast<std::streamsize>(part.size()));
-  const H h = H::open(dir);
-  ASSERT_GE(h.chunk_count(), 2u);
-  fs::rename(dir + "/" + pca_chunk_file_name(0), dir + "/swap");
-  fs::rename(dir + "/" + pca_chunk_file_name(1), dir + "/" + pca_chunk_file_name(0));
-  fs::rename(dir + "/swap", dir + "/" + pca_chunk_file_name(1));
-  EXPECT_THROW((void)h.chunk(0), FormatError);
-  EXPECT_THROW((void)h.assemble(), FormatError);
+  const std::size_t size0 = fs::file_size(chunk0);
+  test::expect_damage_is_error(chunk0, size0 / 97 + 1, size0 / 97 + 1,
+                               [&] { (void)H::open(dir).chunk(0); });
+  test::expect_swapped_chunks_are_errors(H::open(dir), dir, pca_chunk_file_name);
   fs::remove_all(dir);
 }
 

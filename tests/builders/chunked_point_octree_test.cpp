@@ -293,31 +293,10 @@ TEST(ChunkedPointOctreeFiles, BadInputAndDamagedDirectoriesAreErrors) {
   using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
   using G = chunked_point_octree<point_octree_attributes(attributes{})>;
   EXPECT_THROW((void)G::open(dir), FormatError) << "a coloured hierarchy opened as uncoloured";
-  const std::string top = dir + "/" + chunked_top_file;
-  const std::vector<char> good = bytes_of(top);
   // Every truncation and every flipped byte of the top file is an error, never a crash.
-  for (std::size_t cut = 0; cut < good.size(); cut += 7) {
-    std::ofstream(top, std::ios::binary | std::ios::trunc)
-        .write(good.data(), static_cast<std::streamsize>(cut));
-    EXPECT_THROW((void)H::open(dir), Error) << "cut at " << cut;
-  }
-  for (std::size_t at = 0; at < good.size(); at += 5) {
-    std::vector<char> bad = good;
-    bad[at] = static_cast<char>(bad[at] ^ 0x5a);
-    std::ofstream(top, std::ios::binary | std::ios::trunc)
-        .write(bad.data(), static_cast<std::streamsize>(bad.size()));
-    EXPECT_THROW((void)H::open(dir), Error) << "byte " << at << " flipped";
-  }
-  std::ofstream(top, std::ios::binary | std::ios::trunc)
-      .write(good.data(), static_cast<std::streamsize>(good.size()));
+  test::expect_damage_is_error(dir + "/" + chunked_top_file, 7, 5, [&] { (void)H::open(dir); });
   // Two chunks' files swapped: each is a valid point-octree, but not the one the top names.
-  const H h = H::open(dir);
-  ASSERT_GE(h.chunk_count(), 2u);
-  fs::rename(dir + "/" + chunk_file_name(0), dir + "/swap");
-  fs::rename(dir + "/" + chunk_file_name(1), dir + "/" + chunk_file_name(0));
-  fs::rename(dir + "/swap", dir + "/" + chunk_file_name(1));
-  EXPECT_THROW((void)h.chunk(0), FormatError);
-  EXPECT_THROW((void)h.assemble(), FormatError);
+  test::expect_swapped_chunks_are_errors(H::open(dir), dir, chunk_file_name);
   fs::remove_all(dir);
 }
 
