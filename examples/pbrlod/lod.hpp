@@ -233,6 +233,21 @@ class lod_of final : public lod {
   H h_;
 };
 
+/// What the methods of chunked folders share: the samples are the input's points, the bytes the
+/// folder's files, and the folder is written by the build (save() does not copy it elsewhere).
+struct chunked_folder {
+  template <class H>
+  std::size_t samples(const H& h) const {
+    return static_cast<std::size_t>(h.input_points());
+  }
+  template <class H>
+  std::size_t file_bytes(const H& h) const {
+    return static_cast<std::size_t>(h.file_bytes());
+  }
+  template <class H>
+  void save(const H&, const std::string&) const {}
+};
+
 template <class M, class H>
 std::unique_ptr<lod> make_lod(M m, H&& h) {
   return std::make_unique<lod_of<M, std::decay_t<H>>>(std::move(m), std::forward<H>(h));

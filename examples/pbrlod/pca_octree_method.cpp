@@ -113,7 +113,8 @@ struct pca_method {
 
 /// A chunked PCA octree folder (build_pca_octree_chunked): drawn as the PCA octree, its chunks
 /// read as the views need them.
-struct chunked_pca_method : pca_method {
+struct chunked_pca_method : pca_method, chunked_folder {
+  using chunked_folder::samples;
   template <class H>
   frame draw(const H& h, const frame_request& r) const {
     frame f = pca_method::draw(h, r);
@@ -138,17 +139,6 @@ struct chunked_pca_method : pca_method {
           static_cast<double>(h.file_bytes()) / static_cast<double>(h.input_points()));
     return j;
   }
-  template <class H>
-  std::size_t samples(const H& h) const {
-    return static_cast<std::size_t>(h.input_points());
-  }
-  template <class H>
-  std::size_t file_bytes(const H& h) const {
-    return static_cast<std::size_t>(h.file_bytes());
-  }
-  /// The folder is written by the build; it is not copied elsewhere.
-  template <class H>
-  void save(const H&, const std::string&) const {}
 };
 
 std::unique_ptr<lod> open_chunked(const std::string& dir) {

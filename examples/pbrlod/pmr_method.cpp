@@ -103,7 +103,7 @@ struct pmr_method_traits {
 
 /// A chunked PMR folder (build_pmr_chunked): framed by the input sphere its top file records,
 /// drawn as PMR, its chunks read as the views need them.
-struct chunked_pmr_traits {
+struct chunked_pmr_traits : chunked_folder {
   template <class H>
   std::pair<vec3d, double> input_bounds(const H& h) const {
     return {h.origin() + h.input_sphere().centre.template cast<double>(),
@@ -143,17 +143,6 @@ struct chunked_pmr_traits {
     j.boolean("colours", H::attrs.colour);
     return j;
   }
-  template <class H>
-  std::size_t samples(const H& h) const {
-    return static_cast<std::size_t>(h.input_points());
-  }
-  template <class H>
-  std::size_t file_bytes(const H& h) const {
-    return static_cast<std::size_t>(h.file_bytes());
-  }
-  /// The folder is written by the build; it is not copied elsewhere.
-  template <class H>
-  void save(const H&, const std::string&) const {}
 };
 
 std::unique_ptr<lod> open_chunked(const std::string& dir) {

@@ -112,7 +112,7 @@ struct octree_method {
 
 /// A chunked point-octree folder (build_point_octree_chunked): framed by the input sphere its top
 /// file records, drawn like a point-octree, its chunks read as the views need them.
-struct chunked_method {
+struct chunked_method : chunked_folder {
   template <class Tree>
   std::pair<vec3d, double> input_bounds(const Tree& t) const {
     return {t.origin() + t.input_sphere().centre.template cast<double>(),
@@ -143,17 +143,6 @@ struct chunked_method {
     j.num("bits_per_sample", 8.0 * bytes / n);
     return j;
   }
-  template <class Tree>
-  std::size_t samples(const Tree& t) const {
-    return static_cast<std::size_t>(t.input_points());
-  }
-  template <class Tree>
-  std::size_t file_bytes(const Tree& t) const {
-    return static_cast<std::size_t>(t.file_bytes());
-  }
-  /// The folder is written by the build; it is not copied elsewhere.
-  template <class Tree>
-  void save(const Tree&, const std::string&) const {}
 };
 
 std::unique_ptr<lod> open_chunked(const std::string& dir) {
