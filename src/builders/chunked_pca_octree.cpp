@@ -250,6 +250,14 @@ const detail::pca_chunk& chunked_pca_octree<A>::chunk(std::uint32_t c) const {
                       (!A.colour || k->d.colours[0] == top_.colours[chunk_top_[c]]) &&
                       k->global_id(0) == top_global_[chunk_top_[c]];
     if (!same) throw FormatError(path + ": does not match its record in the top file");
+    // Every node's whole-tree number lies in the tree (assemble() places the node there).
+    for (std::size_t l = 0; l < k->level_first.size(); ++l) {
+      const std::uint64_t end =
+          l + 1 < k->level_first.size() ? k->level_first[l + 1] : k->d.nodes.size();
+      if (std::uint64_t{k->level_global[l]} + (end - k->level_first[l]) > node_count())
+        throw FormatError(path + ": level " + std::to_string(l) +
+                          " numbers nodes beyond the tree's " + std::to_string(node_count()));
+    }
     s.c = std::move(k);
   });
   return *s.c;

@@ -3,12 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <barrier>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <thread>
 
 #include "chunked_test_util.hpp"
 #include "pbr_lod/builders/chunked_pca_octree.hpp"
+#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/traverse/sink.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -231,6 +233,32 @@ TEST(ChunkedPcaFiles, BadInputAndDamagedDirectoriesAreErrors) {
   test::expect_damage_is_error(chunk0, size0 / 97 + 1, size0 / 97 + 1,
                                [&] { (void)H::open(dir).chunk(0); });
   test::expect_swapped_chunks_are_errors(H::open(dir), dir, pca_chunk_file_name);
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPcaFiles, ANodeNumberedBeyondTheTreeIsAnError) {
+  // A chunk file whose checksum is right but whose level numbers reach past the tree would make
+  // assemble() write beyond its nodes: the chunk is refused when read.
+  const point_cloud c = make_wavy_surface(4000, 4);
+  const std::string dir = temp_dir("numbers");
+  chunked_pca_octree_options o;
+  o.chunk_points = 600;
+  (void)build_pca_octree_chunked(cloud_point_source(c), dir, o);
+  const H good = H::open(dir);
+  std::uint32_t deep = 0;
+  while (deep < good.chunk_count() && good.chunk(deep).level_first.size() < 2) ++deep;
+  ASSERT_LT(deep, good.chunk_count());
+  // Head: magic 8, version 4, flags, chunk, depth 4 each, points and nodes 8 each, the cell 32,
+  // the level count 4: the level numbers start at byte 76.
+  const std::string path = dir + "/" + pca_chunk_file_name(deep);
+  std::vector<unsigned char> b = detail::load_file_bytes(path);
+  const std::uint32_t far = 0xffffff00u;
+  std::memcpy(b.data() + 76 + 4, &far, 4);
+  const std::uint64_t sum = detail::fnv1a(b.data(), b.size() - 8);
+  std::memcpy(b.data() + b.size() - 8, &sum, 8);
+  detail::save_file_bytes(path, b);
+  EXPECT_THROW((void)H::open(dir).chunk(deep), FormatError);
+  EXPECT_THROW((void)H::open(dir).assemble(), FormatError);
   fs::remove_all(dir);
 }
 
