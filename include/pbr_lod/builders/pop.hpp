@@ -19,6 +19,10 @@
 //               else the 2-, 3- and 4-child constructions) — pop_sphere_rule::paper — or the
 //               exact smallest enclosing sphere (CGAL Min_sphere_of_spheres_d) —
 //               pop_sphere_rule::exact. Normal cones per node for back-face culling.
+//   §3.1, Fig. 5 with a texture, the leaves keep their triangles' texture coordinates and the tree
+//               the texture: leaves are drawn texture-mapped (backward mapping; a
+//               textured_triangle_prim to sinks that take it), inner nodes as points with the
+//               averaged (prefiltered) texel colours.
 //   §3.2        RENDER: frustum and back-face culling, refine while the splat size exceeds the
 //               threshold, a point for an inner node, the leaf's 1–4 triangles at a leaf, the
 //               optional silhouette rule — pop_policy with the generic traverse().
