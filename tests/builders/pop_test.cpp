@@ -1615,6 +1615,40 @@ TEST(PopTexture, CowCloseUpTexturedLeavesBeatFlatOnes) {
   }
 }
 
+// A sink without the textured hook draws what every sink drew before textures were kept: the
+// image of the textured cow through such a sink is byte-identical to the leaves' triangles sent
+// as the triangle_prims the tree held before (positions, normals, per-vertex colours), shaded.
+TEST(PopTexture, SinksWithoutTheHookDrawWhatTheyDrewBefore) {
+  const auto& s = cow_scene::get();
+  ASSERT_NE(s.tree.texture(), nullptr);
+  const render_options ro{.fx = {.shading = true, .colour = true}};
+  const view v(s.cam(1.5, 256), s.tree.origin());
+  const traverse_options o{.tolerance_px = 1, .metric = projection_metric::eye_z};
+  const image flat = render<with_normals_colours>(v, ro, [&](auto& sink) {
+    flat_leaves f{sink};
+    traverse(s.tree, v, o, f, pop_policy{});
+  });
+  const image before = render<with_normals_colours>(v, ro, [&](auto& sink) {
+    buffer_sink<with_normals_colours> cut;
+    traverse(s.tree, v, o, cut, pop_policy{});
+    ASSERT_FALSE(cut.textured_triangles.empty());
+    ASSERT_TRUE(cut.triangles.empty() && cut.points.empty());
+    for (const auto& t : cut.textured_triangles) {
+      triangle_prim<with_normals_colours> p;
+      p.p = t.triangle.p;
+      p.normal = t.triangle.normal;
+      p.colour = t.triangle.colour;
+      sink.triangle(p);
+    }
+  });
+  EXPECT_EQ(flat.colour, before.colour);
+  EXPECT_EQ(flat.depth, before.depth);
+  const image textured = render<with_normals_colours>(
+      v, ro, [&](auto& sink) { traverse(s.tree, v, o, sink, pop_policy{}); });
+  EXPECT_EQ(textured.depth, flat.depth);
+  EXPECT_NE(textured.colour, flat.colour);
+}
+
 // Figure 5's threshold comparison: 1 px (every node larger than a pixel drawn as its
 // texture-mapped triangles) against 2 px, drawn with simplified splatting and as the paper's 5a
 // (visibility splatting, then image reconstruction of radius 2 in screen space). At each
