@@ -129,23 +129,35 @@ constexpr const char* kTriangleVs = R"(
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
 layout(location = 2) in vec3 colour;
+layout(location = 3) in vec3 texcoord;  // s, t, textured (1) or not (0)
 out vec3 frag_normal;
 out vec3 frag_albedo;
+out vec2 frag_st;
+flat out float frag_textured;
 void main() {
   gl_Position = project(position);
   frag_normal = normal;
   frag_albedo = colour;
+  frag_st = texcoord.xy;
+  frag_textured = texcoord.z;
 }
 )";
 
 // rasterizer::triangle: the interpolated normal normalised and flipped on the back face, the
 // interpolated colour rounded to a byte (to_channel), then lit and rounded (scale_colour).
+// rasterizer::textured_triangle: the texture sampled bilinearly with wrapping (GL_LINEAR,
+// GL_REPEAT) in place of the colour.
 constexpr const char* kTriangleFs = R"(
 in vec3 frag_normal;
 in vec3 frag_albedo;
+in vec2 frag_st;
+flat in float frag_textured;
+uniform sampler2D tex;
 out vec4 out_colour;
 void main() {
   vec3 albedo = colouring != 0 ? clamp(floor(frag_albedo + 0.5), 0.0, 255.0) : flat_colour;
+  if (colouring != 0 && frag_textured > 0.5)
+    albedo = clamp(floor(texture(tex, frag_st).rgb * 255.0 + 0.5), 0.0, 255.0);
   vec3 c = albedo;
   if (shading != 0) {
     float len = length(frag_normal);
@@ -170,6 +182,7 @@ struct triangle_vertex {
   float position[3];
   float normal[3];
   std::uint8_t colour[4];
+  float texcoord[3];  // s, t (GL's: t = 1 − v, row 0 on top), 1 when textured
 };
 
 void copy3(float* out, const pbr_lod::vec3f& v) {
@@ -236,6 +249,11 @@ struct gl_renderer::impl {
   std::vector<point_vertex> points;
   std::vector<splat_instance> splats;
   std::vector<triangle_vertex> triangles;
+  /// The frame's texture (one per frame: a triangle with another is drawn untextured) and the
+  /// GL texture holding the image last uploaded.
+  const pbr_lod::texture_image* frame_texture = nullptr;
+  const pbr_lod::texture_image* uploaded = nullptr;
+  GLuint gl_texture = 0;
   pbr_lod::view v{pbr_lod::camera{}, pbr_lod::vec3d::Zero()};
   pbr_lod::render_options o;
   float depth_a = 0, depth_b = 0;  // z_ndc = a + b / z_eye
@@ -301,10 +319,13 @@ gl_renderer::gl_renderer() : d_(std::make_unique<impl>()) {
   attribute(0, 3, F, ts, offsetof(triangle_vertex, position));
   attribute(1, 3, F, ts, offsetof(triangle_vertex, normal));
   attribute(2, 3, B, ts, offsetof(triangle_vertex, colour));
+  attribute(3, 3, F, ts, offsetof(triangle_vertex, texcoord));
   glBindVertexArray(0);
+  glGenTextures(1, &d_->gl_texture);
 }
 
 gl_renderer::~gl_renderer() {
+  glDeleteTextures(1, &d_->gl_texture);
   glDeleteBuffers(3, d_->vbo);
   glDeleteVertexArrays(3, d_->vao);
   for (const GLuint p : d_->programs) glDeleteProgram(p);
@@ -322,6 +343,7 @@ void gl_renderer::begin(const pbr_lod::view& v, const pbr_lod::render_options& o
   d_->points.clear();
   d_->splats.clear();
   d_->triangles.clear();
+  d_->frame_texture = nullptr;
   counts_ = {};
 }
 
@@ -354,6 +376,28 @@ void gl_renderer::triangle(const pbr_lod::triangle_prim<host_attributes>& t) {
   }
 }
 
+void gl_renderer::textured_triangle(const pbr_lod::textured_triangle_prim<host_attributes>& t) {
+  const pbr_lod::texture_image* tex = t.texture;
+  if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
+      tex->texels.size() !=
+          static_cast<std::size_t>(tex->width) * static_cast<std::size_t>(tex->height) ||
+      (d_->frame_texture != nullptr && d_->frame_texture != tex)) {
+    triangle(t.triangle);
+    return;
+  }
+  d_->frame_texture = tex;
+  for (std::size_t k = 0; k < 3; ++k) {
+    triangle_vertex q{};
+    copy3(q.position, t.triangle.p[k]);
+    copy3(q.normal, t.triangle.normal[k]);
+    copy_colour(q.colour, t.triangle.colour[k]);
+    q.texcoord[0] = t.uv[k].x();
+    q.texcoord[1] = 1 - t.uv[k].y();
+    q.texcoord[2] = 1;
+    d_->triangles.push_back(q);
+  }
+}
+
 double gl_renderer::draw() {
   const auto t0 = std::chrono::steady_clock::now();
   impl& d = *d_;
@@ -380,6 +424,20 @@ double gl_renderer::draw() {
   };
   if (!d.triangles.empty()) {
     d.uniforms(d.programs[2]);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, d.gl_texture);
+    if (d.frame_texture != nullptr && d.frame_texture != d.uploaded) {
+      const pbr_lod::texture_image& t = *d.frame_texture;
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      glTexImage2D(GL_TEXTURE_2D, 0, GL_RGB8, t.width, t.height, 0, GL_RGB, GL_UNSIGNED_BYTE,
+                   t.texels.data());
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_REPEAT);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_REPEAT);
+      d.uploaded = d.frame_texture;
+    }
+    glUniform1i(glGetUniformLocation(d.programs[2], "tex"), 0);
     if (d.o.fx.backface_cull)
       glEnable(GL_CULL_FACE);
     else

@@ -9,7 +9,8 @@
 //              pixel centre the exact (s, t) of the splat-plane point it sees, and the fragment
 //              shader keeps s² + t² ≤ 1: the exact perspective projection of the ellipse, as
 //              raster_ellipse computes it, with the depth of the splat's plane.
-//   triangles  GL_TRIANGLES with per-vertex normal and colour, shaded per fragment.
+//   triangles  GL_TRIANGLES with per-vertex normal and colour, shaded per fragment; textured
+//              ones (POP leaves) sample their texture (GL_LINEAR, GL_REPEAT) for the colour.
 //
 // Shading as the CPU rasteriser: Lambert with one directional light and ambient, two-sided
 // (the normal turned towards the eye; for triangles, flipped on the back face), per primitive for
@@ -50,6 +51,7 @@ class gl_renderer final : public pbrlod_tool::host_sink {
   void point(const pbr_lod::point_prim<host_attributes>& p) override;
   void splat(const pbr_lod::splat_prim<host_attributes>& s) override;
   void triangle(const pbr_lod::triangle_prim<host_attributes>& t) override;
+  void textured_triangle(const pbr_lod::textured_triangle_prim<host_attributes>& t) override;
 
   /// Uploads the frame's arrays and draws them into the bound framebuffer, whose size must be
   /// the view's. Returns the GPU time (glFinish included) in seconds.

@@ -58,6 +58,11 @@ class host_sink {
   virtual void point(const point_prim<host_attributes>& p) = 0;
   virtual void splat(const splat_prim<host_attributes>& s) = 0;
   virtual void triangle(const triangle_prim<host_attributes>& t) = 0;
+  /// A texture-mapped triangle (POP's leaves from a textured mesh); a host that does not
+  /// texture draws the triangle_prim inside.
+  virtual void textured_triangle(const textured_triangle_prim<host_attributes>& t) {
+    triangle(t.triangle);
+  }
 };
 
 /// What one frame is drawn from.
@@ -108,6 +113,9 @@ frame host_frame(const H& h, const view& v, const render_options& o, const trave
     void point(const point_prim<host_attributes>& p) { out.point(p); }
     void splat(const splat_prim<host_attributes>& s) { out.splat(s); }
     void triangle(const triangle_prim<host_attributes>& q) { out.triangle(q); }
+    void textured_triangle(const textured_triangle_prim<host_attributes>& q) {
+      out.textured_triangle(q);
+    }
   } fw{host};
   widening_sink<H::attrs, host_attributes, forward> widen{fw};
   cut.replay(widen);

@@ -688,6 +688,8 @@ struct pop_build_state {
   std::shared_ptr<const normal_quantizer> shared_quant;
   const normal_quantizer& quant;
   const bool textured, qn, exact;
+  /// With colours from a texture: the leaves keep their texture coordinates and the texture.
+  const bool keep_texture;
   const unsigned threads;
   const std::size_t nv, nf;
   const std::vector<vec3f>& P;
@@ -720,6 +722,7 @@ struct pop_build_state {
         textured(!m.face_texcoords.empty() && !m.texture_path.empty()),
         qn(o.quantise_nodes),
         exact(o.spheres == pop_sphere_rule::exact),
+        keep_texture(c && textured),
         threads(o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency())),
         nv(m.num_vertices()),
         nf(m.num_faces()),
@@ -913,6 +916,9 @@ void pop_build_state::colour_vertices() {
     tex.img = read_png_texture(mesh.texture_path);
     if (tex.img.width <= 0 || tex.img.height <= 0)
       throw FormatError(mesh.texture_path + ": empty texture");
+    if (tex.img.texels.size() !=
+        static_cast<std::size_t>(tex.img.width) * static_cast<std::size_t>(tex.img.height))
+      throw FormatError(mesh.texture_path + ": texel count does not match the size");
     for (std::size_t f = 0; f < nf; ++f)
       for (const auto& uv : mesh.face_texcoords[f])
         if (!all_finite(uv))
@@ -1083,6 +1089,7 @@ void pop_build_state::lay_out_nodes() {
   d.faces.swap(nbr);
   std::vector<face_slots>().swap(nbr);
   if (d.faces.size() != nf) d.faces.resize(nf);
+  if (keep_texture) d.face_texcoords.resize(nf);
   // A leaf's group's members start at gfaces[leaf_members[i]] (one dependent load fewer than
   // through the group's index in the bottom-up pass, where each is a likely cache miss).
   resize_fresh(leaf_members, nn, threads);
@@ -1352,6 +1359,9 @@ void pop_build_state::gather(std::size_t i) {
   std::array<std::uint32_t, 3>* tri = d.faces.data() + nd.first;
   const std::uint32_t* members = gfaces.data() + leaf_members[i];
   for (std::size_t j = 0; j < nd.count; ++j) tri[j] = mesh.faces[members[j]];
+  if (keep_texture)  // the corners' texture coordinates follow their faces (Figure 5)
+    for (std::size_t j = 0; j < nd.count; ++j)
+      d.face_texcoords[nd.first + j] = mesh.face_texcoords[members[j]];
 }
 
 /// Nodes [a, b) of one level (their children are done), in blocks of `block`.
@@ -1488,6 +1498,11 @@ pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& opt, bool 
   s.lay_out_nodes();
   s.spheres_and_cones();                         // §3.1 spheres, normals, cones, bottom up
   if (opt.quantise_nodes) s.quantise_spheres();  // §3.5, top down
+  if (s.keep_texture) {  // Figure 5: leaves drawn texture-mapped (RGB; alpha is not kept)
+    texture_image img = std::move(s.tex.img);
+    img.alpha.clear();
+    s.d.texture = std::make_shared<const texture_image>(std::move(img));
+  }
   s.finish_stats(t0, t_prep, clock::now());
   return std::move(s.d);
 }

@@ -2,6 +2,7 @@
 // of every count and index, and the file's size accounting.
 
 #include <cstring>
+#include <memory>
 #include <numeric>
 #include <string>
 #include <vector>
@@ -19,13 +20,16 @@ using namespace pop_internal;
 
 // ---------------------------------------------------------------------------------------------
 // Storage (§3.5). Little-endian file, version 3:
-//   header   "PBRLODPP" | u32 version | u32 flags (1 = colour, 2 = quantised nodes)
+//   header   "PBRLODPP" | u32 version | u32 flags (1 = colour, 2 = quantised nodes, 4 = texture;
+//            4 only with 1)
 //            | u32 normal_bits | u32 sphere rule | u32 adjacency
 //            | u64 vertices | u64 faces | u64 nodes | f64 origin[3] | f32 q_min[3] | f32 q_step[3]
 //            | build stats: u64 isolated, non-manifold edges, degenerate, contained_inner
 //            | quantised nodes only: f32 root centre[3], f32 root radius
+//            | texture only: u32 texture width | u32 texture height
 //   vertices u16 q[3] | normal code (u16 when normal_bits ≤ 16, else u32) | [u8 rgb[3]]
 //   faces    u32 v[3]                          (in leaf order)
+//   texture only: per face f32 uv[3][2]        (its corners' texture coordinates, leaf order)
 //   nodes    quantised (QSplat-style, breadth first; first child / first face, parent and depth
 //            are derived from the counts):
 //              u16 sphere code (4 bits each: centre x, y, z offset, radius; levels 0..12;
@@ -33,6 +37,9 @@ using namespace pop_internal;
 //              4 leaf; 5–7 zero) | [u16 RGB 565]
 //            float: f32 centre[3] | f32 radius | f32 cone | normal code | u32 first | u8 count
 //              | u8 leaf | [u8 rgb[3]]
+//   texture only: u8 rgb[3] per texel, width × height, rows top to bottom (embedded, so a file
+//            is self-contained and its bytes depend on the texels only, not on where the
+//            image was)
 //   trailer  u64 FNV-1a of every byte before it
 // Versions 1 (float nodes, fewer stats) and 2 (the build's timings, so no two builds compared
 // equal) are rejected: rebuild the file.
@@ -49,6 +56,15 @@ std::size_t vertex_bytes(int bits, bool colour) {
   return 6 + code_bytes(bits) + (colour ? 3 : 0);
 }
 constexpr std::size_t face_bytes = 12;
+constexpr std::size_t texcoord_bytes = 24;  // per face
+constexpr std::size_t texture_head_bytes = 8;
+/// What a textured file adds: the texture's size, the faces' texture coordinates, the texels.
+std::size_t texture_file_bytes(const pop_data& d) {
+  if (!d.texture) return 0;
+  return texture_head_bytes + d.faces.size() * texcoord_bytes +
+         static_cast<std::size_t>(d.texture->width) * static_cast<std::size_t>(d.texture->height) *
+             3;
+}
 std::size_t node_bytes(int bits, bool colour, bool quantised) {
   if (quantised) return 2 + code_bytes(bits) + 1 + (colour ? 2 : 0);
   return 12 + 4 + 4 + code_bytes(bits) + 4 + 1 + 1 + (colour ? 3 : 0);
@@ -60,7 +76,8 @@ std::size_t pop_file_bytes(const pop_data& d) {
   const bool colour = !d.node_colours.empty();
   return header_bytes + (d.quantised_nodes ? root_bytes : 0) +
          d.positions.size() * vertex_bytes(d.normal_bits, colour) + d.faces.size() * face_bytes +
-         d.nodes.size() * node_bytes(d.normal_bits, colour, d.quantised_nodes) + 8;
+         d.nodes.size() * node_bytes(d.normal_bits, colour, d.quantised_nodes) +
+         texture_file_bytes(d) + 8;
 }
 
 void pop_internal::set_file_stats(pop_data& d, std::size_t size) {
@@ -77,11 +94,12 @@ void pop_internal::set_file_stats(pop_data& d, std::size_t size) {
 void save_pop_data(const pop_data& d, const std::string& path) {
   const bool colour = !d.node_colours.empty();
   const bool qn = d.quantised_nodes;
+  const bool textured = colour && d.texture != nullptr;
   const int bits = d.normal_bits;
   byte_writer w;
   w.bytes.reserve(pop_file_bytes(d));
   write_head(w, pop_format);
-  w.put(static_cast<std::uint32_t>((colour ? 1u : 0u) | (qn ? 2u : 0u)));
+  w.put(static_cast<std::uint32_t>((colour ? 1u : 0u) | (qn ? 2u : 0u) | (textured ? 4u : 0u)));
   w.put(static_cast<std::uint32_t>(bits));
   w.put(static_cast<std::uint32_t>(d.spheres));
   w.put(static_cast<std::uint32_t>(d.adjacency));
@@ -99,6 +117,10 @@ void save_pop_data(const pop_data& d, const std::string& path) {
     for (int k = 0; k < 3; ++k) w.put(d.nodes[0].centre[k]);
     w.put(d.nodes[0].radius);
   }
+  if (textured) {
+    w.put(static_cast<std::uint32_t>(d.texture->width));
+    w.put(static_cast<std::uint32_t>(d.texture->height));
+  }
   for (std::size_t i = 0; i < d.positions.size(); ++i) {
     for (auto q : d.vertex_q[i]) w.put(q);
     w.put_code(d.vertex_normal_codes[i], bits);
@@ -106,6 +128,12 @@ void save_pop_data(const pop_data& d, const std::string& path) {
   }
   for (const auto& f : d.faces)
     for (auto v : f) w.put(v);
+  if (textured)
+    for (const auto& uv : d.face_texcoords)
+      for (const auto& c : uv) {
+        w.put(c.x());
+        w.put(c.y());
+      }
   for (std::size_t i = 0; i < d.nodes.size(); ++i) {
     const auto& nd = d.nodes[i];
     if (qn) {
@@ -125,6 +153,8 @@ void save_pop_data(const pop_data& d, const std::string& path) {
     w.put(nd.leaf);
     if (colour) w.put(d.node_colours[i]);
   }
+  if (textured)
+    for (const rgb8& t : d.texture->texels) w.put(t);
   append_checksum(w);
   save_file_bytes(path, w.bytes);
 }
@@ -132,7 +162,8 @@ void save_pop_data(const pop_data& d, const std::string& path) {
 namespace {
 /// What the header says about the rest of the file.
 struct pop_file_head {
-  bool colour = false, qn = false;
+  bool colour = false, qn = false, textured = false;
+  std::uint64_t tex_w = 0, tex_h = 0;  // textured only
   int bits = 0;
   std::uint64_t nv = 0, nf = 0, nn = 0, size = 0;
   vec3f root_centre = vec3f::Zero();  // quantised nodes only
@@ -147,9 +178,11 @@ pop_file_head read_pop_head(byte_reader& r, const std::vector<unsigned char>& by
   h.colour = colour;
   read_head(r, pop_format, 2);  // 1: float node records; 2: timings in the file
   const auto flags = r.get<std::uint32_t>("flags");
-  if (flags & ~3u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
+  if (flags & ~7u) throw FormatError(path + ": unknown flags " + std::to_string(flags));
   check_colour_flag((flags & 1u) != 0, colour, path, "pop_tree");
   h.qn = (flags & 2u) != 0;
+  h.textured = (flags & 4u) != 0;
+  if (h.textured && !colour) throw FormatError(path + ": texture flag without the colour flag");
   h.bits = static_cast<int>(r.get<std::uint32_t>("normal bits"));
   if (h.bits < normal_quantizer::min_bits || h.bits > normal_quantizer::max_bits)
     throw FormatError(path + ": normal bits " + std::to_string(h.bits) + " outside 6..24");
@@ -162,9 +195,28 @@ pop_file_head read_pop_head(byte_reader& r, const std::vector<unsigned char>& by
   const auto nn = h.nn = r.get<std::uint64_t>("node count");
   const std::uint64_t vb = vertex_bytes(h.bits, colour), nb = node_bytes(h.bits, colour, h.qn);
   const std::uint64_t size = h.size = bytes.size();
+  // The texture's size sits at the end of the header (read in order below): peeked here so
+  // that the size check covers the whole file before anything is allocated.
+  std::uint64_t texture_bytes = 0;
+  if (h.textured) {
+    const std::uint64_t at = header_bytes + (h.qn ? root_bytes : 0);
+    if (at + texture_head_bytes > size) throw FormatError(path + ": truncated header");
+    std::uint32_t wh[2];
+    std::memcpy(wh, bytes.data() + at, sizeof wh);
+    h.tex_w = wh[0];
+    h.tex_h = wh[1];
+    if (h.tex_w == 0 || h.tex_h == 0 || h.tex_w > 0x7fffffffu || h.tex_h > 0x7fffffffu ||
+        h.tex_w > size / 3 || h.tex_h > size / 3 / h.tex_w || nf > size / texcoord_bytes)
+      throw FormatError(path + ": texture of " + std::to_string(h.tex_w) + " × " +
+                        std::to_string(h.tex_h) + " texels for " + std::to_string(nf) +
+                        " faces does not fit in the file size " + std::to_string(size));
+    texture_bytes = texture_head_bytes + nf * texcoord_bytes + h.tex_w * h.tex_h * 3;
+  }
   if (nv == 0 || nf == 0 || nn == 0 || nv >= none || nf >= none || nn >= none || nv > size / vb ||
       nf > size / face_bytes || nn > size / nb ||
-      header_bytes + (h.qn ? root_bytes : 0) + nv * vb + nf * face_bytes + nn * nb + 8 != size)
+      header_bytes + (h.qn ? root_bytes : 0) + nv * vb + nf * face_bytes + nn * nb + texture_bytes +
+              8 !=
+          size)
     throw FormatError(path + ": " + std::to_string(nv) + " vertices, " + std::to_string(nf) +
                       " faces and " + std::to_string(nn) + " nodes do not match the file size " +
                       std::to_string(size));
@@ -189,6 +241,10 @@ pop_file_head read_pop_head(byte_reader& r, const std::vector<unsigned char>& by
     if (!(h.root_radius >= 0) || !std::isfinite(h.root_radius * 2))
       throw FormatError(path + ": root radius " + std::to_string(h.root_radius) +
                         " is negative or too large");
+  }
+  if (h.textured) {  // checked above
+    (void)r.get<std::uint32_t>("texture width");
+    (void)r.get<std::uint32_t>("texture height");
   }
   return h;
 }
@@ -228,6 +284,24 @@ void read_pop_mesh(byte_reader& r, const pop_file_head& h, const normal_quantize
         throw FormatError(path + ": face " + std::to_string(i) + " references vertex " +
                           std::to_string(v) + ", but there are " + std::to_string(nv));
     }
+  if (!h.textured) return;
+  resize_fresh(d.face_texcoords, nf, 1);
+  for (std::size_t i = 0; i < nf; ++i)
+    for (auto& uv : d.face_texcoords[i]) {
+      const float u = r.get_finite("face texture coordinate", i);
+      uv = vec2f(u, r.get_finite("face texture coordinate", i));
+    }
+}
+
+/// The embedded texture (any texel value is valid; its size was checked with the header).
+void read_pop_texture(byte_reader& r, const pop_file_head& h, pop_data& d) {
+  if (!h.textured) return;
+  texture_image img;
+  img.width = static_cast<int>(h.tex_w);
+  img.height = static_cast<int>(h.tex_h);
+  img.texels.resize(h.tex_w * h.tex_h);
+  for (rgb8& t : img.texels) t = r.get<rgb8>("texel");
+  d.texture = std::make_shared<const texture_image>(std::move(img));
 }
 
 /// The node records. Quantised records leave the spheres (relative to the parent) and `first`
@@ -365,6 +439,7 @@ pop_data load_pop_data(const std::string& path, bool colour) {
   const auto shared_quant = normal_quantizer::shared(h.bits);
   read_pop_mesh(r, h, *shared_quant, path, d);
   read_pop_nodes(r, h, *shared_quant, path, d);
+  read_pop_texture(r, h, d);
   if (h.qn) link_quantised_nodes(h, path, d);
   check_pop_tree(h, path, d);
   d.stats.vertices = h.nv;
@@ -388,7 +463,10 @@ bool operator==(const pop_data& a, const pop_data& b) {
          a.node_normal_codes == b.node_normal_codes && a.normal_bits == b.normal_bits &&
          a.spheres == b.spheres && a.adjacency == b.adjacency &&
          a.quantised_nodes == b.quantised_nodes && a.node_sphere_codes == b.node_sphere_codes &&
-         untimed(a.stats) == untimed(b.stats);
+         untimed(a.stats) == untimed(b.stats) && a.face_texcoords == b.face_texcoords &&
+         (a.texture == b.texture ||
+          (a.texture && b.texture && a.texture->width == b.texture->width &&
+           a.texture->height == b.texture->height && a.texture->texels == b.texture->texels));
 }
 
 }  // namespace pbr_lod::detail

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -19,6 +20,7 @@
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/io/texture.hpp"
 #include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/png.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
@@ -1380,6 +1382,312 @@ TEST(PopRender, VisibilityTwoPassHidesTheSurfaceBehindTheGaps) {
     traverse(t, v, o, c, pol);
     EXPECT_GT(c.points, 500u);
     EXPECT_EQ(c.occluders, mode == pop_point_mode::visibility_two_pass ? c.points : 0u);
+  }
+}
+
+}  // namespace
+}  // namespace pbr_lod
+
+// ---- texture-mapped leaves (Figure 5) ---------------------------------------------------------
+
+namespace pbr_lod {
+namespace {
+
+// An untextured mesh's file gains no bytes: the bunny with default options is the file the
+// format wrote before textures were kept (size and FNV-1a trailer of that file, as written by
+// the library before textured leaves existed; the bytes are the same for any thread count).
+TEST(PopTexture, UntexturedFileIsByteIdenticalToBefore) {
+  const auto t = build_pop<with_normals>(real_meshes::get().bunny);
+  EXPECT_EQ(t.texture(), nullptr);
+  EXPECT_TRUE(t.face_texcoords().empty());
+  const auto path = temp_path("bunny_untextured.lod");
+  t.save(path);
+  std::ifstream in(path, std::ios::binary);
+  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
+                                std::istreambuf_iterator<char>());
+  ASSERT_EQ(bytes.size(), 1263789u);
+  std::uint64_t trailer = 0;
+  std::memcpy(&trailer, bytes.data() + bytes.size() - 8, 8);
+  EXPECT_EQ(trailer, 0x7f446f7c1d7be19cull);
+  std::filesystem::remove(path);
+}
+
+/// A grid with texture coordinates = its (x, y) and a 5 × 3 PNG texture written to `png`.
+triangle_mesh textured_grid(int n, const std::string& png) {
+  image tex(5, 3);
+  for (std::size_t i = 0; i < tex.colour.size(); ++i)
+    tex.colour[i] = {static_cast<std::uint8_t>(40 * i), static_cast<std::uint8_t>(255 - 17 * i),
+                     static_cast<std::uint8_t>(i % 2 ? 200 : 30)};
+  tex.depth.assign(tex.colour.size(), 1.0f);
+  write_png(png, tex);
+  triangle_mesh m = grid_mesh(n);
+  m.texture_path = png;
+  for (const auto& f : m.faces) {
+    std::array<vec2f, 3> uv;
+    for (std::size_t k = 0; k < 3; ++k)
+      uv[k] = {m.vertices.positions[f[k]].x(), m.vertices.positions[f[k]].y()};
+    m.face_texcoords.push_back(uv);
+  }
+  return m;
+}
+
+// A textured build keeps each face's corner texture coordinates next to the face (leaf order)
+// and the texture; with_normals (no colours) keeps neither. The file round-trips exactly, and
+// damage anywhere — random bit flips, truncation, the texture's size, the texture flag — is a
+// FormatError (or an IoError), never a crash or a silently different tree.
+TEST(PopTexture, TexturedRoundTripAndDamage) {
+  const auto png = temp_path("tex.png");
+  const triangle_mesh m = textured_grid(10, png);
+  const auto t = build_pop<with_normals_colours>(m);
+  ASSERT_NE(t.texture(), nullptr);
+  EXPECT_EQ(t.texture()->width, 5);
+  EXPECT_EQ(t.texture()->height, 3);
+  ASSERT_EQ(t.face_texcoords().size(), t.faces().size());
+  std::map<std::array<std::uint32_t, 3>, std::size_t> face_of;
+  for (std::size_t f = 0; f < m.faces.size(); ++f) face_of.emplace(m.faces[f], f);
+  for (std::size_t f = 0; f < t.faces().size(); ++f)
+    EXPECT_EQ(t.face_texcoords()[f], m.face_texcoords[face_of.at(t.faces()[f])]) << f;
+  EXPECT_EQ(build_pop<with_normals>(m).file_bytes(),
+            build_pop<with_normals>(grid_mesh(10)).file_bytes());
+
+  const auto path = temp_path("textured.lod");
+  t.save(path);
+  EXPECT_EQ(std::filesystem::file_size(path), t.file_bytes());
+  // What the texture adds: its size (8 B), 24 B of texture coordinates per face, 3 B per texel.
+  const auto plain = [&] {
+    auto u = m;
+    u.face_texcoords.clear();
+    u.texture_path.clear();
+    u.vertices.colours.assign(u.vertices.positions.size(), rgb8{});
+    return build_pop<with_normals_colours>(u);
+  }();
+  EXPECT_EQ(t.file_bytes(), plain.file_bytes() + 8 + 24 * t.faces().size() + 5 * 3 * 3);
+  const auto back = pop_nc::load(path);
+  EXPECT_EQ(back, t);
+  ASSERT_NE(back.texture(), nullptr);
+  EXPECT_EQ(back.texture()->texels, t.texture()->texels);
+  EXPECT_THROW((void)pop_n::load(path), FormatError);  // the attribute set differs
+
+  std::ifstream in(path, std::ios::binary);
+  const std::vector<char> good((std::istreambuf_iterator<char>(in)),
+                               std::istreambuf_iterator<char>());
+  in.close();
+  const auto write = [&](const std::vector<char>& bytes) {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  };
+  std::mt19937 rng(2323);  // seeded: failures reproduce
+  std::uniform_int_distribution<std::size_t> pos(0, good.size() - 1);
+  std::uniform_int_distribution<int> bit(0, 7);
+  for (int i = 0; i < 300; ++i) {
+    auto bad = good;
+    bad[pos(rng)] ^= static_cast<char>(1 << bit(rng));
+    write(bad);
+    EXPECT_THROW((void)pop_nc::load(path), Error) << "flip " << i;
+  }
+  // The last bytes are the texels and the trailer: cut there and in the texture coordinates.
+  for (std::size_t cut : {good.size() - 1, good.size() - 9, good.size() - 30, good.size() / 2}) {
+    write(std::vector<char>(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(cut)));
+    EXPECT_THROW((void)pop_nc::load(path), FormatError) << "truncated at " << cut;
+  }
+  // The texture's size (the header's last 8 bytes before the vertices): too large for the file,
+  // zero, or one texel off — each caught by the size check before anything is allocated.
+  const std::size_t at = 8 + 4 * 5 + 8 * 3 + 8 * 3 + 4 * 6 + 8 * 4 + 16;
+  for (const std::uint32_t w : {0u, 4u, 6u, 0xffffffffu}) {
+    auto bad = good;
+    std::memcpy(bad.data() + at, &w, 4);
+    write(bad);
+    EXPECT_THROW((void)pop_nc::load(path), FormatError) << "width " << w;
+  }
+  // The texture flag cleared (the file then has bytes left over) or set on an untextured file.
+  {
+    auto bad = good;
+    bad[12] = static_cast<char>(bad[12] & ~4);
+    write(bad);
+    EXPECT_THROW((void)pop_nc::load(path), FormatError);
+    plain.save(path);
+    std::ifstream pin(path, std::ios::binary);
+    std::vector<char> p((std::istreambuf_iterator<char>(pin)), std::istreambuf_iterator<char>());
+    pin.close();
+    p[12] = static_cast<char>(p[12] | 4);
+    write(p);
+    EXPECT_THROW((void)pop_nc::load(path), FormatError);
+  }
+  std::filesystem::remove(path);
+  std::filesystem::remove(png);
+}
+
+/// Box filter of k × k pixels: the colour is the mean over the block (background included, so
+/// edges are antialiased), the depth the nearest covered sample's (infinite when none is).
+image downsample(const image& big, int k) {
+  image small(big.width / k, big.height / k);
+  small.depth.assign(small.colour.size(), std::numeric_limits<float>::infinity());
+  for (int y = 0; y < small.height; ++y)
+    for (int x = 0; x < small.width; ++x) {
+      std::array<double, 3> sum{};
+      float depth = std::numeric_limits<float>::infinity();
+      for (int j = 0; j < k; ++j)
+        for (int i = 0; i < k; ++i) {
+          const std::size_t b = static_cast<std::size_t>(y * k + j) * big.width + (x * k + i);
+          sum[0] += big.colour[b].r;
+          sum[1] += big.colour[b].g;
+          sum[2] += big.colour[b].b;
+          if (std::isfinite(big.depth[b])) depth = std::min(depth, big.depth[b]);
+        }
+      const std::size_t s = static_cast<std::size_t>(y) * small.width + x;
+      const double n = k * k;
+      small.colour[s] = {static_cast<std::uint8_t>(std::lround(sum[0] / n)),
+                         static_cast<std::uint8_t>(std::lround(sum[1] / n)),
+                         static_cast<std::uint8_t>(std::lround(sum[2] / n))};
+      small.depth[s] = depth;
+    }
+  return small;
+}
+
+/// Forwards everything but textured triangles: a sink without the hook (leaves drawn with
+/// per-vertex colours, as before textures were kept).
+struct flat_leaves {
+  buffer_sink<with_normals_colours>& b;
+  void point(const point_prim<with_normals_colours>& p) { b.point(p); }
+  void splat(const splat_prim<with_normals_colours>& s) { b.splat(s); }
+  void triangle(const triangle_prim<with_normals_colours>& t) { b.triangle(t); }
+};
+
+struct cow_scene {
+  triangle_mesh mesh = read_mesh(test::data_file("cow.obj"));
+  pop_nc tree = build_pop<with_normals_colours>(mesh);
+  texture_image tex = read_png_texture(mesh.texture_path);
+  static const cow_scene& get() {
+    static const cow_scene s;
+    return s;
+  }
+  [[nodiscard]] camera cam(double dist, int size) const {
+    const sphere b = bounding_sphere_about_box_centre(tree.positions());
+    return camera::orbit(tree.origin() + b.centre.cast<double>(), b.radius, 30, 20, dist, 1,
+                         {size, size});
+  }
+  /// The full mesh, every triangle texture-mapped from its own (unquantised) corners, at
+  /// `ss` × the resolution, box-filtered down: the reference of §3.1/Figure 5.
+  [[nodiscard]] image reference(double dist, int size, int ss, const render_options& ro) const {
+    const camera c = cam(dist, size * ss);
+    const view v(c, mesh.vertices.origin);
+    const image big = render<with_normals_colours>(v, ro, [&](auto& sink) {
+      for (std::size_t f = 0; f < mesh.faces.size(); ++f) {
+        textured_triangle_prim<with_normals_colours> t;
+        for (std::size_t k = 0; k < 3; ++k) {
+          t.triangle.p[k] = mesh.vertices.positions[mesh.faces[f][k]];
+          t.triangle.normal[k] = vec3f::UnitZ();
+        }
+        t.uv = mesh.face_texcoords[f];
+        t.texture = &tex;
+        sink.textured_triangle(t);
+      }
+    });
+    return downsample(big, ss);
+  }
+};
+
+// Figure 5 on the Spot cow: close up, the leaves drawn texture-mapped must be nearer the
+// supersampled textured reference than the same leaves with per-vertex colours (texels under
+// the corners averaged), by a margin; colour only (no shading), so the texture is what differs.
+// The sink without the hook draws the same cut, so only the leaves' colours differ.
+TEST(PopTexture, CowCloseUpTexturedLeavesBeatFlatOnes) {
+  const auto& s = cow_scene::get();
+  const render_options ro{.fx = {.shading = false, .colour = true}};
+  constexpr int size = 256, ss = 4;
+  for (const double dist : {1.2, 2.0}) {
+    const image ref = s.reference(dist, size, ss, ro);
+    const camera c = s.cam(dist, size);
+    const view v(c, s.tree.origin());
+    const traverse_options o{.tolerance_px = 1, .metric = projection_metric::eye_z};
+    const image textured = render<with_normals_colours>(
+        v, ro, [&](auto& sink) { traverse(s.tree, v, o, sink, pop_policy{}); });
+    const image flat = render<with_normals_colours>(v, ro, [&](auto& sink) {
+      flat_leaves f{sink};
+      traverse(s.tree, v, o, f, pop_policy{});
+    });
+    const image_error et = compare_images(ref, textured), ef = compare_images(ref, flat);
+    std::cout << "cow at " << dist << " radii, 1 px: textured leaves " << et.psnr
+              << " dB, flat leaves " << ef.psnr << " dB (reference " << ss << "x" << ss
+              << " supersampled)\n";
+    EXPECT_GT(et.psnr, ef.psnr + 3.0) << "distance " << dist;
+    EXPECT_EQ(textured.depth, flat.depth);  // the same cut, the same triangles
+  }
+}
+
+// A sink without the textured hook draws what every sink drew before textures were kept: the
+// image of the textured cow through such a sink is byte-identical to the leaves' triangles sent
+// as the triangle_prims the tree held before (positions, normals, per-vertex colours), shaded.
+TEST(PopTexture, SinksWithoutTheHookDrawWhatTheyDrewBefore) {
+  const auto& s = cow_scene::get();
+  ASSERT_NE(s.tree.texture(), nullptr);
+  const render_options ro{.fx = {.shading = true, .colour = true}};
+  const view v(s.cam(1.5, 256), s.tree.origin());
+  const traverse_options o{.tolerance_px = 1, .metric = projection_metric::eye_z};
+  const image flat = render<with_normals_colours>(v, ro, [&](auto& sink) {
+    flat_leaves f{sink};
+    traverse(s.tree, v, o, f, pop_policy{});
+  });
+  const image before = render<with_normals_colours>(v, ro, [&](auto& sink) {
+    buffer_sink<with_normals_colours> cut;
+    traverse(s.tree, v, o, cut, pop_policy{});
+    ASSERT_FALSE(cut.textured_triangles.empty());
+    ASSERT_TRUE(cut.triangles.empty() && cut.points.empty());
+    for (const auto& t : cut.textured_triangles) {
+      triangle_prim<with_normals_colours> p;
+      p.p = t.triangle.p;
+      p.normal = t.triangle.normal;
+      p.colour = t.triangle.colour;
+      sink.triangle(p);
+    }
+  });
+  EXPECT_EQ(flat.colour, before.colour);
+  EXPECT_EQ(flat.depth, before.depth);
+  const image textured = render<with_normals_colours>(
+      v, ro, [&](auto& sink) { traverse(s.tree, v, o, sink, pop_policy{}); });
+  EXPECT_EQ(textured.depth, flat.depth);
+  EXPECT_NE(textured.colour, flat.colour);
+}
+
+// Figure 5's threshold comparison: 1 px (every node larger than a pixel drawn as its
+// texture-mapped triangles) against 2 px, drawn with simplified splatting and as the paper's 5a
+// (visibility splatting, then image reconstruction of radius 2 in screen space). At each
+// distance: points and triangles drawn and the error against the supersampled textured
+// reference. A larger threshold draws at least as many inner nodes as points (prefiltered
+// colours) and does not improve the image by more than rounding.
+TEST(PopTexture, OneAndTwoPixelThresholds) {
+  const auto& s = cow_scene::get();
+  const render_options ro{.fx = {.shading = false, .colour = true}};
+  render_options filled = ro;
+  filled.fx.hole_filling = true;
+  filled.hole_filling_radius = 2;
+  constexpr int size = 256, ss = 4;
+  for (const double dist : {2.0, 12.0, 24.0, 48.0}) {
+    const image ref = s.reference(dist, size, ss, ro);
+    const camera c = s.cam(dist, size);
+    const view v(c, s.tree.origin());
+    const auto run = [&](float px, pop_point_mode mode, const render_options& opt,
+                         const char* what) {
+      const traverse_options o{.tolerance_px = px, .metric = projection_metric::eye_z};
+      pop_policy pol;
+      pol.points = mode;
+      counting_sink<with_normals_colours> n;
+      traverse(s.tree, v, o, n, pol);
+      const image img = render<with_normals_colours>(
+          v, opt, [&](auto& sink) { traverse(s.tree, v, o, sink, pol); });
+      const image_error e = compare_images(ref, img);
+      std::cout << "cow at " << dist << " radii, " << what << ": " << n.points << " points + "
+                << n.triangles << " triangles, " << e.psnr << " dB, holes " << e.hole_fraction
+                << "\n";
+      return std::pair{n.points, e.psnr};
+    };
+    const auto one = run(1, pop_point_mode::simplified, ro, "1 px");
+    const auto two = run(2, pop_point_mode::simplified, ro, "2 px");
+    const auto two_filled =
+        run(2, pop_point_mode::visibility_two_pass, filled, "2 px, visibility + filter");
+    EXPECT_GE(two.first, one.first) << "distance " << dist;
+    EXPECT_LE(two.second, one.second + 0.5) << "distance " << dist;
+    EXPECT_LE(two_filled.second, one.second + 0.5) << "distance " << dist;
   }
 }
 

@@ -19,6 +19,10 @@
 //               else the 2-, 3- and 4-child constructions) — pop_sphere_rule::paper — or the
 //               exact smallest enclosing sphere (CGAL Min_sphere_of_spheres_d) —
 //               pop_sphere_rule::exact. Normal cones per node for back-face culling.
+//   §3.1, Fig. 5 with a texture, the leaves keep their triangles' texture coordinates and the tree
+//               the texture: leaves are drawn texture-mapped (backward mapping; a
+//               textured_triangle_prim to sinks that take it), inner nodes as points with the
+//               averaged (prefiltered) texel colours.
 //   §3.2        RENDER: frustum and back-face culling, refine while the splat size exceeds the
 //               threshold, a point for an inner node, the leaf's 1–4 triangles at a leaf, the
 //               optional silhouette rule — pop_policy with the generic traverse().
@@ -52,6 +56,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <ranges>
 #include <string>
@@ -161,6 +166,11 @@ struct pop_data {
   std::vector<std::array<std::uint32_t, 3>> faces;  ///< in leaf order
   std::vector<pop_node> nodes;
   std::vector<rgb8> node_colours;  ///< or empty
+  /// Textured builds (colours from a mesh with texture coordinates and a texture): each face's
+  /// corner texture coordinates, in leaf order as `faces`, and the texture (RGB) they index, for
+  /// drawing leaves texture-mapped (Figure 5). Otherwise empty and null.
+  std::vector<std::array<vec2f, 3>> face_texcoords;
+  std::shared_ptr<const texture_image> texture;
   // storage (§3.5): what the file holds and the in-memory values are derived from
   std::vector<std::array<std::uint16_t, 3>> vertex_q;
   vec3f q_min = vec3f::Zero(), q_step = vec3f::Zero();
@@ -253,7 +263,10 @@ class pop_tree {
     if constexpr (A.colour) p.colour = d_.node_colours[n];
     sink.point(p);
   }
-  /// A leaf's 1–4 triangles with per-vertex normals (and colours).
+  /// A leaf's 1–4 triangles with per-vertex normals (and colours). A textured tree sends a sink
+  /// that takes them (TexturedTriangleSink) textured_triangle_prims — the same triangles with
+  /// their corners' texture coordinates and the tree's texture, drawn by backward mapping
+  /// (Figure 5); every other sink gets the triangle_prims alone.
   template <class S>
   void emit_triangles(node_id n, S& sink) const {
     const node& nd = d_.nodes[n];
@@ -262,6 +275,13 @@ class pop_tree {
       triangle_prim<A> t{{d_.positions[F[0]], d_.positions[F[1]], d_.positions[F[2]]}};
       t.normal = {d_.normals[F[0]], d_.normals[F[1]], d_.normals[F[2]]};
       if constexpr (A.colour) t.colour = {d_.colours[F[0]], d_.colours[F[1]], d_.colours[F[2]]};
+      if constexpr (A.colour && TexturedTriangleSink<S, A>) {
+        if (d_.texture) {
+          sink.textured_triangle(
+              textured_triangle_prim<A>{t, d_.face_texcoords[f], d_.texture.get()});
+          continue;
+        }
+      }
       sink.triangle(t);
     }
   }
@@ -289,6 +309,12 @@ class pop_tree {
   [[nodiscard]] const std::vector<vec3f>& vertex_normals() const { return d_.normals; }
   [[nodiscard]] const std::vector<std::array<std::uint32_t, 3>>& faces() const { return d_.faces; }
   [[nodiscard]] rgb8 node_colour(node_id n) const requires(A.colour) { return d_.node_colours[n]; }
+  /// The texture of a textured tree (leaves drawn texture-mapped), else null.
+  [[nodiscard]] const texture_image* texture() const { return d_.texture.get(); }
+  /// Per face (in faces() order) its corners' texture coordinates; empty unless textured.
+  [[nodiscard]] const std::vector<std::array<vec2f, 3>>& face_texcoords() const {
+    return d_.face_texcoords;
+  }
   [[nodiscard]] pop_sphere_rule sphere_rule() const { return d_.spheres; }
   [[nodiscard]] pop_adjacency adjacency() const { return d_.adjacency; }
   /// True when the node records are QSplat-quantised (pop_options::quantise_nodes).
@@ -330,7 +356,8 @@ class pop_tree {
 
 /// Builds the POP tree of a triangle mesh. Vertex normals are the mesh's, else area-weighted
 /// face normals. With colours (A.colour): the texture's texels when the mesh has texture
-/// coordinates and a texture, else its vertex colours; InvalidArgument when it has neither.
+/// coordinates and a texture, else its vertex colours; InvalidArgument when it has neither. A
+/// tree built from a texture keeps it and the leaves' texture coordinates (emit_triangles()).
 /// Throws InvalidArgument on an empty or invalid mesh (NaN/Inf, out-of-range indices) or bad
 /// options, IoError/FormatError when the texture cannot be read.
 template <attributes A>

@@ -60,6 +60,37 @@ namespace pbr_lod {
           e.shadows, e.hole_filling, e.blending && (shading || colour)};
 }
 
+namespace detail {
+/// Bilinear sample of `tex` at texel-space (x, y) with texel centres on integers, wrapping
+/// (GL_REPEAT): the four texels around (x, y) weighted by their distances. Non-finite
+/// coordinates give texel (0, 0).
+[[nodiscard]] inline rgb8 sample_bilinear_repeat(const texture_image& tex, float x, float y) {
+  if (!std::isfinite(x) || !std::isfinite(y)) return tex.texels[0];
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float tx = x - fx, ty = y - fy;
+  const auto wrap = [](float f, int n) {
+    const double m = std::fmod(static_cast<double>(f), static_cast<double>(n));
+    const int i = static_cast<int>(m < 0 ? m + n : m);
+    return i >= n ? 0 : i;  // m + n may round up to n
+  };
+  const int w = tex.width, h = tex.height;
+  const int x0 = wrap(fx, w), y0 = wrap(fy, h);
+  const int x1 = x0 + 1 == w ? 0 : x0 + 1, y1 = y0 + 1 == h ? 0 : y0 + 1;
+  const auto at = [&](int i, int j) {
+    return tex.texels[static_cast<std::size_t>(j) * static_cast<std::size_t>(w) +
+                      static_cast<std::size_t>(i)];
+  };
+  const rgb8 c00 = at(x0, y0), c10 = at(x1, y0), c01 = at(x0, y1), c11 = at(x1, y1);
+  const auto mix = [tx, ty](std::uint8_t a, std::uint8_t b, std::uint8_t c, std::uint8_t d) {
+    const float top = float(a) + (float(b) - float(a)) * tx;
+    const float bottom = float(c) + (float(d) - float(c)) * tx;
+    return to_channel(top + (bottom - top) * ty);
+  };
+  return {mix(c00.r, c10.r, c01.r, c11.r), mix(c00.g, c10.g, c01.g, c11.g),
+          mix(c00.b, c10.b, c01.b, c11.b)};
+}
+}  // namespace detail
+
 /// A z-buffered rasteriser for one frame; models Sink<A>.
 ///
 /// E is the effect set, fixed at compile time (use render() to choose it at run time). Back-face
@@ -273,6 +304,56 @@ class rasterizer {
           }
           store(i, c);
         });
+  }
+
+  /// A texture-mapped triangle (traverse/primitives.hpp), drawn by backward mapping: each
+  /// covered pixel centre's texture coordinates are interpolated perspective-correctly (over 1/z,
+  /// as triangle()'s attributes) and the texture is sampled bilinearly between the four nearest
+  /// texel centres, wrapping at the edges (GL_REPEAT, as POP's texel averages do). The sample is
+  /// the albedo in place of the vertex colours; depth test, coverage, back-face culling and
+  /// shading are triangle()'s. Without the colour effect, without a texture, or with blending
+  /// (whose passes average per-vertex colours), it is triangle(t.triangle).
+  void textured_triangle(const textured_triangle_prim<A>& t) {
+    if constexpr (!fx.colour || fx.blending) {
+      triangle(t.triangle);
+    } else {
+      const texture_image* const tex = t.texture;
+      if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
+          tex->texels.size() !=
+              static_cast<std::size_t>(tex->width) * static_cast<std::size_t>(tex->height)) {
+        triangle(t.triangle);
+        return;
+      }
+      constexpr int NT = kNP + 2;
+      constexpr std::size_t kUvAt = static_cast<std::size_t>(kNP);
+      std::array<detail::tri_vertex<NT>, 3> v;
+      const float w = static_cast<float>(tex->width), h = static_cast<float>(tex->height);
+      for (std::size_t k = 0; k < 3; ++k) {
+        v[k].h = proj_.point(t.triangle.p[k]);
+        if constexpr (fx.shading)
+          for (int c = 0; c < 3; ++c) v[k].a[static_cast<std::size_t>(c)] = t.triangle.normal[k][c];
+        v[k].a[kColourAt + 0] = t.triangle.colour[k].r;
+        v[k].a[kColourAt + 1] = t.triangle.colour[k].g;
+        v[k].a[kColourAt + 2] = t.triangle.colour[k].b;
+        // Texel space, minus the half texel that puts texel centres on integers.
+        v[k].a[kUvAt] = t.uv[k].x() * w - 0.5f;
+        v[k].a[kUvAt + 1] = (1 - t.uv[k].y()) * h - 0.5f;
+      }
+      float* const kb = kb_;
+      detail::raster_triangle<fx.backface_cull>(
+          proj_, v, [kb](std::size_t i, float k) { return k > kb[i]; },
+          [this, tex](std::size_t i, float k, const std::array<float, NT>& a, bool front) {
+            kb_[i] = k;
+            fragment_colour c{detail::sample_bilinear_repeat(*tex, a[kUvAt], a[kUvAt + 1]), 1.0f};
+            if constexpr (fx.shading) {
+              vec3f n(a[0], a[1], a[2]);
+              const float len = n.norm();
+              n = len > 0 ? vec3f(n / (front ? len : -len)) : vec3f::Zero();
+              c.lit = detail::lambert(n, light_, ambient_);
+            }
+            store(i, c);
+          });
+    }
   }
 
   /// Blending only: ends the visibility pass. Send the same primitives again, then finish().
@@ -567,6 +648,7 @@ class rasterizer {
 static_assert(Sink<rasterizer<positions_only>, positions_only>);
 static_assert(OccluderSink<rasterizer<positions_only>>);
 static_assert(ScreenRectSink<rasterizer<positions_only>, positions_only>);
+static_assert(TexturedTriangleSink<rasterizer<all_attributes, all_effects>, all_attributes>);
 static_assert(Sink<rasterizer<all_attributes, all_effects>, all_attributes>);
 
 namespace detail {

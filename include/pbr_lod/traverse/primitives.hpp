@@ -11,6 +11,7 @@
 
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/math.hpp"
+#include "pbr_lod/io/texture.hpp"
 
 namespace pbr_lod {
 
@@ -90,6 +91,22 @@ struct triangle_prim {
   std::array<vec3f, 3> p;
   [[no_unique_address]] detail::maybe<A.normal, std::array<vec3f, 3>, 0> normal{};
   [[no_unique_address]] detail::maybe<A.colour, std::array<rgb8, 3>, 1> colour{};
+};
+
+/// A texture-mapped triangle: `triangle` (positions, normals, per-vertex colours) with per-corner
+/// texture coordinates into `texture` — POP's leaf triangles drawn by backward mapping (Chen &
+/// Nguyen 2001, Figure 5). Sent only to sinks that take it (TexturedTriangleSink in sink.hpp);
+/// the others get `triangle` alone, the flat-coloured triangle_prim they would get anyway.
+///
+/// Texture coordinates follow OBJ: u to the right, v up, one texture repeat per unit; texel
+/// space is x = u·width, y = (1 − v)·height (rows top to bottom), texel (i, j) centred on
+/// (i + ½, j + ½). The texture is not owned: it must outlive the frame (the emitter's hierarchy
+/// holds it).
+template <attributes A>
+struct textured_triangle_prim {
+  triangle_prim<A> triangle;
+  std::array<vec2f, 3> uv{};
+  const texture_image* texture = nullptr;
 };
 
 }  // namespace pbr_lod

@@ -42,6 +42,14 @@ concept ScreenRectSink = requires(S& s, const screen_rect_prim<A>& r) {
   s.screen_rect(r);
 };
 
+/// A sink that also takes texture-mapped triangles (textured_triangle_prim). Optional: an emitter
+/// sends them only to sinks that model this and sends the others the triangle_prim inside, so a
+/// sink that does not take them sees no change.
+template <class S, attributes A>
+concept TexturedTriangleSink = requires(S& s, const textured_triangle_prim<A>& t) {
+  s.textured_triangle(t);
+};
+
 /// Counts primitives by kind; the cheapest sink (for traversal benchmarks and cut statistics).
 template <attributes A>
 struct counting_sink {
@@ -52,6 +60,8 @@ struct counting_sink {
   void screen_rect(const screen_rect_prim<A>&) { ++points; }
   void splat(const splat_prim<A>&) { ++splats; }
   void triangle(const triangle_prim<A>&) { ++triangles; }
+  /// A textured triangle is a triangle: counted as one.
+  void textured_triangle(const textured_triangle_prim<A>&) { ++triangles; }
   void occluder(const occluder_prim&) { ++occluders; }
   [[nodiscard]] std::size_t total() const { return points + splats + triangles; }
 };
@@ -66,6 +76,7 @@ struct buffer_sink {
   std::vector<triangle_prim<A>> triangles;
   std::vector<occluder_prim> occluders;
   std::vector<screen_rect_prim<A>> screen_rects;
+  std::vector<textured_triangle_prim<A>> textured_triangles;
 
   void point(const point_prim<A>& p) {
     points.push_back(p);
@@ -83,6 +94,10 @@ struct buffer_sink {
     triangles.push_back(t);
     note(kind::triangle);
   }
+  void textured_triangle(const textured_triangle_prim<A>& t) {
+    textured_triangles.push_back(t);
+    note(kind::textured_triangle);
+  }
   void occluder(const occluder_prim& o) {
     occluders.push_back(o);
     note(kind::occluder);
@@ -93,14 +108,17 @@ struct buffer_sink {
     triangles.clear();
     occluders.clear();
     screen_rects.clear();
+    textured_triangles.clear();
     runs_.clear();
   }
   /// Replays the buffered primitives into another sink (e.g. the rasteriser), in the order they
   /// were received; occluders only to a sink that takes them (OccluderSink); screen rectangles
-  /// to a sink that takes them (ScreenRectSink), to the others as as_point_prim().
+  /// to a sink that takes them (ScreenRectSink), to the others as as_point_prim(); textured
+  /// triangles to a sink that takes them (TexturedTriangleSink), to the others as their
+  /// triangle_prim.
   template <Sink<A> S>
   void replay(S& s) const {
-    std::size_t ip = 0, is = 0, it = 0, io = 0, ir = 0;
+    std::size_t ip = 0, is = 0, it = 0, io = 0, ir = 0, itt = 0;
     for (const run& r : runs_) {
       switch (r.what) {
         case kind::occluder:
@@ -123,6 +141,11 @@ struct buffer_sink {
           for (const std::size_t e = std::min(ir + r.count, screen_rects.size()); ir < e; ++ir)
             replay_rect(s, screen_rects[ir]);
           break;
+        case kind::textured_triangle:
+          for (const std::size_t e = std::min(itt + r.count, textured_triangles.size()); itt < e;
+               ++itt)
+            replay_textured(s, textured_triangles[itt]);
+          break;
       }
     }
     // Primitives a caller put into the arrays directly have no recorded order: kind by kind.
@@ -130,6 +153,7 @@ struct buffer_sink {
     for (; is < splats.size(); ++is) s.splat(splats[is]);
     for (; it < triangles.size(); ++it) s.triangle(triangles[it]);
     for (; ir < screen_rects.size(); ++ir) replay_rect(s, screen_rects[ir]);
+    for (; itt < textured_triangles.size(); ++itt) replay_textured(s, textured_triangles[itt]);
     if constexpr (OccluderSink<S>)
       for (; io < occluders.size(); ++io) s.occluder(occluders[io]);
   }
@@ -137,13 +161,27 @@ struct buffer_sink {
  private:
   // The order as runs of one kind: a traversal emits long runs (a node's splats, a leaf's
   // triangles), so this costs a few bytes a frame, not a byte a primitive.
-  enum class kind : unsigned char { point, splat, triangle, occluder, screen_rect };
+  enum class kind : unsigned char {
+    point,
+    splat,
+    triangle,
+    occluder,
+    screen_rect,
+    textured_triangle
+  };
   template <class S>
   static void replay_rect(S& s, const screen_rect_prim<A>& r) {
     if constexpr (ScreenRectSink<S, A>)
       s.screen_rect(r);
     else
       s.point(as_point_prim(r));
+  }
+  template <class S>
+  static void replay_textured(S& s, const textured_triangle_prim<A>& t) {
+    if constexpr (TexturedTriangleSink<S, A>)
+      s.textured_triangle(t);
+    else
+      s.triangle(t.triangle);
   }
   struct run {
     kind what;
@@ -161,5 +199,6 @@ struct buffer_sink {
 static_assert(Sink<counting_sink<positions_only>, positions_only>);
 static_assert(Sink<buffer_sink<all_attributes>, all_attributes>);
 static_assert(ScreenRectSink<buffer_sink<all_attributes>, all_attributes>);
+static_assert(TexturedTriangleSink<buffer_sink<all_attributes>, all_attributes>);
 
 }  // namespace pbr_lod

@@ -141,6 +141,11 @@ struct counting_forwarder {
     ++points;
     inner.screen_rect(r);
   }
+  /// Textured triangles to a sink that takes them, counted as triangles.
+  void textured_triangle(const textured_triangle_prim<A>& t) requires TexturedTriangleSink<S, A> {
+    ++triangles;
+    inner.textured_triangle(t);
+  }
   /// Occluders pass through to a sink that takes them (not counted: they are not primitives).
   void occluder(const occluder_prim& o) requires OccluderSink<S> { inner.occluder(o); }
 };

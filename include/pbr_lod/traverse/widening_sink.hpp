@@ -37,6 +37,25 @@ requires((!From.normal || To.normal) && (!From.colour || To.colour)) struct wide
   }
   void triangle(const triangle_prim<From>& t) {
     triangle_prim<To> q;
+    widen_into(t, q);
+    out.triangle(q);
+  }
+  /// Textured triangles (only between attribute sets with colour: the texture stands in for it)
+  /// to an output that takes them, the widened triangle_prim otherwise.
+  void textured_triangle(const textured_triangle_prim<From>& t) requires(From.colour) {
+    if constexpr (TexturedTriangleSink<Out, To>) {
+      textured_triangle_prim<To> q;
+      q.uv = t.uv;
+      q.texture = t.texture;
+      widen_into(t.triangle, q.triangle);
+      out.textured_triangle(q);
+    } else {
+      triangle(t.triangle);
+    }
+  }
+
+ private:
+  static void widen_into(const triangle_prim<From>& t, triangle_prim<To>& q) {
     q.p = t.p;
     if constexpr (To.normal) {
       if constexpr (From.normal)
@@ -45,7 +64,6 @@ requires((!From.normal || To.normal) && (!From.colour || To.colour)) struct wide
         q.normal.fill(vec3f::Zero());
     }
     if constexpr (From.colour) q.colour = t.colour;
-    out.triangle(q);
   }
 };
 

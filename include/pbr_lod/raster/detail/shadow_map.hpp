@@ -70,10 +70,12 @@ template <attributes A>
     b.extend(s.centre - e);
     b.extend(s.centre + e);
   }
-  for (const auto& t : prims.triangles) {
-    if (!all_finite(t.p[0]) || !all_finite(t.p[1]) || !all_finite(t.p[2])) continue;
+  const auto triangle_bounds = [&b](const auto& t) {
+    if (!all_finite(t.p[0]) || !all_finite(t.p[1]) || !all_finite(t.p[2])) return;
     for (const auto& p : t.p) b.extend(p);
-  }
+  };
+  for (const auto& t : prims.triangles) triangle_bounds(t);
+  for (const auto& t : prims.textured_triangles) triangle_bounds(t.triangle);
   if (b.empty()) return sm;
 
   // Light frame: forward points away from the light; right = forward × up as in `view`.
@@ -115,11 +117,13 @@ template <attributes A>
   const auto write = [kb](std::size_t i, float key, const std::array<float, 0>&, bool) {
     kb[i] = key;
   };
-  for (const auto& t : prims.triangles) {
+  const auto depth_triangle = [&](const auto& t) {
     std::array<tri_vertex<0>, 3> tv;
     for (std::size_t k = 0; k < 3; ++k) tv[k].h = lp.point(t.p[k]);
     raster_triangle<false>(lp, tv, test, write);
-  }
+  };
+  for (const auto& t : prims.triangles) depth_triangle(t);
+  for (const auto& t : prims.textured_triangles) depth_triangle(t.triangle);
   return sm;
 }
 
