@@ -9,6 +9,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -174,22 +175,41 @@ void collect_samples(frame& f, const H& h, const view& v, traverse_options t, co
   f.origin = origin;
 }
 
+/// A method's policy for view v: the policy itself, or, for a policy built for one view (the
+/// ρ-grid's tables), what a callable `policy(v)` makes of it.
+template <class Policy>
+decltype(auto) policy_for(const Policy& policy, const view& v) {
+  if constexpr (std::is_invocable_v<const Policy&, const view&>)
+    return policy(v);
+  else
+    return (policy);
+}
+
 /// The frame of h through traverse() with the method's options and policy, timed as one pass
 /// (and its samples when r asks: collect_samples), or, with r.host, the cut handed to that host
 /// renderer. `Compiled` narrows the effects compiled in (a method that never shadows, say).
+/// `policy` may be a callable view → policy (policy_for). With o.supersample = k the frame is
+/// drawn through the k× view with k × the tolerance — the cut of v — and samples are collected
+/// from that cut.
 /// `origin`: what h's coordinates are relative to.
 template <effects Compiled = all_effects, class H, class Policy>
 frame draw_frame(const H& h, const view& v, const render_options& o, const traverse_options& t,
                  const Policy& policy, const frame_request& r, const vec3d& origin) {
-  if (r.host) return host_frame<Compiled>(h, v, o, t, policy, *r.host);
+  if (r.host) return host_frame<Compiled>(h, v, o, t, policy_for(policy, v), *r.host);
   frame f;
   f.fx = o.fx;
+  // Supersampled, the cut is the one of v: the tolerance in v's pixels is k of the k× view's.
+  const int k = o.supersample;
+  const view dv = k == 1 ? v : v.supersampled(k);
+  traverse_options tk = t;
+  tk.tolerance_px = t.tolerance_px * static_cast<float>(k);
+  decltype(auto) pd = policy_for(policy, dv);
   const auto t0 = clock_type::now();
-  f.img =
-      render<H::attrs, Compiled>(v, o, [&](auto& sink) { f.st = traverse(h, v, t, sink, policy); });
+  f.img = render<H::attrs, Compiled>(
+      v, o, [&](auto& sink, const view& drawn) { f.st = traverse(h, drawn, tk, sink, pd); });
   f.seconds = seconds_since(t0);
-  if (r.time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, policy);
-  collect_samples(f, h, v, t, policy, r, origin);
+  if (r.time_traversal) f.traverse_seconds = traversal_seconds(h, dv, tk, pd);
+  collect_samples(f, h, dv, tk, pd, r, origin);
   return f;
 }
 

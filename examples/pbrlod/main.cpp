@@ -4,7 +4,7 @@
 //
 //   pbrlod build  --method NAME [--param k=v]... INPUT -o OUT.lod
 //   pbrlod render OUT.lod|INPUT [--view AZ,EL,DIST] [--size WxH] [--tolerance PX]
-//                 [--effects LIST] [--up y|z] -o IMAGE.png [--json]
+//                 [--effects LIST] [--up y|z] [--supersample K] -o IMAGE.png [--json]
 //   pbrlod stats  OUT.lod|INPUT [--json]
 //   pbrlod compare A.png B.png [--json]
 //   pbrlod demo   [INPUT] [-o DIR] [--json]
@@ -51,6 +51,10 @@ void add_view_options(CLI::App* cmd, view_args& a) {
       "comma list of shading, colour, backface_cull, shadows, hole_filling, blending; 'none'; "
       "'all'; 'default' = shading where the data has normals (or faces), colour where "
       "it has colours");
+  cmd->add_option("--supersample", a.supersample,
+                  "draw at K x K the resolution (the same cut) and box-filter down: antialiasing")
+      ->check(CLI::Range(1, 16))
+      ->capture_default_str();
 }
 
 image render_input(const loaded_input& in, const camera& cam, const render_options& o) {

@@ -40,6 +40,7 @@ render_options make_render_options(const loaded_input& in, const view_args& a) {
   } else {
     o.fx = parse_effects(a.effects_list);
   }
+  o.supersample = a.supersample;
   return o;
 }
 

@@ -64,21 +64,28 @@ struct rho_method {
       if constexpr (A.normal) {
         if (one_pass && !r.host) {
           const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
+          // The policy's tables are for the view the frame is drawn in: supersampled, the k×
+          // view, which render_one_pass_shadows traverses with k × the tolerance.
+          const int k = o.supersample;
+          const view dv = k == 1 ? v : v.supersampled(k);
+          traverse_options tk = t;
+          tk.tolerance_px = t.tolerance_px * static_cast<float>(k);
           // Occluders outside the frame still cast into it (§4.2 with culling).
-          rho_grid_policy<R> p(g, v, &order);
-          p.cast_shadows(g, v, o.sun.direction.normalized(),
+          rho_grid_policy<R> p(g, dv, &order);
+          p.cast_shadows(g, dv, o.sun.direction.normalized(),
                          rho_grid_caster_side(g, o.shadow_map_size));
           frame one;
           one.fx = o.fx;
           const auto t0 = clock_type::now();
           one.img = render_one_pass_shadows(h, v, o, t, p, &one.st);
           one.seconds = seconds_since(t0);
-          if (r.time_traversal) one.traverse_seconds = traversal_seconds(h, v, t, p);
-          collect_samples(one, h, v, t, p, r, g.origin());
+          if (r.time_traversal) one.traverse_seconds = traversal_seconds(h, dv, tk, p);
+          collect_samples(one, h, dv, tk, p, r, g.origin());
           return one;
         }
       }
-      return draw_frame(h, v, o, t, rho_grid_policy<R>(g, v), r, g.origin());
+      const auto policy = [&](const view& pv) { return rho_grid_policy<R>(g, pv); };
+      return draw_frame(h, v, o, t, policy, r, g.origin());
     });
     f.extra.boolean("one_pass_shadows", one_pass);
     return f;

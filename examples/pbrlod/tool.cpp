@@ -140,6 +140,7 @@ render_options lod_render_options(const view_args& a, bool has_colour) {
   } else {
     o.fx = parse_effects(a.effects_list);
   }
+  o.supersample = a.supersample;
   return o;
 }
 

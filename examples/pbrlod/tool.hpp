@@ -181,6 +181,7 @@ struct view_args {
   std::string size = "512x512";
   std::string up = "y";
   std::string effects_list = "default";
+  int supersample = 1;  ///< render_options::supersample
 };
 std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n, const char* what);
 /// The orbit camera of --view/--size/--up around the bounding sphere of c.

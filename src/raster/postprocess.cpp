@@ -1,17 +1,20 @@
 // pbr_lod — whole-frame passes of the reference rasteriser: shadow resolve (second pass of a
 // two-pass shadow map, Williams 1978), screen-space hole filling (Pfister et al. 2000 visibility
-// splatting + reconstruction; Chen & Nguyen 2001 §3.4 uniform filter), depth conversion.
+// splatting + reconstruction; Chen & Nguyen 2001 §3.4 uniform filter), depth conversion, the
+// supersampling box filter.
 #include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "pbr_lod/raster/detail/postprocess.hpp"
 #include "pbr_lod/raster/detail/raster_core.hpp"
 #include "pbr_lod/raster/detail/shadow_map.hpp"
+#include "pbr_lod/raster/image.hpp"
 
 namespace pbr_lod::detail {
 
@@ -156,3 +159,37 @@ std::vector<float> keys_to_depth(std::span<const float> key, float key_far) {
 }
 
 }  // namespace pbr_lod::detail
+
+namespace pbr_lod {
+
+image downsample_box(const image& big, int k) {
+  if (k < 1 || big.width % k != 0 || big.height % k != 0)
+    throw InvalidArgument("downsample_box: factor " + std::to_string(k) + " for " +
+                          std::to_string(big.width) + "x" + std::to_string(big.height) +
+                          " pixels (expected k >= 1 dividing both sides)");
+  image small(big.width / k, big.height / k);
+  const auto n = static_cast<std::uint64_t>(k) * static_cast<std::uint64_t>(k);
+  for (int y = 0; y < small.height; ++y) {
+    for (int x = 0; x < small.width; ++x) {
+      std::uint64_t r = 0, g = 0, b = 0;
+      float depth = std::numeric_limits<float>::infinity();
+      for (int j = 0; j < k; ++j) {
+        const std::size_t row = big.index(x * k, y * k + j);
+        for (std::size_t i = row; i < row + static_cast<std::size_t>(k); ++i) {
+          r += big.colour[i].r;
+          g += big.colour[i].g;
+          b += big.colour[i].b;
+          depth = std::min(depth, big.depth[i]);
+        }
+      }
+      const std::size_t s = small.index(x, y);
+      small.colour[s] = {static_cast<std::uint8_t>((r + n / 2) / n),
+                         static_cast<std::uint8_t>((g + n / 2) / n),
+                         static_cast<std::uint8_t>((b + n / 2) / n)};
+      small.depth[s] = depth;
+    }
+  }
+  return small;
+}
+
+}  // namespace pbr_lod

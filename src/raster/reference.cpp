@@ -33,7 +33,7 @@ void emit_mesh(const triangle_mesh& m, const std::vector<vec3f>& normals, S& sin
 template <attributes A>
 image render_mesh(const triangle_mesh& m, const view& v, const render_options& opt,
                   const std::vector<vec3f>& normals) {
-  return render<A>(v, opt, [&](auto& sink) { emit_mesh<A>(m, normals, sink); });
+  return render<A>(v, opt, [&](auto& sink, const view&) { emit_mesh<A>(m, normals, sink); });
 }
 
 /// Splat radius per point: factor × k-NN spacing; points whose spacing is 0 (duplicates, a
@@ -104,7 +104,7 @@ std::vector<float> cloud_radii(const point_cloud& c, const render_options& opt) 
 template <attributes A>
 image render_cloud(const point_cloud& c, const view& v, const render_options& opt) {
   const std::vector<float> radius = cloud_radii(c, opt);
-  return render<A>(v, opt, [&](auto& sink) { emit_cloud<A>(c, v, radius, sink); });
+  return render<A>(v, opt, [&](auto& sink, const view& dv) { emit_cloud<A>(c, dv, radius, sink); });
 }
 
 template <attributes A>

@@ -146,6 +146,25 @@ class view {
   }
   /// World-space size of one pixel at depth z (eye space).
   [[nodiscard]] float pixel_size_at_depth(float z) const { return z / focal_px; }
+
+  /// The same view at k × k the resolution (render_options::supersample): k times the width,
+  /// height and focal length, the same frustum and cone. A projected size in this view is k
+  /// times the size in *this (exactly so for k a power of two), so a traversal with k times the
+  /// tolerance selects the same cut. Throws InvalidArgument unless 1 ≤ k and the k× viewport
+  /// fits an int.
+  [[nodiscard]] view supersampled(int k) const {
+    constexpr int max_side = 1 << 16;
+    if (k < 1 || width > max_side / k || height > max_side / k)
+      throw InvalidArgument("view: supersample factor " + std::to_string(k) + " for " +
+                            std::to_string(width) + "x" + std::to_string(height) +
+                            " pixels (expected k >= 1 and a k-fold viewport of at most " +
+                            std::to_string(max_side) + " pixels per side)");
+    view s = *this;
+    s.width = width * k;
+    s.height = height * k;
+    s.focal_px = focal_px * static_cast<float>(k);
+    return s;
+  }
 };
 
 }  // namespace pbr_lod

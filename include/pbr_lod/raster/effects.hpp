@@ -155,6 +155,12 @@ struct render_options {
   /// (square/hexagonal lattice) and, for Poisson-random samples, an uncovered fraction of
   /// exp(−8·0.8²) ≈ 0.6 %; see docs/rasterizer.md.
   float reference_radius_factor = 0.8f;
+  /// Supersampling (the antialiasing of Chen & Nguyen 2001 §3.4, "as in Surfel"): render() draws
+  /// the frame at k × k the resolution, through view::supersampled(k), and box-filters it down
+  /// (downsample_box). The draw must then take the view it draws into, `draw(sink, view)`, since
+  /// traversals size points in that view's pixels; hole_filling_radius is scaled by k so the
+  /// filter spans the same part of the output. 1 = off; k costs about k² of the raster work.
+  int supersample = 1;
 };
 
 }  // namespace pbr_lod

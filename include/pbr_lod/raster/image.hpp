@@ -64,4 +64,10 @@ struct image {
   }
 };
 
+/// Box filter of k × k pixels (render_options::supersample): each output colour is the rounded
+/// mean of its block, background samples included, so edges come out antialiased; its depth is
+/// the nearest covered sample's (+inf when none is). Throws InvalidArgument unless k ≥ 1 divides
+/// both sides of `big`.
+[[nodiscard]] image downsample_box(const image& big, int k);
+
 }  // namespace pbr_lod

@@ -194,7 +194,9 @@ struct node_radius_policy : Policy {
 /// traversal. `policy` must emit front to back from the light; the light map covers
 /// h.bounding_sphere(h.root()) with o.shadow_map_size² texels. Shading is that of the
 /// rasteriser's; the frame is drawn with colour only (and hole filling when o.fx asks for it).
-/// Needs normals (static) and a non-zero light direction (throws InvalidArgument).
+/// Needs normals (static) and a non-zero light direction (throws InvalidArgument). With
+/// o.supersample = k, h is traversed in v.supersampled(k) with k × t.tolerance_px (the cut of v);
+/// a policy built for one view, as the ρ-grid's, must then be built for that view.
 template <Hierarchy H, class Policy>
 [[nodiscard]] image render_one_pass_shadows(const H& h, const view& v, const render_options& o,
                                             const traverse_options& t, const Policy& policy,
@@ -209,13 +211,16 @@ template <Hierarchy H, class Policy>
   ro.fx = effects{.colour = true, .hole_filling = o.fx.hole_filling};
   traverse_stats ts;
   one_pass_shadow_stats ss;
-  image img = render<C>(v, ro, [&](auto& sink) {
+  // Supersampled (o.supersample = k), the cut is v's: k times the tolerance in the k× view.
+  traverse_options tk = t;
+  tk.tolerance_px = t.tolerance_px * static_cast<float>(std::max(o.supersample, 1));
+  image img = render<C>(v, ro, [&](auto& sink, const view& dv) {
     if (h.empty()) return;
     using sink_type = std::decay_t<decltype(sink)>;
-    one_pass_shadow_sink<H::attrs, sink_type> shade(v, o, dir.normalized(),
+    one_pass_shadow_sink<H::attrs, sink_type> shade(dv, o, dir.normalized(),
                                                     h.bounding_sphere(h.root()), sink);
     const detail::node_radius_policy<Policy, decltype(shade)> p{policy, &shade};
-    ts = traverse(h, v, t, shade, p);
+    ts = traverse(h, dv, tk, shade, p);
     ss = shade.stats();
   });
   if (tstats) *tstats = ts;

@@ -33,8 +33,10 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <span>
+#include <string>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -749,6 +751,44 @@ template <attributes A, effects E, class DrawFn>
   }
 }
 
+/// True when draw takes the view it draws into, `draw(sink, view)`, beside the sink.
+template <class DrawFn, class Sink>
+inline constexpr bool draw_takes_view = std::is_invocable_v<DrawFn&, Sink&, const view&>;
+
+template <class Sink, class DrawFn>
+void call_draw(DrawFn& draw, Sink& sink, const view& v) {
+  if constexpr (draw_takes_view<DrawFn, Sink>)
+    draw(sink, v);
+  else
+    draw(sink);
+}
+
+/// The view and options a frame is drawn with, and the factor it is filtered down by.
+struct drawing {
+  view v;
+  render_options opt;
+  int k = 1;
+};
+
+/// render_options::supersample applied: the k× view, the options for drawing into it (hole
+/// filling over k times the radius, up to the frame's larger side, beyond which a larger radius
+/// changes nothing).
+[[nodiscard]] inline drawing drawing_for(const view& v, const render_options& opt,
+                                         bool takes_view) {
+  const int k = opt.supersample;
+  if (k == 1) return {v, opt, 1};
+  if (k > 1 && !takes_view)
+    throw InvalidArgument("render: supersample = " + std::to_string(k) +
+                          " needs a draw that takes the view it draws into, "
+                          "[&](auto& sink, const view& v) { ... }: points are sized in its pixels");
+  drawing d{v.supersampled(k), opt, k};  // throws for k < 1 or a viewport too large
+  d.opt.supersample = 1;
+  const std::int64_t side = std::max(d.v.width, d.v.height);
+  d.opt.hole_filling_radius =
+      static_cast<int>(std::min<std::int64_t>(std::int64_t{opt.hole_filling_radius} * k, side));
+  return d;
+}
+
 }  // namespace detail
 
 /// Renders one frame of buffered primitives (in the order they were buffered).
@@ -764,6 +804,10 @@ template <attributes A, effects E, class DrawFn>
 template <attributes A, effects Compiled = all_effects>
 [[nodiscard]] image render_buffered(const view& v, const render_options& opt,
                                     const buffer_sink<A>& prims) {
+  if (opt.supersample != 1)
+    throw InvalidArgument("render_buffered: supersample = " + std::to_string(opt.supersample) +
+                          ", but buffered primitives are drawn for one view; supersample "
+                          "through render(), whose draw gets the k-fold view");
   constexpr effects allowed = applicable_effects(Compiled, A);
   const effects run = opt.fx & allowed;
   auto dispatch = [&]<effects E>() { return detail::render_prims<A, E>(v, opt, prims); };
@@ -773,6 +817,11 @@ template <attributes A, effects Compiled = all_effects>
 /// Renders one frame: `draw(sink)` emits the frame's primitives into the buffer_sink<A>& it is
 /// given (write it as a generic lambda `[&](auto& sink) { ... }`); it is called exactly once.
 /// The primitives are then drawn by render_buffered<A, Compiled>.
+///
+/// A draw written `[&](auto& sink, const view& dv) { ... }` is also given the view to draw into:
+/// v itself, or with opt.supersample = k its k× copy (view::supersampled), in whose pixels the
+/// traversal must size its points — pass k × the tolerance to select the cut of v. The k× frame
+/// is then box-filtered down to v's size (downsample_box).
 ///
 /// Why a buffer and not the rasteriser itself as the sink: shadows need the frame's primitives
 /// twice anyway, and with one sink type the caller's traversal is compiled once, not once per
@@ -784,12 +833,19 @@ template <attributes A, effects Compiled = all_effects>
 /// that itself calls render() gets a buffer of its own.
 template <attributes A, effects Compiled = all_effects, class DrawFn>
 [[nodiscard]] image render(const view& v, const render_options& opt, DrawFn&& draw) {
+  const detail::drawing d =
+      detail::drawing_for(v, opt, detail::draw_takes_view<DrawFn, buffer_sink<A>>);
+  const auto finish = [&](const buffer_sink<A>& prims) {
+    image img = render_buffered<A, Compiled>(d.v, d.opt, prims);
+    if (d.k != 1) img = downsample_box(img, d.k);
+    return img;
+  };
   thread_local buffer_sink<A> kept;
   thread_local bool busy = false;
   if (busy) {
     buffer_sink<A> prims;
-    draw(prims);
-    return render_buffered<A, Compiled>(v, opt, prims);
+    detail::call_draw(draw, prims, d.v);
+    return finish(prims);
   }
   struct release {
     ~release() {
@@ -799,20 +855,26 @@ template <attributes A, effects Compiled = all_effects, class DrawFn>
   } const guard;
   busy = true;
   kept.clear();
-  draw(kept);
-  return render_buffered<A, Compiled>(v, opt, kept);
+  detail::call_draw(draw, kept, d.v);
+  return finish(kept);
 }
 
 /// render() without the buffer: `draw(sink)` writes straight into the rasteriser<A, E>& (with
 /// shadows or blending, a buffer_sink<A>&) it is given. The same image as render(); no copy of the
 /// frame, but the caller's draw is compiled once per effect combination in the calling file. For
-/// measuring the rasteriser itself, and for frames too large to buffer.
+/// measuring the rasteriser itself, and for frames too large to buffer. Supersamples as render()
+/// does.
 template <attributes A, effects Compiled = all_effects, class DrawFn>
 [[nodiscard]] image render_direct(const view& v, const render_options& opt, DrawFn&& draw) {
+  const detail::drawing d =
+      detail::drawing_for(v, opt, detail::draw_takes_view<DrawFn, buffer_sink<A>>);
   constexpr effects allowed = applicable_effects(Compiled, A);
-  const effects run = opt.fx & allowed;
-  auto dispatch = [&]<effects E>() { return detail::render_streamed<A, E>(v, opt, draw); };
-  return detail::dispatch_effects<allowed, no_effects, 0>(run, dispatch);
+  const effects run = d.opt.fx & allowed;
+  auto at_view = [&](auto& sink) { detail::call_draw(draw, sink, d.v); };
+  auto dispatch = [&]<effects E>() { return detail::render_streamed<A, E>(d.v, d.opt, at_view); };
+  image img = detail::dispatch_effects<allowed, no_effects, 0>(run, dispatch);
+  if (d.k != 1) img = downsample_box(img, d.k);
+  return img;
 }
 
 // Compiled once, in src/raster/render_instances_*.cpp.
