@@ -321,33 +321,40 @@ BENCHMARK(bm_traverse)
     ->Unit(benchmark::kMillisecond);
 
 /// One frame of g through the shared rasteriser: with the one-pass shadows of §4.2 when `order`
-/// (the light's child order) is given and g has normals, else the traversal with policy p.
+/// (the light's child order) is given and g has normals — light-map positions from §4.2's light
+/// displacement table when `light_table`, else projected per drawn cell — else the traversal
+/// with policy p.
 template <class H, rho_grid_arithmetic Ar>
 image rho_frame(const H& h, const rho_grid<3>& g, const view& v, const render_options& o,
                 const traverse_options& t, const std::array<int, 27>* order,
-                const rho_grid_policy<3, Ar>& p, traverse_stats& st) {
+                const rho_grid_policy<3, Ar>& p, traverse_stats& st, bool light_table = false) {
   constexpr attributes A = H::attrs;
   if constexpr (A.normal) {
+    if (order && light_table)
+      return render_one_pass_shadows(
+          h, v, o, t, rho_grid_light_policy<3, Ar>(g, v, one_pass_light_frame(h, o), order), &st);
     if (order) return render_one_pass_shadows(h, v, o, t, rho_grid_policy<3, Ar>(g, v, order), &st);
   }
   return render<A>(v, o, [&](auto& sink) { st = traverse(h, v, t, sink, p); });
 }
 
-// Whole frames (512², shading) into the shared rasteriser: no shadows, one-pass shadows (§4.2),
-// the rasteriser's two-pass shadow map.
+// Whole frames (512², shading) into the shared rasteriser: no shadows, one-pass shadows (§4.2)
+// with each drawn cell projected into the light map, the rasteriser's two-pass shadow map,
+// one-pass shadows with the light displacement table (§4.2).
 void bm_frame(benchmark::State& state) {
   const auto& g = bunny_tri5();
   const view v(bench_camera(g, 2.5), g.origin());
   render_options o;
-  o.fx = effects{.shading = true, .shadows = state.range(0) == 2};
+  const int mode = int(state.range(0));
+  o.fx = effects{.shading = true, .shadows = mode == 2};
   o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
   const traverse_options t{.tolerance_px = 1};
   const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
   traverse_stats st;
   with_rho_grid_hierarchy(g, [&](const auto& h) {
     for (auto _ : state) {
-      const image img = rho_frame(h, g, v, o, t, state.range(0) == 1 ? &order : nullptr,
-                                  rho_grid_policy<3>(g, v), st);
+      const image img = rho_frame(h, g, v, o, t, mode == 1 || mode == 3 ? &order : nullptr,
+                                  rho_grid_policy<3>(g, v), st, mode == 3);
       benchmark::DoNotOptimize(img.colour.data());
     }
   });
@@ -356,8 +363,8 @@ void bm_frame(benchmark::State& state) {
       benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(bm_frame)
-    ->ArgName("mode_0none_1onepass_2twopass")
-    ->DenseRange(0, 2)
+    ->ArgName("mode_0none_1onepass_2twopass_3onepasstable")
+    ->DenseRange(0, 3)
     ->Unit(benchmark::kMillisecond);
 
 // §4.2 with frustum culling, a close view (1.2 half sides: the bunny overflows the frame) and a
@@ -399,12 +406,13 @@ BENCHMARK(bm_off_frame_casters)
     ->Unit(benchmark::kMillisecond);
 
 // Table 3's analogue: frames per second of "Points" (every leaf in view as a one-pixel point,
-// no multi-level: rho_grid_policy::points_only), "Splats" (the flexible traversal, s = 1 px) and
-// "Shadows" (flexible + the one-pass shadows of §4.2), tri-grid levels 4 and 5 of the bunny and
-// Buddha res3, at the iPAQ's 240×320, shading on, from a far view (8 half sides of the cube from
-// its centre, the model ≈ 110 px tall: Fig. 5's top row) and a close one (3 half sides, the model
-// fills the screen and level 5's leaves are ≈ 0.4 px). `arith`: the policy's arithmetic as in
-// bm_traverse (the paper's iPAQ ran 32-bit fixed point, 2).
+// no multi-level: rho_grid_policy::points_only), "Splats" (the flexible traversal, s = 1 px),
+// "Shadows" (flexible + the one-pass shadows of §4.2, each drawn cell projected into the light
+// map) and "Shadows + table" (the light positions from §4.2's displacement table), tri-grid levels
+// 4 and 5 of the bunny and Buddha res3, at the iPAQ's 240×320, shading on, from a far view (8 half
+// sides of the cube from its centre, the model ≈ 110 px tall: Fig. 5's top row) and a close one (3
+// half sides, the model fills the screen and level 5's leaves are ≈ 0.4 px). `arith`: the policy's
+// arithmetic as in bm_traverse (the paper's iPAQ ran 32-bit fixed point, 2).
 const rho_grid<3>& tri_grid(int model_index, int level) {
   static std::map<std::pair<int, int>, rho_grid<3>> cache;
   const auto key = std::pair{model_index, level};
@@ -419,12 +427,13 @@ const rho_grid<3>& tri_grid(int model_index, int level) {
 template <rho_grid_arithmetic Ar>
 void table3_frames(benchmark::State& state, const rho_grid<3>& g, const view& v,
                    const render_options& o, const traverse_options& t,
-                   const std::array<int, 27>* order, bool points_only, traverse_stats& st) {
+                   const std::array<int, 27>* order, bool points_only, bool light_table,
+                   traverse_stats& st) {
   with_rho_grid_hierarchy(g, [&](const auto& h) {
     for (auto _ : state) {
       rho_grid_policy<3, Ar> p(g, v);
       p.points_only = points_only;
-      const image img = rho_frame(h, g, v, o, t, order, p, st);
+      const image img = rho_frame(h, g, v, o, t, order, p, st, light_table);
       benchmark::DoNotOptimize(img.colour.data());
     }
   });
@@ -442,26 +451,28 @@ void bm_table3(benchmark::State& state) {
   const traverse_options t{.tolerance_px = 1};
   const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
   traverse_stats st;
-  const auto* ord = mode == 2 ? &order : nullptr;
+  const auto* ord = mode >= 2 ? &order : nullptr;
+  const bool table = mode == 3;
   if (arith == 2)
-    table3_frames<rho_grid_arithmetic::fixed32>(state, g, v, o, t, ord, mode == 0, st);
+    table3_frames<rho_grid_arithmetic::fixed32>(state, g, v, o, t, ord, mode == 0, table, st);
   else if (arith == 1)
-    table3_frames<rho_grid_arithmetic::fixed>(state, g, v, o, t, ord, mode == 0, st);
+    table3_frames<rho_grid_arithmetic::fixed>(state, g, v, o, t, ord, mode == 0, table, st);
   else
-    table3_frames<rho_grid_arithmetic::floating>(state, g, v, o, t, ord, mode == 0, st);
+    table3_frames<rho_grid_arithmetic::floating>(state, g, v, o, t, ord, mode == 0, table, st);
   state.SetLabel(std::string(model_name(int(state.range(0)))) + " tri/" +
                  std::to_string(state.range(1)) + " " +
                  (mode == 0   ? "points"
                   : mode == 1 ? "splats"
-                              : "shadows"));
+                  : mode == 2 ? "shadows"
+                              : "shadows+table"));
   state.counters["samples"] = double(g.stats().samples);
   state.counters["drawn"] = double(st.emitted_nodes + st.emitted_leaves);
   state.counters["fps"] =
       benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(bm_table3)
-    ->ArgsProduct({{0, 1}, {4, 5}, {0, 1, 2}, {8, 3}, {0, 1, 2}})
-    ->ArgNames({"model", "level", "mode_0points_1splats_2shadows", "dist", "arith"})
+    ->ArgsProduct({{0, 1}, {4, 5}, {0, 1, 2, 3}, {8, 3}, {0, 1, 2}})
+    ->ArgNames({"model", "level", "mode_0points_1splats_2shadows_3table", "dist", "arith"})
     ->Unit(benchmark::kMillisecond);
 
 // §4.1's close views: leaves as one-pixel points (0) or as squares of their projected cell

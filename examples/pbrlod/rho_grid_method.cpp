@@ -70,8 +70,9 @@ struct rho_method {
           const view dv = k == 1 ? v : v.supersampled(k);
           traverse_options tk = t;
           tk.tolerance_px = t.tolerance_px * static_cast<float>(k);
-          // Occluders outside the frame still cast into it (§4.2 with culling).
-          rho_grid_policy<R> p(g, dv, &order);
+          // Light-map positions from §4.2's displacement table; occluders outside the frame
+          // still cast into it (§4.2 with culling).
+          rho_grid_light_policy<R> p(g, dv, one_pass_light_frame(h, o), &order);
           p.cast_shadows(g, dv, o.sun.direction.normalized(),
                          rho_grid_caster_side(g, o.shadow_map_size));
           frame one;

@@ -1744,6 +1744,92 @@ TEST(RhoGridShadows, OccludersOutsideTheFrameStillCast) {
   EXPECT_NEAR(kept, reference, 0.005);
 }
 
+/// Records, for every cell rho_grid_light_policy emits, how far the light coordinates it carries
+/// lie from the cell centre's projection computed here in double (texels; z in texels too).
+struct light_table_probe : rho_grid_light_policy<2> {
+  double* worst;
+  std::size_t* cells;
+  template <class H, class S>
+  void emit(const H& h, const rho_grid_cell& n, const state& hs, const view& v, float size,
+            const traverse_options& o, S& sink) const {
+    const light_map_frame& f = light_frame();
+    const vec3d d = h.centre(n).template cast<double>() - f.centre.cast<double>();
+    const double t = double(f.texel), half = double(f.half);
+    const vec3d ref((d.dot(f.u.cast<double>()) + half) / t, (d.dot(f.v.cast<double>()) + half) / t,
+                    -d.dot(f.to_light.cast<double>()) / t);
+    const vec3d got(hs.light_coords.x(), hs.light_coords.y(), hs.light_coords.z() / t);
+    *worst = std::max(*worst, (got - ref).cwiseAbs().maxCoeff());
+    ++*cells;
+    rho_grid_light_policy<2>::emit(h, n, hs, v, size, o, sink);
+  }
+};
+
+// §4.2's light displacement table: the light-map coordinates carried down the tree (the root's
+// projected once, each child's its parent's + a table entry) must be the projection of the cell
+// centres. Bunny res3 at ρ = 2, level 7 (eight additions down to a leaf), every cell down to the
+// leaves (no culling), a 2048² map: within 10⁻³ texel of a double-precision projection in u, v
+// and z. A wrong sign, axis or scale in the table is off by whole texels at the first level.
+TEST(RhoGridShadows, LightTableMatchesProjection) {
+  const auto g = build_rho_grid<2>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 7});
+  const rho_grid_hierarchy<2, with_normals> h(g);
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const view v(camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {256, 256}), g.origin());
+  render_options o;
+  o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  o.shadow_map_size = 2048;
+  const auto order = rho_grid_light_order<2>(o.sun.direction.normalized());
+  double worst = 0;
+  std::size_t cells = 0;
+  const light_table_probe p{rho_grid_light_policy<2>(g, v, one_pass_light_frame(h, o), &order),
+                            &worst, &cells};
+  counting_sink<with_normals> sink;
+  const traverse_stats st = traverse(h, v, {.tolerance_px = 1, .frustum_cull = false}, sink, p);
+  std::printf("%zu cells, largest light-coordinate error %.2e texel\n", cells, worst);
+  EXPECT_EQ(cells, st.emitted_nodes + st.emitted_leaves);
+  EXPECT_GT(st.emitted_leaves, 100000u);
+  EXPECT_LT(worst, 1e-3);
+}
+
+// The table changes where the light map's coordinates come from, not what it decides: the
+// one-pass frame with the table equals the one that projects every drawn centre, shadowed and
+// lit counts and pixels (bunny res3 tri/4, ρ = 3, the bench's view and light; the coordinates
+// differ by float rounding, ≤ 10⁻³ texel, so a decision on a texel or bias boundary may flip:
+// at most one in 10⁴). A policy built for another light map is refused.
+TEST(RhoGridShadows, LightTableGivesTheSameShadows) {
+  const auto g = build_rho_grid<3>(read_mesh(test::data_file("bun_zipper_res3.ply")), {.level = 4});
+  const rho_grid_hierarchy<3, with_normals> h(g);
+  const vec3d c = g.origin() + vec3d::Constant(0.5 * g.cube_side());
+  const view v(camera::orbit(c, 0.5 * g.cube_side(), 30, 20, 2.5, 1, {256, 256}), g.origin());
+  render_options o;
+  o.fx = effects{.shading = true, .shadows = true};
+  o.sun.direction = vec3f(-0.6f, 0.7f, 0.3f);
+  const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
+  const traverse_options t{.tolerance_px = 1};
+  one_pass_shadow_stats projected, tabled;
+  const image a =
+      render_one_pass_shadows(h, v, o, t, rho_grid_policy<3>(g, v, &order), nullptr, &projected);
+  const rho_grid_light_policy<3> lp(g, v, one_pass_light_frame(h, o), &order);
+  const image b = render_one_pass_shadows(h, v, o, t, lp, nullptr, &tabled);
+  const std::size_t n = projected.lit + projected.shadowed;
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) differ += !(a.colour[i] == b.colour[i]);
+  std::printf("%zu samples: %zu / %zu shadowed (projected / table), %zu pixels differ\n", n,
+              projected.shadowed, tabled.shadowed, differ);
+  EXPECT_GT(projected.shadowed, n / 20);
+  EXPECT_EQ(tabled.lit + tabled.shadowed, n);
+  EXPECT_LE(
+      std::max(projected.shadowed, tabled.shadowed) - std::min(projected.shadowed, tabled.shadowed),
+      n / 10000);
+  EXPECT_LE(differ, a.size() / 10000);
+
+  render_options other = o;
+  other.shadow_map_size = 512;
+  EXPECT_THROW((void)render_one_pass_shadows(h, v, other, t, lp), InvalidArgument);
+  other = o;
+  other.sun.direction = vec3f(0.6f, 0.7f, 0.3f);
+  EXPECT_THROW((void)render_one_pass_shadows(h, v, other, t, lp), InvalidArgument);
+}
+
 /// Does the ray from o along unit d hit triangle abc at a distance in (0, ∞)? Möller–Trumbore,
 /// double.
 bool ray_hits(const vec3d& o, const vec3d& d, const vec3d& a, const vec3d& b, const vec3d& c) {

@@ -65,6 +65,7 @@
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/raster/light_frame.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 
@@ -879,24 +880,9 @@ class rho_grid_policy {
 
   template <class H, class F>
   void for_each_child(const H& h, const rho_grid_cell& n, const state& hs, F&& f) const {
-    const auto& code = h.grid().code(n.cell);
-    const auto& tab = t_.levels[std::size_t(n.depth) + 1];
-    const auto visit_child = [&](int j, std::uint32_t cell) {
-      const auto& d = tab.disp[std::size_t(j)];
-      f(H::child(n, j, cell), state{hs.x + d.x, hs.y + d.y, hs.w + d.w});
-    };
-    std::uint32_t cell = h.grid().first_child(n.cell);
-    if (digit_order_) {
-      // Digit order is the child table's: walk the set bits, no rank per child.
-      using word = typename rho_grid<Rho>::code_type::word;
-      constexpr int word_bits = rho_grid<Rho>::code_type::word_bits;
-      for (std::size_t i = 0; i < code.w.size(); ++i)
-        for (word bits = code.w[i]; bits != 0; bits = word(bits & (bits - 1)))
-          visit_child(int(i) * word_bits + std::countr_zero(bits), cell++);
-      return;
-    }
-    for (const int j : order_)
-      if (code.test(j)) visit_child(j, cell + std::uint32_t(code.rank(j)));
+    for_each_child_digit(h, n, [&](int j, std::uint32_t cell) {
+      f(H::child(n, j, cell), child_state(hs, n.depth, j));
+    });
   }
 
   template <class H, class S>
@@ -998,10 +984,96 @@ class rho_grid_policy {
     return std::isfinite(o.tolerance_px) && o.tolerance_px > 0 ? o.tolerance_px : 1.0f;
   }
 
+ protected:
+  /// Calls visit_child(j, cell) for inner cell n's children, digit j and cell index, in the
+  /// policy's order.
+  template <class H, class F>
+  void for_each_child_digit(const H& h, const rho_grid_cell& n, F&& visit_child) const {
+    const auto& code = h.grid().code(n.cell);
+    std::uint32_t cell = h.grid().first_child(n.cell);
+    if (digit_order_) {
+      // Digit order is the child table's: walk the set bits, no rank per child.
+      using word = typename rho_grid<Rho>::code_type::word;
+      constexpr int word_bits = rho_grid<Rho>::code_type::word_bits;
+      for (std::size_t i = 0; i < code.w.size(); ++i)
+        for (word bits = code.w[i]; bits != 0; bits = word(bits & (bits - 1)))
+          visit_child(int(i) * word_bits + std::countr_zero(bits), cell++);
+      return;
+    }
+    for (const int j : order_)
+      if (code.test(j)) visit_child(j, cell + std::uint32_t(code.rank(j)));
+  }
+  /// Child j's H from its parent's (depth: the parent's): one displacement-table addition.
+  [[nodiscard]] state child_state(const state& hs, int depth, int j) const {
+    const auto& d = t_.levels[std::size_t(depth) + 1].disp[std::size_t(j)];
+    return state{hs.x + d.x, hs.y + d.y, hs.w + d.w};
+  }
+
  private:
   tables t_;
   bool digit_order_;
   std::array<int, R3> order_;
+};
+
+/// §4.2's extra displacement table: rho_grid_policy whose per-entry state also carries the
+/// cell centre's light-map coordinates (light_map_frame::coords: texel u, v and the distance
+/// from the light), the root's projected once and each child's its parent's plus a per-depth
+/// table entry — three more additions per visited cell, as H's. render_one_pass_shadows hands
+/// them to the light map, which then projects nothing. Build it for the frame of the map it
+/// draws into, one_pass_light_frame(h, o) (render_one_pass_shadows checks):
+///   const auto order = rho_grid_light_order<3>(o.sun.direction.normalized());
+///   rho_grid_light_policy<3> p(g, v, one_pass_light_frame(h, o), &order);
+///   image img = render_one_pass_shadows(h, v, o, t, p);
+/// The coordinates are float sums of ≤ leaf depth table entries: within 10⁻³ texel of a direct
+/// projection of the centre (RhoGridShadows.LightTableMatchesProjection).
+template <int Rho, rho_grid_arithmetic Arith = rho_grid_arithmetic::floating,
+          rho_grid_bounds Bounds = rho_grid_bounds::symmetric>
+class rho_grid_light_policy : public rho_grid_policy<Rho, Arith, Bounds> {
+  using base = rho_grid_policy<Rho, Arith, Bounds>;
+  static constexpr int R3 = Rho * Rho * Rho;
+
+ public:
+  struct state : base::state {
+    vec3f light_coords;  ///< the cell centre's light_map_frame::coords
+  };
+
+  rho_grid_light_policy(const rho_grid<Rho>& g, const view& v, const light_map_frame& light,
+                        const std::array<int, R3>* order = nullptr)
+      : base(g, v, order), frame_(light) {
+    const double root_half = 0.5 * g.cube_side();
+    root_light_ = light.coords(vec3d::Constant(root_half).cast<float>());
+    table_.resize(std::size_t(g.leaf_depth()) + 1);
+    for (std::size_t d = 1; d < table_.size(); ++d) {
+      const double side = g.cell_side(int(d));
+      for (int j = 0; j < R3; ++j) {
+        const vec3d o = side * vec3d(double(j % Rho) + 0.5 - 0.5 * Rho,
+                                     double((j / Rho) % Rho) + 0.5 - 0.5 * Rho,
+                                     double(j / (Rho * Rho)) + 0.5 - 0.5 * Rho);
+        table_[d][std::size_t(j)] = light.offset(o);
+      }
+    }
+  }
+
+  [[nodiscard]] const light_map_frame& light_frame() const { return frame_; }
+
+  template <class H>
+  [[nodiscard]] state root_state(const H& h, const view& v, const traverse_options& o) const {
+    return state{base::root_state(h, v, o), root_light_};
+  }
+
+  template <class H, class F>
+  void for_each_child(const H& h, const rho_grid_cell& n, const state& hs, F&& f) const {
+    const auto& tab = table_[std::size_t(n.depth) + 1];
+    this->for_each_child_digit(h, n, [&](int j, std::uint32_t cell) {
+      f(H::child(n, j, cell),
+        state{this->child_state(hs, n.depth, j), hs.light_coords + tab[std::size_t(j)]});
+    });
+  }
+
+ private:
+  light_map_frame frame_;
+  vec3f root_light_;
+  std::vector<std::array<vec3f, R3>> table_;  // [depth][j]: child j's offset from its parent
 };
 
 static_assert(Hierarchy<rho_grid_hierarchy<3, positions_only>>);

@@ -27,12 +27,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <concepts>
 #include <cstddef>
 #include <limits>
 #include <vector>
 
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/raster/light_frame.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -55,28 +57,30 @@ class one_pass_light_map {
   /// of the slope-scaled bias (0: none).
   one_pass_light_map(const vec3f& to_light, const sphere& bounds, int texels, float bias_texels,
                      float slope = one_pass_slope_bias)
-      : l_(to_light),
-        lu_(any_orthogonal(to_light)),
-        lv_(to_light.cross(lu_)),
-        c0_(bounds.centre),
-        half_(bounds.radius),
-        n_(std::max(2, texels)),
-        texel_(2 * bounds.radius / float(n_)),
-        bias_(bias_texels * texel_),
+      : f_(to_light, bounds, texels),
+        n_(f_.texels),
+        bias_(bias_texels * f_.texel),
         slope_(std::isfinite(slope) ? std::max(slope, 0.0f) : 0.0f),
         depth_(std::size_t(n_) * std::size_t(n_), std::numeric_limits<float>::infinity()) {}
+
+  [[nodiscard]] const light_map_frame& frame() const { return f_; }
 
   /// True when a sample at p whose node has bounding radius r and unit normal n (either sign;
   /// zero: unknown, no slope bias) is shadowed by what was written before; then writes the
   /// sample's own footprint.
   bool shadowed_then_write(const vec3f& p, float r, const vec3f& n = vec3f::Zero()) {
-    const vec3f d = p - c0_;
-    const float tu = (d.dot(lu_) + half_) / texel_, tv = (d.dot(lv_) + half_) / texel_;
-    const float z = -d.dot(l_);  // distance from the light, up to a constant
-    const int ix = std::clamp(int(tu), 0, n_ - 1), iy = std::clamp(int(tv), 0, n_ - 1);
+    return shadowed_then_write_at(f_.coords(p), r, n);
+  }
+  /// shadowed_then_write() for a sample whose frame().coords() are `c` (u, v, z), computed by
+  /// the caller.
+  bool shadowed_then_write_at(const vec3f& c, float r, const vec3f& n = vec3f::Zero()) {
+    const float tu = c.x(), tv = c.y(), z = c.z();
+    // Non-finite coordinates (a NaN position) land in texel 0, as int() of a clamped NaN would.
+    const int ix = std::isfinite(tu) ? int(std::clamp(tu, 0.0f, float(n_ - 1))) : 0;
+    const int iy = std::isfinite(tv) ? int(std::clamp(tv, 0.0f, float(n_ - 1))) : 0;
     const float footprint = r / std::sqrt(3.0f);
     const bool shadowed = at(ix, iy) < z - r - bias_ - slope_bias(n, footprint);
-    const float fr = footprint / texel_ + 0.5f;
+    const float fr = footprint / f_.texel + 0.5f;
     const int rr = int(std::ceil(fr));
     for (int y = std::max(0, iy - rr); y <= std::min(n_ - 1, iy + rr); ++y)
       for (int x = std::max(0, ix - rr); x <= std::min(n_ - 1, ix + rr); ++x) {
@@ -94,21 +98,21 @@ class one_pass_light_map {
   /// one_pass_slope_cap).
   [[nodiscard]] float slope_bias(const vec3f& n, float footprint) const {
     if (!(slope_ > 0)) return 0;
-    const float c = std::abs(n.dot(l_));
+    const float c = std::abs(n.dot(f_.to_light));
     if (!(c > 0)) return 0;
     const float s2 = std::max(0.0f, n.squaredNorm() - c * c);
-    return slope_ * (footprint + texel_) * std::min(std::sqrt(s2) / c, one_pass_slope_cap);
+    return slope_ * (footprint + f_.texel) * std::min(std::sqrt(s2) / c, one_pass_slope_cap);
   }
-  vec3f l_, lu_, lv_, c0_;
-  float half_;
+  light_map_frame f_;
   int n_;
-  float texel_, bias_, slope_;
+  float bias_, slope_;
   std::vector<float> depth_;
 };
 
 /// Sink<A> (A with normals) that shades what it receives lit or in shadow and forwards it as
 /// primitives of colours only to `Inner`. The bounding radius of the next primitives is set with
-/// node_radius() (render_one_pass_shadows does it per emitted node).
+/// node_radius() (render_one_pass_shadows does it per emitted node), and the light-map
+/// coordinates of the next one, when the traversal carries them, with node_light().
 template <attributes A, class Inner>
 class one_pass_shadow_sink {
   static_assert(A.normal, "one-pass shadows shade: the primitives need normals");
@@ -125,7 +129,15 @@ class one_pass_shadow_sink {
         inner_(inner) {}
 
   void node_radius(float r) { r_ = r; }
+  /// The next primitive's position in light_map_frame::coords (its point's or splat's centre,
+  /// a triangle's centroid), computed by the traversal — the ρ-grid's light displacement table
+  /// (§4.2) — and used instead of projecting that position; for that one primitive only.
+  void node_light(const vec3f& coords) {
+    light_ = coords;
+    has_light_ = true;
+  }
   [[nodiscard]] const one_pass_shadow_stats& stats() const { return st_; }
+  [[nodiscard]] const light_map_frame& light_frame() const { return map_.frame(); }
 
   void point(const point_prim<A>& p) {
     point_prim<out_attrs> q{p.position, p.size_px};
@@ -153,7 +165,9 @@ class one_pass_shadow_sink {
 
  private:
   bool classify(const vec3f& p, const vec3f& n) {
-    const bool dark = map_.shadowed_then_write(p, r_, n);
+    const bool dark = has_light_ ? map_.shadowed_then_write_at(light_, r_, n)
+                                 : map_.shadowed_then_write(p, r_, n);
+    has_light_ = false;
     ++(dark ? st_.shadowed : st_.lit);
     return dark;
   }
@@ -172,23 +186,52 @@ class one_pass_shadow_sink {
   rgb8 flat_;
   float ambient_;
   float r_ = 0;
+  vec3f light_ = vec3f::Zero();
+  bool has_light_ = false;
   Inner& inner_;
   one_pass_shadow_stats st_;
 };
 
+/// A traversal state that carries its node's light-map coordinates (light_map_frame::coords of
+/// the node's emitted position): render_one_pass_shadows hands them to the shadow sink.
+template <class State>
+concept carries_light_coords = requires(const State& s) {
+  { s.light_coords } -> std::convertible_to<vec3f>;
+};
+
 namespace detail {
-/// Forwards to Policy and tells the shadow sink each emitted node's bounding radius first.
+/// Forwards to Policy and tells the shadow sink each emitted node's bounding radius first (and
+/// its light-map coordinates when the policy's state carries them). The state-taking emit()
+/// forwards to Policy's own when it has one, so that a policy drawing from its state (the
+/// ρ-grid's screen_draw) keeps doing so under shadows.
 template <class Policy, class ShadowSink>
 struct node_radius_policy : Policy {
   ShadowSink* shadows;
-  template <class H, class S>
-  void emit(const H& h, const typename H::node_id& n, const view& v, float size,
+  template <class H, class State, class S>
+  void emit(const H& h, const typename H::node_id& n, const State& hs, const view& v, float size,
             const traverse_options& o, S& sink) const {
     shadows->node_radius(h.bounding_sphere(n).radius);
-    Policy::emit(h, n, v, size, o, sink);
+    if constexpr (carries_light_coords<State>) shadows->node_light(hs.light_coords);
+    if constexpr (has_state_emit<Policy, H, State, S>)
+      Policy::emit(h, n, hs, v, size, o, sink);
+    else
+      Policy::emit(h, n, v, size, o, sink);
   }
 };
 }  // namespace detail
+
+/// The light map's frame render_one_pass_shadows(h, …, o, …) uses: over h's root bounding sphere,
+/// o.shadow_map_size texels, light towards o.sun.direction (normalised; throws InvalidArgument
+/// when it is zero or not finite). A policy with a light table (rho_grid_light_policy) is built
+/// for it.
+template <Hierarchy H>
+[[nodiscard]] light_map_frame one_pass_light_frame(const H& h, const render_options& o) {
+  const vec3f dir = o.sun.direction;
+  if (!all_finite(dir) || !(dir.squaredNorm() > 0))
+    throw InvalidArgument("one-pass shadows need a non-zero light direction");
+  return light_map_frame(dir.normalized(), h.empty() ? sphere{} : h.bounding_sphere(h.root()),
+                         o.shadow_map_size);
+}
 
 /// Renders h for view v (relative to h.origin()) with one-pass shadows from o.sun in one
 /// traversal. `policy` must emit front to back from the light; the light map covers
@@ -196,16 +239,22 @@ struct node_radius_policy : Policy {
 /// rasteriser's; the frame is drawn with colour only (and hole filling when o.fx asks for it).
 /// Needs normals (static) and a non-zero light direction (throws InvalidArgument). With
 /// o.supersample = k, h is traversed in v.supersampled(k) with k × t.tolerance_px (the cut of v);
-/// a policy built for one view, as the ρ-grid's, must then be built for that view.
+/// a policy built for one view, as the ρ-grid's, must then be built for that view. A policy with
+/// a light table (it has light_frame(): rho_grid_light_policy) must have been built for
+/// one_pass_light_frame(h, o), else InvalidArgument.
 template <Hierarchy H, class Policy>
 [[nodiscard]] image render_one_pass_shadows(const H& h, const view& v, const render_options& o,
                                             const traverse_options& t, const Policy& policy,
                                             traverse_stats* tstats = nullptr,
                                             one_pass_shadow_stats* sstats = nullptr) {
   static_assert(H::attrs.normal, "one-pass shadows need normals");
-  const vec3f dir = o.sun.direction;
-  if (!all_finite(dir) || !(dir.squaredNorm() > 0))
-    throw InvalidArgument("one-pass shadows need a non-zero light direction");
+  const light_map_frame frame = one_pass_light_frame(h, o);
+  if constexpr (requires { policy.light_frame(); }) {
+    if (!h.empty() && !(policy.light_frame() == frame))
+      throw InvalidArgument(
+          "one-pass shadows: the policy's light table was built for another light map (build it "
+          "for one_pass_light_frame(h, o): the same light direction and shadow_map_size)");
+  }
   constexpr attributes C{.colour = true};
   render_options ro = o;
   ro.fx = effects{.colour = true, .hole_filling = o.fx.hole_filling};
@@ -217,7 +266,7 @@ template <Hierarchy H, class Policy>
   image img = render<C>(v, ro, [&](auto& sink, const view& dv) {
     if (h.empty()) return;
     using sink_type = std::decay_t<decltype(sink)>;
-    one_pass_shadow_sink<H::attrs, sink_type> shade(dv, o, dir.normalized(),
+    one_pass_shadow_sink<H::attrs, sink_type> shade(dv, o, frame.to_light,
                                                     h.bounding_sphere(h.root()), sink);
     const detail::node_radius_policy<Policy, decltype(shade)> p{policy, &shade};
     ts = traverse(h, dv, tk, shade, p);
