@@ -561,9 +561,8 @@ BENCHMARK(bm_bounds)
 // with the cells drawn as today (draw 0: point_prims re-projected by the rasteriser in float,
 // inner cells as s × s squares at their samples) or from the traversal's tables (draw 1:
 // screen rectangles placed from H/W in the policy's arithmetic; with per-corner bounds an inner
-// cell is the rectangle of its sampled children). `arith` as in bm_traverse; per-corner bounds
-// are float and int64 only. psnr_vs_mesh: the frame against the mesh drawn by the same
-// rasteriser (the full-detail reference).
+// cell is the rectangle of its sampled children). `arith` as in bm_traverse. psnr_vs_mesh: the
+// frame against the mesh drawn by the same rasteriser (the full-detail reference).
 template <rho_grid_arithmetic Ar, rho_grid_bounds Bd>
 void draw_frames(benchmark::State& state, const rho_grid<3>& g, const camera& cam, float s,
                  bool screen_draw) {
@@ -593,15 +592,8 @@ void draw_frames(benchmark::State& state, const rho_grid<3>& g, const camera& ca
 template <rho_grid_arithmetic Ar>
 void draw_frames_bounds(benchmark::State& state, const rho_grid<3>& g, const camera& cam, float s,
                         bool screen_draw, bool per_corner) {
-  if constexpr (Ar == rho_grid_arithmetic::fixed32) {
-    if (per_corner) {
-      state.SkipWithError("per-corner bounds are float and int64 only");
-      return;
-    }
-  } else {
-    if (per_corner)
-      return draw_frames<Ar, rho_grid_bounds::per_corner>(state, g, cam, s, screen_draw);
-  }
+  if (per_corner)
+    return draw_frames<Ar, rho_grid_bounds::per_corner>(state, g, cam, s, screen_draw);
   draw_frames<Ar, rho_grid_bounds::symmetric>(state, g, cam, s, screen_draw);
 }
 void bm_draw(benchmark::State& state) {
@@ -619,7 +611,7 @@ void bm_draw(benchmark::State& state) {
 BENCHMARK(bm_draw)
     ->ArgNames({"arith", "draw", "per_corner", "s", "dist10"})
     ->ArgsProduct({{0, 1, 2}, {0, 1}, {0}, {1, 4}, {25, 80}})
-    ->ArgsProduct({{0, 1}, {0, 1}, {1}, {1, 4}, {25, 80}})
+    ->ArgsProduct({{0, 1, 2}, {0, 1}, {1}, {1, 4}, {25, 80}})
     ->Unit(benchmark::kMillisecond);
 
 }  // namespace

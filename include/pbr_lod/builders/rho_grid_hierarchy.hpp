@@ -79,7 +79,8 @@ enum class rho_grid_arithmetic { floating, fixed, fixed32 };
 /// E/(W·(W − B)) about the projected centre from one max-|Δ| entry per axis (all arithmetics).
 /// `per_corner`: the paper's bounds table — per depth the min and max over the cell's corners of
 /// ΔX, ΔY, ΔW — giving the rectangle [min x, max x] × [min y, max y] with the minimum z/w, which
-/// lies inside the symmetric one (float and int64 only: fixed32 would need a second reciprocal).
+/// lies inside the symmetric one (every arithmetic; fixed32 divides through the reciprocal
+/// table for the min and the max z/w, two look-ups per cell where the symmetric bound takes one).
 enum class rho_grid_bounds { symmetric, per_corner };
 
 /// A node of a ρ-grid hierarchy: the cell index (rho_grid numbering), its depth below the root
@@ -660,16 +661,83 @@ struct rho_traversal {
     return {{lo, lo >= value(0) ? dhi : dlo}, {hi, hi >= value(0) ? dlo : dhi}};
   }
 
-  /// test() with the per-corner bounds table (float and int64; cross-multiplied, no division):
+  /// fixed32's per-corner rectangle: the four fractions of corner_interval() divided through
+  /// the reciprocal table, two look-ups (min and max z/w, the only denominators), x and y with
+  /// screen_g fractional bits from the principal point. Only called when W + min ΔW > z_near
+  /// ≥ 0, so both denominators are ≥ 1 unit. The numerators X + ΔX are within 2^30 (choose_scale
+  /// bounds |H| plus a cell's offsets), so they and the box sums stay in int32.
+  struct projected_rectangle {
+    std::int32_t x0, x1, y0, y1;
+    bool saturated = false;  ///< a side reached ±2^30 units: clamped towards the screen
+  };
+  [[nodiscard]] projected_rectangle project_corners(const hom& h, const corner_box& b) const {
+    const value dlo = h.w + b.mn[2], dhi = h.w + b.mx[2];
+    const auto rlo = rho_reciprocal::of(std::uint32_t(dlo)),
+               rhi = rho_reciprocal::of(std::uint32_t(dhi));
+    projected_rectangle r{};
+    const auto q = [&](const fraction& f) {
+      return rho_reciprocal::divide(std::int64_t(f.n) << screen_g, f.d == dlo ? rlo : rhi,
+                                    r.saturated);
+    };
+    const interval ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
+    const interval iy = corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi);
+    r.x0 = q(ix.lo);
+    r.x1 = q(ix.hi);
+    r.y0 = q(iy.lo);
+    r.y1 = q(iy.hi);
+    return r;
+  }
+
+  /// test() with the per-corner bounds table. Float and int64 cross-multiply, no division:
   ///   splat condition   hi.n·lo.d − lo.n·hi.d ≤ s·hi.d·lo.d  (x and y; Eq. 6 on max x − min x)
   ///   frustum culling   hi.n < −c_x·hi.d (left), lo.n > c_x·lo.d (right), likewise y;
   ///                     W + min ΔW > z_far (beyond), W + max ΔW < z_near (behind)
+  /// fixed32 divides through the reciprocal table instead (project_corners) and compares the
+  /// rectangle's sides: x1 − x0 ≤ s, x1 < −c_x, x0 > c_x, likewise y. As in test_projected(), a
+  /// saturated rectangle is never a splat; its clamped sides still lie beyond the screen's
+  /// edges (2^30 units ≥ 64 half screens), so culling decides as without the clamp.
   [[nodiscard]] verdict test_per_corner(const hom& h, int l, bool leaf, float s, bool cull,
                                         const corner_box& b) const {
-    static_assert(!projective, "the per-corner bounds are float and int64 only");
     const value dlo = h.w + b.mn[2], dhi = h.w + b.mx[2];  // the minimum and maximum z/w
     if (dhi < znear) return may_cull.near ? verdict::cull : caster(l, leaf);
     if (!(dlo > znear)) return leaf ? verdict::draw : verdict::refine;
+    if constexpr (projective)
+      return corners_projected(h, l, leaf, s, cull, b, dlo);
+    else
+      return corners_homogeneous(h, l, leaf, s, cull, b, dlo, dhi);
+  }
+  [[nodiscard]] verdict corners_projected(const hom& h, int l, bool leaf, float s, bool cull,
+                                          const corner_box& b, value dlo) const {
+    const projected_rectangle r = project_corners(h, b);
+    const value dhi = h.w + b.mx[2];
+    const auto small = [&] {
+      return !r.saturated &&
+             narrow_projected(corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi), s) &&
+             narrow_projected(corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi), s);
+    };
+    if (cull) {
+      const bool far = dlo > zfar, left = r.x1<-cx, right = r.x0> cx,
+                 top = r.y1<-cy, bottom = r.y0> cy;
+      return decide({far, left, right, top, bottom}, l, leaf, small);
+    }
+    return decide({}, l, leaf, small);
+  }
+  /// fixed32's splat condition on one axis, hi.n/hi.d − lo.n/lo.d ≤ s, without the cancellation
+  /// of subtracting the two divided sides (whose 2^-13 error is relative to their distance from
+  /// the centre, not to the width): the exact int64 numerator N = hi.n·lo.d − lo.n·hi.d ≥ 0
+  /// (products of two int32), then N/hi.d ≤ s·lo.d through one reciprocal, both sides shifted by
+  /// k bits so that the right one fits 29 bits (a left side that saturates is > 2× the right).
+  [[nodiscard]] static bool narrow_projected(const interval& i, float s) {
+    const std::int64_t n = std::int64_t(i.hi.n) * i.lo.d - std::int64_t(i.lo.n) * i.hi.d;
+    const double rhs = std::min(double(s), 0x1p20) * double(i.lo.d);  // < 2^52
+    const int k = std::max(0, int(std::bit_width(std::uint64_t(rhs))) - 29);
+    bool sat = false;
+    const std::int32_t lhs =
+        rho_reciprocal::divide(n >> k, rho_reciprocal::of(std::uint32_t(i.hi.d)), sat);
+    return !sat && double(std::int64_t(lhs) << k) <= rhs;  // < 2^53: exact
+  }
+  [[nodiscard]] verdict corners_homogeneous(const hom& h, int l, bool leaf, float s, bool cull,
+                                            const corner_box& b, value dlo, value dhi) const {
     const interval ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
     const interval iy = corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi);
     const auto narrow = [&](const interval& i) {
@@ -689,7 +757,8 @@ struct rho_traversal {
   }
 
   /// The per-corner rectangle of a cell in pixels from the principal point (y down), what
-  /// test_per_corner() compares: empty (all NaN) when the cell reaches behind the near plane.
+  /// test_per_corner() compares: empty (all NaN) when the cell reaches behind the near plane
+  /// (fixed32: or its rectangle saturated).
   struct rectangle {
     double x0, x1, y0, y1;
   };
@@ -698,6 +767,21 @@ struct rho_traversal {
     if (!(dlo > znear)) {
       constexpr double nan = std::numeric_limits<double>::quiet_NaN();
       return {nan, nan, nan, nan};
+    }
+    if constexpr (projective) {  // the tests' rectangle, rounded outwards
+      const projected_rectangle r = project_corners(h, b);
+      if (r.saturated) {
+        constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+        return {nan, nan, nan, nan};
+      }
+      // Widened by twice the divisions' error bound (2^-13 of the distance from the principal
+      // point) and two units, so the rectangle still contains every corner it bounds.
+      const auto slack = [](std::int32_t q) {
+        return double((std::int64_t(q < 0 ? -q : q) >> 12) + 2);
+      };
+      const double unit_px = std::ldexp(1.0, -screen_g);
+      return {(r.x0 - slack(r.x0)) * unit_px, (r.x1 + slack(r.x1)) * unit_px,
+              (r.y0 - slack(r.y0)) * unit_px, (r.y1 + slack(r.y1)) * unit_px};
     }
     const auto q = [](const fraction& f) { return double(f.n) / double(f.d); };  // scale-free
     const interval ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
@@ -797,13 +881,10 @@ template <int Rho>
 /// metric, cull_volume and backface_cull do not apply. Stats: emitted_nodes = inner cells drawn
 /// as splats, emitted_leaves = leaves drawn as points, culled_frustum = subtrees culled.
 /// Bounds picks the cell bound of the tests (rho_grid_bounds): per_corner visits and draws fewer
-/// cells at the same s (docs/rho-grid.md measures it), in float and int64.
+/// cells at the same s (docs/rho-grid.md measures it), in every arithmetic.
 template <int Rho, rho_grid_arithmetic Arith = rho_grid_arithmetic::floating,
           rho_grid_bounds Bounds = rho_grid_bounds::symmetric>
 class rho_grid_policy {
-  static_assert(Bounds == rho_grid_bounds::symmetric || Arith != rho_grid_arithmetic::fixed32,
-                "per-corner bounds are float and int64 only: fixed32 tests the projected "
-                "centre through one reciprocal per cell, the rectangle needs two (W ± B)");
   static constexpr int R3 = Rho * Rho * Rho;
   static constexpr bool per_corner = Bounds == rho_grid_bounds::per_corner;
   using arith =
