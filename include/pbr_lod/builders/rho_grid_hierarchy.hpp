@@ -669,22 +669,28 @@ struct rho_traversal {
   struct projected_rectangle {
     std::int32_t x0, x1, y0, y1;
     bool saturated = false;  ///< a side reached ±2^30 units: clamped towards the screen
+    interval ix, iy;         ///< the fractions divided
+    value dlo;
+    rho_reciprocal::value rlo, rhi;  ///< of the min and the max z/w
+    [[nodiscard]] const rho_reciprocal::value& reciprocal(value d) const {
+      return d == dlo ? rlo : rhi;
+    }
   };
   [[nodiscard]] projected_rectangle project_corners(const hom& h, const corner_box& b) const {
     const value dlo = h.w + b.mn[2], dhi = h.w + b.mx[2];
-    const auto rlo = rho_reciprocal::of(std::uint32_t(dlo)),
-               rhi = rho_reciprocal::of(std::uint32_t(dhi));
     projected_rectangle r{};
+    r.dlo = dlo;
+    r.rlo = rho_reciprocal::of(std::uint32_t(dlo));
+    r.rhi = rho_reciprocal::of(std::uint32_t(dhi));
+    r.ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
+    r.iy = corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi);
     const auto q = [&](const fraction& f) {
-      return rho_reciprocal::divide(std::int64_t(f.n) << screen_g, f.d == dlo ? rlo : rhi,
-                                    r.saturated);
+      return rho_reciprocal::divide(std::int64_t(f.n) << screen_g, r.reciprocal(f.d), r.saturated);
     };
-    const interval ix = corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi);
-    const interval iy = corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi);
-    r.x0 = q(ix.lo);
-    r.x1 = q(ix.hi);
-    r.y0 = q(iy.lo);
-    r.y1 = q(iy.hi);
+    r.x0 = q(r.ix.lo);
+    r.x1 = q(r.ix.hi);
+    r.y0 = q(r.iy.lo);
+    r.y1 = q(r.iy.hi);
     return r;
   }
 
@@ -709,15 +715,13 @@ struct rho_traversal {
   [[nodiscard]] verdict corners_projected(const hom& h, int l, bool leaf, float s, bool cull,
                                           const corner_box& b, value dlo) const {
     const projected_rectangle r = project_corners(h, b);
-    const value dhi = h.w + b.mx[2];
     const auto small = [&] {
-      return !r.saturated &&
-             narrow_projected(corner_interval(h.x, b.mn[0], b.mx[0], dlo, dhi), s) &&
-             narrow_projected(corner_interval(h.y, b.mn[1], b.mx[1], dlo, dhi), s);
+      return !r.saturated && narrow_projected(r.ix, s, r.reciprocal(r.ix.hi.d)) &&
+             narrow_projected(r.iy, s, r.reciprocal(r.iy.hi.d));
     };
     if (cull) {
-      const bool far = dlo > zfar, left = r.x1<-cx, right = r.x0> cx,
-                 top = r.y1<-cy, bottom = r.y0> cy;
+      const bool far = dlo > zfar, left = (r.x1 < -cx), right = (r.x0 > cx), top = (r.y1 < -cy),
+                 bottom = (r.y0 > cy);
       return decide({far, left, right, top, bottom}, l, leaf, small);
     }
     return decide({}, l, leaf, small);
@@ -725,15 +729,16 @@ struct rho_traversal {
   /// fixed32's splat condition on one axis, hi.n/hi.d − lo.n/lo.d ≤ s, without the cancellation
   /// of subtracting the two divided sides (whose 2^-13 error is relative to their distance from
   /// the centre, not to the width): the exact int64 numerator N = hi.n·lo.d − lo.n·hi.d ≥ 0
-  /// (products of two int32), then N/hi.d ≤ s·lo.d through one reciprocal, both sides shifted by
-  /// k bits so that the right one fits 29 bits (a left side that saturates is > 2× the right).
-  [[nodiscard]] static bool narrow_projected(const interval& i, float s) {
+  /// (products of two int32), then N/hi.d ≤ s·lo.d through hi.d's reciprocal `r`, both sides
+  /// shifted by k bits so that the right one fits 29 bits (a left side that saturates is > 2×
+  /// the right).
+  [[nodiscard]] static bool narrow_projected(const interval& i, float s,
+                                             const rho_reciprocal::value& r) {
     const std::int64_t n = std::int64_t(i.hi.n) * i.lo.d - std::int64_t(i.lo.n) * i.hi.d;
     const double rhs = std::min(double(s), 0x1p20) * double(i.lo.d);  // < 2^52
     const int k = std::max(0, int(std::bit_width(std::uint64_t(rhs))) - 29);
     bool sat = false;
-    const std::int32_t lhs =
-        rho_reciprocal::divide(n >> k, rho_reciprocal::of(std::uint32_t(i.hi.d)), sat);
+    const std::int32_t lhs = rho_reciprocal::divide(n >> k, r, sat);
     return !sat && double(std::int64_t(lhs) << k) <= rhs;  // < 2^53: exact
   }
   [[nodiscard]] verdict corners_homogeneous(const hom& h, int l, bool leaf, float s, bool cull,
