@@ -137,7 +137,6 @@ class one_pass_shadow_sink {
     has_light_ = true;
   }
   [[nodiscard]] const one_pass_shadow_stats& stats() const { return st_; }
-  [[nodiscard]] const light_map_frame& light_frame() const { return map_.frame(); }
 
   void point(const point_prim<A>& p) {
     point_prim<out_attrs> q{p.position, p.size_px};
