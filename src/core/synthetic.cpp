@@ -123,6 +123,78 @@ triangle_mesh make_demo_scene(int detail) {
   return std::move(b.m);
 }
 
+triangle_mesh make_hard_cases_scene(int detail) {
+  detail = std::clamp(detail, 4, 1024);
+  builder b;
+  // Two spheres, gap 0.04 between them, 0.1 above the floor.
+  const auto sphere = [&](const vec3f& c, float r, const vec3f& colour) {
+    const int rings = detail, segs = 2 * detail;
+    const auto base = static_cast<std::uint32_t>(b.m.vertices.positions.size());
+    for (int j = 0; j <= rings; ++j) {
+      const float theta = std::numbers::pi_v<float> * static_cast<float>(j) / float(rings);
+      for (int i = 0; i <= segs; ++i) {
+        const float phi = 2 * std::numbers::pi_v<float> * static_cast<float>(i) / float(segs);
+        const vec3f n(std::sin(theta) * std::cos(phi), std::cos(theta),
+                      std::sin(theta) * std::sin(phi));
+        b.vertex(c + r * n, n, colour);
+      }
+    }
+    const auto at = [&](int i, int j) {
+      return base + static_cast<std::uint32_t>(j * (segs + 1) + i);
+    };
+    for (int j = 0; j < rings; ++j)
+      for (int i = 0; i < segs; ++i) {
+        if (j > 0) b.tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+        if (j < rings - 1) b.tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+      }
+  };
+  sphere(vec3f(-0.52f, 0.6f, 0), 0.5f, vec3f(0.85f, 0.2f, 0.2f));
+  sphere(vec3f(0.52f, 0.6f, 0), 0.5f, vec3f(0.2f, 0.3f, 0.9f));
+  // The floor: y = 0, normal +y, a grid of 2·detail × (3·detail/2) quads with a square hole.
+  // Tiles of the checkerboard are 4 × 4 quads; a vertex takes the colour of the tile it starts.
+  {
+    const int nx = 2 * detail, nz = 3 * detail / 2;
+    const float x0 = -1.6f, z0 = -1.2f, dx = 3.2f / float(nx), dz = 2.4f / float(nz);
+    const auto base = static_cast<std::uint32_t>(b.m.vertices.positions.size());
+    for (int j = 0; j <= nz; ++j)
+      for (int i = 0; i <= nx; ++i) {
+        const bool dark = ((i / 4) + (j / 4)) % 2 == 1;
+        b.vertex(vec3f(x0 + dx * float(i), 0, z0 + dz * float(j)), vec3f(0, 1, 0),
+                 dark ? vec3f(0.25f, 0.45f, 0.25f) : vec3f(0.9f, 0.85f, 0.6f));
+      }
+    const auto at = [&](int i, int j) {
+      return base + static_cast<std::uint32_t>(j * (nx + 1) + i);
+    };
+    for (int j = 0; j < nz; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const float cx = x0 + dx * (float(i) + 0.5f), cz = z0 + dz * (float(j) + 0.5f);
+        if (cx > -0.3f && cx < 0.3f && cz > 0.55f && cz < 1.05f) continue;  // the hole
+        b.tri(at(i, j), at(i, j + 1), at(i + 1, j + 1));  // counter-clockwise seen from +y
+        b.tri(at(i, j), at(i + 1, j + 1), at(i + 1, j));
+      }
+  }
+  // The wall on the floor's back edge (z = −1.2), facing +z, with a hue ramp along x.
+  {
+    const int nx = 2 * detail, ny = detail / 2;
+    const auto base = static_cast<std::uint32_t>(b.m.vertices.positions.size());
+    for (int j = 0; j <= ny; ++j)
+      for (int i = 0; i <= nx; ++i) {
+        const float u = float(i) / float(nx);
+        b.vertex(vec3f(-1.6f + 3.2f * u, float(j) / float(ny), -1.2f), vec3f(0, 0, 1),
+                 hue(0.8f * u));
+      }
+    const auto at = [&](int i, int j) {
+      return base + static_cast<std::uint32_t>(j * (nx + 1) + i);
+    };
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        b.tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+        b.tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+      }
+  }
+  return std::move(b.m);
+}
+
 point_cloud sample_surface(const triangle_mesh& mesh, std::size_t n, std::uint64_t seed) {
   mesh.validate("sample_surface input");
   point_cloud out;

@@ -44,6 +44,63 @@ image_error compare_images(const image& reference, const image& test) {
 
 namespace {
 
+/// The pixels of `img` that are covered and have every pixel within Euclidean distance r
+/// (inside the frame) covered too: an erosion of the coverage mask by a disk.
+std::vector<char> eroded_coverage(const image& img, int r) {
+  const int w = img.width, h = img.height;
+  std::vector<std::pair<int, int>> disk;
+  for (int dy = -r; dy <= r; ++dy)
+    for (int dx = -r; dx <= r; ++dx)
+      if ((dx != 0 || dy != 0) && dx * dx + dy * dy <= r * r) disk.emplace_back(dx, dy);
+  std::vector<char> in(img.size(), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!img.covered(x, y)) continue;
+      bool inside = true;
+      for (const auto& [dx, dy] : disk) {
+        const int xx = x + dx, yy = y + dy;
+        if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+        if (!img.covered(xx, yy)) {
+          inside = false;
+          break;
+        }
+      }
+      in[img.index(x, y)] = inside ? 1 : 0;
+    }
+  return in;
+}
+
+}  // namespace
+
+input_likeness compare_to_input(const image& input_render, const image& test, int inset_px) {
+  (void)compare_images(input_render, test);  // the same size and buffer checks
+  if (inset_px < 0)
+    throw InvalidArgument("compare_to_input: inset_px is " + std::to_string(inset_px) +
+                          ", expected >= 0");
+  const std::vector<char> interior = eroded_coverage(input_render, inset_px);
+  input_likeness l;
+  double sum2 = 0;
+  std::size_t both = 0, either = 0;
+  for (std::size_t i = 0; i < input_render.size(); ++i) {
+    const bool r = input_render.covered(i), t = test.covered(i);
+    both += (r && t) ? 1 : 0;
+    either += (r || t) ? 1 : 0;
+    if (!interior[i]) continue;
+    ++l.interior_pixels;
+    l.interior_holes += t ? 0 : 1;
+    const rgb8 a = input_render.colour[i], b = test.colour[i];
+    const double dr = double(a.r) - b.r, dg = double(a.g) - b.g, db = double(a.b) - b.b;
+    sum2 += dr * dr + dg * dg + db * db;
+  }
+  const double rmse = l.interior_pixels ? std::sqrt(sum2 / (3.0 * double(l.interior_pixels))) : 0;
+  l.psnr_interior =
+      rmse > 0 ? 20.0 * std::log10(255.0 / rmse) : std::numeric_limits<double>::infinity();
+  l.silhouette_iou = either ? double(both) / double(either) : 1.0;
+  return l;
+}
+
+namespace {
+
 /// Separable Gaussian blur (σ = 1.5, radius 5) with the weights renormalised where the window
 /// leaves the image, so a constant image stays constant up to the border.
 std::vector<double> gaussian_blur(const std::vector<double>& in, int w, int h) {

@@ -74,6 +74,51 @@ TEST(Metrics, KnownDifferences) {
   EXPECT_NEAR(f.psnr, 14.136951, 1e-5);
 }
 
+// compare_to_input on a 9×9 frame whose input render covers the 7×7 square x, y ∈ [1, 7]:
+// with inset 2 the interior is the pixels whose disk of radius 2 stays covered — the 3×3 square
+// x, y ∈ [3, 5] (a pixel at x = 2 has x = 0 within distance 2). Inset 0 keeps all 49.
+TEST(Metrics, CompareToInputInteriorAndIou) {
+  image input(9, 9, {0, 0, 0});
+  for (int y = 1; y <= 7; ++y)
+    for (int x = 1; x <= 7; ++x) {
+      input.colour[input.index(x, y)] = {100, 100, 100};
+      input.depth[input.index(x, y)] = 1;
+    }
+  image test = input;
+  // A wrong colour on the silhouette (x = 1) is outside the interior: no interior error.
+  test.colour[test.index(1, 4)] = {0, 255, 0};
+  // A hole at the centre: the one interior pixel that differs, by 100 in each channel.
+  test.depth[test.index(4, 4)] = kInf;
+  test.colour[test.index(4, 4)] = {0, 0, 0};
+  // Two covered pixels outside the input's silhouette.
+  test.depth[test.index(0, 0)] = 1;
+  test.depth[test.index(8, 8)] = 1;
+  const input_likeness l = compare_to_input(input, test);
+  EXPECT_EQ(l.interior_pixels, 9u);
+  EXPECT_EQ(l.interior_holes, 1u);
+  // RMSE = sqrt(3·100² / (9·3)) = 100/3; PSNR = 20·log10(255·3/100).
+  EXPECT_NEAR(l.psnr_interior, 20 * std::log10(7.65), 1e-9);
+  // both: 49 − 1 (the hole) = 48; either: 49 + 2 = 51.
+  EXPECT_DOUBLE_EQ(l.silhouette_iou, 48.0 / 51.0);
+  EXPECT_EQ(compare_to_input(input, test, 0).interior_pixels, 49u);
+  EXPECT_EQ(compare_to_input(input, input, 0).psnr_interior,
+            std::numeric_limits<double>::infinity());
+  EXPECT_THROW((void)compare_to_input(input, test, -1), InvalidArgument);
+  EXPECT_THROW((void)compare_to_input(input, image(8, 9)), InvalidArgument);
+}
+
+// A model that fills the frame: the frame's edge is not its silhouette, so every pixel is
+// interior; an empty input render has no interior and an IoU of 1 against an empty test.
+TEST(Metrics, CompareToInputFrameEdgeAndEmpty) {
+  const image full = uniform(6, 5, {7, 8, 9});
+  EXPECT_EQ(compare_to_input(full, full).interior_pixels, 30u);
+  const image empty(6, 5);
+  const input_likeness l = compare_to_input(empty, empty);
+  EXPECT_EQ(l.interior_pixels, 0u);
+  EXPECT_EQ(l.silhouette_iou, 1.0);
+  EXPECT_EQ(compare_to_input(empty, full).silhouette_iou, 0.0);
+}
+
 // SSIM: 1 for identical images; for two uniform greys a and b (no structure, σ = 0) eq. 13
 // reduces to (2ab + C1) / (a² + b² + C1), worked out by hand for 100 vs 120.
 TEST(Metrics, SsimIdenticalAndUniform) {

@@ -39,4 +39,17 @@ namespace pbr_lod {
 [[nodiscard]] point_cloud make_lidar_tile(std::size_t n, std::uint64_t seed = 1,
                                           bool outliers = true);
 
+/// A scene of the cases where a builder's finest cut stops looking like its input, with
+/// per-vertex normals and colours (about 8·detail² triangles; detail 48 → ~19k):
+///  * two separate surfaces close together: two spheres of radius 0.5 whose gap is 0.04, each
+///    0.1 above the floor — a triangle or splat that joins them shows in the gap;
+///  * an open boundary and a hole: the floor is a single-sided 3.2 × 2.4 plate (open outer edge)
+///    with a 0.6 × 0.5 square hole in front of the spheres;
+///  * a sharp concave crease: a wall 1 high standing on the floor's back edge (separate vertices,
+///    so normals jump 90°), its top edge open;
+///  * colours: a two-colour checkerboard floor (per-vertex colours constant on each tile's
+///    vertices), a hue ramp on the wall, one red and one blue sphere.
+/// y is up; the scene spans x ∈ [−1.6, 1.6], y ∈ [0, 1.1], z ∈ [−1.2, 1.2]. Deterministic.
+[[nodiscard]] triangle_mesh make_hard_cases_scene(int detail = 48);
+
 }  // namespace pbr_lod

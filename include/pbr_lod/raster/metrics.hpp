@@ -29,6 +29,26 @@ struct image_error {
 /// image: rmse 0, psnr +inf.
 [[nodiscard]] image_error compare_images(const image& reference, const image& test);
 
+/// How a render looks next to the input's own full-detail render from the same view (the mesh;
+/// the cloud's every point) — what the user sees, as opposed to compare_images against a
+/// builder's own finest cut, which a wrong finest cut passes.
+struct input_likeness {
+  /// PSNR over the RGB channels of the interior pixels: covered in the input render and at least
+  /// `inset_px` pixels inside its silhouette (every pixel within that Euclidean distance is
+  /// covered too; pixels beyond the frame do not count as uncovered). A test pixel left empty
+  /// there compares its background colour. +inf when they all agree; +inf with interior_pixels
+  /// 0 when the input render has no interior.
+  double psnr_interior = 0;
+  /// |covered in both| / |covered in either| (1 when neither covers anything).
+  double silhouette_iou = 0;
+  std::size_t interior_pixels = 0;  ///< the pixels psnr_interior is taken over
+  std::size_t interior_holes = 0;   ///< interior pixels the test leaves empty
+};
+
+/// Compares `test` with `input_render` (same size, else InvalidArgument) as above; inset_px ≥ 0.
+[[nodiscard]] input_likeness compare_to_input(const image& input_render, const image& test,
+                                              int inset_px = 2);
+
 /// Mean structural similarity (Wang, Bovik, Sheikh & Simoncelli 2004, eq. 13) of the luminance
 /// (Y = 0.299 R + 0.587 G + 0.114 B) of the two images: local means, variances and covariance
 /// under an 11×11 Gaussian window (σ = 1.5, renormalised at the borders), C1 = (0.01·255)²,
