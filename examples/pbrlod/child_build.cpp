@@ -86,6 +86,11 @@ loaded_input load_sweep_input(const std::string& spec) {
     in.mesh = make_demo_scene(std::stoi(spec.substr(10)));
     return in;
   }
+  if (spec.rfind("generated-hard:", 0) == 0) {
+    loaded_input in;
+    in.mesh = make_hard_cases_scene(std::stoi(spec.substr(15)));
+    return in;
+  }
   return load(spec);
 }
 

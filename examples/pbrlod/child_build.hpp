@@ -17,8 +17,8 @@
 
 namespace pbrlod_tool {
 
-/// A sweep input the child can produce on its own: a file path, or "generated:N" for
-/// make_demo_scene(N).
+/// A sweep input the child can produce on its own: a file path, "generated:N" for
+/// make_demo_scene(N), or "generated-hard:N" for make_hard_cases_scene(N).
 loaded_input load_sweep_input(const std::string& spec);
 
 /// What a child build reports.

@@ -1,11 +1,14 @@
 // pbrlod sweep — what accuracy costs in time: every builder over the same inputs, views and
 // tolerances, one row per (builder, input, setting, tolerance, view), written as CSV and JSON.
 //
-// Each frame's image error is taken against the same hierarchy drawn at tolerance 0 from the
-// same view (its finest cut: every leaf, the same samples, splat model and effects), so psnr and
-// holes measure what LOD costs and nothing else; psnr_input compares with the input's own
-// full-detail render (the mesh, or every point as a splat), which adds the builder's
-// resampling and splat model on top.
+// What the user sees leads: psnr_interior and silhouette_iou compare each frame with the
+// input's own full-detail render from the same view (the mesh, or every point as a splat) —
+// PSNR over the pixels at least 2 px inside its silhouette, and the overlap of the silhouettes
+// — and hausdorff_fwd is the cut's distance to the input surface; a builder whose finest cut
+// draws the wrong surface shows there. psnr_input is the whole-frame PSNR against the same
+// render. psnr and holes take each frame against the same hierarchy drawn at tolerance 0 (its
+// finest cut: every leaf, the same samples, splat model and effects), so they measure what LOD
+// costs and nothing else — and cannot see a wrong finest cut.
 #include "sweep.hpp"
 
 #include <algorithm>
@@ -25,6 +28,7 @@
 #include "child_build.hpp"
 #include "contact_sheet.hpp"
 #include "lod.hpp"
+#include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/knn.hpp"
@@ -85,6 +89,9 @@ struct sweep_row {
   double build_seconds = 0, frame_seconds = 0, traverse_seconds = 0, raster_seconds = 0;
   std::size_t points = 0, splats = 0, triangles = 0;
   double psnr = 0, holes = 0, ssim = 0, psnr_input = 0, holes_input = 0;
+  /// What the user sees, against the input's own render: PSNR over the pixels ≥ 2 px inside its
+  /// silhouette, and the silhouette IoU (raster/metrics.hpp compare_to_input).
+  double psnr_interior = 0, silhouette_iou = 0;
   std::size_t file_bytes = 0;
   double bytes_per_input_point = 0, bytes_per_sample = 0;
   /// Object-space error of the cut against the input's points, over the bounding-box diagonal:
@@ -101,7 +108,7 @@ struct sweep_row {
 struct tile_candidate {
   std::string builder, input;
   float tolerance = 0;
-  double seconds = 0, psnr_input = 0;
+  double seconds = 0, psnr_interior = 0;
   image img;
 };
 
@@ -137,6 +144,7 @@ std::vector<sweep_input> sweep_inputs(const std::vector<std::string>& files, boo
     const fs::path p = fs::path(env) / f;
     if (fs::exists(p)) add(p.filename().string(), p.string());
   }
+  add("generated-hard-cases", "generated-hard:48");
   add("generated-scene-large", "generated:" + std::to_string(large_scene_detail));
   return in;
 }
@@ -275,6 +283,7 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
       const frame f = timed_frame(*l, r, plan.repeats);
       const image_error e = compare_images(finest, f.img);
       const image_error ei = compare_images(input_refs[vi], f.img);
+      const input_likeness like = compare_to_input(input_refs[vi], f.img);
       sweep_row row;
       row.builder = m.name;
       row.input = in.name;
@@ -296,13 +305,16 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
       row.ssim = ssim(finest, f.img);
       row.psnr_input = ei.psnr;
       row.holes_input = ei.hole_fraction;
+      row.psnr_interior = like.psnr_interior;
+      row.silhouette_iou = like.silhouette_iou;
       row.file_bytes = l->file_bytes();
       row.bytes_per_input_point = static_cast<double>(row.file_bytes) / n_in;
       row.bytes_per_sample =
           static_cast<double>(row.file_bytes) / static_cast<double>(l->samples());
       set_object_error(row, in, f.samples, f.origin);
       out.rows.push_back(row);
-      if (vi == sheet_view) out.tiles.push_back({m.name, in.name, tol, f.seconds, ei.psnr, f.img});
+      if (vi == sheet_view)
+        out.tiles.push_back({m.name, in.name, tol, f.seconds, like.psnr_interior, f.img});
     }
   }
 }
@@ -434,6 +446,7 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
       const auto [img, secs] = timed_render(level, cams[vi], opts[vi], plan.repeats);
       const image_error e = compare_images(finest_img[vi], img);
       const image_error ei = compare_images(input_refs[vi], img);
+      const input_likeness like = compare_to_input(input_refs[vi], img);
       sweep_row row;
       row.builder = peer.name;
       row.input = in.name;
@@ -449,6 +462,8 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
       row.ssim = ssim(finest_img[vi], img);
       row.psnr_input = ei.psnr;
       row.holes_input = ei.hole_fraction;
+      row.psnr_interior = like.psnr_interior;
+      row.silhouette_iou = like.silhouette_iou;
       row.file_bytes = bytes;
       row.bytes_per_input_point = static_cast<double>(bytes) / static_cast<double>(all.size());
       row.bytes_per_sample = static_cast<double>(bpp);
@@ -462,7 +477,8 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
       row.peak_build_mib = row.build_bytes_per_input_point = row.build_cpu_seconds =
           std::numeric_limits<double>::quiet_NaN();  // built in-process: not measured
       out.rows.push_back(row);
-      if (vi == sheet_view) out.tiles.push_back({peer.name, in.name, setting, secs, ei.psnr, img});
+      if (vi == sheet_view)
+        out.tiles.push_back({peer.name, in.name, setting, secs, like.psnr_interior, img});
     }
   }
 }
@@ -470,7 +486,8 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
 const char* const csv_header =
     "builder,input,setting,tolerance,view,build_seconds,frame_seconds,traverse_seconds,"
     "raster_seconds,points,splats,triangles,primitives,psnr,holes,ssim,psnr_input,holes_input,"
-    "file_bytes,bytes_per_input_point,bytes_per_sample,hausdorff,hausdorff_fwd,hausdorff_bwd,"
+    "psnr_interior,silhouette_iou,file_bytes,bytes_per_input_point,bytes_per_sample,hausdorff,"
+    "hausdorff_fwd,hausdorff_bwd,"
     "mean_fwd,mean_bwd,rms_fwd,rms_bwd,build_cpu_seconds,peak_build_mib,"
     "build_bytes_per_input_point";
 
@@ -489,8 +506,9 @@ std::string csv_line(const sweep_row& r) {
     << number(r.traverse_seconds) << ',' << number(r.raster_seconds) << ',' << r.points << ','
     << r.splats << ',' << r.triangles << ',' << r.points + r.splats + r.triangles << ','
     << number(r.psnr) << ',' << number(r.holes) << ',' << number(r.ssim) << ','
-    << number(r.psnr_input) << ',' << number(r.holes_input) << ',' << r.file_bytes << ','
-    << number(r.bytes_per_input_point) << ',' << number(r.bytes_per_sample);
+    << number(r.psnr_input) << ',' << number(r.holes_input) << ',' << number(r.psnr_interior) << ','
+    << number(r.silhouette_iou) << ',' << r.file_bytes << ',' << number(r.bytes_per_input_point)
+    << ',' << number(r.bytes_per_sample);
   for (const double v :
        {r.hausdorff, r.hausdorff_fwd, r.hausdorff_bwd, r.mean_fwd, r.mean_bwd, r.rms_fwd, r.rms_bwd,
         r.build_cpu_seconds, r.peak_build_mib, r.build_bytes_per_input_point})
@@ -509,6 +527,7 @@ json row_json(const sweep_row& r) {
   j.integer("triangles", static_cast<long long>(r.triangles));
   j.num("psnr", r.psnr).num("holes", r.holes).num("ssim", r.ssim);
   j.num("psnr_input", r.psnr_input).num("holes_input", r.holes_input);
+  j.num("psnr_interior", r.psnr_interior).num("silhouette_iou", r.silhouette_iou);
   j.integer("file_bytes", static_cast<long long>(r.file_bytes));
   j.num("bytes_per_input_point", r.bytes_per_input_point);
   j.num("bytes_per_sample", r.bytes_per_sample);
@@ -582,7 +601,8 @@ std::vector<std::string> check_rows(const std::vector<sweep_row>& rows,
 struct setting_mean {
   std::string builder, input;
   float tolerance = 0;
-  double frame_ms = 0, psnr = 0, psnr_input = 0, bytes_per_input_point = 0;
+  double frame_ms = 0, psnr = 0, psnr_input = 0, psnr_interior = 0, silhouette_iou = 0,
+         bytes_per_input_point = 0;
   int n = 0;
 };
 
@@ -600,6 +620,8 @@ std::vector<setting_mean> setting_means(const std::vector<sweep_row>& rows) {
     it->frame_ms += 1e3 * r.frame_seconds;
     it->psnr += std::min(r.psnr, cap);
     it->psnr_input += std::min(r.psnr_input, cap);
+    it->psnr_interior += std::min(r.psnr_interior, cap);
+    it->silhouette_iou += r.silhouette_iou;
     it->bytes_per_input_point = r.bytes_per_input_point;
     ++it->n;
   }
@@ -607,6 +629,8 @@ std::vector<setting_mean> setting_means(const std::vector<sweep_row>& rows) {
     m.frame_ms /= m.n;
     m.psnr /= m.n;
     m.psnr_input /= m.n;
+    m.psnr_interior /= m.n;
+    m.silhouette_iou /= m.n;
   }
   return out;
 }
@@ -617,10 +641,9 @@ std::string file_stem(const std::string& s) {
   return o;
 }
 
+/// Whole or not at all (core/atomic_file.hpp).
 void write_text(const fs::path& p, const std::string& text) {
-  std::ofstream o(p);
-  o << text;
-  if (!o) throw IoError(p.string() + ": cannot write");
+  write_file_atomically(p.string(), text.data(), text.size());
 }
 
 /// One series per `key` value (builder or input) of the means that pass `keep`, in order.
@@ -670,26 +693,26 @@ std::vector<std::string> write_charts(const std::vector<sweep_row>& rows, const 
   }
   for (const auto& in : inputs) {
     const auto here = [&](const setting_mean& m) { return m.input == in; };
-    chart t{in + ": image error against frame time",
+    chart t{in + ": what the user sees against frame time",
             "frame time, ms",
-            "PSNR against the input's full-detail render, dB",
+            "PSNR inside the input render's silhouette, dB",
             true,
             {}};
     t.series = series_by(means, by_builder, here, [](const setting_mean& m) {
-      return std::pair{m.frame_ms, m.psnr_input};
+      return std::pair{m.frame_ms, m.psnr_interior};
     });
     std::vector<std::pair<double, double>> all;
     for (const auto& s : t.series) all.insert(all.end(), s.points.begin(), s.points.end());
     t.series.push_back({"Pareto front", pareto_front(all), true});
     files.push_back((dir / ("pareto_time_" + file_stem(in) + ".svg")).string());
     write_text(files.back(), to_svg(t));
-    chart bytes{in + ": image error against storage",
+    chart bytes{in + ": what the user sees against storage",
                 "file bytes per input point",
-                "PSNR against the input's full-detail render, dB",
+                "PSNR inside the input render's silhouette, dB",
                 true,
                 {}};
     bytes.series = series_by(means, by_builder, here, [](const setting_mean& m) {
-      return std::pair{m.bytes_per_input_point, m.psnr_input};
+      return std::pair{m.bytes_per_input_point, m.psnr_interior};
     });
     files.push_back((dir / ("bytes_" + file_stem(in) + ".svg")).string());
     write_text(files.back(), to_svg(bytes));
@@ -728,17 +751,16 @@ image matched_time_sheet(const std::vector<tile_candidate>& tiles, int shrink_by
       sheet.back().push_back(
           {shrink(t.img, shrink_by),
            {name + " " + number(t.tolerance), number(1e3 * t.seconds).substr(0, 6) + " ms",
-            number(t.psnr_input).substr(0, 5) + " dB", t.input.substr(0, 20)}});
+            number(t.psnr_interior).substr(0, 5) + " dB inner", t.input.substr(0, 20)}});
     }
   }
   return contact_sheet(sheet);
 }
 
 void write_csv(const std::string& path, const std::vector<sweep_row>& rows) {
-  std::ofstream o(path);
-  o << csv_header << "\n";
-  for (const auto& r : rows) o << csv_line(r) << "\n";
-  if (!o) throw IoError(path + ": cannot write");
+  std::string text = std::string(csv_header) + "\n";
+  for (const auto& r : rows) text += csv_line(r) + "\n";
+  write_text(path, text);
 }
 
 void write_json(const std::string& path, const sweep_plan& plan, const std::string& size,
