@@ -17,6 +17,7 @@
 
 #include "lod.hpp"
 #include "pbr_lod/builders/pop.hpp"
+#include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
@@ -329,9 +330,7 @@ int cmd_papers(const std::string& data_dir, const std::string& papers_dir, const
      << spg_md.str() << "\n### Pajarola, Fig. 1: points drawn at a screen tolerance\n\n"
      << paj_md.str();
   const auto write = [&](const fs::path& p, const std::string& text) {
-    std::ofstream f(p);
-    f << text;
-    if (!f) throw IoError(p.string() + ": cannot write");
+    write_file_atomically(p.string(), text.data(), text.size());  // whole or not at all
   };
   write(fs::path(dir) / "papers.md", md.str());
   write(fs::path(dir) / "papers.csv", csv.str());

@@ -14,6 +14,8 @@
 #include "io_internal.hpp"
 #include "pbr_lod/io/write.hpp"
 
+#include "pbr_lod/core/atomic_file.hpp"
+
 namespace pbr_lod {
 namespace {
 
@@ -112,7 +114,9 @@ void write_impl(const std::string& path, const point_cloud& c, const triangle_me
   }
   h += "end_header\n";
 
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  // Whole or not at all: written beside the target, renamed over it once complete.
+  atomic_output file(path);
+  std::ofstream out(file.temp_path(), std::ios::binary | std::ios::trunc);
   if (!out) throw IoError(path + ": cannot open for writing: " + std::strerror(errno));
   out.write(h.data(), static_cast<std::streamsize>(h.size()));
 
@@ -156,6 +160,7 @@ void write_impl(const std::string& path, const point_cloud& c, const triangle_me
   w.flush();
   out.close();
   if (!out) throw IoError(path + ": cannot write: " + std::strerror(errno));
+  file.commit();
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <memory>
 #include <vector>
 
+#include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/io/texture.hpp"
 
@@ -41,7 +42,9 @@ void write_png(const std::string& path, const image& img) {
     rgba[4 * i + 2] = img.colour[i].b;
     rgba[4 * i + 3] = img.covered(i) ? 255 : 0;
   }
-  file_ptr f(std::fopen(path.c_str(), "wb"));
+  // Whole or not at all: written beside the target, renamed over it once complete.
+  atomic_output file(path);
+  file_ptr f(std::fopen(file.temp_path().c_str(), "wb"));
   if (!f) throw IoError("write_png: cannot open " + path + " for writing: " + std::strerror(errno));
   png_image pi;
   std::memset(&pi, 0, sizeof pi);
@@ -57,6 +60,7 @@ void write_png(const std::string& path, const image& img) {
     throw IoError("write_png: cannot write " + path + ": " + std::strerror(errno));
   if (std::fclose(f.release()) != 0)
     throw IoError("write_png: cannot close " + path + ": " + std::strerror(errno));
+  file.commit();
 }
 
 image read_png(const std::string& path) {

@@ -15,6 +15,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/math.hpp"
 
@@ -165,12 +166,10 @@ inline bool checksum_matches(const std::vector<unsigned char>& bytes) {
   return stored == fnv1a(bytes.data(), bytes.size() - 8);
 }
 
-/// Writes the whole file; throws IoError when it cannot be opened or written.
+/// Writes the whole file, whole or not at all (core/atomic_file.hpp): a failed or killed write
+/// leaves the previous file as it was. Throws IoError naming the file and the reason.
 inline void save_file_bytes(const std::string& path, const std::vector<unsigned char>& bytes) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  if (!f) throw IoError(path + ": cannot open for writing");
-  f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-  if (!f) throw IoError(path + ": write failed");
+  write_file_atomically(path, bytes.data(), bytes.size());
 }
 
 }  // namespace pbr_lod::detail
