@@ -30,8 +30,8 @@ phase() {  # phase NAME — prints how long the previous phase took, then starts
 }
 phase "install dependencies"
 bash scripts/install-deps.sh --peers  # with PCL, for the sweep's PCL peers
-jobs="${JOBS:-$(nproc)}"
-data="${PBR_LOD_DATA:-$root/../shared/data}"
+# shellcheck source=scripts/configure.sh
+source scripts/configure.sh  # build, data, jobs, common: the same as scripts/demo.sh
 if [ ! -f "$data/bun_zipper.ply" ]; then
   if [ "${CI:-}" = "true" ]; then
     echo "test.sh: the shared data folder is missing: $data (set PBR_LOD_DATA); CI runs every test" >&2
@@ -42,17 +42,10 @@ if [ ! -f "$data/bun_zipper.ply" ]; then
   echo "test.sh: to run them all: PBR_LOD_DATA=/path/to/shared/data bash scripts/test.sh" >&2
 fi
 export PBR_LOD_DATA="$data"
-build="${BUILD_DIR:-build}"
-
-common=(-G Ninja -DPBR_LOD_WERROR=ON -DPBR_LOD_DATA_DIR="$data")
-if [ "${PBR_LOD_CCACHE:-1}" != 0 ] && command -v ccache > /dev/null; then
-  common+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-  export CCACHE_BASEDIR="$root" CCACHE_NOHASHDIR=1
-  ccache -z > /dev/null || true
-fi
+[ "${PBR_LOD_CCACHE:-1}" != 0 ] && command -v ccache > /dev/null && { ccache -z > /dev/null || true; }
 
 phase "build (Release, -Werror)"
-cmake -S . -B "$build/release" "${common[@]}" -DCMAKE_BUILD_TYPE=Release
+configure_release
 cmake --build "$build/release" -j "$jobs"
 phase "tests (Release)"
 ctest --test-dir "$build/release" --output-on-failure -j "$jobs"
