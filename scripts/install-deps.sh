@@ -8,6 +8,8 @@
 set -euo pipefail
 packages=(
   build-essential cmake ninja-build ccache pkg-config git
+  # examples/strict_json.py holds every `pbrlod --json` output of the tests to strict JSON.
+  python3
   libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
   # pbrlod build --distributed (the tool only; the library never links MPI).

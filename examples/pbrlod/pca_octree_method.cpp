@@ -97,8 +97,6 @@ struct pca_method {
     constexpr effects compiled{.shading = true, .colour = true, .backface_cull = true};
     frame f = draw_frame<compiled>(t, v, o, topt, policy, r, t.origin());
     f.extra.integer("seed", static_cast<long long>(r.seed));
-    f.extra.integer("nodes_drawn",
-                    static_cast<long long>(f.st.emitted_nodes + f.st.emitted_leaves));
     return f;
   }
   template <class Tree>

@@ -4,6 +4,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -14,6 +15,7 @@
 #include <memory>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -40,7 +42,9 @@ inline double seconds_since(clock_type::time_point t0) {
   return std::chrono::duration<double>(clock_type::now() - t0).count();
 }
 
-// ---- a minimal JSON object writer (one object on one line; numbers, strings, nested objects)
+// ---- a minimal JSON object writer (one object on one line; numbers, strings, nested objects).
+// A key written twice throws std::logic_error: a JSON reader keeps one of two equal keys at its
+// own choice, so a repeated key is a bug of the report, not something to print.
 class json {
  public:
   json& num(const std::string& k, double v) {
@@ -81,8 +85,9 @@ class json {
     out_ += v;
     return *this;
   }
-  /// Appends the fields of another object (after this one's).
+  /// Appends the fields of another object (after this one's); throws as a repeated key does.
   json& merge(const json& other) {
+    for (const auto& k : other.keys_) claim(k);
     if (!other.out_.empty()) out_ += (out_.empty() ? "" : ",") + other.out_;
     return *this;
   }
@@ -90,8 +95,14 @@ class json {
 
  private:
   void key(const std::string& k) {
+    claim(k);
     if (!out_.empty()) out_ += ",";
     out_ += quote(k) + ":";
+  }
+  void claim(const std::string& k) {
+    if (std::find(keys_.begin(), keys_.end(), k) != keys_.end())
+      throw std::logic_error("json: the key \"" + k + "\" is written twice");
+    keys_.push_back(k);
   }
   static std::string quote(const std::string& s) {
     std::string q = "\"";
@@ -121,6 +132,7 @@ class json {
     }
     return q + "\"";
   }
+  std::vector<std::string> keys_;  ///< written so far, to refuse a repeated one
   std::string out_;
 };
 
