@@ -14,6 +14,7 @@
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/traverse/sink.hpp"
+#include "support/data.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -203,7 +204,7 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
   // flipped as a whole (without the chunk step, two leaves are: 312 samples), and the samples
   // whose sign the two propagations settle differently — 63 of 8,171, in two leaves of the
   // scan's open base — stay under 1 %.
-  const point_cloud c = read_points(std::string(PBR_LOD_DATA_DIR) + "/bun_zipper_res2.ply");
+  const point_cloud c = read_points(test::data_file("bun_zipper_res2.ply"));
   chunked_pmr_options o;
   o.pmr.max_leaf_points = 1000;
   o.chunk_points = 1000;

@@ -1,0 +1,28 @@
+# Fails when a test reaches the shared data folder other than through tests/support/data.hpp
+# (test::data_file), which skips a test on a clone without the data and fails it under CI=true.
+# A test that builds the path itself (PBR_LOD_DATA_DIR, getenv("PBR_LOD_DATA"), "…/bun_zipper")
+# throws "cannot open" on a fresh clone instead of skipping.
+#   cmake -DSOURCE_DIR=<tests folder> -P check_data_access.cmake
+file(GLOB_RECURSE sources "${SOURCE_DIR}/*.cpp" "${SOURCE_DIR}/*.hpp")
+set(bad "")
+foreach(f IN LISTS sources)
+  if(f MATCHES "/support/data\\.hpp$")
+    continue()
+  endif()
+  file(STRINGS "${f}" lines)
+  set(n 0)
+  foreach(line IN LISTS lines)
+    math(EXPR n "${n} + 1")
+    if(line MATCHES "^ *//")
+      continue()
+    endif()
+    if(line MATCHES "PBR_LOD_DATA_DIR|getenv\\(\"PBR_LOD_DATA\"\\)|\"/(bun_zipper|happy_vrip|cow|milk_cartoon|1\\.2-with-color)")
+      file(RELATIVE_PATH rel "${SOURCE_DIR}" "${f}")
+      string(APPEND bad "  ${rel}:${n}: ${line}\n")
+    endif()
+  endforeach()
+endforeach()
+if(bad)
+  message(FATAL_ERROR "tests open the shared data without test::data_file (tests/support/data.hpp):\n${bad}")
+endif()
+message(STATUS "every test reaches the shared data through test::data_file")
