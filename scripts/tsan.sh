@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# The hierarchies' concurrency promises under ThreadSanitizer: several threads traversing one
+# loaded hierarchy of each builder (Ladder's ConcurrentTraversal), a chunked hierarchy loading
+# its chunks lazily from several threads, and the thread-parallel builds and k-NN queries the
+# tests run anyway. Builds the `tsan` preset (build/tsan: the library and three test programs)
+# and runs those tests. Not part of scripts/test.sh: its build would add about as much to CI as
+# the ASan build does (docs/development.md).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+jobs="${JOBS:-$(nproc)}"
+launcher=()
+if [ "${PBR_LOD_CCACHE:-1}" != 0 ] && command -v ccache > /dev/null; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  export CCACHE_BASEDIR="$root" CCACHE_NOHASHDIR=1
+fi
+data="${PBR_LOD_DATA:-$root/../shared/data}"
+cmake --preset tsan "${launcher[@]}" -DPBR_LOD_DATA_DIR="$data"
+cmake --build build/tsan -j "$jobs" --target test_ladder test_point_octree test_core
+# halt_on_error: the first race fails the run; second_deadlock_stack for readable lock reports.
+export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1"
+export PBR_LOD_DATA="$data"
+build/tsan/tests/builders/test_ladder --gtest_filter='AllBuilders/ConcurrentTraversal.*'
+build/tsan/tests/builders/test_point_octree \
+  --gtest_filter='ChunkedPointOctree.*:ChunkedPointOctreeDistributed.*'
+build/tsan/tests/core/test_core --gtest_filter='Parallel*:*Knn*:*Estimat*'
+echo "tsan.sh: no data races reported"
