@@ -81,17 +81,7 @@ std::string run_self(const std::vector<std::string>& args) {
 }  // namespace
 
 loaded_input load_sweep_input(const std::string& spec) {
-  if (spec.rfind("generated:", 0) == 0) {
-    loaded_input in;
-    in.mesh = make_demo_scene(std::stoi(spec.substr(10)));
-    return in;
-  }
-  if (spec.rfind("generated-hard:", 0) == 0) {
-    loaded_input in;
-    in.mesh = make_hard_cases_scene(std::stoi(spec.substr(15)));
-    return in;
-  }
-  return load(spec);
+  return load(spec);  // files and the generated scenes alike (tool.hpp)
 }
 
 child_build build_in_child(const method_entry& m, const std::string& spec,

@@ -2,6 +2,7 @@
 #include "tool.hpp"
 
 #include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 
 #include <algorithm>
@@ -74,11 +75,31 @@ std::unique_ptr<point_source> open_build_source(const std::string& input) {
   return open_point_source(input);
 }
 
+namespace {
+
+/// N of "PREFIXN" (1 ≤ N ≤ 4096), else InvalidArgument naming the form expected.
+int generated_detail(const std::string& spec, const std::string& prefix) {
+  const std::string count = spec.substr(prefix.size());
+  try {
+    std::size_t used = 0;
+    const int n = std::stoi(count, &used);
+    if (used == count.size() && n >= 1 && n <= 4096) return n;
+  } catch (const std::exception&) {
+  }
+  throw InvalidArgument(spec + ": expected " + prefix + "N with 1 <= N <= 4096");
+}
+
+}  // namespace
+
 loaded_input load(const std::string& path) {
   loaded_input in;
   const auto t0 = clock_type::now();
   const auto ext = fs::path(path).extension().string();
-  if (path.rfind("generated-points:", 0) == 0)
+  if (path.rfind("generated:", 0) == 0)
+    in.mesh = make_demo_scene(generated_detail(path, "generated:"));
+  else if (path.rfind("generated-hard:", 0) == 0)
+    in.mesh = make_hard_cases_scene(generated_detail(path, "generated-hard:"));
+  else if (path.rfind("generated-points:", 0) == 0)
     in.mesh.vertices = read_all(*open_build_source(path));  // the in-memory twin of a chunked build
   else if (ext == ".ply" || ext == ".obj" || ext == ".off" || ext == ".PLY" || ext == ".OBJ" ||
            ext == ".OFF")

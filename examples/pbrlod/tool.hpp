@@ -181,7 +181,9 @@ struct loaded_input {
   [[nodiscard]] bool is_mesh() const { return !mesh.faces.empty(); }
 };
 /// Reads a mesh (.ply/.obj/.off) or a point cloud (.pcd/.las, or a PLY without faces); warnings
-/// go to stderr. Throws on a file without points.
+/// go to stderr. Throws on a file without points. Also the generated inputs: "generated:N" (the
+/// demo scene, make_demo_scene(N)), "generated-hard:N" (make_hard_cases_scene(N)) and
+/// "generated-points:N[:normals]".
 loaded_input load(const std::string& path);
 
 /// World-space bounding sphere (centre of the box, radius to the farthest point), in double.
