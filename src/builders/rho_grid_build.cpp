@@ -36,6 +36,7 @@
 #include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
+#include "pbr_lod/core/repeated_faces.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -287,7 +288,10 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   tri_vector tris;
   std::vector<std::uint32_t> face_of;
   tris.reserve(m.faces.size());
-  for (std::size_t i = 0; i < m.faces.size(); ++i) {
+  // Exact repeats add nothing to the surface; without this their count set the AABB tree's
+  // cost and the depth of the k-d tree of its distance queries (a stack overflow at 50,000
+  // copies of one triangle).
+  for (const std::uint32_t i : unique_faces(m)) {
     const auto& fc = m.faces[i];
     const K::Point_3 a = rel(fc[0]), b = rel(fc[1]), cc = rel(fc[2]);
     if (CGAL::collinear(a, b, cc)) continue;  // zero area: measure-zero geometry, skipped
