@@ -51,8 +51,8 @@ enum class ellipse_rule {
   ///    blob — vegetation, corners) is no surface, and a sample whose ρᵢ exceeds
   ///    local_spacing_sparse_factor × the cloud's median ρ is sparse: either gets a round disk
   ///    of radius non_surface_disk_factor × d₈ (d₈ its distance to the 8th nearest neighbour),
-  ///    bounded as above, and a sparse one at most non_surface_disk_factor ×
-  ///    local_spacing_sparse_factor × the cloud's median d₈.
+  ///    bounded as above, and a sparse one at most the typical sample's: non_surface_disk_factor
+  ///    × the cloud's median d₈.
   local_spacing,
 };
 
