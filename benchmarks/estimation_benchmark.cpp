@@ -12,15 +12,23 @@
 
 #include <nanoflann.hpp>
 
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <cmath>
 #include "estimation_inputs.hpp"
+#include "pbr_lod/builders/point_octree.hpp"
 #include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/png.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
 
 namespace pbr_lod::bench {
 namespace {
@@ -174,6 +182,137 @@ BENCHMARK_CAPTURE(bm_lidar_coverage, lidar_500k, std::string("lidar500000clean")
     ->Arg(1)
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1);
+
+// What the user sees on scans without normals: the estimated splats (range(1) = 0) or the
+// point-octree's finest cut (1: tolerance 1 px, default options) against the cloud's own render
+// (render_reference of the positions alone: every point a screen-aligned square of 1.6 × its
+// 8th-neighbour distance), from 1.2 and 3 radii, three directions each (z up for the LiDAR
+// tiles), 640 × 480. Counters, worst over the six views: holes_% (the reference's pixels left
+// empty, in % of them), covered_x (pixels covered / the reference's), and the mean interior PSNR
+// of compare_to_input; the largest splat of a non-surface neighbourhood (surface variation
+// above local_spacing_max_thickness) over the sample's 8th-neighbour distance; estimation_s.
+// range(0): 0 ellipse_rule::neighbours, 1 local_spacing. PBR_LOD_BENCH_PNG=DIR writes the images.
+void bm_scan_coverage(benchmark::State& state, const std::string& name) {
+  const estimation_input& in = estimation_inputs::get(name);
+  const int up = name.starts_with("lidar") || name == "las" ? 2 : 1;
+  point_cloud ref, est;
+  ref.positions = est.positions = in.positions;
+  ref.origin = est.origin = vec3d::Zero();
+  estimation_options opt{.k_ellipses = 12};
+  opt.ellipses = state.range(0) == 0 ? ellipse_rule::neighbours : ellipse_rule::local_spacing;
+  double seconds = 0;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto e = estimate_normals_and_ellipses(est.positions, opt);
+    seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    est.normals = std::move(e.normals);
+    est.axis_u = std::move(e.axes.u);
+    est.axis_v = std::move(e.axes.v);
+  }
+  using octree = point_octree<point_octree_attributes(positions_only)>;
+  std::optional<octree> tree;
+  if (state.range(1) == 1) tree.emplace(build_point_octree(point_set<positions_only>::from(ref)));
+  vec3f lo = in.positions.front(), hi = lo;
+  for (const auto& p : in.positions) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const vec3d centre = (0.5f * (lo + hi)).cast<double>();
+  const double radius = 0.5 * double((hi - lo).norm());
+  double holes = 0, covered_x = 0, psnr = 0, interior_holes = 0;
+  int views = 0;
+  const char* png = std::getenv("PBR_LOD_BENCH_PNG");
+  for (const double dist : {1.2, 3.0})
+    for (const auto& [az, el] : {std::pair(30.0, 25.0), {160.0, 35.0}, {-70.0, 10.0}}) {
+      const camera cam = camera::orbit(centre, radius, az, el, dist, up, {640, 480});
+      const image a = render_reference(ref, cam, {});
+      image b;
+      if (tree) {
+        const view v(cam, tree->origin());
+        b = render<octree::attrs>(v, render_options{}, [&](auto& sink) {
+          traverse(*tree, v, {.tolerance_px = 1}, sink, point_octree_policy{});
+        });
+      } else {
+        b = render_reference(est, cam, {});
+      }
+      std::size_t ca = 0, cb = 0, h = 0;
+      for (std::size_t i = 0; i < a.size(); ++i) {
+        ca += a.covered(i);
+        cb += b.covered(i);
+        h += a.covered(i) && !b.covered(i);
+      }
+      holes = std::max(holes, 100.0 * double(h) / double(std::max<std::size_t>(ca, 1)));
+      covered_x = std::max(covered_x, double(cb) / double(std::max<std::size_t>(ca, 1)));
+      const input_likeness like = compare_to_input(a, b);
+      psnr += std::min(like.psnr_interior, 100.0);
+      const double inner = 100.0 * double(like.interior_holes) /
+                           double(std::max<std::size_t>(like.interior_pixels, 1));
+      interior_holes = std::max(interior_holes, inner);
+      if (png) {
+        const std::string stem = std::string(png) + "/" + name + "_r" +
+                                 std::to_string(state.range(0)) + std::to_string(state.range(1)) +
+                                 "_d" + std::to_string(int(dist * 10)) + "_az" +
+                                 std::to_string(int(az));
+        // Grey: covered by both; red: a hole (the reference only); blue: spill (ours only).
+        image d(a.width, a.height, rgb8{255, 255, 255});
+        std::fill(d.depth.begin(), d.depth.end(), 1.0f);
+        for (std::size_t i = 0; i < a.size(); ++i)
+          d.colour[i] = a.covered(i) && b.covered(i) ? rgb8{150, 150, 150}
+                        : a.covered(i)               ? rgb8{230, 0, 0}
+                        : b.covered(i)               ? rgb8{0, 0, 230}
+                                                     : rgb8{255, 255, 255};
+        write_png(stem + "_diff.png", d);
+        if (!tree) {
+          render_options shaded;
+          shaded.fx.shading = true;
+          write_png(stem + ".png", render_reference(est, cam, shaded));
+        }
+        std::printf("%s d%.1f az%.0f: holes %.2f %% (interior %.2f %%) covered %.3f\n",
+                    name.c_str(), dist, az,
+                    100.0 * double(h) / double(std::max<std::size_t>(ca, 1)), inner,
+                    double(cb) / double(std::max<std::size_t>(ca, 1)));
+      }
+      ++views;
+    }
+  // The largest splat of a non-surface neighbourhood, over the sample's 8th-neighbour distance.
+  const std::vector<float> d8 = knn_spacing(in.positions, 8);
+  const knn_graph g = nearest_neighbour_graph(in.positions, 12);
+  double worst = 0;
+  std::size_t non_surface = 0;
+  for (std::size_t i = 0; i < in.positions.size(); ++i) {
+    vec3d mean = vec3d::Zero();
+    for (int j = 0; j < 12; ++j) mean += in.positions[g.index[i * 12 + j]].cast<double>();
+    mean /= 12;
+    mat3d cov = mat3d::Zero();
+    for (int j = 0; j < 12; ++j) {
+      const vec3d d = in.positions[g.index[i * 12 + j]].cast<double>() - mean;
+      cov += d * d.transpose();
+    }
+    const vec3d l = Eigen::SelfAdjointEigenSolver<mat3d>(cov, Eigen::EigenvaluesOnly).eigenvalues();
+    if (!(l.sum() > 0) || l[0] <= local_spacing_max_thickness * l.sum()) continue;
+    ++non_surface;
+    if (d8[i] > 0) worst = std::max(worst, double(est.axis_u[i].norm()) / d8[i]);
+  }
+  state.counters["holes_%"] = holes;
+  state.counters["covered_x"] = covered_x;
+  state.counters["interior_holes_%"] = interior_holes;
+  state.counters["psnr_interior"] = psnr / views;
+  state.counters["non_surface_%"] = 100.0 * double(non_surface) / double(in.positions.size());
+  state.counters["non_surface_major_per_d8"] = worst;
+  state.counters["estimation_s"] = seconds;
+}
+void scan_coverage_args(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"rule", "octree"})->Unit(benchmark::kMillisecond)->Iterations(1);
+  for (int r : {0, 1}) b->Args({r, 0});
+  b->Args({1, 1});
+}
+BENCHMARK_CAPTURE(bm_scan_coverage, lidar_500k, std::string("lidar500000"))
+    ->Apply(scan_coverage_args);
+BENCHMARK_CAPTURE(bm_scan_coverage, lidar_500k_clean, std::string("lidar500000clean"))
+    ->Apply(scan_coverage_args);
+BENCHMARK_CAPTURE(bm_scan_coverage, las, std::string("las"))->Apply(scan_coverage_args);
+BENCHMARK_CAPTURE(bm_scan_coverage, milk, std::string("milk"))->Apply(scan_coverage_args);
+BENCHMARK_CAPTURE(bm_scan_coverage, bunny, std::string("bunny"))->Apply(scan_coverage_args);
 
 // The k-NN graph alone (k = 16): our batch (Morton order, range(0) threads) ...
 void bm_knn_graph(benchmark::State& state, const std::string& name) {

@@ -28,7 +28,8 @@ struct estimation_input {
 struct estimation_inputs {
   /// "bunny", "buddha" (the scans' vertices, true normals from their meshes), "wavyN" (N
   /// samples of make_wavy_surface: analytic normals, inward), "lidarN" / "lidarNclean" (about N
-  /// returns of make_lidar_tile, with / without its isolated returns; no true normals).
+  /// returns of make_lidar_tile, with / without its isolated returns; no true normals), "las" /
+  /// "milk" (1.2-with-color.las, milk_cartoon_all_small_clorox.pcd: positions only).
   static const estimation_input& get(const std::string& name) {
     static std::map<std::string, estimation_input> cache;
     auto it = cache.find(name);
@@ -38,6 +39,10 @@ struct estimation_inputs {
       in.positions =
           make_lidar_tile(std::stoul(name.substr(5)), 1, name.ends_with("clean") ? false : true)
               .positions;
+    } else if (name == "las" || name == "milk") {  // real scans without normals: positions
+      const point_cloud c = read_points(test::data_file(
+          name == "las" ? "1.2-with-color.las" : "milk_cartoon_all_small_clorox.pcd"));
+      in.positions = c.positions;
     } else if (name.starts_with("wavy")) {
       point_cloud c = make_wavy_surface(std::stoul(name.substr(4)), 1);
       in.positions = std::move(c.positions);

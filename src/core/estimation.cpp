@@ -303,19 +303,45 @@ std::vector<vec3f> normals_from(std::span<const vec3f> positions,
   return normals;
 }
 
-/// The size bound of ellipse_rule::local_spacing: local_spacing_reach × ρᵢ, the distance to the
-/// farthest of the kk neighbours, but at most local_spacing_outlier_factor × the median ρⱼ of
-/// those neighbours — an isolated sample (an outlier) has neighbours whose own neighbourhoods are
-/// small. A median of 0 (the neighbours are duplicates) bounds nothing.
-std::vector<float> spacing_caps(std::span<const vec3f> positions,
-                                const std::vector<std::uint32_t>& table, std::size_t stride,
-                                std::size_t kk, unsigned threads) {
+/// The per-sample bounds of ellipse_rule::local_spacing.
+struct spacing_bounds {
+  /// local_spacing_reach × ρᵢ, the distance to the farthest of the kk neighbours, but at most
+  /// local_spacing_outlier_factor × the median ρⱼ of those neighbours — an isolated sample (an
+  /// outlier) has neighbours whose own neighbourhoods are small. A median of 0 (the neighbours
+  /// are duplicates) bounds nothing.
+  std::vector<float> cap;
+  /// Whether ρᵢ exceeds local_spacing_sparse_factor × the median ρ of the whole cloud.
+  std::vector<char> sparse;
+  /// The median over the cloud of the distance to the disk neighbour (0 when all are 0).
+  float median_disk_spacing = 0;
+};
+
+/// The n/2-th smallest positive value of v (0 when none is positive); v is reordered.
+float median_positive(std::vector<float>& v) {
+  const auto end = std::partition(v.begin(), v.end(), [](float x) { return x > 0; });
+  if (end == v.begin()) return 0;
+  const auto mid = v.begin() + (end - v.begin()) / 2;
+  std::nth_element(v.begin(), mid, end);
+  return *mid;
+}
+
+spacing_bounds spacing_caps(std::span<const vec3f> positions,
+                            const std::vector<std::uint32_t>& table, std::size_t stride,
+                            std::size_t kk, std::size_t disk_neighbour, unsigned threads) {
   const std::size_t n = positions.size();
-  std::vector<float> rho(n), cap(n);
+  std::vector<float> rho(n), disk(n);
+  spacing_bounds out{std::vector<float>(n), std::vector<char>(n, 0), 0};
   parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i)
+    for (std::size_t i = begin; i < end; ++i) {
       rho[i] = (positions[table[i * stride + kk - 1]] - positions[i]).norm();
+      disk[i] = (positions[table[i * stride + disk_neighbour]] - positions[i]).norm();
+    }
   });
+  std::vector<float> scratch = rho;
+  const float sparse_above =
+      static_cast<float>(local_spacing_sparse_factor) * median_positive(scratch);
+  scratch = std::move(disk);
+  out.median_disk_spacing = median_positive(scratch);
   parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
     std::vector<float> around(kk);
     for (std::size_t i = begin; i < end; ++i) {
@@ -323,11 +349,13 @@ std::vector<float> spacing_caps(std::span<const vec3f> positions,
       const auto mid = around.begin() + static_cast<std::ptrdiff_t>(kk / 2);
       std::nth_element(around.begin(), mid, around.end());
       const auto reach = static_cast<float>(local_spacing_reach * rho[i]);
-      cap[i] = *mid > 0 ? std::min(reach, static_cast<float>(local_spacing_outlier_factor) * *mid)
-                        : reach;
+      out.cap[i] = *mid > 0
+                       ? std::min(reach, static_cast<float>(local_spacing_outlier_factor) * *mid)
+                       : reach;
+      out.sparse[i] = sparse_above > 0 && rho[i] > sparse_above;
     }
   });
-  return cap;
+  return out;
 }
 
 /// Semi-axis lengths (major, minor) of the ellipse along e1, e2 (unit, in the tangent frame)
@@ -369,11 +397,15 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
   constexpr double cover_margin = 1 + 1e-5;
   constexpr int max_fallback_k = 4096;
   const bool bounded = rule == ellipse_rule::local_spacing;
-  const std::vector<float> caps =
-      bounded ? spacing_caps(positions, table, stride, kz, threads) : std::vector<float>{};
-  // The disk of a sample whose neighbourhood is no surface reaches its 8th nearest neighbour's
-  // distance × 0.8, the splat of the full-detail reference render (raster/reference.hpp).
+  // The disk of a sample whose neighbourhood is no surface is sized by its 8th nearest
+  // neighbour's distance, as the full-detail reference's splat (raster/reference.hpp).
   const std::size_t disk_neighbour = std::min<std::size_t>(8, kz - 1);
+  const spacing_bounds bounds =
+      bounded ? spacing_caps(positions, table, stride, kz, disk_neighbour, threads)
+              : spacing_bounds{};
+  // A sparse sample's disk is no larger than a typical sample's: the non-surface disk at the
+  // cloud's median d₈.
+  const double sparse_radius = non_surface_disk_factor * double(bounds.median_disk_spacing);
 
   parallel_over(n, threads, [&](std::size_t begin, std::size_t end) {
     std::vector<std::uint32_t> more;
@@ -428,12 +460,17 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
         // Thickness: the neighbourhood's variance along the normal over its total variance
         // (Pauly's surface variation λ₀/(λ₀+λ₁+λ₂) for the PCA normal): 0 on a plane, 1/3 for
         // an isotropic blob. Above the threshold the tangent plane means nothing (a tree
-        // crown, a corner): a disk at the reference's spacing, not a plane-fitted ellipse.
+        // crown, a corner), and a sparse sample's neighbourhood (an isolated return, a stray
+        // hit on a wall) says little about a surface: a round disk at the reference's
+        // spacing, not a plane-fitted ellipse.
         const double m = double(kz);
         const double along = z2 - z1 * z1 / m, total = extent2 - sum.squaredNorm() / m;
-        if (total > 0 && along > local_spacing_max_thickness * total) {
-          const double radius = std::min<double>(
-              caps[i], 0.8 * (positions[idx[disk_neighbour]] - positions[i]).norm());
+        const bool thick = total > 0 && along > local_spacing_max_thickness * total;
+        if (thick || bounds.sparse[i]) {
+          double radius = std::min<double>(
+              bounds.cap[i],
+              non_surface_disk_factor * (positions[idx[disk_neighbour]] - positions[i]).norm());
+          if (bounds.sparse[i] && sparse_radius > 0) radius = std::min(radius, sparse_radius);
           if (radius > 0) {
             out.u[i] = (radius * t1).cast<float>();
             out.v[i] = (radius * t2).cast<float>();
@@ -454,7 +491,7 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
       const double f = std::sqrt(f2) * cover_margin;
       const vec3d axis1 = e1.x() * t1 + e1.y() * t2, axis2 = e2.x() * t1 + e2.y() * t2;
       auto [major, minor] = std::pair(f * std::sqrt(l1), f * std::sqrt(l2));
-      if (bounded) std::tie(major, minor) = capped_axes(major, minor, caps[i], xy, e1, e2);
+      if (bounded) std::tie(major, minor) = capped_axes(major, minor, bounds.cap[i], xy, e1, e2);
       out.u[i] = (major * axis1).cast<float>();
       out.v[i] = (minor * axis2).cast<float>();
     }

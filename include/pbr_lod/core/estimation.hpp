@@ -47,9 +47,12 @@ enum class ellipse_rule {
   ///    then grown just enough to keep the neighbours inside (at most the major), so no splat
   ///    is a spike, and every neighbour stays covered unless the outlier bound applies;
   ///  * a neighbourhood thicker than local_spacing_max_thickness (its variance along the normal
-  ///    over its total variance: 0 on a plane, 1/3 for an isotropic blob — vegetation, corners)
-  ///    is no surface: a disk of radius 0.8 × the distance to the 8th nearest neighbour, the
-  ///    splat of the full-detail reference render, bounded as above.
+  ///    over its total variance, Pauly's surface variation: 0 on a plane, 1/3 for an isotropic
+  ///    blob — vegetation, corners) is no surface, and a sample whose ρᵢ exceeds
+  ///    local_spacing_sparse_factor × the cloud's median ρ is sparse: either gets a round disk
+  ///    of radius non_surface_disk_factor × d₈ (d₈ its distance to the 8th nearest neighbour),
+  ///    bounded as above, and a sparse one at most the typical sample's: non_surface_disk_factor
+  ///    × the cloud's median d₈.
   local_spacing,
 };
 
@@ -59,6 +62,14 @@ inline constexpr double local_spacing_reach = 1.5;
 inline constexpr double local_spacing_outlier_factor = 8.0;
 /// ellipse_rule::local_spacing: the thickness above which a neighbourhood is not a surface.
 inline constexpr double local_spacing_max_thickness = 0.1;
+/// ellipse_rule::local_spacing: a sample whose neighbourhood radius exceeds this many times the
+/// cloud's median neighbourhood radius is sparse (an isolated return, a stray hit).
+inline constexpr double local_spacing_sparse_factor = 16.0;
+/// ellipse_rule::local_spacing: the radius of the round splat of a non-surface or sparse sample
+/// over its distance to the 8th nearest neighbour d₈. A disk of radius r seen from a uniformly
+/// random direction covers πr²/2 on average; the full-detail reference draws a bare position as
+/// a view-facing square of side 2 × 0.8 d₈ (raster/reference.hpp). Equal areas: r = 1.6·√(2/π)·d₈.
+inline constexpr double non_surface_disk_factor = 1.2766;
 
 /// Parameters of the estimation, shared by every entry point below.
 struct estimation_options {
