@@ -12,9 +12,12 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
+#include <numeric>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -50,22 +53,72 @@ unsigned resolve_threads(unsigned threads) {
   return threads ? threads : std::max(1u, std::thread::hardware_concurrency());
 }
 
-/// The positions sorted along a Morton curve, and the permutation back.
+/// The distinct positions sorted along a Morton curve, and the way back to the caller's points.
+///
+/// Exact duplicates (the same position bits; with `normals`, the same normal bits too) are
+/// estimated once: a copy adds nothing to a neighbourhood's shape, and a point with thousands of
+/// copies made every k-NN query around it visit them all — the fallback search for a duplicate's
+/// nearest distinct neighbour (up to 4096 neighbours) made 2,000 copies of a grid take minutes.
+/// Every copy gets its representative's normal and ellipse.
 struct sorted_points {
-  std::vector<std::uint32_t> order;  // order[r] = caller's index of the point of rank r
-  std::vector<vec3f> pos;            // pos[r] = positions[order[r]]
+  std::vector<std::uint32_t> order;  // order[r] = caller's index of the representative of rank r
+  std::vector<vec3f> pos;            // pos[r] = positions[order[r]], all distinct
+  std::vector<std::uint32_t> rank;   // rank[i] = the rank of caller's point i's representative
 };
 
-sorted_points sort_points(std::span<const vec3f> positions) {
-  sorted_points s{morton_order(positions), std::vector<vec3f>(positions.size())};
-  for (std::size_t r = 0; r < positions.size(); ++r) s.pos[r] = positions[s.order[r]];
+/// A point's identity for duplicate collapsing: its position's bits, then its normal's.
+using point_key = std::array<std::uint32_t, 6>;
+
+point_key key_of(const vec3f& p, const vec3f* n) {
+  point_key k{};
+  std::memcpy(k.data(), p.data(), 3 * sizeof(float));
+  if (n) std::memcpy(k.data() + 3, n->data(), 3 * sizeof(float));
+  return k;
+}
+
+sorted_points sort_points(std::span<const vec3f> positions, std::span<const vec3f> normals = {}) {
+  const std::size_t n = positions.size();
+  // Group exact duplicates; the representative of a group is its first point.
+  std::vector<std::uint32_t> by_key(n);
+  std::iota(by_key.begin(), by_key.end(), 0u);
+  const auto key = [&](std::uint32_t i) {
+    return key_of(positions[i], normals.empty() ? nullptr : &normals[i]);
+  };
+  std::stable_sort(by_key.begin(), by_key.end(),
+                   [&](std::uint32_t a, std::uint32_t b) { return key(a) < key(b); });
+  std::vector<std::uint32_t> rep(n);  // caller's index of each point's representative
+  std::vector<std::uint32_t> reps;
+  for (std::size_t t = 0; t < n; ++t) {
+    const std::uint32_t i = by_key[t];
+    if (t > 0 && key(i) == key(by_key[t - 1])) {
+      rep[i] = rep[by_key[t - 1]];
+    } else {
+      rep[i] = i;
+      reps.push_back(i);
+    }
+  }
+  std::sort(reps.begin(), reps.end());  // caller's order: without duplicates, as before
+  std::vector<vec3f> distinct(reps.size());
+  for (std::size_t u = 0; u < reps.size(); ++u) distinct[u] = positions[reps[u]];
+  sorted_points s;
+  const std::vector<std::uint32_t> morton = morton_order(distinct);
+  s.order.resize(reps.size());
+  s.pos.resize(reps.size());
+  std::vector<std::uint32_t> rank_of_rep(n, 0);
+  for (std::size_t r = 0; r < reps.size(); ++r) {
+    s.order[r] = reps[morton[r]];
+    s.pos[r] = positions[s.order[r]];
+    rank_of_rep[s.order[r]] = static_cast<std::uint32_t>(r);
+  }
+  s.rank.resize(n);
+  for (std::size_t i = 0; i < n; ++i) s.rank[i] = rank_of_rep[rep[i]];
   return s;
 }
 
-/// out[order[r]] = in[r].
-std::vector<vec3f> unsort(const std::vector<vec3f>& in, const std::vector<std::uint32_t>& order) {
-  std::vector<vec3f> out(in.size());
-  for (std::size_t r = 0; r < in.size(); ++r) out[order[r]] = in[r];
+/// out[i] = in[rank[i]]: each of the caller's points gets its representative's value.
+std::vector<vec3f> unsort(const std::vector<vec3f>& in, const sorted_points& s) {
+  std::vector<vec3f> out(s.rank.size());
+  for (std::size_t i = 0; i < s.rank.size(); ++i) out[i] = in[s.rank[i]];
   return out;
 }
 
@@ -535,10 +588,10 @@ std::vector<vec3f> estimate_normals(std::span<const vec3f> positions,
   const sorted_points s = sort_points(positions);
   const knn_index index(s.pos);
   report(opt, 0.1);
-  const int kk = clamp_k(opt.k_normals, positions.size());
+  const int kk = clamp_k(opt.k_normals, s.pos.size());
   const auto table = knn_table(s.pos, index, kk, threads);
   report(opt, 0.7);
-  auto normals = unsort(normals_from(s.pos, table, kk, kk, opt, threads), s.order);
+  auto normals = unsort(normals_from(s.pos, table, kk, kk, opt, threads), s);
   report(opt, 1);
   return normals;
 }
@@ -558,14 +611,16 @@ splat_axes estimate_splat_ellipses(std::span<const vec3f> positions, std::span<c
   check_positions(positions, "estimate_splat_ellipses");
   if (positions.empty()) return {};
   threads = resolve_threads(threads);
-  const sorted_points s = sort_points(positions);
-  std::vector<vec3f> sorted_normals(positions.size());
-  for (std::size_t r = 0; r < positions.size(); ++r) sorted_normals[r] = normals[s.order[r]];
+  // Copies with their own normals are distinct samples here: each ellipse lies in its normal's
+  // tangent plane.
+  const sorted_points s = sort_points(positions, normals);
+  std::vector<vec3f> sorted_normals(s.pos.size());
+  for (std::size_t r = 0; r < s.pos.size(); ++r) sorted_normals[r] = normals[s.order[r]];
   const knn_index index(s.pos);
-  const int kk = clamp_k(k, positions.size());
+  const int kk = clamp_k(k, s.pos.size());
   const auto table = knn_table(s.pos, index, kk, threads);
   splat_axes e = ellipses_from(s.pos, sorted_normals, index, table, kk, kk, rule, threads);
-  return {unsort(e.u, s.order), unsort(e.v, s.order)};
+  return {unsort(e.u, s), unsort(e.v, s)};
 }
 
 estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
@@ -577,15 +632,14 @@ estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
   const sorted_points s = sort_points(positions);
   const knn_index index(s.pos);
   report(opt, 0.1);
-  const int kn = clamp_k(opt.k_normals, positions.size()),
-            ke = clamp_k(opt.k_ellipses, positions.size());
+  const int kn = clamp_k(opt.k_normals, s.pos.size()), ke = clamp_k(opt.k_ellipses, s.pos.size());
   const int stride = std::max(kn, ke);
   const auto table = knn_table(s.pos, index, stride, threads);
   report(opt, 0.6);
   const std::vector<vec3f> normals = normals_from(s.pos, table, stride, kn, opt, threads);
   report(opt, 0.85);
   splat_axes e = ellipses_from(s.pos, normals, index, table, stride, ke, opt.ellipses, threads);
-  estimated_splats out{unsort(normals, s.order), {unsort(e.u, s.order), unsort(e.v, s.order)}};
+  estimated_splats out{unsort(normals, s), {unsort(e.u, s), unsort(e.v, s)}};
   report(opt, 1);
   return out;
 }

@@ -455,6 +455,32 @@ TEST(SplatEllipses, CoverAnAnisotropicGrid) {
   EXPECT_EQ(count_uncovered(pts, e, t.o, t.t1, t.t2, t.n, 400), 0u);
 }
 
+// Exact duplicates are estimated once: 2,000 copies of every point of a jittered 12 × 12 patch
+// give each copy exactly the normal and ellipse of the patch estimated alone (so the cost is
+// the patch's: before, every k-NN query around a copy visited all 2,000 and the search for the
+// nearest distinct sample went to 4096 neighbours — minutes for this input).
+TEST(SplatEllipses, DuplicatesAreEstimatedOnce) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> jitter(-0.02f, 0.02f);
+  std::vector<vec3f> patch;
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < 12; ++x)
+      patch.emplace_back(0.1f * float(x) + jitter(rng), 0.1f * float(y) + jitter(rng),
+                         0.01f * std::sin(float(x + 2 * y)));
+  std::vector<vec3f> copies;
+  for (int c = 0; c < 2000; ++c) copies.insert(copies.end(), patch.begin(), patch.end());
+  const estimated_splats one = estimate_normals_and_ellipses(patch, 16, 16, true, 1);
+  const estimated_splats many = estimate_normals_and_ellipses(copies, 16, 16, true, 2);
+  ASSERT_EQ(many.normals.size(), copies.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < copies.size(); ++i) {
+    const std::size_t j = i % patch.size();
+    differ += many.normals[i] != one.normals[j] || many.axes.u[i] != one.axes.u[j] ||
+              many.axes.v[i] != one.axes.v[j];
+  }
+  EXPECT_EQ(differ, 0u);
+}
+
 // Degenerate neighbourhoods: a single point, all duplicates, duplicates beside a distinct
 // point, a line (λ₂ = 0 in the tangent plane), points stacked along the normal.
 TEST(SplatEllipses, DegenerateLadder) {
@@ -475,17 +501,19 @@ TEST(SplatEllipses, DegenerateLadder) {
     expect_axes_valid(e, n);
     EXPECT_NEAR(e.u[0].norm(), 1e-6f, 1e-10f);
   }
-  {  // 40 duplicates and one point 0.3 away: the duplicates reach it (nearest non-zero spacing)
+  {  // 40 duplicates and one point 0.3 away: the duplicates are one sample (estimated once,
+     // every copy the same), so this is two samples 0.3 apart along x — each a needle reaching
+     // the other, clamped to 10 % width.
     std::vector<vec3f> pts(40, vec3f(0, 0, 0));
     pts.push_back(vec3f(0.3f, 0, 0));
     const std::vector<vec3f> n(pts.size(), vec3f::UnitZ());
     const auto e = estimate_splat_ellipses(pts, n, 8);
     expect_axes_valid(e, n);
-    EXPECT_NEAR(e.u[0].norm(), 0.3f, 1e-6f);
-    EXPECT_NEAR(e.v[0].norm(), 0.3f, 1e-6f);
-    // The lone point sees the duplicates 0.3 away along x: a needle clamped to 10 % width.
-    EXPECT_GE(e.u[40].norm(), 0.3f);
-    EXPECT_NEAR(e.v[40].norm() / e.u[40].norm(), splat_min_axis_ratio, 1e-5);
+    for (const std::size_t i : {std::size_t{0}, std::size_t{40}}) {
+      EXPECT_GE(e.u[i].norm(), 0.3f) << i;
+      EXPECT_NEAR(e.v[i].norm() / e.u[i].norm(), splat_min_axis_ratio, 1e-5) << i;
+    }
+    for (std::size_t i = 1; i < 40; ++i) EXPECT_EQ(e.u[i], e.u[0]) << i;
   }
   {  // a line along x with normal z: minor axis = 10 % of the major
     std::vector<vec3f> line;
