@@ -74,6 +74,8 @@ json octree_stats_json(const Tree& t, const std::string& path) {
   // Nodes whose EQ 5–6 ellipse was replaced by the corners' bounding circle: counted on the
   // stored nodes (point_octree::is_circle), so a loaded file gives the build's number.
   j.integer("circle_fallbacks", static_cast<long long>(st.circle_fallbacks));
+  // Zero or non-finite input normals estimated from the positions (build only; a file: 0).
+  j.integer("normals_filled", static_cast<long long>(st.normals_filled));
   return j;
 }
 

@@ -114,6 +114,10 @@ struct point_octree_build_stats {
   std::size_t input_points = 0;
   std::size_t nodes = 0, leaves = 0, max_depth = 0;
   bool estimated_normals = false, estimated_ellipses = false;
+  /// Input normals that were zero or not finite — "no normal" (3DGS files store zeros) — and
+  /// were estimated from the positions (fill_missing_normals). Measured by the build; a loaded
+  /// file reports 0.
+  std::size_t normals_filled = 0;
   /// Nodes drawn with the bounding circle of their corners (point_octree::is_circle): where
   /// fit_ellipse's guard replaced the EQ 5–6 ellipse, and where the tangent covariance is round
   /// (λ₁ = λ₂), whose EQ 5–6 ellipse is that circle. Counted on the stored nodes, so a loaded

@@ -32,6 +32,7 @@
 #include "pbr_lod/core/covariance.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/memory.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
@@ -771,9 +772,14 @@ point_set<A> prepare_samples(const point_set<In>& points, const point_octree_opt
       for (std::size_t i = lo; i < hi; ++i) {
         vec3f& v = work.normals[i];
         const float len = v.norm();
-        v = (len > 0 && std::isfinite(len)) ? vec3f(v / len) : vec3f::UnitZ();
+        if (len > 0 && std::isfinite(len)) v /= len;
       }
     });
+    // A zero or non-finite normal is no normal: estimated from the positions, oriented by the
+    // given ones around it (all of them when none is given, as for a bare cloud).
+    const normal_repair r = fill_missing_normals(work.positions, work.normals, opt.knn, threads);
+    st.normals_filled = r.missing;
+    if (r.all_estimated) st.estimated_normals = true;
   } else if constexpr (!In.ellipse) {
     // Neither: both from one k-NN search.
     auto est = estimate_normals_and_ellipses(work.positions, est_opt);
