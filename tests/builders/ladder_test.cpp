@@ -201,6 +201,30 @@ std::vector<ladder_case> make_ladder() {
     l.push_back({"zero_normals", m, {}, {}});
   }
   {
+    // One triangle written 50,000 times (its three vertices shared): the ρ-grid's AABB tree
+    // overflowed the stack on this. Every builder must build it at the cost of one triangle.
+    triangle_mesh m = soup({vec3f(0, 0, 0), vec3f(1, 0, 0), vec3f(0, 1, 0)});
+    m.faces.assign(50000, {0, 1, 2});
+    l.push_back({"repeated_triangle", m, {}, {}});
+  }
+  {
+    // 2,000 coincident copies of a small grid, each with vertices of its own: 2,000 copies
+    // of every triangle for the mesh builders, 2,000 points at each position for the others.
+    const triangle_mesh g = grid(4, 4);
+    triangle_mesh m;
+    for (int c = 0; c < 2000; ++c) {
+      const auto base = static_cast<std::uint32_t>(m.vertices.positions.size());
+      m.vertices.positions.insert(m.vertices.positions.end(), g.vertices.positions.begin(),
+                                  g.vertices.positions.end());
+      m.vertices.normals.insert(m.vertices.normals.end(), g.vertices.normals.begin(),
+                                g.vertices.normals.end());
+      m.vertices.colours.insert(m.vertices.colours.end(), g.vertices.colours.begin(),
+                                g.vertices.colours.end());
+      for (const auto& f : g.faces) m.faces.push_back({base + f[0], base + f[1], base + f[2]});
+    }
+    l.push_back({"coincident_copies", m, {}, {}});
+  }
+  {
     auto m = uv_sphere(kSphereRadius, kSphereCentre);
     const rgb8 c{88, 136, 200};
     std::fill(m.vertices.colours.begin(), m.vertices.colours.end(), c);
