@@ -110,9 +110,11 @@ int display_level(int rho) {
 
 /// Mean input points per occupied leaf below which a level is too fine for a point cloud: its
 /// leaves no longer tile the sampled surface (a leaf narrower than the spacing is an island
-/// among empty cells, and draws as an isolated dot however it is splatted). Two points per leaf
-/// on average is a leaf about 1.4 point spacings across on a surface.
-constexpr double min_points_per_leaf = 2.0;
+/// among empty cells, and draws as an isolated dot however it is splatted). Four points per leaf
+/// on average is a leaf about two point spacings across on a surface; with two, an unevenly
+/// sampled scan (the milk-carton Kinect frame) still left a fifth of its render uncovered
+/// (docs/rho-grid.md).
+constexpr double min_points_per_leaf = 4.0;
 
 /// Run-time statistics of the per-level working set.
 struct working_set {

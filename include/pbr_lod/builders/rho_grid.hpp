@@ -112,8 +112,9 @@ struct rho_grid_options {
   /// single cell.) Range [−1, rho_grid_max_level(ρ)].
   /// Unset: rho_grid_auto_level — for a mesh the coarsest level with at least 512 leaves across
   /// the cube (about a pixel per leaf when the model fills a 512-pixel view: tri/5, oct/8); for
-  /// a point cloud no finer than its sampling (leaves about 1.5 median point spacings across),
-  /// so that the leaves of a sparse cloud still touch and do not draw as isolated dots.
+  /// a point cloud no finer than its sampling (the finest level whose occupied leaves hold ≥ 4
+  /// input points on average: about two point spacings across), so that the leaves of a sparse
+  /// cloud still tile its surface and do not draw as isolated dots.
   std::optional<int> level = std::nullopt;
   /// Bits of the quantised normal (pbr_lod::normal_quantizer, 6..16), 0 for none. 13 as in the
   /// paper (and Botsch 2002). Ignored (no bits) when the input has no normals: a point cloud
@@ -408,9 +409,9 @@ decltype(auto) visit_rho(int rho, F&& f) {
 }
 
 /// The level rho_grid_options::level = nullopt builds (see there): for a mesh from ρ alone, for a
-/// point cloud also from its median nearest-neighbour spacing (over at most 4096 of its points,
-/// taken at a fixed stride, so the answer is deterministic). Throws like build_rho_grid for an
-/// empty or invalid input.
+/// point cloud also from its occupancy (points per occupied leaf, counted from the sorted leaf
+/// paths at the mesh level and each coarser one). Throws like build_rho_grid for an empty or
+/// invalid input.
 template <int Rho>
 [[nodiscard]] int rho_grid_auto_level(const triangle_mesh& mesh);
 template <int Rho>
