@@ -2160,6 +2160,39 @@ TEST(RhoGridColour, ColoursRoundTripInEveryLayout) {
   }
 }
 
+// A version-5 (coloured) file damaged anywhere, checksum resealed, is refused with a FormatError
+// or loads into a grid that saves and loads again (the parser lets nothing through that it or
+// serialise() would choke on): every byte of the header flipped, and every 7th of the payload, in
+// the three layouts. Truncated at any length, it is a FormatError. A version-4 file relabelled 5
+// (an uncoloured header read as a coloured one) is refused.
+TEST(RhoGridColour, DamagedColouredFilesAreRefusedOrConsistent) {
+  const auto g = build_rho_grid<3>(colour_ramp(), {.level = 1});
+  ASSERT_TRUE(g.has_colours());
+  for (const auto layout :
+       {rho_grid_layout::nis, rho_grid_layout::is, rho_grid_layout::compressed}) {
+    const auto good = g.serialise(layout);
+    ASSERT_EQ(good[8], 5);
+    for (std::size_t i = 0; i + 8 < good.size(); i += i < 160 ? 1 : 7) {
+      auto bad = good;
+      bad[i] ^= 0xFF;
+      try {
+        const auto back = rho_grid<3>::parse(reseal(bad));
+        EXPECT_EQ(rho_grid<3>::parse(back.serialise(layout)), back) << "byte " << i;
+      } catch (const FormatError&) {
+      }
+    }
+    for (std::size_t n = 0; n < good.size(); n += 5)
+      EXPECT_THROW((void)rho_grid<3>::parse({good.begin(), good.begin() + std::ptrdiff_t(n)}),
+                   FormatError)
+          << n << " bytes";
+  }
+  triangle_mesh plain = colour_ramp();
+  plain.vertices.colours.clear();
+  auto v4 = build_rho_grid<3>(plain, {.level = 1}).serialise(rho_grid_layout::is);
+  v4[8] = 5;
+  EXPECT_THROW((void)rho_grid<3>::parse(reseal(v4)), FormatError);
+}
+
 // A grid without colours writes exactly the bytes it wrote before colours existed: the FNV-1a
 // of each layout's file, measured with the library before this change (same input, same
 // options). A changed header or payload for uncoloured grids would make every existing file
