@@ -559,8 +559,8 @@ test::user_view_score user_score(const triangle_mesh& mesh, const rho_grid<3>& g
 // The plain scene is bounded the same way by its interior depth edges (a sphere's rim over the
 // floor and the wall: cells straddling a rim draw up to half a leaf's diagonal beyond it, dark
 // rim against lit floor). Measured (coloured / plain): interior PSNR min 21.4 / 23.1 dB, mean
-// 22.8 / 24.3 dB, IoU min 0.973, cut → input 0.0046; the paper's one-pixel leaves and no colours:
-// 9.6 / 18.0 dB min.
+// 22.8 / 24.3 dB, IoU min 0.973, cut → input 0.0046; the paper's one-pixel leaves and no colours
+// (the code before): 8.7 / 9.8 dB min, IoU min 0.736.
 TEST(RhoGridUserView, FinestCutLooksLikeTheHardCasesScene) {
   double dist = 0, dist_plain = 0;
   const auto coloured = user_score(hard_cases(), hard_cases_grid(), dist);
@@ -595,11 +595,11 @@ double worst_holes(double dist, bool screen_draw) {
 }
 
 // No holes at any distance (§4.1's bounds make a leaf's square cover its projected cell, so the
-// surface in every leaf is covered): at 1.2 radii a leaf is 2–6 px and one-pixel points miss
-// 70–90 % of the mesh's pixels; at 3 and 8 radii leaves are below a pixel. Every arithmetic,
-// both bounds, with and without screen_draw's rectangles. Measured: 0 everywhere; the paper's
-// one-pixel leaves miss 3.7–5.1 % of the pixels at 1.2 radii and show the surfaces behind
-// through the gaps on most of the others.
+// surface in every leaf is covered): at 1.2 radii a leaf is 2–6 px; at 3 and 8 radii leaves are
+// below a pixel. Every arithmetic, both bounds, with and without screen_draw's rectangles.
+// Measured: 0 everywhere; the paper's one-pixel leaves (the code before) leave 29.7 % of the
+// mesh's pixels empty at 1.2 radii, in every arithmetic, and show the surfaces behind through
+// the gaps on most of the others.
 template <rho_grid_arithmetic Ar>
 void expect_no_holes() {
   for (const double dist : {1.2, 3.0, 8.0}) {
@@ -628,7 +628,7 @@ TEST(RhoGridUserView, NoHolesAtAnyDistanceFixed32) {
 // Close up the interior still looks like the mesh, not only covered: interior PSNR and IoU at
 // 1.2 radii, where each leaf is a square of 2–6 pixels (the conservative bound of its cube, up
 // to √3 of its side). Measured: min 20.1 dB (the checkerboard's edges), IoU min 0.977; with the
-// paper's one-pixel leaves the surfaces behind show through: 9.6 dB.
+// paper's one-pixel leaves (the code before) the surfaces behind show through: 8.5 dB, IoU 0.70.
 TEST(RhoGridUserView, CloseViewsLookLikeTheMesh) {
   const triangle_mesh& mesh = hard_cases();
   const render_options o = default_effects();
