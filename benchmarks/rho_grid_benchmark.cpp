@@ -22,6 +22,7 @@
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
 #include "pbr_lod/builders/rho_grid_hierarchy.hpp"
+#include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/one_pass_shadows.hpp"
@@ -220,6 +221,37 @@ BENCHMARK(bm_coded<3>)
     ->Args({0, 5})
     ->Args({1, 5})
     ->Unit(benchmark::kMillisecond);
+
+// Colours as a sample attribute (§3.1: "we need more bits if we have more materials or
+// colors"): bits per leaf sample of the NIS, IS, in-core and compressed forms with colour_bits
+// = 0 (no colour), 8 (3:3:2), 12 (4:4:4) and 16 (5:6:5), on the coloured generated scenes
+// (0: the demo scene, detail 64; 1: the hard-cases scene, detail 48) at tri/4 and tri/5. The
+// raw forms grow by exactly colour_bits per cell (IS, in core: 16 bits per cell whatever
+// colour_bits), the coded one by what the parent prediction leaves.
+void bm_colour_storage(benchmark::State& state) {
+  static const triangle_mesh scenes[2] = {make_demo_scene(64), make_hard_cases_scene(48)};
+  const triangle_mesh& m = scenes[state.range(0)];
+  const int level = int(state.range(1)), bits = int(state.range(2));
+  rho_grid<3> g;
+  for (auto _ : state) {
+    g = build_rho_grid<3>(m, {.level = level, .colour_bits = bits, .threads = 2});
+    benchmark::DoNotOptimize(g.cell_count());
+  }
+  const auto cs = g.coded_size();
+  const double n = double(g.leaf_count());
+  state.counters["samples"] = n;
+  state.counters["sigma"] = g.sigma();
+  state.counters["bps_nis"] = g.stats().bits_per_sample_nis;
+  state.counters["bps_is"] = g.stats().bits_per_sample_is;
+  state.counters["bps_incore"] = g.stats().bits_per_sample_incore;
+  state.counters["bps_coded_attr"] = cs.bits_per_sample_attributes;
+  state.counters["bps_coded_file"] = double(cs.file_bytes) * 8 / n;
+}
+BENCHMARK(bm_colour_storage)
+    ->ArgNames({"scene", "level", "colour_bits"})
+    ->ArgsProduct({{0, 1}, {4, 5}, {0, 8, 12, 16}})
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
 
 // The context choices of the coder: geometry context model (0 level+child, 1 + parent's face
 // neighbours, 2 + child-level neighbours) × attribute predictor (0 parent, 1 previous sibling).

@@ -17,6 +17,7 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   j.str("file", path).str("method", "rho-grid");
   j.integer("rho", R).integer("level", g.level()).integer("sigma", g.sigma());
   j.integer("normal_bits", g.normal_bits()).integer("material_bits", g.material_bits());
+  j.integer("colour_bits", g.colour_bits());
   j.integer("samples", static_cast<long long>(st.samples));
   j.integer("inner_cells", static_cast<long long>(st.inner_cells));
   j.num("bits_per_sample_nis", st.bits_per_sample_nis);
@@ -55,7 +56,7 @@ struct rho_method {
   template <int R>
   frame draw(const rho_grid<R>& g, const frame_request& r) const {
     const view v(r.cam, g.origin());
-    render_options o = lod_render_options(r.view, g.has_materials());
+    render_options o = lod_render_options(r.view, g.has_colours() || g.has_materials());
     o.fx.shading = o.fx.shading && g.has_normals();
     const bool one_pass = o.fx.shadows && g.has_normals();
     const traverse_options t{.tolerance_px = r.tolerance};
@@ -121,9 +122,12 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   params m(items);
   const int rho = static_cast<int>(m.integer("rho", 3, 2, 5));
   rho_grid_options o;
-  o.level = static_cast<int>(m.integer("level", 5, 0, 39));
+  // No level given: rho_grid_options' default (rho_grid_auto_level: from ρ for a mesh, no finer
+  // than the sampling for a point cloud).
+  if (const long level = m.integer("level", -1, 0, 39); level >= 0) o.level = int(level);
   o.normal_bits = static_cast<int>(m.integer("normal_bits", 13, 0, 16));
   o.material_bits = static_cast<int>(m.integer("material_bits", 3, 0, 8));
+  o.colour_bits = static_cast<int>(m.integer("colour_bits", 16, 0, 16));
   o.knn = static_cast<int>(m.integer("knn", 16, 0, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   rho_method method;
@@ -131,7 +135,7 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   method.layout = method.layout_name == "is"    ? rho_grid_layout::is
                   : method.layout_name == "nis" ? rho_grid_layout::nis
                                                 : rho_grid_layout::compressed;
-  m.finish("rho-grid", "rho, level, normal_bits, material_bits, knn, threads, layout");
+  m.finish("rho-grid", "rho, level, normal_bits, material_bits, colour_bits, knn, threads, layout");
   o.progress = progress_callback("rho-grid", on_terminal);
   const loaded_input& li = in.get();
   return visit_rho(rho, [&]<int R>() {

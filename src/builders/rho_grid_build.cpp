@@ -56,10 +56,13 @@ struct frame {
 
 void check_options(const rho_grid_options& o, int rho) {
   const int maxl = rho_grid_max_level(rho);
-  if (o.level < -1 || o.level > maxl)
+  if (o.level && (*o.level < -1 || *o.level > maxl))
     throw InvalidArgument("rho-grid: level must lie in [-1, " + std::to_string(maxl) +
                           "] for rho = " + std::to_string(rho) + ", got " +
-                          std::to_string(o.level));
+                          std::to_string(*o.level));
+  if (o.colour_bits != 0 && (o.colour_bits < 3 || o.colour_bits > 16))
+    throw InvalidArgument("rho-grid: colour_bits must be 0 or in [3, 16], got " +
+                          std::to_string(o.colour_bits));
   if (o.normal_bits != 0 && (o.normal_bits < normal_quantizer::min_bits || o.normal_bits > 16))
     throw InvalidArgument("rho-grid: normal_bits must be 0 or in [" +
                           std::to_string(normal_quantizer::min_bits) + ", 16], got " +
@@ -92,6 +95,27 @@ frame make_frame(const vec3d& lo, const vec3d& hi, int rho, int depth) {
 std::uint32_t pack_attr(std::uint32_t normal, std::uint32_t material, int normal_bits) {
   return normal | (material << normal_bits);
 }
+
+/// rho_grid_options::level's default for a mesh: the coarsest level with ≥ 512 leaves across
+/// the cube (a leaf about a pixel when the model fills a 512-pixel view): 8, 5, 4, 3 for
+/// ρ = 2, 3, 4, 5 (512, 729, 1024, 625 leaves across).
+int display_level(int rho) {
+  int l = 0;
+  std::uint64_t across = std::uint64_t(rho);
+  while (across < 512) {
+    across *= std::uint64_t(rho);
+    ++l;
+  }
+  return std::min(l, rho_grid_max_level(rho));
+}
+
+/// Mean input points per occupied leaf below which a level is too fine for a point cloud: its
+/// leaves no longer tile the sampled surface (a leaf narrower than the spacing is an island
+/// among empty cells, and draws as an isolated dot however it is splatted). Four points per leaf
+/// on average is a leaf about two point spacings across on a surface; with two, an unevenly
+/// sampled scan (the milk-carton Kinect frame) still left a fifth of its render uncovered
+/// (docs/rho-grid.md).
+constexpr double min_points_per_leaf = 4.0;
 
 /// Run-time statistics of the per-level working set.
 struct working_set {
@@ -141,6 +165,86 @@ std::vector<vec3f> estimated_normals(const point_cloud& c, const rho_grid_option
   return estimate_normals(c.positions, e);
 }
 
+/// The leaf cell and path key (k base-ρ³ digits, the first level most significant) of every
+/// point of a cloud at leaf depth k, and the points sorted by key: the cells of every depth are
+/// then runs of `order`.
+template <int Rho>
+struct point_paths {
+  using lb = level_builder<Rho>;
+  static constexpr int R3 = lb::R3;
+  int depth;
+  frame f;
+  std::vector<cell_pos> leaf;
+  std::vector<std::uint64_t> key;
+  std::vector<std::uint32_t> order;
+
+  point_paths(const point_cloud& c, int k) : depth(k) {
+    const std::size_t n = c.size();
+    vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (std::size_t i = 0; i < n; ++i) {
+      const vec3d w = c.world(i);
+      lo = lo.cwiseMin(w);
+      hi = hi.cwiseMax(w);
+    }
+    f = make_frame(lo, hi, Rho, k);
+    const std::uint64_t cells_per_axis = lb::pow_rho(k);
+    const vec3d shift = c.origin - f.min;
+    leaf.resize(n);
+    key.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const vec3d r = shift + c.positions[i].cast<double>();
+      for (int a = 0; a < 3; ++a) {
+        const double x = std::floor(r[a] / f.leaf);
+        leaf[i][std::size_t(a)] = std::uint32_t(
+            std::clamp(x, 0.0, double(cells_per_axis - 1)));  // clamp also maps NaN-free rounding
+      }
+      std::uint64_t kk = 0;
+      for (int l = 1; l <= k; ++l) {
+        const std::uint64_t span = lb::pow_rho(k - l);
+        const auto d = [&](int a) { return (leaf[i][std::size_t(a)] / span) % Rho; };
+        kk = kk * R3 + (d(0) + Rho * d(1) + Rho * Rho * d(2));
+      }
+      key[i] = kk;
+    }
+    order.resize(n);
+    std::iota(order.begin(), order.end(), 0u);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  }
+
+  /// The finest depth (≥ 1: level 0) whose occupied leaves hold min_points_per_leaf points on
+  /// average, counted from the sorted keys (a cell of depth d is a run of equal key prefixes).
+  [[nodiscard]] int auto_depth() const {
+    const std::size_t n = key.size();
+    std::uint64_t div = 1;
+    for (int d = depth; d >= 1; --d, div *= R3) {
+      std::size_t occupied = 0;
+      for (std::size_t i = 0; i < n; ++occupied) {
+        const std::uint64_t ck = key[order[i]] / div;
+        while (i < n && key[order[i]] / div == ck) ++i;
+      }
+      if (double(n) >= min_points_per_leaf * double(occupied)) return d;
+    }
+    return std::min(depth, 1);
+  }
+
+  /// Cuts the paths to depth k ≤ depth: keys and cells are prefixes, so the order stays sorted
+  /// and the frame keeps its cube.
+  void truncate(int k) {
+    if (k >= depth) return;
+    std::uint64_t div = 1, span = 1;
+    for (int e = 0; e < depth - k; ++e) {
+      div *= R3;
+      span *= Rho;
+    }
+    for (auto& kk : key) kk /= div;
+    for (auto& p : leaf)
+      for (auto& x : p) x = std::uint32_t(x / span);
+    f.leaf = f.side / std::pow(double(Rho), k);  // as make_frame computes it
+    depth = k;
+  }
+};
+
 template <int Rho>
 rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o) {
   using lb = level_builder<Rho>;
@@ -150,22 +254,25 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
   c.validate("rho-grid input");
   if (c.empty()) throw InvalidArgument("rho-grid: the input has no points");
   check_options(o, Rho);
-  const int k = o.level + 1;  // leaf depth: the paper's level l is a ρ^(l+1) grid
   const std::size_t n = c.size();
   const std::vector<vec3f> estimated = estimated_normals(c, o);
   const double estimation_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::vector<vec3f>& normals = estimated.empty() ? c.normals : estimated;
 
-  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (std::size_t i = 0; i < n; ++i) {
-    const vec3d w = c.world(i);
-    lo = lo.cwiseMin(w);
-    hi = hi.cwiseMax(w);
-  }
-  const frame f = make_frame(lo, hi, Rho, k);
+  // Leaf paths at the requested depth, or (no level given) at the display depth, then cut to
+  // the finest depth the sampling supports (point_paths::auto_depth).
+  point_paths<Rho> pp(c, o.level ? *o.level + 1 : display_level(Rho) + 1);
+  if (!o.level) pp.truncate(pp.auto_depth());
+  const int k = pp.depth;  // leaf depth: the paper's level l is a ρ^(l+1) grid
+  const frame& f = pp.f;
+  const std::vector<cell_pos>& leaf = pp.leaf;
+  const std::vector<std::uint64_t>& key = pp.key;
+  const std::vector<std::uint32_t>& order = pp.order;
+  const vec3d shift = c.origin - f.min;
   const int nb = normals.empty() ? 0 : o.normal_bits;
   const int mb = c.materials.empty() ? 0 : o.material_bits;
+  const int cb = c.colours.empty() ? 0 : o.colour_bits;
   if (mb > 0)
     for (std::size_t i = 0; i < n; ++i)
       if (c.materials[i] >= (1u << mb))
@@ -175,37 +282,14 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
   std::optional<normal_quantizer> q;
   if (nb > 0) q.emplace(nb);
 
-  // Leaf position and path key (k base-ρ³ digits, the first level most significant).
-  const std::uint64_t cells_per_axis = lb::pow_rho(k);
-  const vec3d shift = c.origin - f.min;
-  std::vector<cell_pos> leaf(n);
-  std::vector<std::uint64_t> key(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const vec3d r = shift + c.positions[i].cast<double>();
-    for (int a = 0; a < 3; ++a) {
-      const double x = std::floor(r[a] / f.leaf);
-      leaf[i][std::size_t(a)] = std::uint32_t(
-          std::clamp(x, 0.0, double(cells_per_axis - 1)));  // clamp also maps NaN-free rounding
-    }
-    std::uint64_t kk = 0;
-    for (int l = 1; l <= k; ++l) {
-      const std::uint64_t span = lb::pow_rho(k - l);
-      const auto d = [&](int a) { return (leaf[i][std::size_t(a)] / span) % Rho; };
-      kk = kk * R3 + (d(0) + Rho * d(1) + Rho * Rho * d(2));
-    }
-    key[i] = kk;
-  }
-  std::vector<std::uint32_t> order(n);
-  std::iota(order.begin(), order.end(), 0u);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
-
   working_set ws;
   ws.note(n * (sizeof(cell_pos) + sizeof(std::uint64_t) + sizeof(std::uint32_t)));
   rho_grid<Rho> g;
   access::set_frame(g, k, f.min, f.side, nb, mb);
+  access::set_colour_bits(g, cb);
   auto& codes = access::codes(g);
   auto& attrs = access::attrs(g);
+  auto& colours = access::colours(g);
   auto& samples = access::samples(g);
   std::size_t cells = 0;
   for (int l = 0; l <= k; ++l) {
@@ -236,6 +320,7 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
       const std::uint32_t nc = nb ? q->encode(normals[best]) : 0u;
       const std::uint32_t mc = mb ? std::uint32_t(c.materials[best]) : 0u;
       if (nb + mb > 0) attrs.push_back(std::uint16_t(pack_attr(nc, mc, nb)));
+      if (cb > 0) colours.push_back(std::uint16_t(rho_grid_encode_colour(c.colours[best], cb)));
       if (l < k) codes.push_back(cd);
       if (o.keep_sample_points)
         samples.push_back((shift + c.positions[best].cast<double>()).cast<float>());
@@ -269,7 +354,8 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   m.validate("rho-grid input mesh");
   check_options(o, Rho);
   if (m.vertices.empty()) throw InvalidArgument("rho-grid: the input mesh has no vertices");
-  const int k = o.level + 1;  // leaf depth: the paper's level l is a ρ^(l+1) grid
+  // Leaf depth: the paper's level l is a ρ^(l+1) grid.
+  const int k = (o.level ? *o.level : display_level(Rho)) + 1;
 
   // Frame from the vertices the faces use (all vertices when there are no faces).
   vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
@@ -315,12 +401,14 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
       pc.positions.push_back(m.vertices.positions[v]);
       if (!m.vertices.normals.empty()) pc.normals.push_back(m.vertices.normals[v]);
       if (!m.vertices.materials.empty()) pc.materials.push_back(m.vertices.materials[v]);
+      if (!m.vertices.colours.empty()) pc.colours.push_back(m.vertices.colours[v]);
     }
     return build_from_points<Rho>(pc, o);
   }
 
   const int nb = o.normal_bits;  // a mesh always has (geometric) normals
   const int mb = m.vertices.materials.empty() ? 0 : o.material_bits;
+  const int cb = m.vertices.colours.empty() ? 0 : o.colour_bits;
   if (mb > 0)
     for (std::size_t i = 0; i < m.vertices.size(); ++i)
       if (m.vertices.materials[i] >= (1u << mb))
@@ -345,8 +433,10 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
 
   rho_grid<Rho> g;
   access::set_frame(g, k, f.min, f.side, nb, mb);
+  access::set_colour_bits(g, cb);
   auto& codes = access::codes(g);
   auto& attrs = access::attrs(g);
+  auto& colours = access::colours(g);
   auto& samples = access::samples(g);
   working_set ws;
   std::vector<cell_pos> level{cell_pos{0, 0, 0}}, next;
@@ -357,9 +447,10 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
     const std::size_t nl = level.size();
     std::vector<typename lb::code> lcodes(l < k ? nl : 0);
     std::vector<std::uint16_t> lattrs(nb + mb > 0 ? nl : 0);
+    std::vector<std::uint16_t> lcolours(cb > 0 ? nl : 0);
     std::vector<vec3f> lsamples(o.keep_sample_points ? nl : 0);
     ws.note((level.capacity() + nl * R3) * sizeof(cell_pos) + nl * sizeof(typename lb::code) +
-            nl * 2 + lsamples.size() * sizeof(vec3f));
+            (lattrs.size() + lcolours.size()) * 2 + lsamples.size() * sizeof(vec3f));
     detail::parallel_pieces(
         nl, threads, 8 * std::size_t(threads), 64, [&](std::size_t first, std::size_t last) {
           std::vector<tri_vector::const_iterator> hits;
@@ -372,7 +463,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
             if (o.keep_sample_points) lsamples[ci] = s.cast<float>();
             const std::size_t ti = std::size_t(it - tris.cbegin());
             const auto& fc = m.faces[face_of[ti]];
-            if (nb + mb > 0) {
+            if (nb + mb + cb > 0) {
               // Barycentric coordinates of the closest point (double, Cramer on the normal
               // equations).
               const auto P = [&](int i) {
@@ -400,7 +491,18 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
                 const int vmax = b0 >= b1 && b0 >= b2 ? 0 : (b1 >= b2 ? 1 : 2);
                 mc = m.vertices.materials[fc[std::size_t(vmax)]];
               }
-              lattrs[ci] = std::uint16_t(pack_attr(nc, mc, nb));
+              if (nb + mb > 0) lattrs[ci] = std::uint16_t(pack_attr(nc, mc, nb));
+              if (cb > 0) {
+                // The colour at the closest point, interpolated as the mesh's render does.
+                const auto& vc = m.vertices.colours;
+                const auto mix = [&](std::uint8_t rgb8::*ch) {
+                  const double x =
+                      b0 * (vc[fc[0]].*ch) + b1 * (vc[fc[1]].*ch) + b2 * (vc[fc[2]].*ch);
+                  return std::uint8_t(std::clamp(std::lround(x), 0l, 255l));
+                };
+                lcolours[ci] = std::uint16_t(
+                    rho_grid_encode_colour(rgb8{mix(&rgb8::r), mix(&rgb8::g), mix(&rgb8::b)}, cb));
+              }
             }
             if (l == k) continue;
             // Childhood code: exact triangle/box tests of the triangles meeting this cell.
@@ -451,6 +553,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
     if (cells > 0xffffffffull)
       throw InvalidArgument("rho-grid: more cells than 32-bit child indices address");
     attrs.insert(attrs.end(), lattrs.begin(), lattrs.end());
+    colours.insert(colours.end(), lcolours.begin(), lcolours.end());
     samples.insert(samples.end(), lsamples.begin(), lsamples.end());
     if (l < k) {
       next.clear();
@@ -497,9 +600,28 @@ rho_grid<Rho> build_rho_grid(const point_cloud& points, const rho_grid_options& 
   return with_input_bounds(build_from_points<Rho>(points, options), points);
 }
 
+template <int Rho>
+int rho_grid_auto_level(const triangle_mesh& mesh) {
+  mesh.validate("rho-grid input mesh");
+  if (mesh.vertices.empty()) throw InvalidArgument("rho-grid: the input mesh has no vertices");
+  for (const auto& fc : mesh.faces) {
+    const auto p = [&](int i) { return mesh.vertices.positions[fc[std::size_t(i)]]; };
+    if ((p(1) - p(0)).cross(p(2) - p(0)).squaredNorm() > 0) return display_level(Rho);
+  }
+  return rho_grid_auto_level<Rho>(mesh.vertices);  // no surface: built from the vertices
+}
+template <int Rho>
+int rho_grid_auto_level(const point_cloud& points) {
+  points.validate("rho-grid input");
+  if (points.empty()) throw InvalidArgument("rho-grid: the input has no points");
+  return point_paths<Rho>(points, display_level(Rho) + 1).auto_depth() - 1;
+}
+
 #define PBR_LOD_RHO_GRID_BUILD(R)                                                        \
   template rho_grid<R> build_rho_grid<R>(const triangle_mesh&, const rho_grid_options&); \
-  template rho_grid<R> build_rho_grid<R>(const point_cloud&, const rho_grid_options&);
+  template rho_grid<R> build_rho_grid<R>(const point_cloud&, const rho_grid_options&);   \
+  template int rho_grid_auto_level<R>(const triangle_mesh&);                             \
+  template int rho_grid_auto_level<R>(const point_cloud&);
 PBR_LOD_RHO_GRID_BUILD(2)
 PBR_LOD_RHO_GRID_BUILD(3)
 PBR_LOD_RHO_GRID_BUILD(4)

@@ -25,6 +25,9 @@
 // tree), i − i_pred, and j minus the predicted column rescaled to row i (adaptive Exp-Golomb
 // residuals). A normal just across an octant boundary keeps (i, j) near the prediction's, since
 // the table is on absolute values. Materials: a bit tree conditioned on the predicted material.
+// Colours (when the grid has them): each channel's quantised level minus the parent's, an
+// adaptive Exp-Golomb residual per channel (closest-point colours of a cell and its parent are
+// usually equal or near on a smoothly coloured surface).
 #include <algorithm>
 #include <array>
 #include <memory>
@@ -147,7 +150,8 @@ struct attribute_model {
   std::array<range_prob, 32> equal;
   std::array<range_prob, 8> octant;  // bit tree, nodes 1..7
   adaptive_int row, column_same, column_moved;
-  std::vector<range_prob> material;  // (predicted material, bit-tree node)
+  std::vector<range_prob> material;    // (predicted material, bit-tree node)
+  std::array<adaptive_int, 3> colour;  // residual per channel (red, green, blue)
   attribute_model(int material_bits) {
     equal.fill(range_prob_init);
     octant.fill(range_prob_init);
@@ -236,14 +240,43 @@ std::uint32_t code_attribute(Coder& rc, attribute_model& m, const std::optional<
   return nc | (mat << nb);
 }
 
+/// Codes (or decodes) a colour code of `cb` bits against the predicted code: per channel the
+/// level minus the predicted level. Decoding checks each level against its channel's range.
+template <bool Encode, class Coder>
+std::uint32_t code_colour(Coder& rc, attribute_model& m, int cb, std::uint32_t pred,
+                          std::uint32_t value, const std::string& what) {
+  const auto split = rho_grid_colour_split(cb);
+  std::uint32_t out = 0;
+  int shift = 0;
+  for (std::size_t ch = 0; ch < 3; ++ch) {
+    const int bits = split[ch];
+    const std::uint32_t mask = (1u << bits) - 1u;
+    const auto p = std::int32_t((pred >> shift) & mask);
+    std::int32_t v;
+    if constexpr (Encode) {
+      v = std::int32_t((value >> shift) & mask);
+      m.colour[ch].encode(rc, v - p);
+    } else {
+      v = p + m.colour[ch].decode(rc, what);
+      if (v < 0 || std::uint32_t(v) > mask)
+        throw FormatError(what + ": decoded colour level " + std::to_string(v) + " out of range");
+    }
+    out |= std::uint32_t(v) << shift;
+    shift += bits;
+  }
+  return out;
+}
+
 /// The attribute stream, shared by the encoder and the decoder: the root's attribute, then each
 /// inner cell's children in breadth-first order, each coded against its parent's attribute (or,
 /// with sibling_or_parent, its previous sibling's). get(i) is cell i's attribute (already decoded
-/// when decoding); put(i, v) receives what code_attribute returns for cell i.
-template <bool Encode, int Rho, class Coder, class Get, class Put>
+/// when decoding); put(i, v) receives what code_attribute returns for cell i; likewise
+/// get_colour, put_colour for its colour code when the grid has colours (coded after the
+/// attribute, against the same cell's colour).
+template <bool Encode, int Rho, class Coder, class Get, class Put, class GetC, class PutC>
 void walk_attributes(Coder& rc, const rho_grid<Rho>& g, const rho_coder_options& options, Get&& get,
-                     Put&& put, const std::string& what) {
-  const int nb = g.normal_bits(), mb = g.material_bits();
+                     Put&& put, GetC&& get_colour, PutC&& put_colour, const std::string& what) {
+  const int nb = g.normal_bits(), mb = g.material_bits(), cb = g.colour_bits();
   std::shared_ptr<const normal_quantizer> q;  // the process-wide table, not one per call
   std::optional<normal_split> ns;
   if (nb > 0) {
@@ -251,19 +284,24 @@ void walk_attributes(Coder& rc, const rho_grid<Rho>& g, const rho_coder_options&
     ns.emplace(*q);
   }
   attribute_model m(mb);
-  const auto code = [&](std::uint32_t i, int level, std::uint32_t pred) {
-    put(i, code_attribute<Encode>(rc, m, ns, nb, mb, level, pred, Encode ? get(i) : 0u, what));
+  const auto code = [&](std::uint32_t i, int level, std::uint32_t pred, std::uint32_t pred_colour) {
+    if (nb + mb > 0)
+      put(i, code_attribute<Encode>(rc, m, ns, nb, mb, level, pred, Encode ? get(i) : 0u, what));
+    if (cb > 0)
+      put_colour(i, code_colour<Encode>(rc, m, cb, pred_colour, Encode ? get_colour(i) : 0u, what));
   };
-  code(0, 0, 0);
+  code(0, 0, 0, 0);
   int level = 0;
   for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
     while (c >= g.depth_begin(level + 1)) ++level;
     const std::uint32_t first = g.first_child(c), n = std::uint32_t(g.code(c).count());
-    for (std::uint32_t k = 0; k < n; ++k)
-      code(first + k, level + 1,
-           (options.attributes == rho_attribute_predictor::sibling_or_parent && k > 0)
-               ? std::uint32_t(get(first + k - 1))
-               : std::uint32_t(get(c)));
+    for (std::uint32_t k = 0; k < n; ++k) {
+      const bool sibling =
+          options.attributes == rho_attribute_predictor::sibling_or_parent && k > 0;
+      const std::uint32_t from = sibling ? first + k - 1 : c;
+      code(first + k, level + 1, nb + mb > 0 ? std::uint32_t(get(from)) : 0u,
+           cb > 0 ? std::uint32_t(get_colour(from)) : 0u);
+    }
   }
 }
 
@@ -296,6 +334,7 @@ rho_coded_streams rho_grid_encode(const rho_grid<Rho>& g, const rho_coder_option
     range_encoder rc;
     walk_attributes<true>(
         rc, g, options, [&](std::uint32_t i) { return g.attribute(i); },
+        [](std::uint32_t, std::uint32_t) {}, [&](std::uint32_t i) { return g.colour_code(i); },
         [](std::uint32_t, std::uint32_t) {}, "");
     out.attributes = rc.finish();
   }
@@ -335,7 +374,9 @@ void rho_grid_decode(rho_grid<Rho>& g, const unsigned char* geometry, std::size_
   // The walk matched every level's decoded cells to the declared counts, so `total` is the real
   // cell count; the attributes are sized before finish() so its in-core statistics count them.
   auto& attrs = access::attrs(g);
-  if (g.sigma() > 0) attrs.assign(total, 0);
+  auto& colours = access::colours(g);
+  if (g.normal_bits() + g.material_bits() > 0) attrs.assign(total, 0);
+  if (g.has_colours()) colours.assign(total, 0);
   access::finish(g, total, what);
   if (g.sigma() == 0) {
     if (attributes_size != 0) throw FormatError(what + ": attribute stream of a grid with σ = 0");
@@ -344,7 +385,9 @@ void rho_grid_decode(rho_grid<Rho>& g, const unsigned char* geometry, std::size_
   range_decoder rc(attributes, attributes_size, what + " (attributes)");
   walk_attributes<false>(
       rc, g, options, [&](std::uint32_t i) { return attrs[i]; },
-      [&](std::uint32_t i, std::uint32_t v) { attrs[i] = std::uint16_t(v); }, what);
+      [&](std::uint32_t i, std::uint32_t v) { attrs[i] = std::uint16_t(v); },
+      [&](std::uint32_t i) { return colours[i]; },
+      [&](std::uint32_t i, std::uint32_t v) { colours[i] = std::uint16_t(v); }, what);
   rc.finish();
 }
 

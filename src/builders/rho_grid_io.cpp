@@ -4,18 +4,23 @@
 // File layout (little endian):
 //   magic "PBRLODRG", u32 version, u32 ρ, u32 leaf depth k = level + 1
 //   (rho_grid::leaf_depth), u32 layout (0 NIS, 1 IS),
-//   u32 normal bits, u32 material bits, f64 origin[3], f64 cube side,
+//   u32 normal bits, u32 material bits, [version 5 only: u32 colour bits], f64 origin[3],
+//   f64 cube side,
 //   f64 input centre[3] (world), f64 input radius (rho_grid::input_centre), u64 cells per level [k
 //   + 1], u64 payload bits, payload bytes ⌈bits/8⌉, u64 FNV-1a of all bytes before it.
 // Payload, pre-order from the root (children in increasing digit order):
 //   NIS  ρ³-bit code of every inner cell, then the σ-bit attribute of every leaf
 //   IS   per cell: σ-bit attribute, then (inner cells) the ρ³-bit code
+// A σ-bit attribute is rho_grid::sample_bits: normal code, material, colour code from the low
+// bits up.
 // The cells of one level appear in pre-order in path order, which is the breadth-first order of
 // the in-core structure, so reading appends to per-level arrays and needs no reordering.
 //
-// Version 4 for every layout; versions 1 (NIS, IS) and 2 (compressed) had no input bounds, and
-// 1–3 held the build's time (no two builds compared equal): they are rejected with a message to
-// rebuild.
+// Version 4 for every layout of a grid without colours, version 5 (the colour bits in the header)
+// for a grid with colours: a grid without colours writes exactly the bytes it always did, and a
+// reader of version 4 alone refuses a coloured file by its version instead of misreading it.
+// Versions 1 (NIS, IS) and 2 (compressed) had no input bounds, and 1–3 held the build's time (no
+// two builds compared equal): they are rejected with a message to rebuild.
 // Compressed layout (2, beyond the paper): the same
 // header up to the cells per level, then u32 geometry context model, u32 attribute predictor,
 // u64 geometry bytes G, u64 attribute bytes A, G + A bytes of the two range-coded streams
@@ -37,8 +42,33 @@ namespace pbr_lod {
 namespace {
 
 constexpr detail::file_format rho_format{"rho-grid", {'P', 'B', 'R', 'L', 'O', 'D', 'R', 'G'}, 4};
-/// Bytes before the cells per level: magic, 6 u32, 8 f64 (origin, side, input bounds).
-constexpr std::size_t fixed_header_bytes = 8 + 6 * 4 + 8 * 8;
+/// The version a grid with colours is written in (rho_format.version without).
+constexpr std::uint32_t coloured_version = 5;
+/// Bytes before the cells per level: magic, 6 u32, 8 f64 (origin, side, input bounds); version 5
+/// one u32 more (the colour bits).
+constexpr std::size_t fixed_header_bytes(bool coloured) {
+  return 8 + (coloured ? 7 : 6) * 4 + 8 * 8;
+}
+
+/// Reads and checks the magic and the version (4, or 5 with colours): read_head's messages, two
+/// versions.
+std::uint32_t read_rho_head(detail::byte_reader& r) {
+  for (const char c : rho_format.magic)
+    if (r.get<char>("magic") != c)
+      throw FormatError(r.path + ": not a pbr_lod " + rho_format.name +
+                        " file (bad magic, expected " + std::string(rho_format.magic, 8) + ")");
+  const auto v = r.get<std::uint32_t>("version");
+  if (v >= 1 && v <= 3)
+    throw FormatError(r.path + ": " + rho_format.name + " file version " + std::to_string(v) +
+                      " is no longer read; this library reads version " +
+                      std::to_string(rho_format.version) + " (" + std::to_string(coloured_version) +
+                      " with colours): rebuild the file with pbrlod build");
+  if (v != rho_format.version && v != coloured_version)
+    throw FormatError(r.path + ": version " + std::to_string(v) + ", this library reads version " +
+                      std::to_string(rho_format.version) + " (" + std::to_string(coloured_version) +
+                      " with colours)");
+  return v;
+}
 
 struct header_writer {
   std::vector<unsigned char>& b;
@@ -75,12 +105,13 @@ template <int Rho>
 void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_grid_layout layout) {
   header_writer h{out};
   for (char c : rho_format.magic) h.put(c);
-  h.put(rho_format.version);
+  h.put(g.has_colours() ? coloured_version : rho_format.version);
   h.put(std::uint32_t(Rho));
   h.put(std::uint32_t(g.leaf_depth()));
   h.put(std::uint32_t(layout));
   h.put(std::uint32_t(g.normal_bits()));
   h.put(std::uint32_t(g.material_bits()));
+  if (g.has_colours()) h.put(std::uint32_t(g.colour_bits()));
   h.put(g.origin().x());
   h.put(g.origin().y());
   h.put(g.origin().z());
@@ -120,7 +151,8 @@ rho_grid_coded_size rho_grid<Rho>::coded_size() const {
   // Read the two stream lengths back from the file just written: the sizes are those of the
   // bytes the decoder reads, never an estimate.
   std::uint64_t gb = 0, ab = 0;
-  const std::size_t lengths = fixed_header_bytes + std::size_t(leaf_depth_ + 1) * 8 + 2 * 4;
+  const std::size_t lengths =
+      fixed_header_bytes(has_colours()) + std::size_t(leaf_depth_ + 1) * 8 + 2 * 4;
   std::memcpy(&gb, bytes.data() + lengths, 8);
   std::memcpy(&ab, bytes.data() + lengths + 8, 8);
   rho_grid_coded_size s;
@@ -152,9 +184,7 @@ std::vector<unsigned char> rho_grid<Rho>::serialise(rho_grid_layout layout) cons
   while (!stack.empty()) {
     const std::uint32_t c = stack.back();
     stack.pop_back();
-    if (is || is_leaf(c)) {
-      if (is) w.put(attribute(c), s);
-    }
+    if (is) w.put(sample_bits(c), s);
     if (is_leaf(c)) continue;
     put_code(w, codes_[c], children_per_cell);
     for (std::uint32_t i = std::uint32_t(codes_[c].count()); i-- > 0;)
@@ -162,7 +192,7 @@ std::vector<unsigned char> rho_grid<Rho>::serialise(rho_grid_layout layout) cons
   }
   if (!is)
     for (std::size_t c = codes_.size(); c < attrs_count_; ++c)
-      w.put(attribute(std::uint32_t(c)), s);
+      w.put(sample_bits(std::uint32_t(c)), s);
   if (w.bits() != bits)
     throw Error("rho-grid: internal error, wrote " + std::to_string(w.bits()) +
                 " payload bits, expected " + std::to_string(bits));
@@ -178,7 +208,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   detail::byte_reader r{bytes, 0, what};
   // Versions 1 (NIS, IS) and 2 (compressed) did not record the input's bounds, 1–3 stored the
   // build's time.
-  detail::read_head(r, rho_format, 3);
+  const std::uint32_t version = read_rho_head(r);
   const auto rho_in = r.get<std::uint32_t>("rho");
   if (rho_in != std::uint32_t(Rho))
     throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
@@ -195,6 +225,10 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
       nb + mb > 16)
     throw FormatError(what + ": unsupported attribute layout (" + std::to_string(nb) +
                       " normal bits, " + std::to_string(mb) + " material bits)");
+  const auto cb = version == coloured_version ? r.get<std::uint32_t>("colour bits") : 0u;
+  if (version == coloured_version && (cb < 3 || cb > 16))
+    throw FormatError(what + ": version " + std::to_string(coloured_version) + " with " +
+                      std::to_string(cb) + " colour bits (expected 3 to 16)");
   vec3d origin;
   origin.x() = r.get<double>("origin");
   origin.y() = r.get<double>("origin");
@@ -227,6 +261,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
   if (layout == 2) {
     rho_grid g;
     access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+    access::set_colour_bits(g, int(cb));
     access::set_input_bounds(g, in_centre, in_radius);
     const auto gm = r.get<std::uint32_t>("geometry context model");
     const auto am = r.get<std::uint32_t>("attribute predictor");
@@ -249,7 +284,7 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
                             what);
     return g;
   }
-  const std::uint64_t sigma = nb + mb, leaves = per_level[depth], inner = total - leaves;
+  const std::uint64_t sigma = nb + mb + cb, leaves = per_level[depth], inner = total - leaves;
   const std::uint64_t expect = inner * R3 + leaves * sigma + (layout == 1 ? inner * sigma : 0);
   const auto bits = r.get<std::uint64_t>("payload bits");
   if (bits != expect)
@@ -266,29 +301,32 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
 
   rho_grid g;
   access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+  access::set_colour_bits(g, int(cb));
   access::set_input_bounds(g, in_centre, in_radius);
   auto& codes = access::codes(g);
   auto& attrs = access::attrs(g);
+  auto& colours = access::colours(g);
   std::vector<std::vector<code_type>> lcodes(depth);
-  std::vector<std::vector<std::uint16_t>> lattrs(depth + 1);
+  std::vector<std::vector<std::uint16_t>> lattrs(depth + 1), lcolours(depth + 1);
   detail::bit_reader br(bytes.data() + r.pos, bits, what);
   // The process-wide table: building one per parse was most of the cost of loading a small grid.
   std::shared_ptr<const normal_quantizer> q;
   if (nb > 0) q = normal_quantizer::shared(int(nb));
-  const auto read_attr = [&](std::vector<std::uint16_t>& dst) {
+  const auto read_attr = [&](std::uint32_t l) {
     const auto a = std::uint32_t(br.get(int(sigma), "attribute"));
     if (q && !q->valid(a & ((1u << nb) - 1u)))
       throw FormatError(what + ": invalid normal code " + std::to_string(a & ((1u << nb) - 1u)) +
                         " at bit " + std::to_string(br.position()));
-    if (sigma > 0) dst.push_back(std::uint16_t(a));
+    if (nb + mb > 0) lattrs[l].push_back(std::uint16_t(a & ((1u << (nb + mb)) - 1u)));
+    if (cb > 0) lcolours[l].push_back(std::uint16_t(a >> (nb + mb)));  // every cb-bit code valid
   };
   std::vector<std::uint32_t> stack{0};  // levels of the cells still to read
   while (!stack.empty()) {
     const std::uint32_t l = stack.back();
     stack.pop_back();
-    if (layout == 1) read_attr(lattrs[l]);
+    if (layout == 1) read_attr(l);
     if (l == depth) {
-      if (layout == 1 && lattrs[l].size() > leaves && sigma > 0)
+      if (layout == 1 && std::max(lattrs[l].size(), lcolours[l].size()) > leaves && sigma > 0)
         throw FormatError(what + ": more leaves than the " + std::to_string(leaves) + " declared");
       continue;
     }
@@ -318,35 +356,52 @@ rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
     codes.insert(codes.end(), lcodes[l].begin(), lcodes[l].end());
   }
   if (layout == 0) {
-    for (std::uint64_t i = 0; i < leaves; ++i) read_attr(lattrs[depth]);
+    for (std::uint64_t i = 0; i < leaves; ++i) read_attr(depth);
   }
   if (br.position() != bits)
     throw FormatError(what + ": payload has " + std::to_string(bits - br.position()) +
                       " bits left over");
-  if (sigma > 0) {
+  const auto gather = [&](std::vector<std::uint16_t>& dst,
+                          const std::vector<std::vector<std::uint16_t>>& per) {
     if (layout == 1)
-      for (const auto& la : lattrs) attrs.insert(attrs.end(), la.begin(), la.end());
+      for (const auto& la : per) dst.insert(dst.end(), la.begin(), la.end());
     else {
-      attrs.assign(inner, 0);
-      attrs.insert(attrs.end(), lattrs[depth].begin(), lattrs[depth].end());
+      dst.assign(inner, 0);
+      dst.insert(dst.end(), per[depth].begin(), per[depth].end());
     }
-  }
+  };
+  if (nb + mb > 0) gather(attrs, lattrs);
+  if (cb > 0) gather(colours, lcolours);
   access::finish(g, total, what);
   if (layout == 0 && sigma > 0 && inner > 0) {
     // Rebuild the intermediate samples bottom-up: mean normal of the children, re-quantised;
-    // the first child's material.
+    // the first child's material; the mean colour of the children, re-quantised.
     for (std::size_t c = inner; c-- > 0;) {
       const auto cc = std::uint32_t(c);
       const std::uint32_t first = g.first_child(cc);
       const int n = g.code(cc).count();
-      std::uint32_t nc = 0;
-      if (q) {
-        vec3f sum = vec3f::Zero();
-        for (int i = 0; i < n; ++i) sum += q->decode(g.normal_code(first + std::uint32_t(i)));
-        nc = q->encode(sum.squaredNorm() > 0 ? vec3f(sum) : q->decode(g.normal_code(first)));
+      if (nb + mb > 0) {
+        std::uint32_t nc = 0;
+        if (q) {
+          vec3f sum = vec3f::Zero();
+          for (int i = 0; i < n; ++i) sum += q->decode(g.normal_code(first + std::uint32_t(i)));
+          nc = q->encode(sum.squaredNorm() > 0 ? vec3f(sum) : q->decode(g.normal_code(first)));
+        }
+        const std::uint32_t mat = g.material(first);
+        attrs[c] = std::uint16_t(nc | (mat << nb));
       }
-      const std::uint32_t mat = g.material(first);
-      attrs[c] = std::uint16_t(nc | (mat << nb));
+      if (cb > 0) {
+        std::array<int, 3> sum{};
+        for (int i = 0; i < n; ++i) {
+          const rgb8 k = g.colour(first + std::uint32_t(i));
+          sum[0] += k.r;
+          sum[1] += k.g;
+          sum[2] += k.b;
+        }
+        const auto mean = [n](int v) { return std::uint8_t((v + n / 2) / n); };
+        colours[c] = std::uint16_t(
+            rho_grid_encode_colour(rgb8{mean(sum[0]), mean(sum[1]), mean(sum[2])}, int(cb)));
+      }
     }
   }
   return g;
@@ -365,7 +420,7 @@ rho_grid<Rho> rho_grid<Rho>::load(const std::string& path) {
 int rho_grid_file_rho(const std::string& path) {
   const auto bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};
-  detail::read_head(r, rho_format, 3);
+  (void)read_rho_head(r);
   const auto rho = r.get<std::uint32_t>("rho");
   if (rho < 2 || rho > 5) throw FormatError(path + ": rho " + std::to_string(rho) + " unsupported");
   return int(rho);

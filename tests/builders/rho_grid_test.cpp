@@ -262,6 +262,37 @@ TEST(RhoGridLevels, LevelIsThePapersLevel) {
   EXPECT_EQ(rho_grid_max_level(3), 12);  // 13 digits of 27: 27^13 < 2^63 < 27^14
 }
 
+// With no level given, a mesh gets the coarsest level with ≥ 512 leaves across the cube (about a
+// pixel per leaf when the model fills a 512-pixel view), whatever ρ: tri/5 (729), oct/8 (512),
+// 4-grid level 4 (1024), 5-grid level 3 (625) — a fixed "level 5" would be 64³ for an octree and
+// 15625³ for ρ = 5. A point cloud gets no finer a level than its sampling supports: the finest
+// with ≥ 4 points per occupied leaf on average, so that its leaves tile the surface. 1000 points
+// on a unit sphere are ≈ 0.11 apart; level 1 of a tri-grid (9 leaves across the cube of side 2,
+// 0.22 wide) holds fewer than 4 per occupied leaf (the sphere cuts many leaves in a corner
+// only), level 0 (0.67 wide) dozens: level 0.
+TEST(RhoGridLevels, DefaultLevelFollowsTheInput) {
+  EXPECT_EQ(rho_grid_auto_level<3>(bunny_small()), 5);
+  EXPECT_EQ(rho_grid_auto_level<2>(bunny_small()), 8);
+  EXPECT_EQ(rho_grid_auto_level<4>(bunny_small()), 4);
+  EXPECT_EQ(rho_grid_auto_level<5>(bunny_small()), 3);
+  point_cloud sphere;
+  std::mt19937 rng(3);
+  std::normal_distribution<float> gauss(0, 1);
+  for (int i = 0; i < 1000; ++i)
+    sphere.positions.push_back(vec3f(gauss(rng), gauss(rng), gauss(rng)).normalized());
+  const int auto_level = rho_grid_auto_level<3>(sphere);
+  EXPECT_EQ(auto_level, 0);
+  const auto g = build_rho_grid<3>(sphere, {});
+  EXPECT_EQ(g.level(), auto_level);
+  EXPECT_GE(double(sphere.size()) / double(g.leaf_count()), 4.0);
+  const auto finer = build_rho_grid<3>(sphere, {.level = auto_level + 1});
+  EXPECT_LT(double(sphere.size()) / double(finer.leaf_count()), 4.0);
+  // The same cells as an explicit build at that level (the auto level's paths are prefixes).
+  EXPECT_EQ(g, build_rho_grid<3>(sphere, {.level = auto_level}));
+  // The bunny's 453 vertices (res4) support a coarser grid than its surface does.
+  EXPECT_LT(rho_grid_auto_level<3>(bunny_small().vertices), 5);
+}
+
 // ---------------------------------------------------------------------------------------------
 // §3.1 structure and sampling
 // ---------------------------------------------------------------------------------------------
@@ -370,7 +401,7 @@ TEST(RhoGridSampling, PointCloudLeavesAreTheOccupiedCells) {
     }
   }
   EXPECT_EQ(leaves, occupied);
-  EXPECT_EQ(g.sigma(), 13);  // the samples have normals and no materials: 13 bits
+  EXPECT_EQ(g.sigma(), 13 + 16);  // normals, colours (5:6:5) and no materials
 }
 
 // A cloud without normals (a LiDAR tile) gets k-NN normals: points on a sphere of radius 2,
@@ -1985,6 +2016,198 @@ TEST(RhoGridShadows, OnePassMatchesTwoPassShadowMap) {
   EXPECT_GT(double(sh1) / double(cov), 0.05);
   EXPECT_GE(sh2, sh1);
   EXPECT_GT(double(both) / double(sh1), 0.95);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Colours (§3.1: "we need more bits if we have more materials or colors")
+// ---------------------------------------------------------------------------------------------
+
+// c bits split as the classic packed formats, each channel rounded to its nearest level: every
+// 8-bit value comes back within half a level, and 0 and 255 exactly.
+TEST(RhoGridColour, QuantisationIsWithinHalfALevel) {
+  EXPECT_EQ(rho_grid_colour_split(16), (std::array<int, 3>{5, 6, 5}));
+  EXPECT_EQ(rho_grid_colour_split(15), (std::array<int, 3>{5, 5, 5}));
+  EXPECT_EQ(rho_grid_colour_split(12), (std::array<int, 3>{4, 4, 4}));
+  EXPECT_EQ(rho_grid_colour_split(8), (std::array<int, 3>{3, 3, 2}));
+  for (const int bits : {3, 8, 12, 16}) {
+    const auto split = rho_grid_colour_split(bits);
+    for (int v = 0; v < 256; ++v) {
+      const rgb8 c{std::uint8_t(v), std::uint8_t(255 - v), std::uint8_t(v / 2)};
+      const std::uint32_t code = rho_grid_encode_colour(c, bits);
+      EXPECT_LT(code, 1u << bits);
+      const rgb8 d = rho_grid_decode_colour(code, bits);
+      const std::array<int, 3> in{c.r, c.g, c.b}, out{d.r, d.g, d.b};
+      for (std::size_t k = 0; k < 3; ++k)
+        EXPECT_LE(std::abs(in[k] - out[k]), 255.0 / (2 * ((1 << split[k]) - 1)) + 0.5)
+            << bits << " bits, channel " << k << ", value " << in[k];
+    }
+    EXPECT_EQ(rho_grid_decode_colour(rho_grid_encode_colour({0, 0, 0}, bits), bits),
+              (rgb8{0, 0, 0}));
+    EXPECT_EQ(rho_grid_decode_colour(rho_grid_encode_colour({255, 255, 255}, bits), bits),
+              (rgb8{255, 255, 255}));
+  }
+}
+
+/// A 1 × 1 plane tilted in z, its red channel 255·x and green 255·y (linear, so the interpolated
+/// colour at a point is known exactly), blue constant.
+triangle_mesh colour_ramp() {
+  triangle_mesh m;
+  constexpr int n = 6;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      const float x = float(i) / n, y = float(j) / n;
+      m.vertices.positions.emplace_back(x, y, 0.25f * x + 0.1f * y);
+      m.vertices.colours.push_back(
+          {std::uint8_t(std::lround(255 * x)), std::uint8_t(std::lround(255 * y)), 90});
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const auto at = [&](int x, int y) { return std::uint32_t(y * (n + 1) + x); };
+      m.faces.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      m.faces.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  return m;
+}
+
+// Every cell, inner or leaf, carries the colour at its sample (the closest surface point, §3.1):
+// red = 255·x and green = 255·y there, within the 5:6:5 quantisation (4.1, 2.0), the vertices'
+// colours rounded to 8 bits (0.5) and the interpolation's rounding (0.5). A cell coloured from a
+// vertex or from its centre is up to a cell (≈ 9 levels of red at level 3) off.
+TEST(RhoGridColour, SampleTakesTheColourAtItsClosestPoint) {
+  const triangle_mesh m = colour_ramp();
+  const auto g = build_rho_grid<3>(m, {.level = 3, .keep_sample_points = true});
+  ASSERT_TRUE(g.has_colours());
+  EXPECT_EQ(g.colour_bits(), 16);
+  for (std::uint32_t c = 0; c < g.cell_count(); ++c) {
+    const vec3d s = g.sample_points()[c].cast<double>() + g.origin() - m.vertices.origin;
+    const rgb8 k = g.colour(c);
+    EXPECT_NEAR(k.r, 255 * s.x(), 5.2) << "cell " << c;  // + 0.5: the vertices' rounded ramp
+    EXPECT_NEAR(k.g, 255 * s.y(), 3.1) << "cell " << c;
+    EXPECT_NEAR(k.b, 90, 4.6);
+  }
+  // A cloud's cell takes its sample point's colour.
+  const point_cloud pc = sample_surface(m, 3000, 4);
+  const auto gp = build_rho_grid<3>(pc, {.level = 2, .keep_sample_points = true});
+  ASSERT_TRUE(gp.has_colours());
+  for (std::uint32_t c = 0; c < gp.cell_count(); ++c) {
+    const vec3f s = gp.sample_points()[c] + (gp.origin() - pc.origin).cast<float>();
+    std::size_t best = 0;
+    for (std::size_t i = 1; i < pc.size(); ++i)
+      if ((pc.positions[i] - s).squaredNorm() < (pc.positions[best] - s).squaredNorm()) best = i;
+    EXPECT_EQ(gp.colour_code(c), rho_grid_encode_colour(pc.colours[best], 16)) << "cell " << c;
+  }
+}
+
+// Colours are σ bits like the material: σ = 13 + 16 on a coloured mesh and every count follows
+// (payload bits, in-core bytes, bits per sample); a mesh without colours (or colour_bits = 0)
+// stores no colour bit and writes the version-4 file it always did, a coloured one version 5.
+TEST(RhoGridColour, ColoursCostBitsOnlyWhenTheInputHasThem) {
+  const triangle_mesh coloured = make_demo_scene(8);
+  ASSERT_FALSE(coloured.vertices.colours.empty());
+  triangle_mesh plain = coloured;
+  plain.vertices.colours.clear();
+  const auto gc = build_rho_grid<3>(coloured, {.level = 3});
+  const auto gp = build_rho_grid<3>(plain, {.level = 3});
+  const auto g0 = build_rho_grid<3>(coloured, {.level = 3, .colour_bits = 0});
+  EXPECT_EQ(gc.sigma(), 29);
+  EXPECT_EQ(gp.sigma(), 13);
+  EXPECT_EQ(g0.sigma(), 13);
+  EXPECT_FALSE(gp.has_colours());
+  EXPECT_EQ(gp, g0);  // the same grid: colour_bits = 0 is "no colours"
+  EXPECT_EQ(gc.leaf_count(), gp.leaf_count());
+  const std::uint64_t n = gc.leaf_count(), inner = gc.inner_count();
+  EXPECT_EQ(gc.payload_bits(rho_grid_layout::nis), inner * 27 + n * 29);
+  EXPECT_EQ(gc.payload_bits(rho_grid_layout::is), inner * 27 + (n + inner) * 29);
+  EXPECT_EQ(gc.memory_bytes(), gp.memory_bytes() + gc.cell_count() * 2);
+  EXPECT_NEAR(gc.stats().bits_per_sample_is - gp.stats().bits_per_sample_is,
+              16.0 * double(gc.cell_count()) / double(n), 1e-9);
+  EXPECT_EQ(gc.serialise(rho_grid_layout::is)[8], 5);
+  EXPECT_EQ(gp.serialise(rho_grid_layout::is)[8], 4);
+  EXPECT_GT(gc.coded_size().attribute_bytes, gp.coded_size().attribute_bytes);
+  EXPECT_THROW((void)build_rho_grid<3>(coloured, {.level = 1, .colour_bits = 2}), InvalidArgument);
+  EXPECT_THROW((void)build_rho_grid<3>(coloured, {.level = 1, .colour_bits = 17}), InvalidArgument);
+}
+
+// The stored colours survive every layout: IS and the compressed layout exactly (every cell);
+// NIS, which has no inner attributes (§3.2), the leaves exactly and every inner cell the mean of
+// its children's colours, re-quantised. Also with 8 colour bits, no normals and no materials.
+TEST(RhoGridColour, ColoursRoundTripInEveryLayout) {
+  const triangle_mesh m = make_demo_scene(8);
+  for (const rho_grid_options& o :
+       {rho_grid_options{.level = 3},
+        rho_grid_options{.level = 2, .normal_bits = 0, .material_bits = 0, .colour_bits = 8}}) {
+    const auto g = build_rho_grid<3>(m, o);
+    ASSERT_TRUE(g.has_colours());
+    EXPECT_EQ(rho_grid<3>::parse(g.serialise(rho_grid_layout::is)), g);
+    EXPECT_EQ(rho_grid<3>::parse(g.serialise(rho_grid_layout::compressed)), g);
+    const auto nis = rho_grid<3>::parse(g.serialise(rho_grid_layout::nis));
+    for (std::uint32_t c = std::uint32_t(g.inner_count()); c < g.cell_count(); ++c)
+      EXPECT_EQ(nis.colour_code(c), g.colour_code(c));
+    for (std::uint32_t c = 0; c < g.inner_count(); ++c) {
+      std::array<int, 3> sum{};
+      const int k = nis.code(c).count();
+      for (int i = 0; i < k; ++i) {
+        const rgb8 ch = nis.colour(nis.first_child(c) + std::uint32_t(i));
+        sum[0] += ch.r;
+        sum[1] += ch.g;
+        sum[2] += ch.b;
+      }
+      const auto mean = [k](int v) { return std::uint8_t((v + k / 2) / k); };
+      EXPECT_EQ(
+          nis.colour_code(c),
+          rho_grid_encode_colour({mean(sum[0]), mean(sum[1]), mean(sum[2])}, g.colour_bits()));
+    }
+  }
+}
+
+// A version-5 (coloured) file damaged anywhere, checksum resealed, is refused with a FormatError
+// or loads into a grid that saves and loads again (the parser lets nothing through that it or
+// serialise() would choke on): every byte of the header flipped, and every 7th of the payload, in
+// the three layouts. Truncated at any length, it is a FormatError. A version-4 file relabelled 5
+// (an uncoloured header read as a coloured one) is refused.
+TEST(RhoGridColour, DamagedColouredFilesAreRefusedOrConsistent) {
+  const auto g = build_rho_grid<3>(colour_ramp(), {.level = 1});
+  ASSERT_TRUE(g.has_colours());
+  for (const auto layout :
+       {rho_grid_layout::nis, rho_grid_layout::is, rho_grid_layout::compressed}) {
+    const auto good = g.serialise(layout);
+    ASSERT_EQ(good[8], 5);
+    for (std::size_t i = 0; i + 8 < good.size(); i += i < 160 ? 1 : 7) {
+      auto bad = good;
+      bad[i] ^= 0xFF;
+      try {
+        const auto back = rho_grid<3>::parse(reseal(bad));
+        EXPECT_EQ(rho_grid<3>::parse(back.serialise(layout)), back) << "byte " << i;
+      } catch (const FormatError&) {
+      }
+    }
+    for (std::size_t n = 0; n < good.size(); n += 5)
+      EXPECT_THROW((void)rho_grid<3>::parse({good.begin(), good.begin() + std::ptrdiff_t(n)}),
+                   FormatError)
+          << n << " bytes";
+  }
+  triangle_mesh plain = colour_ramp();
+  plain.vertices.colours.clear();
+  auto v4 = build_rho_grid<3>(plain, {.level = 1}).serialise(rho_grid_layout::is);
+  v4[8] = 5;
+  EXPECT_THROW((void)rho_grid<3>::parse(reseal(v4)), FormatError);
+}
+
+// A grid without colours writes exactly the bytes it wrote before colours existed: the FNV-1a
+// of each layout's file, measured with the library before this change (same input, same
+// options). A changed header or payload for uncoloured grids would make every existing file
+// differ from a rebuild.
+TEST(RhoGridColour, FilesWithoutColoursAreUnchanged) {
+  triangle_mesh m = make_demo_scene(8);
+  m.vertices.colours.clear();
+  const auto g = build_rho_grid<3>(m, {.level = 3});
+  const auto hash = [&](rho_grid_layout l) {
+    const auto b = g.serialise(l);
+    return detail::fnv1a(b.data(), b.size());
+  };
+  EXPECT_EQ(hash(rho_grid_layout::nis), 0x0ac4ce455e21fa90ull);
+  EXPECT_EQ(hash(rho_grid_layout::is), 0x7aa03475cc82aaf3ull);
+  EXPECT_EQ(hash(rho_grid_layout::compressed), 0x891d9aed34890815ull);
 }
 
 }  // namespace

@@ -11,6 +11,9 @@
 //                cloud, the cell's own input point closest to the centre); the sample's
 //                attribute is σ bits: a q-bit quantised normal (13 by default) + an m-bit
 //                material index (3 by default). A scene without normals or materials stores none.
+//                "Evidently, we need more bits if we have more materials or colors": an input
+//                with colours adds a c-bit quantised RGB colour (5:6:5 by default) to σ, stored
+//                beside the 16-bit normal/material attribute; an input without stores no bit.
 //   §3.2, Eq. 1–4 the packed bitstreams: NIS (codes in pre-order, then the leaf attributes) and
 //                IS (attribute + code per cell, interleaved in pre-order); rho_grid_cost() is
 //                Eq. 4 (Table 1).
@@ -74,12 +77,45 @@ namespace pbr_lod {
   return rho_grid_max_leaf_depth(rho) - 1;
 }
 
+/// Bits per channel (red, green, blue) of a c-bit colour: c/3 each, the remainder to green,
+/// then red — 16 → 5:6:5, 12 → 4:4:4, 8 → 3:3:2, the classic packed formats.
+[[nodiscard]] constexpr std::array<int, 3> rho_grid_colour_split(int colour_bits) {
+  const int b = colour_bits / 3, rem = colour_bits % 3;
+  return {b + (rem >= 2 ? 1 : 0), b + (rem >= 1 ? 1 : 0), b};
+}
+/// An 8-bit RGB colour quantised to colour_bits (rho_grid_colour_split): each channel rounded to
+/// the nearest of its 2^bits evenly spaced levels; red in the low bits.
+[[nodiscard]] constexpr std::uint32_t rho_grid_encode_colour(const rgb8& c, int colour_bits) {
+  const auto [br, bg, bb] = rho_grid_colour_split(colour_bits);
+  const auto q = [](std::uint8_t v, int bits) {
+    const std::uint32_t m = (1u << bits) - 1u;
+    return (std::uint32_t(v) * m + 127u) / 255u;
+  };
+  return q(c.r, br) | (q(c.g, bg) << br) | (q(c.b, bb) << (br + bg));
+}
+/// The colour a code stands for: each channel's level scaled back to 0…255 (rounded), so 0 and
+/// the top level decode to 0 and 255 exactly; the error of encode then decode is at most half a
+/// level, 255 / (2·(2^bits − 1)) (4.1 for 5 bits, 2.0 for 6).
+[[nodiscard]] constexpr rgb8 rho_grid_decode_colour(std::uint32_t code, int colour_bits) {
+  const auto [br, bg, bb] = rho_grid_colour_split(colour_bits);
+  const auto d = [](std::uint32_t q, int bits) {
+    const std::uint32_t m = (1u << bits) - 1u;
+    return std::uint8_t(((q & m) * 255u + m / 2) / m);
+  };
+  return {d(code, br), d(code >> br, bg), d(code >> (br + bg), bb)};
+}
+
 struct rho_grid_options {
   /// The level of the leaves as the paper numbers it (Table 2's oct/7, tri/4, ...): the leaves
   /// are the cells of a ρ^(level+1) grid over the bounding cube — oct/7 is a 256³ grid, tri/4 a
   /// 243³ grid. (Level 0 is the first ρ×ρ×ρ grid; the cube itself is level −1, which builds a
   /// single cell.) Range [−1, rho_grid_max_level(ρ)].
-  int level = 5;
+  /// Unset: rho_grid_auto_level — for a mesh the coarsest level with at least 512 leaves across
+  /// the cube (about a pixel per leaf when the model fills a 512-pixel view: tri/5, oct/8); for
+  /// a point cloud no finer than its sampling (the finest level whose occupied leaves hold ≥ 4
+  /// input points on average: about two point spacings across), so that the leaves of a sparse
+  /// cloud still tile its surface and do not draw as isolated dots.
+  std::optional<int> level = std::nullopt;
   /// Bits of the quantised normal (pbr_lod::normal_quantizer, 6..16), 0 for none. 13 as in the
   /// paper (and Botsch 2002). Ignored (no bits) when the input has no normals: a point cloud
   /// without normals. A mesh always has geometric normals.
@@ -96,6 +132,10 @@ struct rho_grid_options {
   /// Bits of the material index (0..8), 0 for none; 3 = 8 materials as in the paper. Ignored
   /// when the input has no materials. Materials ≥ 2^bits are an InvalidArgument.
   int material_bits = 3;
+  /// Bits of the quantised colour (0, or 3…16; rho_grid_colour_split: 16 = 5:6:5), 0 for none.
+  /// Ignored (no bits) when the input has no colours. A sample takes the colour at its closest
+  /// point (a mesh: interpolated from the vertex colours; a cloud: the sample point's).
+  int colour_bits = 16;
   /// Threads for the build (0 = hardware concurrency). The grid does not depend on it.
   unsigned threads = 0;
   /// Keep the sampled surface point of every cell (world = origin + value) in sample_points
@@ -226,9 +266,13 @@ class rho_grid {
   [[nodiscard]] double input_radius() const { return input_radius_; }
   [[nodiscard]] int normal_bits() const { return normal_bits_; }
   [[nodiscard]] int material_bits() const { return material_bits_; }
-  [[nodiscard]] int sigma() const { return normal_bits_ + material_bits_; }
+  /// Bits of the quantised colour (0 when the input had none).
+  [[nodiscard]] int colour_bits() const { return colour_bits_; }
+  /// σ: the bits of a sample's attributes, normal + material + colour.
+  [[nodiscard]] int sigma() const { return normal_bits_ + material_bits_ + colour_bits_; }
   [[nodiscard]] bool has_normals() const { return normal_bits_ > 0; }
   [[nodiscard]] bool has_materials() const { return material_bits_ > 0; }
+  [[nodiscard]] bool has_colours() const { return colour_bits_ > 0; }
 
   [[nodiscard]] std::size_t cell_count() const { return attrs_count_; }
   [[nodiscard]] std::size_t inner_count() const { return codes_.size(); }
@@ -239,9 +283,22 @@ class rho_grid {
   [[nodiscard]] bool is_leaf(std::uint32_t c) const { return c >= codes_.size(); }
   [[nodiscard]] const code_type& code(std::uint32_t c) const { return codes_[c]; }
   [[nodiscard]] std::uint32_t first_child(std::uint32_t c) const { return first_child_[c]; }
-  /// σ-bit attribute of cell c (0 when σ = 0).
+  /// Normal and material of cell c (normal code in the low normal_bits(), material above; 0
+  /// when the grid stores neither).
   [[nodiscard]] std::uint32_t attribute(std::uint32_t c) const {
     return attrs_.empty() ? 0u : attrs_[c];
+  }
+  /// Colour code of cell c (rho_grid_encode_colour; 0 without colours).
+  [[nodiscard]] std::uint32_t colour_code(std::uint32_t c) const {
+    return colours_.empty() ? 0u : colours_[c];
+  }
+  [[nodiscard]] rgb8 colour(std::uint32_t c) const {
+    return rho_grid_decode_colour(colour_code(c), colour_bits_);
+  }
+  /// The whole σ-bit sample of cell c as the streams store it: attribute(c) in the low
+  /// normal + material bits, the colour code above.
+  [[nodiscard]] std::uint32_t sample_bits(std::uint32_t c) const {
+    return attribute(c) | (colour_code(c) << (normal_bits_ + material_bits_));
   }
   [[nodiscard]] std::uint32_t normal_code(std::uint32_t c) const {
     return attribute(c) & ((1u << normal_bits_) - 1u);
@@ -257,10 +314,11 @@ class rho_grid {
   [[nodiscard]] const rho_grid_stats& stats() const { return stats_; }
 
   /// Bytes of the §3.3 in-core structure: codes and 32-bit child indices of the inner cells,
-  /// 16-bit attributes of every cell (none when σ = 0).
+  /// 16-bit attributes of every cell (none when normal + material bits = 0) and 16-bit colours
+  /// of every cell (none without colours).
   [[nodiscard]] std::size_t memory_bytes() const {
     return codes_.size() * (sizeof(code_type) + sizeof(std::uint32_t)) +
-           attrs_.size() * sizeof(std::uint16_t);
+           attrs_.size() * sizeof(std::uint16_t) + colours_.size() * sizeof(std::uint16_t);
   }
   /// Payload bits of a stream (§3.2), without the file header and checksum.
   [[nodiscard]] std::uint64_t payload_bits(rho_grid_layout layout) const {
@@ -292,7 +350,8 @@ class rho_grid {
     return a.leaf_depth_ == b.leaf_depth_ && a.origin_ == b.origin_ && a.side_ == b.side_ &&
            a.input_centre_ == b.input_centre_ && a.input_radius_ == b.input_radius_ &&
            a.normal_bits_ == b.normal_bits_ && a.material_bits_ == b.material_bits_ &&
-           a.codes_ == b.codes_ && a.first_child_ == b.first_child_ && a.attrs_ == b.attrs_ &&
+           a.colour_bits_ == b.colour_bits_ && a.colours_ == b.colours_ && a.codes_ == b.codes_ &&
+           a.first_child_ == b.first_child_ && a.attrs_ == b.attrs_ &&
            a.depth_start_ == b.depth_start_ && a.attrs_count_ == b.attrs_count_;
   }
 
@@ -303,10 +362,11 @@ class rho_grid {
   double side_ = 1;
   vec3d input_centre_ = vec3d::Zero();
   double input_radius_ = 0;
-  int normal_bits_ = 0, material_bits_ = 0;
+  int normal_bits_ = 0, material_bits_ = 0, colour_bits_ = 0;
   std::vector<code_type> codes_;            // inner cells
   std::vector<std::uint32_t> first_child_;  // inner cells
-  std::vector<std::uint16_t> attrs_;        // every cell (empty when σ = 0)
+  std::vector<std::uint16_t> attrs_;        // every cell (empty when normal + material bits = 0)
+  std::vector<std::uint16_t> colours_;      // every cell (empty without colours)
   std::vector<std::uint32_t> depth_start_;  // leaf_depth + 2 entries
   std::size_t attrs_count_ = 0;             // cells
   std::vector<vec3f> sample_points_;
@@ -324,7 +384,7 @@ template <int Rho>
 
 /// Builds the ρ-grid of a point cloud: a cell is non-empty when it holds an input point; its
 /// sample is that cell's input point closest to the centre, with its normal (the cloud's, else
-/// estimated from options.knn neighbours) and material (when the cloud has them).
+/// estimated from options.knn neighbours), material and colour (when the cloud has them).
 template <int Rho>
 [[nodiscard]] rho_grid<Rho> build_rho_grid(const point_cloud& points,
                                            const rho_grid_options& options = {});
@@ -347,6 +407,15 @@ decltype(auto) visit_rho(int rho, F&& f) {
       throw InvalidArgument("rho-grid: rho must be 2, 3, 4 or 5, got " + std::to_string(rho));
   }
 }
+
+/// The level rho_grid_options::level = nullopt builds (see there): for a mesh from ρ alone, for a
+/// point cloud also from its occupancy (points per occupied leaf, counted from the sorted leaf
+/// paths at the mesh level and each coarser one). Throws like build_rho_grid for an empty or
+/// invalid input.
+template <int Rho>
+[[nodiscard]] int rho_grid_auto_level(const triangle_mesh& mesh);
+template <int Rho>
+[[nodiscard]] int rho_grid_auto_level(const point_cloud& points);
 
 /// ρ of a saved rho-grid file (reads the header only); throws IoError / FormatError.
 [[nodiscard]] int rho_grid_file_rho(const std::string& path);

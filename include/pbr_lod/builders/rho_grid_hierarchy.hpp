@@ -4,8 +4,9 @@
 // rho_grid_hierarchy<ρ, A> models Hierarchy (traverse/hierarchy.hpp) over a built rho_grid<ρ>:
 // a node is a cell with its depth and integer position (positions are implicit in the path),
 // A ⊆ {normal, colour} is the compile-time attribute set of the primitives (normal = the decoded
-// σ-bit normal, colour = the material's palette colour), and emit() sends one point_prim at the
-// cell centre. Any traversal policy can drive it; rho_grid_policy is the paper's.
+// σ-bit normal, colour = the decoded colour when the grid stores colours, else the material's
+// palette colour), and emit() sends one point_prim at the cell centre. Any traversal policy can
+// drive it; rho_grid_policy is the paper's.
 //
 // rho_grid_policy is the paper's Render(cell, centre, level) with Botsch et al.'s transformation
 // factorisation: the homogeneous screen position H = (X, Y, W) of a cell centre is its parent's
@@ -20,9 +21,11 @@
 //   frustum culling   X·(W − B) + E_x < −c_x·W·(W − B)  (left of the screen; likewise right,
 //                     top, bottom), W − B > z_far (beyond), W + B < z_near (behind the viewer)
 // s is traverse_options::tolerance_px. A cell meeting the splat condition is emitted as a square
-// splat of s pixels (an inner cell's intermediate sample) or a one-pixel point (a leaf); a leaf
-// is emitted in any case; a cell that straddles the near plane is refined. X is measured from
-// the principal point, so |X| is small near the screen centre.
+// splat of s pixels (an inner cell's intermediate sample); a leaf is emitted in any case, as a
+// square of its own conservative projected width (§4.1's bounds of the cell), or a one-pixel
+// point when that is at most a pixel — so that leaves larger than a pixel in close views leave
+// no holes (rho_grid_policy::leaf_splats); a cell that straddles the near plane is refined. X is
+// measured from the principal point, so |X| is small near the screen centre.
 //
 // §5.1 fixed point: rho_grid_policy<ρ, rho_grid_arithmetic::fixed> runs the same tests with H,
 // the displacement and bounds tables in 64-bit fixed point (F fractional bits chosen per view so
@@ -108,12 +111,13 @@ struct rho_grid_screen_rect {
 }
 
 /// A built rho_grid<Rho> seen as a Hierarchy whose primitives carry the attributes A (normals
-/// decoded from the σ-bit attribute, colours from the material palette). Holds a pointer to the
-/// grid, which must outlive it. Const member functions are safe for concurrent readers.
+/// decoded from the σ-bit attribute; colours decoded from it when the grid stores colours, else
+/// from the material palette). Holds a pointer to the grid, which must outlive it. Const member
+/// functions are safe for concurrent readers.
 template <int Rho, attributes A>
 class rho_grid_hierarchy {
   static_assert(attributes{.normal = true, .colour = true}.contains(A),
-                "a ρ-grid has normals and materials (drawn as colours) only");
+                "a ρ-grid has normals and colours (or materials, drawn as colours) only");
 
  public:
   static constexpr attributes attrs = A;
@@ -124,8 +128,8 @@ class rho_grid_hierarchy {
   explicit rho_grid_hierarchy(const rho_grid<Rho>& g) : g_(&g) {
     if (A.normal && !g.has_normals())
       throw InvalidArgument("rho-grid: normals requested, the grid stores none");
-    if (A.colour && !g.has_materials())
-      throw InvalidArgument("rho-grid: colours requested, the grid stores no materials");
+    if (A.colour && !g.has_colours() && !g.has_materials())
+      throw InvalidArgument("rho-grid: colours requested, the grid stores no colours or materials");
     if constexpr (A.normal) q_ = normal_quantizer::shared(g.normal_bits());  // one per process
     // cell_side() takes a pow(); a frame asks for it once per drawn cell.
     for (int d = 0; d <= g.leaf_depth(); ++d) side_.push_back(g.cell_side(d));
@@ -196,7 +200,9 @@ class rho_grid_hierarchy {
   template <class P>
   void set_attributes([[maybe_unused]] const node_id& n, [[maybe_unused]] P& p) const {
     if constexpr (A.normal) p.normal = q_->decode(g_->normal_code(n.cell));
-    if constexpr (A.colour) p.colour = rho_grid_material_colour(g_->material(n.cell));
+    if constexpr (A.colour)
+      p.colour =
+          g_->has_colours() ? g_->colour(n.cell) : rho_grid_material_colour(g_->material(n.cell));
   }
 
   const rho_grid<Rho>* g_;
@@ -205,13 +211,15 @@ class rho_grid_hierarchy {
 };
 
 /// Calls f(rho_grid_hierarchy<Rho, A>(g)) with A the attributes g stores (normals when it has
-/// normals, colours when it has materials): the ρ-grid's run-time σ split, made compile time.
+/// normals, colours when it has colours or materials): the ρ-grid's run-time σ split, made
+/// compile time.
 template <int Rho, class F>
 decltype(auto) with_rho_grid_hierarchy(const rho_grid<Rho>& g, F&& f) {
   constexpr attributes N{.normal = true}, C{.colour = true};
-  if (g.has_normals() && g.has_materials()) return f(rho_grid_hierarchy<Rho, N | C>(g));
+  const bool colour = g.has_colours() || g.has_materials();
+  if (g.has_normals() && colour) return f(rho_grid_hierarchy<Rho, N | C>(g));
   if (g.has_normals()) return f(rho_grid_hierarchy<Rho, N>(g));
-  if (g.has_materials()) return f(rho_grid_hierarchy<Rho, C>(g));
+  if (colour) return f(rho_grid_hierarchy<Rho, C>(g));
   return f(rho_grid_hierarchy<Rho, positions_only>(g));
 }
 
@@ -816,28 +824,48 @@ struct rho_traversal {
     return leaf ? verdict::draw : verdict::refine;
   }
 
-  /// The cell's conservative projected width in pixels (2·max(E_x, E_y) / (W·(W − B)), what the
-  /// splat test compares with s); +inf when the cell straddles the eye plane. Both sides are
-  /// products of two values, so the ratio is free of the fixed-point scale.
-  [[nodiscard]] float width_px(const hom& h, int l) const {
+  /// The cell's conservative projected widths in pixels along x and y (2·E_x / (W·(W − B)) and
+  /// 2·E_y / (W·(W − B)), what the splat test compares with s); +inf when the cell straddles
+  /// the eye plane. Both sides are products of two values, so the ratios are free of the
+  /// fixed-point scale.
+  [[nodiscard]] std::array<float, 2> widths_px(const hom& h, int l) const {
     const auto& t = levels[std::size_t(l)];
     const value den = h.w - t.b;
-    if (!(den > znear)) return std::numeric_limits<float>::infinity();
-    if constexpr (projective) {  // 2·max(E)/(W − B) through the table, screen_g fraction bits
+    constexpr float inf = std::numeric_limits<float>::infinity();
+    if (!(den > znear)) return {inf, inf};
+    if constexpr (projective) {  // 2·E/(W − B) through the table, screen_g fraction bits
+      const projection p = project(h, t);
+      const auto r = rho_reciprocal::of(std::uint32_t(den));
+      const auto px = [&](std::int64_t e) {
+        bool sat = p.saturated;
+        const std::int32_t w = rho_reciprocal::divide(2 * e, r, sat);
+        return std::ldexp(float(sat ? 1 << 30 : w), -screen_g);  // saturated: ≥ 64 half screens
+      };
+      return {px(p.ex), px(p.ey)};
+    } else {
+      const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
+      const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
+      const double wd = static_cast<double>(Arith::mul(h.w, den));
+      return {static_cast<float>(2 * static_cast<double>(ex) / wd),
+              static_cast<float>(2 * static_cast<double>(ey) / wd)};
+    }
+  }
+  /// The larger of widths_px(): what a square of the cell's projection needs (fixed32: one
+  /// division, of the larger extent).
+  [[nodiscard]] float width_px(const hom& h, int l) const {
+    if constexpr (projective) {
+      const auto& t = levels[std::size_t(l)];
+      const value den = h.w - t.b;
+      if (!(den > znear)) return std::numeric_limits<float>::infinity();
       const projection p = project(h, t);
       bool sat = p.saturated;
       const std::int32_t w = rho_reciprocal::divide(2 * std::max(p.ex, p.ey),
                                                     rho_reciprocal::of(std::uint32_t(den)), sat);
       return std::ldexp(float(sat ? 1 << 30 : w), -screen_g);  // saturated: ≥ 64 half screens
     } else {
-      return width_homogeneous(h, t, den);
+      const auto w = widths_px(h, l);
+      return std::max(w[0], w[1]);
     }
-  }
-  [[nodiscard]] float width_homogeneous(const hom& h, const level_tables& t, value den) const {
-    const auto ex = Arith::mul(t.ax, h.w) + Arith::mul(t.b, h.x < 0 ? value(-h.x) : h.x);
-    const auto ey = Arith::mul(t.ay, h.w) + Arith::mul(t.b, h.y < 0 ? value(-h.y) : h.y);
-    const double wd = static_cast<double>(Arith::mul(h.w, den));
-    return static_cast<float>(2 * static_cast<double>(ex > ey ? ex : ey) / wd);
   }
 
   /// c·p / scale for a wide product p (float: c·p).
@@ -931,9 +959,11 @@ class rho_grid_policy {
   /// cells are still culled against the view volume on the way down.
   bool points_only = false;
   /// §4.1's close views without holes: a leaf drawn as a square of its cell's conservative
-  /// projected width (at least one pixel) instead of a one-pixel point, so that leaves larger
-  /// than a pixel still cover their cell. Off by default (docs/rho-grid.md measures both).
-  bool leaf_splats = false;
+  /// projected width (with per-corner bounds and screen_draw: its cell's screen rectangle), or a
+  /// one-pixel point when that is at most a pixel, so that leaves larger than a pixel still
+  /// cover their cell. On by default; off, every leaf is a one-pixel point as the paper draws
+  /// them, which leaves holes once leaves project larger than a pixel (docs/rho-grid.md).
+  bool leaf_splats = true;
   /// §5.1 and §4.1 drawing: a drawn cell goes to a sink that takes screen rectangles
   /// (ScreenRectSink: the rasteriser, buffer_sink) as a screen_rect_prim placed from the
   /// traversal's H divided by W in the policy's arithmetic (fixed32: through the reciprocal table
@@ -1023,6 +1053,24 @@ class rho_grid_policy {
           r.x1 = hi(b.x1, t_.cx8);
           r.y0 = lo(b.y0, t_.cy8);
           r.y1 = hi(b.y1, t_.cy8);
+          return r;
+        }
+      }
+    }
+    if constexpr (!per_corner) {
+      // A leaf_splats leaf larger than a pixel: its symmetric bound as a rectangle (the two
+      // half extents of the tests), no wider than the square of the larger one.
+      if (size_px > 1 && leaf_splats && !points_only && h.is_leaf(n)) {
+        const auto w = t_.widths_px(hs, n.depth);
+        if (std::isfinite(w[0]) && std::isfinite(w[1])) {
+          const auto half_of = [](float wp) {
+            return std::int64_t(std::min(wp, 1e6f) * float(1 << (tables::rect_bits - 1)));
+          };
+          const std::int64_t hx = half_of(w[0]), hy = half_of(w[1]);
+          r.x0 = fix(c->x - hx);
+          r.x1 = fix(c->x + hx);
+          r.y0 = fix(c->y - hy);
+          r.y1 = fix(c->y + hy);
           return r;
         }
       }

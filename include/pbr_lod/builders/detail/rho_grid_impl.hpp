@@ -70,6 +70,8 @@ struct rho_grid_access {
   using grid = rho_grid<Rho>;
   static auto& codes(grid& g) { return g.codes_; }
   static auto& attrs(grid& g) { return g.attrs_; }
+  static auto& colours(grid& g) { return g.colours_; }
+  static void set_colour_bits(grid& g, int cb) { g.colour_bits_ = cb; }
   static auto& samples(grid& g) { return g.sample_points_; }
   static auto& stats(grid& g) { return g.stats_; }
   static void set_input_bounds(grid& g, const vec3d& centre, double radius) {
