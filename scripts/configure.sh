@@ -6,7 +6,9 @@
 #
 # Environment: PBR_LOD_DATA (default ../shared/data beside the checkout), BUILD_DIR (default
 # build), JOBS (default: number of cores), PBR_LOD_CCACHE=0 to build without ccache.
-data="${PBR_LOD_DATA:-$root/../shared/data}"
+# Canonical (no "..") so that every clone beside the data compiles the tests with the same
+# define, and ccache serves one clone's objects to the next.
+data="$(realpath -m "${PBR_LOD_DATA:-$root/../shared/data}")"
 build="${BUILD_DIR:-build}"
 jobs="${JOBS:-$(nproc)}"
 common=(-G Ninja -DPBR_LOD_WERROR=ON -DPBR_LOD_DATA_DIR="$data")
