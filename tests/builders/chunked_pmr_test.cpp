@@ -30,6 +30,7 @@ pmr_options small_leaves() {
   pmr_options o;
   o.max_leaf_points = 400;
   o.neighbour_margin = 0.25f;
+  o.triangulation_points = 1000;  // at most every chunk_points below: equal to the chunked build
   return o;
 }
 
@@ -206,6 +207,7 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
   const point_cloud c = read_points(std::string(PBR_LOD_DATA_DIR) + "/bun_zipper_res2.ply");
   chunked_pmr_options o;
   o.pmr.max_leaf_points = 1000;
+  o.pmr.triangulation_points = 1000;  // as the chunks: the same Voronoi work
   o.chunk_points = 1000;
   const std::string dir = temp_dir("bunny");
   const auto r = build_pmr_chunked(cloud_point_source(c), dir, o);

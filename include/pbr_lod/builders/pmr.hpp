@@ -76,13 +76,32 @@ struct pmr_options {
   /// input; level i keeps the samples whose ratio r/h stayed ≥ ρᵢ under iterative deletion.
   /// At most 31 thresholds, each in (0, 10], strictly increasing.
   std::vector<float> rho = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f, 0.6f, 0.7f, 0.8f, 0.9f, 1.0f};
-  /// Neighbour samples triangulated with a leaf: those within this fraction of the leaf's edge
-  /// length of its cube (from any leaf). The paper takes every sample of the 26 neighbouring
-  /// leaves (≈ 1.0 for leaves of equal size): 8–15× the leaf's own samples on a surface. A
-  /// Voronoi cell depends only on nearby samples; 0.1 triangulates ≈ 1.8× the own samples and
-  /// keeps 98 % of the normals of the paper's rule (0.25: 3.3×, 99 %; docs/pmr.md), and meets
-  /// the 60 s target for 437k points on 2 cores.
+  /// Samples per Delaunay triangulation at most: the Voronoi work (§2) runs once for the
+  /// highest octree node holding at most this many samples — all its leaves in one
+  /// triangulation, so a leaf's neighbours inside it are all there, as the paper's halo rule
+  /// wants, and an input of at most this many samples gives the whole-cloud result (a leaf
+  /// holding more is a triangulation by itself). Not below max_leaf_points in effect.
+  std::uint32_t triangulation_points = 1u << 17;
+  /// Neighbour samples triangulated with a triangulation's node: those within this fraction of
+  /// the node's edge length of its cube (from any other node). The paper takes every sample of
+  /// the 26 neighbouring leaves; a Voronoi cell depends only on nearby samples (docs/pmr.md).
   float neighbour_margin = 0.1f;
+  /// Umbrella triangles only where the surface is (docs/pmr.md, "Umbrellas on the surface"). A
+  /// triangle of p's umbrella is kept when its dual Voronoi edge also meets the cocone of its
+  /// two other vertices — the points seen within `cocone_degrees` of their tangent planes
+  /// (Amenta, Choi, Dey, Leekha 2002: θ = π/8) — so it lies flat for all three, and when its
+  /// longest edge is at most `edge_spacing` × the largest local spacing of its vertices (the
+  /// distance to a vertex's 4th nearest Delaunay neighbour at that level), so it joins samples
+  /// that are neighbours on the surface, not across a gap, a hole or an open boundary. 0 turns
+  /// a rule off (both 0: the paper's umbrellas).
+  float cocone_degrees = 22.5f;
+  float edge_spacing = 3.0f;
+  /// When the input has normals: they give the tangent planes of the umbrellas and the
+  /// cocones, and are the drawn normals (the pole vector still drives the decimation, §2). A
+  /// pole is a poor normal where the sampling is too sparse for the shape (a plate thinner
+  /// than the spacing, sparse vertices of a CAD mesh); the input's normal is not. false: the
+  /// poles everywhere, the input's normals only orient them (the paper's inputs have none).
+  bool input_normals = true;
   /// Threads for the build (0 = hardware concurrency). The output does not depend on it.
   unsigned threads = 0;
   /// Called with the fraction done (0..1) from the calling thread; return false to cancel
@@ -177,6 +196,12 @@ struct pmr_cell_input {
   std::span<const vec3d> points;
   std::uint32_t own = 0;
   std::span<const float> rho;
+  /// The umbrella rules of pmr_options (0: off).
+  float cocone_degrees = 0;
+  float edge_spacing = 0;
+  /// Empty, or per point a unit normal (zero: none) for the umbrellas' tangent planes and the
+  /// cocones in place of the pole vector (pmr_options::input_normals).
+  std::span<const vec3d> normals = {};
 };
 
 /// What the Voronoi processing finds for the own samples.
