@@ -169,6 +169,7 @@ pmr_options pmr_params(const std::vector<std::string>& items, bool on_terminal,
   o.cocone_degrees = static_cast<float>(m.number("cocone", o.cocone_degrees, 0, 89.9));
   o.edge_spacing = static_cast<float>(m.number("edge_spacing", o.edge_spacing, 0, 1000));
   o.input_normals = m.integer("input_normals", 1, 0, 1) != 0;
+  o.neighbour_leaves = m.integer("neighbour_leaves", 1, 0, 1) != 0;
   if (chunked) {
     if (const auto b = m.bytes("memory")) chunked->memory_bytes = *b;
     chunked->chunk_points =
@@ -176,7 +177,7 @@ pmr_options pmr_params(const std::vector<std::string>& items, bool on_terminal,
   }
   m.finish("pmr",
            "leaf_points, margin, levels, rho_step, threads, triangulation_points, cocone, "
-           "edge_spacing, input_normals, memory, chunk_points");
+           "edge_spacing, input_normals, neighbour_leaves, memory, chunk_points");
   o.progress = progress_callback("pmr", on_terminal);
   return o;
 }

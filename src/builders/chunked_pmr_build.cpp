@@ -82,6 +82,8 @@ struct chunked_pmr_builder : chunked_pass_base {
     // build_pmr with triangulation_points at most chunk_points.
     po.triangulation_points =
         static_cast<std::uint32_t>(std::min<std::uint64_t>(po.triangulation_points, chunk_points));
+    // A chunk's halo is a margin about it: equal to build_pmr with neighbour_leaves = false.
+    po.neighbour_leaves = false;
   }
 
   void progress(double f) const {

@@ -201,11 +201,14 @@ struct builder {
         for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) stack.push_back(c);
         continue;
       }
+      // A leaf the box touches: all its samples (the paper's rule), or those in the box.
       for (std::uint32_t j = nd.begin; j < nd.end; ++j) {
         const std::uint32_t i = order[j];
         if (rep[i] != i) continue;
         const vec3d& p = local[i];
-        if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) ids.push_back(i);
+        if (opt.neighbour_leaves ||
+            ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()))
+          ids.push_back(i);
       }
     }
     for (auto i = owned; i < local.size(); ++i) {

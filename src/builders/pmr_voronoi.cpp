@@ -21,12 +21,14 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <queue>
 #include <utility>
 #include <vector>
 
 #include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/knn.hpp"
 
 namespace pbr_lod::detail {
 namespace {
@@ -203,33 +205,6 @@ class leaf_voronoi {
     return s;
   }
 
-  /// The distance from sample i to its k-th nearest sample among its Delaunay neighbours and
-  /// theirs (the farthest when there are fewer): the local sample spacing at the current level.
-  /// The nearest neighbour is always a Delaunay neighbour, the next few nearly always within two
-  /// steps; the Delaunay neighbours alone would miss them where long edges run along a
-  /// boundary.
-  [[nodiscard]] double spacing(std::uint32_t i, std::size_t k) {
-    adj_.clear();
-    dt_.finite_adjacent_vertices(vertex_[i], std::back_inserter(adj_));
-    ring_.assign(adj_.begin(), adj_.end());
-    for (const Vertex& a : adj_) dt_.finite_adjacent_vertices(a, std::back_inserter(ring_));
-    std::sort(ring_.begin(), ring_.end());
-    ring_.erase(std::unique(ring_.begin(), ring_.end()), ring_.end());
-    ring_.erase(std::remove(ring_.begin(), ring_.end(), vertex_[i]), ring_.end());
-    return kth_distance(in_.points[i], ring_, k);
-  }
-
-  /// The k-th smallest distance from p to the points of `vs` (the largest when fewer).
-  template <class Range>
-  [[nodiscard]] double kth_distance(const vec3d& p, const Range& vs, std::size_t k) {
-    d2_.clear();
-    for (const auto& v : vs) d2_.push_back((in_.points[index_of(v)] - p).squaredNorm());
-    if (d2_.empty()) return 0;
-    const std::size_t m = std::min(k, d2_.size()) - 1;
-    std::nth_element(d2_.begin(), d2_.begin() + static_cast<std::ptrdiff_t>(m), d2_.end());
-    return std::sqrt(d2_[m]);
-  }
-
   /// Removes sample i (CGAL vertex removal keeps the triangulation Delaunay) and returns its
   /// finite neighbours before the removal, whose cells grew.
   void remove(std::uint32_t i, std::vector<std::uint32_t>& neighbours) {
@@ -287,24 +262,20 @@ class leaf_voronoi {
     return nn;
   }
 
-  [[nodiscard]] static std::uint32_t index_of(const Vertex& v) { return v->info(); }
-  [[nodiscard]] static std::uint32_t index_of(std::uint32_t i) { return i; }
-
   const pmr_cell_input& in_;
-  std::vector<double> d2_;
   Dt dt_;
   std::vector<Vertex> vertex_;  // by point index; null once removed (or never inserted)
   std::vector<Cell> cells_;
-  std::vector<Vertex> adj_, ring_;
+  std::vector<Vertex> adj_;
 };
 
 /// Neighbours whose distance is a sample's local spacing (the k-th nearest).
-constexpr std::size_t spacing_neighbours = 4;
+constexpr int spacing_neighbours = 4;
 
 /// Whether umbrella triangle t of sample p lies on the surface (docs/pmr.md, "Umbrellas on the
 /// surface"): its longest edge at most edge_spacing × the largest spacing of its vertices, and
-/// its dual Voronoi edge in the cocone of its other two vertices. Normals and spacings come from
-/// the current level's triangulation, computed once per sample and level.
+/// its dual Voronoi edge in the cocone of its other two vertices. Normals and spacings are those
+/// of the current level (samples still present), computed once per sample and level.
 class umbrella_rules {
  public:
   umbrella_rules(leaf_voronoi* vor, const pmr_cell_input& in)
@@ -314,13 +285,19 @@ class umbrella_rules {
 
   [[nodiscard]] bool active() const { return in_.edge_spacing > 0 || in_.cocone_degrees > 0; }
 
-  /// Forget the previous level's normals and spacings.
-  void new_level() {
+  /// A new level: the samples present are those with alive(i); the previous level's normals
+  /// and spacings are forgotten.
+  template <class Alive>
+  void new_level(const Alive& alive) {
     normal_.assign(in_.points.size(), vec3d::Zero());
     spacing_.assign(in_.points.size(), -1.0);
+    if (!(in_.edge_spacing > 0)) return;
+    // The spacing: distance to the k-th nearest sample present (an exact k-d tree per level).
+    std::vector<vec3f> pts;
+    for (std::uint32_t i = 0; i < in_.points.size(); ++i)
+      if (alive(i)) pts.push_back(in_.points[i].cast<float>());
+    index_ = std::make_unique<knn_index>(pts);
   }
-  /// The spacings of a triangulation of dimension 2 (no leaf_voronoi queries then).
-  void set_spacings(std::vector<double> s) { spacing_ = std::move(s); }
 
   [[nodiscard]] bool keep(std::uint32_t p, const std::array<std::uint32_t, 3>& t,
                           const umbrella_candidate* dual) {
@@ -340,9 +317,18 @@ class umbrella_rules {
     return true;
   }
 
+  /// Whether point i has a given normal (pmr_cell_input::normals).
+  [[nodiscard]] bool given(std::uint32_t i) const {
+    return !in_.normals.empty() && in_.normals[i].squaredNorm() > 0;
+  }
+
  private:
   double spacing(std::uint32_t i) {
-    if (spacing_[i] < 0) spacing_[i] = vor_->spacing(i, spacing_neighbours);
+    if (spacing_[i] < 0) {
+      index_->query(in_.points[i].cast<float>(), spacing_neighbours + 1, idx_, d2_);
+      // The first answer is the sample itself (the points are distinct).
+      spacing_[i] = d2_.empty() ? 0.0 : std::sqrt(static_cast<double>(d2_.back()));
+    }
     return spacing_[i];
   }
   const vec3d& normal(std::uint32_t i) {
@@ -351,23 +337,19 @@ class umbrella_rules {
     return normal_[i];
   }
 
- public:
-  /// Whether point i has a given normal (pmr_cell_input::normals).
-  [[nodiscard]] bool given(std::uint32_t i) const {
-    return !in_.normals.empty() && in_.normals[i].squaredNorm() > 0;
-  }
-
- private:
   leaf_voronoi* vor_;
   const pmr_cell_input& in_;
   double sin_theta_;
   std::vector<vec3d> normal_;
   std::vector<double> spacing_;
+  std::vector<std::uint32_t> idx_;
+  std::vector<float> d2_;
+  std::unique_ptr<knn_index> index_;
 };
 
 void record_umbrellas(leaf_voronoi& vor, const pmr_cell_input& in, umbrella_rules& rules,
                       pmr_cell_output::level_umbrellas& out) {
-  rules.new_level();
+  rules.new_level([&](std::uint32_t i) { return vor.alive(i); });
   std::vector<umbrella_candidate> cand;
   std::vector<std::array<std::uint32_t, 3>> tris;
   for (std::uint32_t i = 0; i < in.own; ++i) {
@@ -393,7 +375,7 @@ void record_umbrellas(leaf_voronoi& vor, const pmr_cell_input& in, umbrella_rule
 
 /// Levels for a triangulation of dimension < 3: no Voronoi cells to measure, so no deletion;
 /// every level is the input, with the plane's triangles as umbrellas in dimension 2 (the edge
-/// rule applies, the spacing from the plane's triangulation; a plane has no cocone to test).
+/// rule applies; a plane has no cocone to test).
 pmr_cell_output flat_cell(leaf_voronoi& vor, const pmr_cell_input& in) {
   pmr_cell_output out;
   out.dimension = vor.dimension();
@@ -408,22 +390,7 @@ pmr_cell_output flat_cell(leaf_voronoi& vor, const pmr_cell_input& in) {
   out.radius.assign(in.own, 0.0);
   out.hull.assign(in.own, 1);
   umbrella_rules rules(nullptr, in);
-  if (rules.active()) {
-    // As leaf_voronoi::spacing: the k-th nearest among the neighbours and theirs.
-    std::vector<double> spacing(in.points.size(), 0.0);
-    std::vector<std::uint32_t> nb;
-    for (std::uint32_t i = 0; i < in.points.size(); ++i) {
-      nb.clear();
-      for (const auto& tri : per_vertex[i])
-        for (const std::uint32_t k : tri)
-          for (const auto& tri2 : per_vertex[k]) nb.insert(nb.end(), tri2.begin(), tri2.end());
-      std::sort(nb.begin(), nb.end());
-      nb.erase(std::unique(nb.begin(), nb.end()), nb.end());
-      nb.erase(std::remove(nb.begin(), nb.end(), i), nb.end());
-      spacing[i] = vor.kth_distance(in.points[i], nb, spacing_neighbours);
-    }
-    rules.set_spacings(std::move(spacing));
-  }
+  if (rules.active()) rules.new_level([](std::uint32_t) { return true; });
   pmr_cell_output::level_umbrellas lu;
   for (std::uint32_t i = 0; i < in.own; ++i) {
     auto& t = per_vertex[i];

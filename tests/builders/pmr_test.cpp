@@ -827,16 +827,19 @@ TEST(pmr_user_view, FinestCutLooksLikeTheHardCasesScene) {
   const point_cloud points = sample_surface(scene, 40000, 3);
   const likeness l = score_against_mesh(scene, points, user_view_options());
   print("hard cases", l);
-  EXPECT_GE(l.views.psnr_interior_min, 28.0);
-  EXPECT_GE(l.views.iou_min, 0.97);
-  EXPECT_LE(l.cut_to_input, 0.01);
-  // The same floors fail for the paper's umbrellas (both rules off): the test sees the defect.
+  EXPECT_GE(l.views.psnr_interior_min, 29.0);  // reached: 31.2 dB
+  EXPECT_GE(l.views.iou_min, 0.98);            // 0.989
+  EXPECT_LE(l.cut_to_input, 0.01);             // 0.0084
+  // The same floors fail for the paper's umbrellas (rules and input normals off: 13.5 dB, 0.935,
+  // 0.145): the test sees the defect.
   pmr_options paper = user_view_options();
   paper.cocone_degrees = 0;
   paper.edge_spacing = 0;
   paper.input_normals = false;
   const likeness old = score_against_mesh(scene, points, paper);
   print("hard cases, paper", old);
+  EXPECT_LT(old.views.psnr_interior_min, 29.0);
+  EXPECT_LT(old.views.iou_min, 0.98);
   EXPECT_GT(old.cut_to_input, 0.01);
 }
 
@@ -889,6 +892,7 @@ TEST(pmr_user_view, DISABLED_HaloAgreement) {
   if (const char* e = std::getenv("PMR_MARGIN")) o.neighbour_margin = std::stof(e);
   if (const char* e = std::getenv("PMR_LEAF")) o.max_leaf_points = std::stoul(e);
   if (const char* e = std::getenv("PMR_TRI")) o.triangulation_points = std::stoul(e);
+  if (const char* e = std::getenv("PMR_LEAVES")) o.neighbour_leaves = std::stoi(e) != 0;
   const auto run = [&](const char* name, const point_cloud& c) {
     pmr_options whole = o;
     whole.max_leaf_points = 1u << 30;

@@ -6,17 +6,21 @@
 //   (the pole, height and radius of a Voronoi cell: N. Amenta, M. Bern. Surface reconstruction by
 //   Voronoi filtering. Discrete Comput. Geom. 22, 1999.)
 // What each part implements:
-//   §2 Spatial decomposition  octree with at most `max_leaf_points` samples per leaf; per leaf a
-//               3-D Delaunay triangulation (CGAL) of its samples plus the samples of the
-//               neighbouring leaves (within `neighbour_margin`); only the leaf's own samples
-//               are written — src/builders/pmr_build.cpp (octree, gathering, assembly) and
+//   §2 Spatial decomposition  octree with at most `max_leaf_points` samples per leaf; a 3-D
+//               Delaunay triangulation (CGAL) per octree node of at most `triangulation_points`
+//               samples (its leaves together) plus every sample of the leaves neighbouring it
+//               (the paper's rule); only the node's own samples are written —
+//               src/builders/pmr_build.cpp (octree, gathering, assembly) and
 //               src/builders/pmr_voronoi.cpp (everything CGAL).
 //   §2 Point hierarchy  pole (farthest Voronoi vertex; hull cells: direction from the outward
 //               hull facet normals), height h, normal estimate, tangent polygon, radius r, and
 //               the iterative deletion of samples with r/h < ρ for ρ in `rho`, the Delaunay
 //               triangulation updated by CGAL vertex removal — pmr_voronoi.cpp.
 //   §2 Triangle hierarchy  the umbrella of p at level i = the Delaunay triangles dual to the
-//               Voronoi edges of V_p that the tangent polygon crosses — pmr_voronoi.cpp.
+//               Voronoi edges of V_p that the tangent polygon crosses, kept where they lie on
+//               the surface: the dual edge meets the cocone of all three vertices (Amenta,
+//               Choi, Dey, Leekha 2002, the flatness result the paper cites) and no edge is
+//               longer than `edge_spacing` × the local sample spacing — pmr_voronoi.cpp.
 //   §2 Records  umbrella radius per sample and level, average umbrella radius per level per
 //               leaf, triangles shared by umbrellas stored once per leaf and level; the file
 //               (save()/load(), "PBRLODPM" v1) — src/builders/pmr_io.cpp. Beyond the paper: the
@@ -82,10 +86,13 @@ struct pmr_options {
   /// wants, and an input of at most this many samples gives the whole-cloud result (a leaf
   /// holding more is a triangulation by itself). Not below max_leaf_points in effect.
   std::uint32_t triangulation_points = 1u << 17;
-  /// Neighbour samples triangulated with a triangulation's node: those within this fraction of
-  /// the node's edge length of its cube (from any other node). The paper takes every sample of
-  /// the 26 neighbouring leaves; a Voronoi cell depends only on nearby samples (docs/pmr.md).
+  /// Neighbour samples triangulated with a triangulation's node: those of the leaves within
+  /// this fraction of the node's edge length of its cube — with neighbour_leaves, every sample
+  /// of every such leaf, so each leaf's triangulation holds all samples of the leaves that
+  /// share a face, edge or vertex with it (the paper's rule); else only the samples inside
+  /// that margin. The chunked build (builders/chunked_pmr.hpp) takes the margin only.
   float neighbour_margin = 0.1f;
+  bool neighbour_leaves = true;
   /// Umbrella triangles only where the surface is (docs/pmr.md, "Umbrellas on the surface"). A
   /// triangle of p's umbrella is kept when its dual Voronoi edge also meets the cocone of its
   /// two other vertices — the points seen within `cocone_degrees` of their tangent planes
