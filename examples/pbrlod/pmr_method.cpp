@@ -164,12 +164,20 @@ pmr_options pmr_params(const std::vector<std::string>& items, bool on_terminal,
   for (long i = 1; i <= nrho; ++i)
     o.rho.push_back(static_cast<float>(step * static_cast<double>(i)));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
+  o.triangulation_points = static_cast<std::uint32_t>(
+      m.integer("triangulation_points", o.triangulation_points, 8, 1 << 30));
+  o.cocone_degrees = static_cast<float>(m.number("cocone", o.cocone_degrees, 0, 89.9));
+  o.edge_spacing = static_cast<float>(m.number("edge_spacing", o.edge_spacing, 0, 1000));
+  o.input_normals = m.integer("input_normals", 1, 0, 1) != 0;
+  o.neighbour_leaves = m.integer("neighbour_leaves", 1, 0, 1) != 0;
   if (chunked) {
     if (const auto b = m.bytes("memory")) chunked->memory_bytes = *b;
     chunked->chunk_points =
         static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1ll << 31) - 1));
   }
-  m.finish("pmr", "leaf_points, margin, levels, rho_step, threads, memory, chunk_points");
+  m.finish("pmr",
+           "leaf_points, margin, levels, rho_step, threads, triangulation_points, cocone, "
+           "edge_spacing, input_normals, neighbour_leaves, memory, chunk_points");
   o.progress = progress_callback("pmr", on_terminal);
   return o;
 }

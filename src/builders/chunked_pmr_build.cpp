@@ -78,6 +78,12 @@ struct chunked_pmr_builder : chunked_pass_base {
                        : std::max<std::uint64_t>(
                              1, opt.memory_bytes / (chunked_pmr_bytes_per_point * workers));
     chunk_points = std::clamp<std::uint64_t>(chunk_points, po.max_leaf_points, (1u << 31) - 1);
+    // A triangulation never spans chunks (nor its neighbours beyond a chunk's halo): equal to
+    // build_pmr with triangulation_points at most chunk_points.
+    po.triangulation_points =
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(po.triangulation_points, chunk_points));
+    // A chunk's halo is a margin about it: equal to build_pmr with neighbour_leaves = false.
+    po.neighbour_leaves = false;
   }
 
   void progress(double f) const {

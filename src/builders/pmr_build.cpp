@@ -46,6 +46,12 @@ void validate_pmr_options(const pmr_options& o) {
                             std::to_string(i) + "] = " + std::to_string(o.rho[i]));
   if (!(o.neighbour_margin >= 0 && o.neighbour_margin <= 2))
     throw InvalidArgument("build_pmr: neighbour_margin must lie in [0, 2]");
+  if (o.triangulation_points < 8)
+    throw InvalidArgument("build_pmr: triangulation_points must be at least 8");
+  if (!(o.cocone_degrees >= 0 && o.cocone_degrees < 90))
+    throw InvalidArgument("build_pmr: cocone_degrees must lie in [0, 90)");
+  if (!(o.edge_spacing >= 0 && o.edge_spacing <= 1000))
+    throw InvalidArgument("build_pmr: edge_spacing must lie in [0, 1000]");
 }
 
 namespace {
@@ -130,6 +136,8 @@ struct builder {
   std::vector<std::uint32_t> order;      // octree order of the samples
   std::vector<build_node> nodes;
   std::vector<std::uint32_t> leaf_nodes;
+  std::vector<std::uint32_t> block_nodes;                // one triangulation each
+  std::vector<std::vector<std::uint32_t>> block_leaves;  // per block: its leaves
   std::vector<leaf_result> results;
 
   builder(const point_cloud& c, const pmr_options& o, std::uint32_t own,
@@ -170,9 +178,9 @@ struct builder {
   /// within the margin of its cube, in input order; relative to the cube's centre. A node whose
   /// cell misses the margin box is skipped; its cell is widened by a millionth of its size, as
   /// a sample on its upper face may lie an ulp outside it.
-  void gather(std::uint32_t leaf, std::vector<std::uint32_t>& ids, std::vector<vec3d>& pts,
+  void gather(std::uint32_t node, std::vector<std::uint32_t>& ids, std::vector<vec3d>& pts,
               std::uint32_t& own) const {
-    const build_node& L = nodes[leaf_nodes[leaf]];
+    const build_node& L = nodes[node];
     ids.clear();
     for (std::uint32_t j = L.begin; j < L.end; ++j)
       if (rep[order[j]] == order[j]) ids.push_back(order[j]);
@@ -184,7 +192,7 @@ struct builder {
       const build_node& nd = nodes[stack.back()];
       const std::uint32_t k = stack.back();
       stack.pop_back();
-      if (k == leaf_nodes[leaf]) continue;
+      if (k == node) continue;
       const double slack = nd.size * 1e-6;
       const vec3d nhi = nd.lo + vec3d::Constant(nd.size + slack);
       const vec3d nlo = nd.lo - vec3d::Constant(slack);
@@ -193,11 +201,14 @@ struct builder {
         for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) stack.push_back(c);
         continue;
       }
+      // A leaf the box touches: all its samples (the paper's rule), or those in the box.
       for (std::uint32_t j = nd.begin; j < nd.end; ++j) {
         const std::uint32_t i = order[j];
         if (rep[i] != i) continue;
         const vec3d& p = local[i];
-        if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) ids.push_back(i);
+        if (opt.neighbour_leaves ||
+            ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()))
+          ids.push_back(i);
       }
     }
     for (auto i = owned; i < local.size(); ++i) {
@@ -214,52 +225,127 @@ struct builder {
     for (std::size_t k = 0; k < ids.size(); ++k) pts[k] = local[ids[k]] - c;
   }
 
-  /// §2 Point and Triangle hierarchy of one leaf (the Voronoi work), in input indices.
-  leaf_result process_leaf(std::uint32_t leaf) const {
+  /// The triangulations (docs/pmr.md, deviations: "Triangulations"): the highest octree nodes
+  /// holding at most triangulation_points samples (a leaf holding more is one by itself), in
+  /// node order; and for each, its leaves in sample order.
+  void find_blocks() {
+    std::vector<std::uint32_t> stack{0};
+    while (!stack.empty()) {
+      const std::uint32_t k = stack.back();
+      stack.pop_back();
+      const build_node& nd = nodes[k];
+      if (nd.leaf || nd.end - nd.begin <= opt.triangulation_points) {
+        block_nodes.push_back(k);
+        continue;
+      }
+      for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) stack.push_back(c);
+    }
+    std::sort(block_nodes.begin(), block_nodes.end());
+    std::vector<std::uint32_t> leaf_index(nodes.size(), 0);
+    for (std::uint32_t l = 0; l < leaf_nodes.size(); ++l) leaf_index[leaf_nodes[l]] = l;
+    block_leaves.assign(block_nodes.size(), {});
+    for (std::size_t b = 0; b < block_nodes.size(); ++b) {
+      stack.assign(1, block_nodes[b]);
+      while (!stack.empty()) {
+        const std::uint32_t k = stack.back();
+        stack.pop_back();
+        if (nodes[k].leaf) {
+          block_leaves[b].push_back(leaf_index[k]);
+          continue;
+        }
+        for (std::uint32_t c = nodes[k].first; c < nodes[k].first + nodes[k].count; ++c)
+          stack.push_back(c);
+      }
+      std::sort(block_leaves[b].begin(), block_leaves[b].end(),
+                [&](std::uint32_t a, std::uint32_t c) {
+                  return nodes[leaf_nodes[a]].begin < nodes[leaf_nodes[c]].begin;
+                });
+    }
+  }
+
+  /// §2 Point and Triangle hierarchy of the leaves of one block (the Voronoi work, one
+  /// triangulation), split into their leaf_results, in input indices.
+  void process_block(std::size_t b) {
     std::vector<std::uint32_t> ids;
     std::vector<vec3d> pts;
     std::uint32_t own = 0;
-    gather(leaf, ids, pts, own);
-    leaf_result r;
-    r.triangulated = pts.size();
-    pmr_cell_output c = pmr_process_cell({pts, own, opt.rho});
-    r.own.assign(ids.begin(), ids.begin() + own);
-    r.levels = std::move(c.levels);
-    r.hull = std::move(c.hull);
-    r.normal.resize(own);
-    for (std::uint32_t i = 0; i < own; ++i) r.normal[i] = c.normal[i].cast<float>();
-    r.removals = c.removals;
-    r.flat = c.dimension < 3;
-    r.lv.resize(c.umbrellas.size());
-    for (std::size_t l = 0; l < c.umbrellas.size(); ++l) {
-      auto& src = c.umbrellas[l];
-      auto& dst = r.lv[l];
-      dst.sample = std::move(src.sample);
-      dst.first = std::move(src.first);
-      dst.tris.resize(src.tris.size());
-      for (std::size_t t = 0; t < src.tris.size(); ++t)
-        dst.tris[t] = {ids[src.tris[t][0]], ids[src.tris[t][1]], ids[src.tris[t][2]]};
-      dst.radius.resize(src.radius.size());
-      for (std::size_t k = 0; k < src.radius.size(); ++k)
-        dst.radius[k] = static_cast<float>(src.radius[k]);
+    gather(block_nodes[b], ids, pts, own);
+    // The input's normals, when it has them and they are wanted (pmr_options::input_normals).
+    std::vector<vec3d> given;
+    const bool with_normals = opt.input_normals && !cloud.normals.empty();
+    if (with_normals) {
+      given.resize(ids.size());
+      for (std::size_t k = 0; k < ids.size(); ++k) {
+        const vec3d g = cloud.normals[ids[k]].cast<double>();
+        given[k] = g.squaredNorm() > 0 ? vec3d(g.normalized()) : vec3d::Zero();
+      }
     }
-    return r;
+    pmr_cell_output c =
+        pmr_process_cell({pts, own, opt.rho, opt.cocone_degrees, opt.edge_spacing, given});
+    // The block's own samples are its leaves' unique samples, leaf after leaf (sample order).
+    const auto& leaves = block_leaves[b];
+    std::vector<std::uint32_t> which(own), at(own);
+    std::uint32_t k = 0;
+    for (std::uint32_t w = 0; w < leaves.size(); ++w) {
+      const build_node& L = nodes[leaf_nodes[leaves[w]]];
+      leaf_result& r = results[leaves[w]];
+      r = {};
+      for (std::uint32_t j = L.begin; j < L.end; ++j) {
+        if (rep[order[j]] != order[j]) continue;
+        which[k] = w;
+        at[k] = static_cast<std::uint32_t>(r.own.size());
+        r.own.push_back(ids[k]);
+        r.levels.push_back(c.levels[k]);
+        r.normal.push_back(with_normals && given[k].squaredNorm() > 0 ? given[k].cast<float>()
+                                                                      : c.normal[k].cast<float>());
+        r.hull.push_back(c.hull[k]);
+        ++k;
+      }
+      r.flat = c.dimension < 3;
+      r.lv.resize(c.umbrellas.size());
+    }
+    results[leaves.front()].triangulated = pts.size();
+    results[leaves.front()].removals = c.removals;
+    for (std::size_t l = 0; l < c.umbrellas.size(); ++l) {
+      const auto& src = c.umbrellas[l];
+      for (std::size_t e = 0; e < src.sample.size(); ++e) {
+        const std::uint32_t i = src.sample[e];
+        auto& dst = results[leaves[which[i]]].lv[l];
+        if (dst.first.empty()) dst.first.push_back(0);
+        dst.sample.push_back(at[i]);
+        for (std::uint32_t t = src.first[e]; t < src.first[e + 1]; ++t)
+          dst.tris.push_back({ids[src.tris[t][0]], ids[src.tris[t][1]], ids[src.tris[t][2]]});
+        dst.first.push_back(static_cast<std::uint32_t>(dst.tris.size()));
+        dst.radius.push_back(static_cast<float>(src.radius[e]));
+      }
+    }
+    for (const std::uint32_t l : leaves)
+      for (auto& lv : results[l].lv)
+        if (lv.first.empty()) lv.first.push_back(0);
   }
 
   void process_leaves(pmr_build_stats& st) {
     const unsigned threads =
         opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
-    results.resize(leaf_nodes.size());
+    results.assign(leaf_nodes.size(), {});
+    find_blocks();
+    // Largest blocks first: the last to start is a small one.
+    std::vector<std::uint32_t> by_size(block_nodes.size());
+    std::iota(by_size.begin(), by_size.end(), 0u);
+    std::stable_sort(by_size.begin(), by_size.end(), [&](std::uint32_t a, std::uint32_t b) {
+      const build_node &x = nodes[block_nodes[a]], &y = nodes[block_nodes[b]];
+      return x.end - x.begin > y.end - y.begin;
+    });
     std::atomic<std::size_t> done{0};
     std::atomic<bool> cancel{false};
     const auto caller = std::this_thread::get_id();
-    parallel_tasks(leaf_nodes.size(), threads, [&](std::size_t l, unsigned) {
+    parallel_tasks(block_nodes.size(), threads, [&](std::size_t k, unsigned) {
       if (cancel.load()) return;
-      results[l] = process_leaf(static_cast<std::uint32_t>(l));
+      process_block(by_size[k]);
       const std::size_t d = ++done;
       if (opt.progress && std::this_thread::get_id() == caller &&
           !opt.progress(0.05 +
-                        0.9 * static_cast<double>(d) / static_cast<double>(leaf_nodes.size())))
+                        0.9 * static_cast<double>(d) / static_cast<double>(block_nodes.size())))
         cancel.store(true);
     });
     if (cancel.load()) throw Cancelled("build_pmr: cancelled");

@@ -21,11 +21,14 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
+#include <numbers>
 #include <queue>
 #include <utility>
 #include <vector>
 
 #include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/knn.hpp"
 
 namespace pbr_lod::detail {
 namespace {
@@ -61,6 +64,31 @@ struct cell_shape {
   }
 };
 
+/// A Delaunay triangle dual to a Voronoi edge of V_p that p's tangent plane crosses (a triangle
+/// of p's umbrella before the surface rules): its sorted point indices and its dual Voronoi
+/// edge, the segment [a, b] or, when `ray`, the ray from a along b.
+struct umbrella_candidate {
+  std::array<std::uint32_t, 3> tri{};
+  vec3d a = vec3d::Zero(), b = vec3d::Zero();
+  bool ray = false;
+};
+
+/// Whether the Voronoi edge of c meets the cocone of sample q with unit normal m: the points x
+/// with |m·(x − q)| ≤ sin θ · |x − q| (Amenta, Choi, Dey, Leekha 2002; the restriction to V_q
+/// holds by itself, since the edge dual to a triangle at q lies on V_q's boundary). Outside the
+/// cocone are two convex cones about ±m (the nappes); a segment misses the cocone exactly when
+/// both ends lie in the same nappe, a ray when its start does and its direction points into that
+/// nappe's cone.
+bool meets_cocone(const vec3d& q, const vec3d& m, double sin_theta, const umbrella_candidate& c) {
+  const auto nappe = [&](const vec3d& x) {
+    const double g = m.dot(x), h = sin_theta * x.norm();
+    return g > h ? 1 : (g < -h ? -1 : 0);
+  };
+  const int sa = nappe(c.a - q);
+  if (sa == 0) return true;
+  return nappe(c.ray ? c.b : vec3d(c.b - q)) != sa;
+}
+
 class leaf_voronoi {
  public:
   explicit leaf_voronoi(const pmr_cell_input& in) : in_(in) {
@@ -82,10 +110,10 @@ class leaf_voronoi {
 
   /// The cell of sample i: pole and normal (§2 Point hierarchy; hull cells from the outward
   /// hull normals), height, and the tangent polygon's radius; with `umbrella`, also the Delaunay
-  /// triangles dual to the Voronoi edges the tangent polygon crosses (sorted point triples) and
-  /// the umbrella radius. Needs dimension 3.
-  cell_shape shape(std::uint32_t i, std::vector<std::array<std::uint32_t, 3>>* umbrella,
-                   double* umbrella_radius) {
+  /// triangles dual to the Voronoi edges the tangent polygon crosses, with those edges. Needs
+  /// dimension 3.
+  cell_shape shape(std::uint32_t i, std::vector<umbrella_candidate>* umbrella,
+                   const vec3d* plane_normal = nullptr) {
     const Vertex v = vertex_[i];
     const Point& P = v->point();
     const vec3d p = to_vec(P);
@@ -130,8 +158,9 @@ class leaf_voronoi {
     }
     // Tangent polygon: the plane through p orthogonal to the normal cuts the Voronoi edges of
     // V_p (duals of the Delaunay triangles at p) where their ends lie on opposite sides.
-    const vec3d& n = s.normal;
-    double r = 0, ur2 = 0;
+    // The tangent plane: orthogonal to the pole vector, or to the given normal.
+    const vec3d& n = plane_normal ? *plane_normal : s.normal;
+    double r = 0;
     for (const Cell& c : cells_) {
       const int iv = c->index(v);
       const bool c_inf = dt_.is_infinite(c);
@@ -147,36 +176,32 @@ class leaf_voronoi {
         if (!nb_inf && std::less<const void*>{}(&*nb, &*c)) continue;
         const vec3d c1 = to_vec(c->circumcenter());
         const double s1 = n.dot(c1 - p);
-        vec3d x;
+        vec3d x, far;
         if (!nb_inf) {
-          const vec3d c2 = to_vec(nb->circumcenter());
-          const double s2 = n.dot(c2 - p);
+          far = to_vec(nb->circumcenter());
+          const double s2 = n.dot(far - p);
           if ((s1 < 0) == (s2 < 0)) continue;
-          x = c1 + (c2 - c1) * (s1 / (s1 - s2));
+          x = c1 + (far - c1) * (s1 / (s1 - s2));
         } else {
           // An unbounded Voronoi edge: the ray from c1 along the hull facet's outward normal.
-          const vec3d d = hull_normal(nb, nb->index(dt_.infinite_vertex()));
-          const double nd = n.dot(d);
+          far = hull_normal(nb, nb->index(dt_.infinite_vertex()));
+          const double nd = n.dot(far);
           if (!((s1 < 0 && nd > 0) || (s1 >= 0 && nd < 0))) continue;
-          x = c1 - d * (s1 / nd);
+          x = c1 - far * (s1 / nd);
         }
         s.crossed = true;
         r = std::max(r, (x - p).norm());
         if (umbrella) {
-          std::array<std::uint32_t, 3> t{};
+          umbrella_candidate u{{}, c1, far, nb_inf};
           int k = 0;
           for (int m = 0; m < 4; ++m)
-            if (m != j) {
-              t[k++] = c->vertex(m)->info();
-              ur2 = std::max(ur2, (to_vec(c->vertex(m)->point()) - p).squaredNorm());
-            }
-          std::sort(t.begin(), t.end());
-          umbrella->push_back(t);
+            if (m != j) u.tri[k++] = c->vertex(m)->info();
+          std::sort(u.tri.begin(), u.tri.end());
+          umbrella->push_back(u);
         }
       }
     }
     s.radius = r;
-    if (umbrella_radius) *umbrella_radius = std::sqrt(ur2);
     return s;
   }
 
@@ -244,25 +269,113 @@ class leaf_voronoi {
   std::vector<Vertex> adj_;
 };
 
-void record_umbrellas(leaf_voronoi& vor, const pmr_cell_input& in,
+/// Neighbours whose distance is a sample's local spacing (the k-th nearest).
+constexpr int spacing_neighbours = 4;
+
+/// Whether umbrella triangle t of sample p lies on the surface (docs/pmr.md, "Umbrellas on the
+/// surface"): its longest edge at most edge_spacing × the largest spacing of its vertices, and
+/// its dual Voronoi edge in the cocone of its other two vertices. Normals and spacings are those
+/// of the current level (samples still present), computed once per sample and level.
+class umbrella_rules {
+ public:
+  umbrella_rules(leaf_voronoi* vor, const pmr_cell_input& in)
+      : vor_(vor),
+        in_(in),
+        sin_theta_(std::sin(static_cast<double>(in.cocone_degrees) * std::numbers::pi / 180)) {}
+
+  [[nodiscard]] bool active() const { return in_.edge_spacing > 0 || in_.cocone_degrees > 0; }
+
+  /// A new level: the samples present are those with alive(i); the previous level's normals
+  /// and spacings are forgotten.
+  template <class Alive>
+  void new_level(const Alive& alive) {
+    normal_.assign(in_.points.size(), vec3d::Zero());
+    spacing_.assign(in_.points.size(), -1.0);
+    if (!(in_.edge_spacing > 0)) return;
+    // The spacing: distance to the k-th nearest sample present (an exact k-d tree per level).
+    std::vector<vec3f> pts;
+    for (std::uint32_t i = 0; i < in_.points.size(); ++i)
+      if (alive(i)) pts.push_back(in_.points[i].cast<float>());
+    index_ = std::make_unique<knn_index>(pts);
+  }
+
+  [[nodiscard]] bool keep(std::uint32_t p, const std::array<std::uint32_t, 3>& t,
+                          const umbrella_candidate* dual) {
+    if (in_.edge_spacing > 0) {
+      double longest2 = 0, sigma = 0;
+      for (int k = 0; k < 3; ++k) {
+        longest2 =
+            std::max(longest2, (in_.points[t[k]] - in_.points[t[(k + 1) % 3]]).squaredNorm());
+        sigma = std::max(sigma, spacing(t[k]));
+      }
+      const double limit = static_cast<double>(in_.edge_spacing) * sigma;
+      if (longest2 > limit * limit) return false;
+    }
+    if (in_.cocone_degrees > 0 && dual)
+      for (const std::uint32_t q : t)
+        if (q != p && !meets_cocone(in_.points[q], normal(q), sin_theta_, *dual)) return false;
+    return true;
+  }
+
+  /// Whether point i has a given normal (pmr_cell_input::normals).
+  [[nodiscard]] bool given(std::uint32_t i) const {
+    return !in_.normals.empty() && in_.normals[i].squaredNorm() > 0;
+  }
+
+ private:
+  double spacing(std::uint32_t i) {
+    if (spacing_[i] < 0) {
+      index_->query(in_.points[i].cast<float>(), spacing_neighbours + 1, idx_, d2_);
+      // The first answer is the sample itself (the points are distinct).
+      spacing_[i] = d2_.empty() ? 0.0 : std::sqrt(static_cast<double>(d2_.back()));
+    }
+    return spacing_[i];
+  }
+  const vec3d& normal(std::uint32_t i) {
+    if (given(i)) return in_.normals[i];
+    if (normal_[i].squaredNorm() == 0) normal_[i] = vor_->shape(i, nullptr).normal;
+    return normal_[i];
+  }
+
+  leaf_voronoi* vor_;
+  const pmr_cell_input& in_;
+  double sin_theta_;
+  std::vector<vec3d> normal_;
+  std::vector<double> spacing_;
+  std::vector<std::uint32_t> idx_;
+  std::vector<float> d2_;
+  std::unique_ptr<knn_index> index_;
+};
+
+void record_umbrellas(leaf_voronoi& vor, const pmr_cell_input& in, umbrella_rules& rules,
                       pmr_cell_output::level_umbrellas& out) {
+  rules.new_level([&](std::uint32_t i) { return vor.alive(i); });
+  std::vector<umbrella_candidate> cand;
   std::vector<std::array<std::uint32_t, 3>> tris;
   for (std::uint32_t i = 0; i < in.own; ++i) {
     if (!vor.alive(i)) continue;
+    cand.clear();
+    (void)vor.shape(i, &cand, rules.given(i) ? &in.normals[i] : nullptr);
     tris.clear();
-    double ur = 0;
-    (void)vor.shape(i, &tris, &ur);
+    double ur2 = 0;
+    for (const umbrella_candidate& c : cand) {
+      if (rules.active() && !rules.keep(i, c.tri, &c)) continue;
+      tris.push_back(c.tri);
+      for (const std::uint32_t k : c.tri)
+        ur2 = std::max(ur2, (in.points[k] - in.points[i]).squaredNorm());
+    }
     std::sort(tris.begin(), tris.end());
     out.sample.push_back(i);
     out.first.push_back(static_cast<std::uint32_t>(out.tris.size()));
     out.tris.insert(out.tris.end(), tris.begin(), tris.end());
-    out.radius.push_back(tris.empty() ? 0.0 : ur);
+    out.radius.push_back(tris.empty() ? 0.0 : std::sqrt(ur2));
   }
   out.first.push_back(static_cast<std::uint32_t>(out.tris.size()));
 }
 
 /// Levels for a triangulation of dimension < 3: no Voronoi cells to measure, so no deletion;
-/// every level is the input, with the plane's triangles as umbrellas in dimension 2.
+/// every level is the input, with the plane's triangles as umbrellas in dimension 2 (the edge
+/// rule applies; a plane has no cocone to test).
 pmr_cell_output flat_cell(leaf_voronoi& vor, const pmr_cell_input& in) {
   pmr_cell_output out;
   out.dimension = vor.dimension();
@@ -276,9 +389,15 @@ pmr_cell_output flat_cell(leaf_voronoi& vor, const pmr_cell_input& in) {
   out.height.assign(in.own, inf);
   out.radius.assign(in.own, 0.0);
   out.hull.assign(in.own, 1);
+  umbrella_rules rules(nullptr, in);
+  if (rules.active()) rules.new_level([](std::uint32_t) { return true; });
   pmr_cell_output::level_umbrellas lu;
   for (std::uint32_t i = 0; i < in.own; ++i) {
     auto& t = per_vertex[i];
+    if (rules.active())
+      t.erase(std::remove_if(t.begin(), t.end(),
+                             [&](const auto& tri) { return !rules.keep(i, tri, nullptr); }),
+              t.end());
     std::sort(t.begin(), t.end());
     double ur2 = 0;
     for (const auto& tri : t)
@@ -313,7 +432,7 @@ pmr_cell_output pmr_process_cell(const pmr_cell_input& in) {
   // Level 0: every cell's shape (own samples: stored), ratios for the deletion.
   std::vector<double> ratio(n);
   for (std::uint32_t i = 0; i < n; ++i) {
-    const cell_shape s = vor.shape(i, nullptr, nullptr);
+    const cell_shape s = vor.shape(i, nullptr);
     ratio[i] = s.ratio();
     if (i < in.own) {
       out.normal[i] = s.normal;
@@ -323,7 +442,8 @@ pmr_cell_output pmr_process_cell(const pmr_cell_input& in) {
       out.hull[i] = s.hull ? 1 : 0;
     }
   }
-  record_umbrellas(vor, in, out.umbrellas[0]);
+  umbrella_rules rules(&vor, in);
+  record_umbrellas(vor, in, rules, out.umbrellas[0]);
 
   // Iterative deletion per threshold: the sample of smallest known r/h next (ties by index, so
   // the result is deterministic). A removal makes its neighbours' cells grow, so their ratios
@@ -347,7 +467,7 @@ pmr_cell_output pmr_process_cell(const pmr_cell_input& in) {
         if (!vor.alive(i) || q != ratio[i]) continue;  // removed, or a superseded entry
         if (stale[i]) {
           stale[i] = 0;
-          ratio[i] = vor.shape(i, nullptr, nullptr).ratio();
+          ratio[i] = vor.shape(i, nullptr).ratio();
           if (ratio[i] < rho) heap.emplace(ratio[i], i);
           continue;
         }
@@ -373,7 +493,7 @@ pmr_cell_output pmr_process_cell(const pmr_cell_input& in) {
       for (const std::uint32_t k : pending) {
         if (!vor.alive(k) || !stale[k]) continue;
         stale[k] = 0;
-        ratio[k] = vor.shape(k, nullptr, nullptr).ratio();
+        ratio[k] = vor.shape(k, nullptr).ratio();
         if (ratio[k] < rho) {
           heap.emplace(ratio[k], k);
           more = true;
@@ -390,7 +510,7 @@ pmr_cell_output pmr_process_cell(const pmr_cell_input& in) {
     heap = {};
     for (std::uint32_t i = 0; i < in.own; ++i)
       if (vor.alive(i)) out.levels[i] = static_cast<std::uint8_t>(li + 2);
-    record_umbrellas(vor, in, out.umbrellas[li + 1]);
+    record_umbrellas(vor, in, rules, out.umbrellas[li + 1]);
   }
   return out;
 }

@@ -31,6 +31,9 @@ pmr_options small_leaves() {
   pmr_options o;
   o.max_leaf_points = 400;
   o.neighbour_margin = 0.25f;
+  // At most every chunk_points below, and the margin halo: equal to the chunked build.
+  o.triangulation_points = 1000;
+  o.neighbour_leaves = false;
   return o;
 }
 
@@ -207,6 +210,8 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
   const point_cloud c = read_points(test::data_file("bun_zipper_res2.ply"));
   chunked_pmr_options o;
   o.pmr.max_leaf_points = 1000;
+  o.pmr.triangulation_points = 1000;  // as the chunks: the same Voronoi work
+  o.pmr.neighbour_leaves = false;
   o.chunk_points = 1000;
   const std::string dir = temp_dir("bunny");
   const auto r = build_pmr_chunked(cloud_point_source(c), dir, o);

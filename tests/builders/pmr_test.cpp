@@ -6,6 +6,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -14,10 +17,14 @@
 #include <set>
 
 #include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
+#include "pbr_lod/raster/png.hpp"
+#include "pbr_lod/raster/rasterizer.hpp"
 #include "support/cameras.hpp"
 #include "support/data.hpp"
+#include "support/user_view.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -650,6 +657,264 @@ TEST(pmr_real_data, BunnyBuildsAndDecimates) {
   expect_valid(h, m.vertices.size());
   EXPECT_GT(h.leaf_count(), 2u);
   EXPECT_LT(h.points_at_level(h.levels() - 1), m.vertices.size() / 2);
+}
+
+// ---- what the user sees (issue 39): the finest cut against the input's own render
+
+/// The finest cut: every leaf at level 0, every sample drawn as its umbrella.
+buffer_sink<with_normals> finest_cut(const pmr_hierarchy& h) {
+  buffer_sink<with_normals> cut;
+  for (std::uint32_t l = 0; l < h.leaf_count(); ++l) h.emit_level(l, 0, 0.0f, cut);
+  return cut;
+}
+
+/// The cut a view draws at factor 1 with the tool's default effects (shading, and the input's
+/// colours when it has them).
+image draw_cut(const pmr_hierarchy& h, const camera& cam) {
+  const view v(cam, h.origin());
+  render_options ro;
+  ro.fx = no_effects;
+  ro.fx.shading = true;
+  ro.fx.colour = h.has_colours();
+  const traverse_options t{.tolerance_px = 1};
+  if (h.has_colours()) {
+    const pmr_colour_view hc(h);
+    return render<pmr_colour_view::attrs>(
+        v, ro, [&](auto& sink) { traverse(hc, v, t, sink, pmr_policy{}); });
+  }
+  return render<pmr_hierarchy::attrs>(v, ro,
+                                      [&](auto& sink) { traverse(h, v, t, sink, pmr_policy{}); });
+}
+
+render_options input_effects(bool colour) {
+  render_options ro;
+  ro.fx = no_effects;
+  ro.fx.shading = true;
+  ro.fx.colour = colour;
+  return ro;
+}
+
+struct likeness {
+  test::user_view_score views;
+  double cut_to_input = 0;  ///< of the finest cut, over the input's diagonal
+  double build_seconds = 0;
+  double build_cpu_seconds = 0;  ///< of every thread
+  std::size_t triangles = 0;     ///< at level 0
+};
+
+/// With PMR_PNG=DIR set: the views' input and cut renders as DIR/NAME_VIEW_{input,cut}.png.
+void write_views(const std::string& name, const std::vector<camera>& cams,
+                 const std::function<image(const camera&)>& input,
+                 const std::function<image(const camera&)>& cut) {
+  const char* dir = std::getenv("PMR_PNG");
+  if (!dir) return;
+  for (std::size_t v = 0; v < cams.size(); ++v) {
+    const std::string base = std::string(dir) + "/" + name + "_" + std::to_string(v);
+    write_png(base + "_input.png", input(cams[v]));
+    write_png(base + "_cut.png", cut(cams[v]));
+  }
+}
+
+/// With PMR_WORST set: the finest cut's triangles farthest from the mesh.
+void print_worst(const triangle_mesh& mesh, const pmr_hierarchy& h);
+
+/// The same against the points of `surface`.
+void print_worst(const point_cloud& dense, double diag, const pmr_hierarchy& h) {
+  const auto cut = finest_cut(h);
+  const knn_index index(dense.positions);
+  const vec3f shift = (h.origin() - dense.origin).cast<float>();
+  std::vector<std::pair<double, std::size_t>> worst;
+  for (std::size_t t = 0; t < cut.triangles.size(); ++t) {
+    buffer_sink<with_normals> one;
+    one.triangles.push_back(cut.triangles[t]);
+    auto pos = test::cut_positions(one);
+    for (auto& p : pos) p += shift;
+    worst.emplace_back(distance_to(pos, index).max, t);
+  }
+  std::sort(worst.rbegin(), worst.rend());
+  for (std::size_t k = 0; k < std::min<std::size_t>(12, worst.size()); ++k) {
+    const auto& T = cut.triangles[worst[k].second].p;
+    std::printf("  %.4f  (%.3f %.3f %.3f) (%.3f %.3f %.3f) (%.3f %.3f %.3f)\n",
+                worst[k].first / diag, T[0].x() + shift.x(), T[0].y() + shift.y(),
+                T[0].z() + shift.z(), T[1].x() + shift.x(), T[1].y() + shift.y(),
+                T[1].z() + shift.z(), T[2].x() + shift.x(), T[2].y() + shift.y(),
+                T[2].z() + shift.z());
+  }
+}
+
+void print_worst(const triangle_mesh& mesh, const pmr_hierarchy& h) {
+  if (std::getenv("PMR_WORST"))
+    print_worst(sample_surface(mesh, 400000, 7), test::frame_of(mesh.vertices).diagonal, h);
+}
+
+/// PMR built from `points`, scored against the mesh it samples.
+likeness score_against_mesh(const triangle_mesh& mesh, const point_cloud& points,
+                            const pmr_options& o, const std::string& name = "") {
+  const std::clock_t c0 = std::clock();
+  const auto h = build_pmr(points, o);
+  print_worst(mesh, h);
+  likeness r;
+  r.build_cpu_seconds = double(std::clock() - c0) / CLOCKS_PER_SEC;
+  r.build_seconds = h.stats().build_seconds;
+  r.triangles = h.triangles_at_level(0);
+  const auto cams = test::user_views(test::frame_of(mesh.vertices));
+  const render_options ro = input_effects(!mesh.vertices.colours.empty());
+  r.views = test::score_views(
+      cams, [&](const camera& c) { return render_reference(mesh, c, ro); },
+      [&](const camera& c) { return draw_cut(h, c); });
+  if (!name.empty())
+    write_views(
+        name, cams, [&](const camera& c) { return render_reference(mesh, c, ro); },
+        [&](const camera& c) { return draw_cut(h, c); });
+  r.cut_to_input = test::cut_to_input(mesh, test::cut_positions(finest_cut(h)), h.origin());
+  return r;
+}
+
+/// PMR of a cloud scored against the cloud's own render (normals estimated for shading when it
+/// has none) and its points.
+likeness score_against_cloud(const point_cloud& cloud, const pmr_options& o,
+                             const std::string& name = "") {
+  const std::clock_t c0 = std::clock();
+  const auto h = build_pmr(cloud, o);
+  if (std::getenv("PMR_WORST")) print_worst(cloud, test::frame_of(cloud).diagonal, h);
+  likeness r;
+  r.build_cpu_seconds = double(std::clock() - c0) / CLOCKS_PER_SEC;
+  r.build_seconds = h.stats().build_seconds;
+  r.triangles = h.triangles_at_level(0);
+  point_cloud shaded = cloud;
+  if (shaded.normals.empty()) shaded.normals = estimate_normals(shaded.positions);
+  const auto cams = test::user_views(test::frame_of(cloud));
+  const render_options ro = input_effects(!cloud.colours.empty());
+  r.views = test::score_views(
+      cams, [&](const camera& c) { return render_reference(shaded, c, ro); },
+      [&](const camera& c) { return draw_cut(h, c); });
+  if (!name.empty())
+    write_views(
+        name, cams, [&](const camera& c) { return render_reference(shaded, c, ro); },
+        [&](const camera& c) { return draw_cut(h, c); });
+  const auto cut = test::cut_positions(finest_cut(h));
+  const vec3f shift = (h.origin() - cloud.origin).cast<float>();
+  std::vector<vec3f> moved(cut.size());
+  for (std::size_t i = 0; i < cut.size(); ++i) moved[i] = cut[i] + shift;
+  const knn_index index(cloud.positions);
+  r.cut_to_input = distance_to(moved, index).max / test::frame_of(cloud).diagonal;
+  return r;
+}
+
+void print(const char* name, const likeness& l) {
+  std::printf(
+      "%-22s psnr_interior min %6.2f mean %6.2f  iou_min %.4f  cut_to_input %.4f  "
+      "build %.2f s (cpu %.2f s)  level-0 triangles %zu\n",
+      name, l.views.psnr_interior_min, l.views.psnr_interior_mean, l.views.iou_min, l.cut_to_input,
+      l.build_seconds, l.build_cpu_seconds, l.triangles);
+}
+
+pmr_options user_view_options() {
+  pmr_options o;
+  o.threads = 2;
+  return o;
+}
+
+TEST(pmr_user_view, FinestCutLooksLikeTheHardCasesScene) {
+  // Two spheres 0.04 apart and 0.1 above a floor with an open boundary and a square hole, a
+  // wall meeting the floor in a crease, colours; PMR takes points, so the scene is sampled.
+  // The paper's umbrellas join whatever Voronoi edges the tangent plane crosses: triangles from
+  // a sphere to the floor, across the hole, fans along the open boundary — far from the surface
+  // (cut → input), and drawn where the input shows background or another surface. With the
+  // cocone and spacing rules (docs/pmr.md) the finest cut stays on the surface and looks like
+  // the input from every user view. Floors a little below what the build reaches.
+  const triangle_mesh scene = make_hard_cases_scene(32);
+  const point_cloud points = sample_surface(scene, 40000, 3);
+  const likeness l = score_against_mesh(scene, points, user_view_options());
+  print("hard cases", l);
+  EXPECT_GE(l.views.psnr_interior_min, 29.0);  // reached: 31.2 dB
+  EXPECT_GE(l.views.iou_min, 0.98);            // 0.989
+  EXPECT_LE(l.cut_to_input, 0.01);             // 0.0084
+  // The same floors fail for the paper's umbrellas (rules and input normals off: 13.5 dB, 0.935,
+  // 0.145): the test sees the defect.
+  pmr_options paper = user_view_options();
+  paper.cocone_degrees = 0;
+  paper.edge_spacing = 0;
+  paper.input_normals = false;
+  const likeness old = score_against_mesh(scene, points, paper);
+  print("hard cases, paper", old);
+  EXPECT_LT(old.views.psnr_interior_min, 29.0);
+  EXPECT_LT(old.views.iou_min, 0.98);
+  EXPECT_GT(old.cut_to_input, 0.01);
+}
+
+/// Not run by default (--gtest_also_run_disabled_tests): the table of docs/pmr.md. PMR_COCONE,
+/// PMR_EDGE, PMR_MARGIN override the options; PMR_INPUTS picks inputs (letters h d b y l).
+TEST(pmr_user_view, DISABLED_Report) {
+  pmr_options o = user_view_options();
+  if (const char* e = std::getenv("PMR_COCONE")) o.cocone_degrees = std::stof(e);
+  if (const char* e = std::getenv("PMR_EDGE")) o.edge_spacing = std::stof(e);
+  if (const char* e = std::getenv("PMR_MARGIN")) o.neighbour_margin = std::stof(e);
+  if (const char* e = std::getenv("PMR_NORMALS")) o.input_normals = std::stoi(e) != 0;
+  const std::string which = std::getenv("PMR_INPUTS") ? std::getenv("PMR_INPUTS") : "hdbyl";
+  std::printf("cocone %.1f deg, edge_spacing %.2f, margin %.2f, input normals %d\n",
+              o.cocone_degrees, o.edge_spacing, o.neighbour_margin, int(o.input_normals));
+  if (which.find('h') != std::string::npos) {
+    const triangle_mesh scene = make_hard_cases_scene(48);
+    print("hard cases 48 / 60k",
+          score_against_mesh(scene, sample_surface(scene, 60000, 3), o, "hard"));
+  }
+  if (which.find('d') != std::string::npos) {
+    const triangle_mesh scene = make_demo_scene();
+    print("demo scene vertices", score_against_mesh(scene, scene.vertices, o, "demo"));
+  }
+  if (which.find('b') != std::string::npos) {
+    const triangle_mesh m = read_mesh(test::data_file("bun_zipper.ply"));
+    print("bunny", score_against_mesh(m, m.vertices, o, "bunny"));
+  }
+  if (which.find('y') != std::string::npos) {
+    const triangle_mesh m = read_mesh(test::data_file("happy_vrip_res3.ply"));
+    print("happy res3", score_against_mesh(m, m.vertices, o, "happy"));
+  }
+  if (which.find('l') != std::string::npos)
+    print("lidar tile 60k", score_against_cloud(make_lidar_tile(60000, 1, false), o, "lidar"));
+}
+
+/// Per input sample, the number of levels it is in.
+std::vector<int> level_counts(const pmr_hierarchy& h) {
+  std::vector<int> n(h.source().size(), 0);
+  for (std::uint32_t l = 0; l < h.leaf_count(); ++l)
+    for (std::uint32_t i = 0; i < h.levels(); ++i)
+      for (std::uint32_t k = 0; k < h.level(l, i).points; ++k)
+        ++n[h.source()[h.leaf(l).first_point + k]];
+  return n;
+}
+
+/// Not run by default: the fraction of samples whose level count agrees with a whole-cloud
+/// build (one leaf, one triangulation), for the default leaves (PMR_MARGIN, PMR_LEAF override).
+TEST(pmr_user_view, DISABLED_HaloAgreement) {
+  pmr_options o = user_view_options();
+  if (const char* e = std::getenv("PMR_MARGIN")) o.neighbour_margin = std::stof(e);
+  if (const char* e = std::getenv("PMR_LEAF")) o.max_leaf_points = std::stoul(e);
+  if (const char* e = std::getenv("PMR_TRI")) o.triangulation_points = std::stoul(e);
+  if (const char* e = std::getenv("PMR_LEAVES")) o.neighbour_leaves = std::stoi(e) != 0;
+  const auto run = [&](const char* name, const point_cloud& c) {
+    pmr_options whole = o;
+    whole.max_leaf_points = 1u << 30;
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto a = level_counts(build_pmr(c, whole));
+    const double ta = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const auto hb = build_pmr(c, o);
+    const auto b = level_counts(hb);
+    std::size_t same = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) same += a[i] == b[i];
+    std::printf(
+        "%-12s leaves %zu, triangulation_points %u, margin %.2f: same level count %.2f %%  "
+        "(whole %.1f s, leaves %.1f s, triangulated %zu)\n",
+        name, hb.leaf_count(), o.triangulation_points, o.neighbour_margin,
+        100.0 * double(same) / double(a.size()), ta, hb.stats().build_seconds,
+        hb.stats().triangulated_points);
+  };
+  const std::string which = std::getenv("PMR_INPUTS") ? std::getenv("PMR_INPUTS") : "b";
+  if (which.find('b') != std::string::npos)
+    run("bunny", read_mesh(test::data_file("bun_zipper.ply")).vertices);
+  if (which.find('w') != std::string::npos) run("wavy 100k", make_wavy_surface(100000, 1));
+  if (which.find('W') != std::string::npos) run("wavy 300k", make_wavy_surface(300000, 1));
 }
 
 }  // namespace

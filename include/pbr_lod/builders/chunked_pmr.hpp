@@ -28,9 +28,10 @@
 //  7. The top nodes' bounding spheres bottom up from the chunks' roots; the top file.
 //
 // Equal to the in-memory build: chunked_pmr::assemble() returns build_pmr's hierarchy of the same
-// input, sample for sample and bit for bit, when the input has normals (they orient the pole
-// vectors sample by sample). Without normals, positions, levels, umbrellas and nodes are equal;
-// build_pmr propagates signs over the whole input's umbrella edges in one order, the chunked
+// input with neighbour_leaves = false (a chunk's halo is a margin) and triangulation_points at
+// most chunk_points, sample for sample and bit for bit, when the input has normals (they orient the
+// pole vectors sample by sample). Without normals, positions, levels, umbrellas and nodes are
+// equal; build_pmr propagates signs over the whole input's umbrella edges in one order, the chunked
 // build within each chunk and then between chunks, and where a surface is ambiguous (thin
 // sheets, sharp folds) the two can settle a sample's sign differently (docs/scale.md measures how
 // often).

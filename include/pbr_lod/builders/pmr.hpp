@@ -6,17 +6,21 @@
 //   (the pole, height and radius of a Voronoi cell: N. Amenta, M. Bern. Surface reconstruction by
 //   Voronoi filtering. Discrete Comput. Geom. 22, 1999.)
 // What each part implements:
-//   §2 Spatial decomposition  octree with at most `max_leaf_points` samples per leaf; per leaf a
-//               3-D Delaunay triangulation (CGAL) of its samples plus the samples of the
-//               neighbouring leaves (within `neighbour_margin`); only the leaf's own samples
-//               are written — src/builders/pmr_build.cpp (octree, gathering, assembly) and
+//   §2 Spatial decomposition  octree with at most `max_leaf_points` samples per leaf; a 3-D
+//               Delaunay triangulation (CGAL) per octree node of at most `triangulation_points`
+//               samples (its leaves together) plus every sample of the leaves neighbouring it
+//               (the paper's rule); only the node's own samples are written —
+//               src/builders/pmr_build.cpp (octree, gathering, assembly) and
 //               src/builders/pmr_voronoi.cpp (everything CGAL).
 //   §2 Point hierarchy  pole (farthest Voronoi vertex; hull cells: direction from the outward
 //               hull facet normals), height h, normal estimate, tangent polygon, radius r, and
 //               the iterative deletion of samples with r/h < ρ for ρ in `rho`, the Delaunay
 //               triangulation updated by CGAL vertex removal — pmr_voronoi.cpp.
 //   §2 Triangle hierarchy  the umbrella of p at level i = the Delaunay triangles dual to the
-//               Voronoi edges of V_p that the tangent polygon crosses — pmr_voronoi.cpp.
+//               Voronoi edges of V_p that the tangent polygon crosses, kept where they lie on
+//               the surface: the dual edge meets the cocone of all three vertices (Amenta,
+//               Choi, Dey, Leekha 2002, the flatness result the paper cites) and no edge is
+//               longer than `edge_spacing` × the local sample spacing — pmr_voronoi.cpp.
 //   §2 Records  umbrella radius per sample and level, average umbrella radius per level per
 //               leaf, triangles shared by umbrellas stored once per leaf and level; the file
 //               (save()/load(), "PBRLODPM" v1) — src/builders/pmr_io.cpp. Beyond the paper: the
@@ -76,13 +80,35 @@ struct pmr_options {
   /// input; level i keeps the samples whose ratio r/h stayed ≥ ρᵢ under iterative deletion.
   /// At most 31 thresholds, each in (0, 10], strictly increasing.
   std::vector<float> rho = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f, 0.6f, 0.7f, 0.8f, 0.9f, 1.0f};
-  /// Neighbour samples triangulated with a leaf: those within this fraction of the leaf's edge
-  /// length of its cube (from any leaf). The paper takes every sample of the 26 neighbouring
-  /// leaves (≈ 1.0 for leaves of equal size): 8–15× the leaf's own samples on a surface. A
-  /// Voronoi cell depends only on nearby samples; 0.1 triangulates ≈ 1.8× the own samples and
-  /// keeps 98 % of the normals of the paper's rule (0.25: 3.3×, 99 %; docs/pmr.md), and meets
-  /// the 60 s target for 437k points on 2 cores.
+  /// Samples per Delaunay triangulation at most: the Voronoi work (§2) runs once for the
+  /// highest octree node holding at most this many samples — all its leaves in one
+  /// triangulation, so a leaf's neighbours inside it are all there, as the paper's halo rule
+  /// wants, and an input of at most this many samples gives the whole-cloud result (a leaf
+  /// holding more is a triangulation by itself). Not below max_leaf_points in effect.
+  std::uint32_t triangulation_points = 1u << 17;
+  /// Neighbour samples triangulated with a triangulation's node: those of the leaves within
+  /// this fraction of the node's edge length of its cube — with neighbour_leaves, every sample
+  /// of every such leaf, so each leaf's triangulation holds all samples of the leaves that
+  /// share a face, edge or vertex with it (the paper's rule); else only the samples inside
+  /// that margin. The chunked build (builders/chunked_pmr.hpp) takes the margin only.
   float neighbour_margin = 0.1f;
+  bool neighbour_leaves = true;
+  /// Umbrella triangles only where the surface is (docs/pmr.md, "Umbrellas on the surface"). A
+  /// triangle of p's umbrella is kept when its dual Voronoi edge also meets the cocone of its
+  /// two other vertices — the points seen within `cocone_degrees` of their tangent planes
+  /// (Amenta, Choi, Dey, Leekha 2002: θ = π/8) — so it lies flat for all three, and when its
+  /// longest edge is at most `edge_spacing` × the largest local spacing of its vertices (the
+  /// distance to a vertex's 4th nearest Delaunay neighbour at that level), so it joins samples
+  /// that are neighbours on the surface, not across a gap, a hole or an open boundary. 0 turns
+  /// a rule off (both 0: the paper's umbrellas).
+  float cocone_degrees = 22.5f;
+  float edge_spacing = 3.0f;
+  /// When the input has normals: they give the tangent planes of the umbrellas and the
+  /// cocones, and are the drawn normals (the pole vector still drives the decimation, §2). A
+  /// pole is a poor normal where the sampling is too sparse for the shape (a plate thinner
+  /// than the spacing, sparse vertices of a CAD mesh); the input's normal is not. false: the
+  /// poles everywhere, the input's normals only orient them (the paper's inputs have none).
+  bool input_normals = true;
   /// Threads for the build (0 = hardware concurrency). The output does not depend on it.
   unsigned threads = 0;
   /// Called with the fraction done (0..1) from the calling thread; return false to cancel
@@ -177,6 +203,12 @@ struct pmr_cell_input {
   std::span<const vec3d> points;
   std::uint32_t own = 0;
   std::span<const float> rho;
+  /// The umbrella rules of pmr_options (0: off).
+  float cocone_degrees = 0;
+  float edge_spacing = 0;
+  /// Empty, or per point a unit normal (zero: none) for the umbrellas' tangent planes and the
+  /// cocones in place of the pole vector (pmr_options::input_normals).
+  std::span<const vec3d> normals = {};
 };
 
 /// What the Voronoi processing finds for the own samples.
