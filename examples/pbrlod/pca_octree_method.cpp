@@ -23,6 +23,7 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
   o.gamma = static_cast<float>(m.number("gamma", 3.5, 0.5, 10));
   o.curvature_c = static_cast<float>(m.number("curvature_c", 1, 0, 100));
   o.lambda_max = static_cast<float>(m.number("lambda_max", 2, 1, 16));
+  o.surface_angle = static_cast<float>(m.number("surface_angle", 60, 1, 180));
   o.quantise = m.flag("quantise", true);
   o.position_codebook = static_cast<std::uint32_t>(m.integer("codebook_p", 1024, 1, 4096));
   o.normal_codebook = static_cast<std::uint32_t>(m.integer("codebook_n", 1024, 1, 4096));
@@ -38,7 +39,8 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
         static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1ll << 31) - 1));
   }
   m.finish("pca-octree",
-           "leaf_size, max_depth, gamma, curvature_c, lambda_max, quantise, codebook_p, "
+           "leaf_size, max_depth, gamma, curvature_c, lambda_max, surface_angle, quantise, "
+           "codebook_p, "
            "codebook_n, codebook_c, kmeans_iterations, kmeans_sample, kmeans_seed, knn, threads, "
            "memory, chunk_points");
   o.progress = progress_callback("pca-octree", on_terminal);

@@ -40,24 +40,7 @@ void read_codebooks(byte_reader& r, pca_data& d, std::uint32_t kp, std::uint32_t
   } else if (kp != 0 || kn != 0 || kc != 0) {
     bad("codebooks in a file without quantisation");
   }
-  d.codebook_p.resize(kp);
-  for (std::uint32_t i = 0; i < kp; ++i) {
-    d.codebook_p[i] = r.get_vec("position codebook entry", i);
-    if ((d.codebook_p[i].array().abs() > 128).any()) bad("position codebook entry out of range");
-  }
-  d.codebook_n.resize(kn);
-  for (std::uint32_t i = 0; i < kn; ++i) {
-    const float a = r.get_finite("normal codebook entry", i),
-                b = r.get_finite("normal codebook entry", i);
-    if (!(a >= 0 && b >= 0 && a <= 4 && b <= 4)) bad("normal codebook entry out of range");
-    d.codebook_n[i] = vec2f(a, b);
-  }
-  d.codebook_c.resize(kc);
-  for (std::uint32_t i = 0; i < kc; ++i) {
-    d.codebook_c[i] = r.get_vec("colour codebook entry", i);
-    if ((d.codebook_c[i].array() < 0).any() || (d.codebook_c[i].array() > 2).any())
-      bad("colour codebook entry out of range");
-  }
+  get_pca_codebooks(r, d, kp, kn, kc, r.path);
 }
 }  // namespace
 
@@ -167,7 +150,7 @@ chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
     bad("origin, root cube or input radius not finite");
   const auto kp = r.get<std::uint32_t>("codebook size"), kn = r.get<std::uint32_t>("codebook size"),
              kc = r.get<std::uint32_t>("codebook size");
-  if (12ull * kp + 8ull * kn + 12ull * kc > bytes.size() - r.pos) bad("codebooks cut short");
+  if (pca_codebook_bytes(kp, kn, kc) > bytes.size() - r.pos) bad("codebooks cut short");
   read_codebooks(r, d, kp, kn, kc, A.colour);
   const auto nt = r.get<std::uint64_t>("top node count");
   const auto nc = r.get<std::uint64_t>("chunk count");

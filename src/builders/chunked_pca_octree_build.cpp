@@ -72,6 +72,8 @@ void put_raw(byte_writer& w, const pca_data& d) {
     put_m(w, nd.sigma);
     put_m(w, nd.normal_frame);
     put_m(w, nd.normal_sigma);
+    put_m(w, nd.extent);
+    w.put(nd.normal_extent);
     w.put(nd.first);
     w.put(nd.count);
     w.put(nd.mask);
@@ -83,6 +85,7 @@ void put_raw(byte_writer& w, const pca_data& d) {
     put_m(w, c.mean);
     put_m(w, c.frame);
     put_m(w, c.sigma);
+    w.put(c.extent);
   }
 }
 void get_raw(byte_reader& r, pca_data& d) {
@@ -94,6 +97,8 @@ void get_raw(byte_reader& r, pca_data& d) {
     get_m(r, nd.sigma);
     get_m(r, nd.normal_frame);
     get_m(r, nd.normal_sigma);
+    get_m(r, nd.extent);
+    nd.normal_extent = r.get<float>("normal extent");
     nd.first = r.get<std::uint32_t>("first");
     nd.count = r.get<std::uint8_t>("count");
     nd.mask = r.get<std::uint8_t>("mask");
@@ -106,6 +111,7 @@ void get_raw(byte_reader& r, pca_data& d) {
     get_m(r, c.mean);
     get_m(r, c.frame);
     get_m(r, c.sigma);
+    c.extent = r.get<float>("colour extent");
   }
 }
 
@@ -318,8 +324,16 @@ struct chunked_pca_builder : chunked_pass_base {
       if (in.colour) pts.colours[i] = recs[i].colour;
     }
     const top_cell& x = nodes[chunk_top[c]];
+    // A leaf of one or two points takes its parent's spacing (build_pca_data's rule): the
+    // chunk root's parent is a top cell.
+    double parent_spacing = 0;
+    for (const top_cell& y : nodes)
+      if (y.st == top_cell::state::split && chunk_top[c] >= y.first_child &&
+          chunk_top[c] < y.first_child + y.children)
+        parent_spacing = size / std::ldexp(1.0, y.depth) / std::sqrt(static_cast<double>(y.count));
     pca_data d;
-    const pca_subtree_moments m = pca_build_subtree(d, pts, x.cell_min, x.depth, size, po, threads);
+    const pca_subtree_moments m =
+        pca_build_subtree(d, pts, x.cell_min, x.depth, size, po, threads, parent_spacing);
     byte_writer w;
     put_raw(w, d);
     save_file_bytes(temp_path("raw", c), w.bytes);
@@ -440,6 +454,7 @@ struct chunked_pca_builder : chunked_pass_base {
       nd.depth = cell.depth;
       nd.cell_min = cell.cell_min;
       nd.cell_size = size / std::ldexp(1.0, cell.depth);
+      pca_inner_extents(top, x);  // its children (chunk roots or top cells) are done
     }
   }
 
@@ -496,7 +511,7 @@ struct chunked_pca_builder : chunked_pass_base {
     std::array<std::uint64_t, 3> rng{};
     std::array<std::vector<std::uint32_t>, 3> picks;
     const int books = in.colour ? 3 : 2;
-    std::unordered_map<std::uint64_t, std::array<vec3f, 3>> feature;
+    std::unordered_map<std::uint64_t, std::array<pca_feature, 3>> feature;
     for (int b = 0; b < books; ++b) {
       picks[b] = pca_kmeans_picks(total_nodes, po, static_cast<std::uint64_t>(b + 1), rng[b]);
       for (const std::uint32_t g : picks[b]) feature[g];
@@ -515,15 +530,14 @@ struct chunked_pca_builder : chunked_pass_base {
     }
     const std::array<std::uint32_t, 3> k{po.position_codebook, po.normal_codebook,
                                          po.colour_codebook};
-    std::array<std::vector<vec3f>, 3> book;
+    std::array<std::vector<pca_feature>, 3> book;
     for (int b = 0; b < books; ++b) {
-      std::vector<vec3f> xs(picks[b].size());
+      std::vector<pca_feature> xs(picks[b].size());
       for (std::size_t i = 0; i < xs.size(); ++i) xs[i] = feature.at(picks[b][i])[b];
       book[b] = pca_kmeans_train(xs, k[b], po, rng[b], workers);
     }
     top.codebook_p = book[0];
-    top.codebook_n.resize(book[1].size());
-    for (std::size_t c = 0; c < book[1].size(); ++c) top.codebook_n[c] = book[1][c].head<2>();
+    top.codebook_n = book[1];
     top.codebook_c = book[2];
   }
 
@@ -554,12 +568,10 @@ struct chunked_pca_builder : chunked_pass_base {
       byte_writer w;
       w.put(top.lambda_norm);
       w.put(total_nodes);
-      for (const auto* b : {&top.codebook_p, &top.codebook_c}) {
+      for (const auto* b : {&top.codebook_p, &top.codebook_n, &top.codebook_c}) {
         w.put(static_cast<std::uint32_t>(b->size()));
-        for (const vec3f& v : *b) w.put_vec(v);
+        for (const pca_feature& v : *b) put_m(w, v);
       }
-      w.put(static_cast<std::uint32_t>(top.codebook_n.size()));
-      for (const vec2f& v : top.codebook_n) put_m(w, v);
       for (std::uint32_t c = 0; c < chunk_top.size(); ++c) {
         w.put(static_cast<std::uint32_t>(chunk_global[c].size()));
         for (const std::uint32_t v : chunk_global[c]) w.put(v);
@@ -573,12 +585,10 @@ struct chunked_pca_builder : chunked_pass_base {
       byte_reader r{bytes, 0, path};
       top.lambda_norm = r.get<float>("lambda");
       total_nodes = r.get<std::uint64_t>("nodes");
-      for (auto* b : {&top.codebook_p, &top.codebook_c}) {
+      for (auto* b : {&top.codebook_p, &top.codebook_n, &top.codebook_c}) {
         b->resize(r.get<std::uint32_t>("codebook"));
-        for (vec3f& v : *b) v = r.get_vec("codebook", 0);
+        for (pca_feature& v : *b) get_m(r, v);
       }
-      top.codebook_n.resize(r.get<std::uint32_t>("codebook"));
-      for (vec2f& v : top.codebook_n) get_m(r, v);
       chunk_global.resize(chunk_top.size());
       for (auto& g : chunk_global) {
         g.resize(r.get<std::uint32_t>("levels"));
@@ -657,9 +667,7 @@ struct chunked_pca_builder : chunked_pass_base {
     w.put(static_cast<std::uint32_t>(top.codebook_p.size()));
     w.put(static_cast<std::uint32_t>(top.codebook_n.size()));
     w.put(static_cast<std::uint32_t>(top.codebook_c.size()));
-    for (const auto& v : top.codebook_p) w.put_vec(v);
-    for (const auto& v : top.codebook_n) put_m(w, v);
-    for (const auto& v : top.codebook_c) w.put_vec(v);
+    put_pca_codebooks(w, top);
     w.put(static_cast<std::uint64_t>(nodes.size()));
     w.put(static_cast<std::uint64_t>(m));
     put_pca_nodes(w, top);

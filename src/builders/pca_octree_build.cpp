@@ -48,6 +48,8 @@ void pca_validate_options(const pca_octree_options& o, bool input_normals) {
   need(std::isfinite(o.curvature_c) && o.curvature_c >= 0, "curvature_c must be >= 0");
   need(std::isfinite(o.lambda_max) && o.lambda_max >= 1 && o.lambda_max <= 16,
        "lambda_max must lie in [1, 16]");
+  need(std::isfinite(o.surface_angle) && o.surface_angle > 0 && o.surface_angle <= 180,
+       "surface_angle must lie in (0, 180] degrees");
   need(o.position_codebook >= 1 && o.position_codebook <= 4096,
        "position_codebook must lie in 1..4096 (12-bit indices)");
   need(o.normal_codebook >= 1 && o.normal_codebook <= 4096,
@@ -101,6 +103,10 @@ struct octree_points {
   std::vector<vec3d>& pos;
   double cube_size;
   std::uint32_t leaf_size, max_depth;
+  /// Unit normals in input order (normals[index[k]] is point k's) and the cosine of
+  /// pca_octree_options::surface_angle: a small node whose normals differ more is split.
+  const std::vector<vec3f>& normals;
+  float surface_cos;
   std::vector<std::uint32_t> index = identity(pos.size());
   std::vector<vec3d> pos_tmp = std::vector<vec3d>(pos.size());
   std::vector<std::uint32_t> index_tmp = std::vector<std::uint32_t>(pos.size());
@@ -218,6 +224,15 @@ bool partition_parallel(octree_points& p, build_node r, const vec3d& mid, unsign
   return true;
 }
 
+/// Whether the normals of a node's points all lie within surface_angle of the first one (§6's
+/// "normal-coherent part"): if not, the node holds two surfaces or a crease and is split on.
+bool one_surface(const octree_points& p, build_node r) {
+  const vec3f& n0 = p.normals[p.index[r.begin]];
+  for (std::uint32_t k = r.begin + 1; k < r.end; ++k)
+    if (p.normals[p.index[k]].dot(n0) < p.surface_cos) return false;
+  return true;
+}
+
 /// Splits node `i` of `part` at its cell centre (§3) unless it holds at most leaf_size points,
 /// reaches max_depth or holds one position only; appends its children to `part` in octant order.
 /// Touches only the node's own range of the points, so disjoint nodes split concurrently; a
@@ -225,7 +240,8 @@ bool partition_parallel(octree_points& p, build_node r, const vec3d& mid, unsign
 void split_node(octree_points& p, std::vector<part_node>& part, std::size_t i, unsigned threads) {
   const build_node r = part[i].range;
   const std::uint8_t depth = part[i].depth;
-  if (r.end - r.begin <= p.leaf_size || depth >= p.max_depth) return;
+  if (depth >= p.max_depth) return;
+  if (r.end - r.begin <= p.leaf_size && one_surface(p, r)) return;
   const double half = p.cube_size / std::ldexp(1.0, depth + 1);
   const vec3d cmin = part[i].cell_min, mid = cmin + vec3d::Constant(half);
   std::array<std::uint32_t, 9> start{};
@@ -327,8 +343,16 @@ std::vector<build_node> build_octree(octree_points& p, pca_data& d, std::uint8_t
 pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& ranges,
                                     const std::vector<vec3d>& pos,
                                     const std::vector<vec3f>& normals,
-                                    const std::vector<rgb8>& cols, unsigned threads) {
+                                    const std::vector<rgb8>& cols, unsigned threads,
+                                    double root_parent_spacing) {
   const std::size_t n = d.nodes.size();
+  // A leaf of one or two points takes the spacing of its parent's points: its cell edge over
+  // the square root of their count.
+  std::vector<double> parent_spacing(n, root_parent_spacing);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::uint32_t c = d.nodes[i].first; c < d.nodes[i].first + d.nodes[i].count; ++c)
+      parent_spacing[c] =
+          d.nodes[i].cell_size / std::sqrt(static_cast<double>(ranges[i].end - ranges[i].begin));
   const bool colour = !cols.empty();
   if (colour) d.colours.resize(n);
   // The normals first: their mean is what the degenerate position rules align z with. If they
@@ -370,6 +394,12 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
         pca_set_statistics(nd, mp, normal[i]);
         if (colour)
           d.colours[i] = pca_colours_from(colour_here[i - b].mean, colour_here[i - b].covariance());
+        if (nd.count == 0)
+          pca_leaf_extents(nd, colour ? &d.colours[i] : nullptr, pos.data() + r.begin,
+                           normals.data() + r.begin, colour ? cols.data() + r.begin : nullptr,
+                           r.end - r.begin, parent_spacing[i]);
+        else
+          pca_inner_extents(d, i);
       }
     });
     std::swap(below, here);
@@ -393,17 +423,21 @@ void pca_set_statistics(pca_node& nd, const scatter_accumulator& positions,
 
 pca_subtree_moments pca_build_subtree(pca_data& d, pca_points& pts, const vec3d& cell_min,
                                       std::uint8_t depth, double root_size,
-                                      const pca_octree_options& o, unsigned threads) {
+                                      const pca_octree_options& o, unsigned threads,
+                                      double root_parent_spacing) {
   d.cube_min = cell_min;
   d.cube_size = root_size / std::ldexp(1.0, depth);
-  octree_points p{pts.pos, root_size, o.leaf_size, o.max_depth};
+  const auto surface_cos =
+      static_cast<float>(std::cos(static_cast<double>(o.surface_angle) * std::numbers::pi / 180));
+  octree_points p{pts.pos, root_size, o.leaf_size, o.max_depth, pts.normals, surface_cos};
   const std::vector<build_node> ranges = build_octree(p, d, depth, threads);
   pts.normals = permute_by(pts.normals, p.index, threads);
   pts.colours = permute_by(pts.colours, p.index, threads);
-  const pca_subtree_moments m =
-      node_statistics(d, ranges, pts.pos, pts.normals, pts.colours, threads);
-  pca_derive_cells(d, threads);
-  return m;
+  pca_derive_cells(d, threads);    // a leaf of one point takes its spacing from its cell
+  if (!(root_parent_spacing > 0))  // the whole tree's root: its own cell and points
+    root_parent_spacing = d.cube_size / std::sqrt(static_cast<double>(pts.pos.size()));
+  return node_statistics(d, ranges, pts.pos, pts.normals, pts.colours, threads,
+                         root_parent_spacing);
 }
 
 pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
@@ -554,11 +588,11 @@ void derive_node_bounds(pca_data& d, std::size_t i) {
     lambda = std::clamp(std::isfinite(l) ? l : d.lambda_max, 1.0f, d.lambda_max);
   }
   nd.lambda = lambda;
-  // The generator truncates at γ: positions lie in the ellipsoid of semi-axes γ·λ·σ_p,
-  // normals within γ·σ_n¹ of the mean normal. Children's bounds are added so that the
-  // sphere and the cone hold everything the subtree generates.
-  float r = d.gamma * lambda * nd.sigma.x();
-  float cone = std::min(pi, d.gamma * nd.normal_sigma.x());
+  // Generated positions lie in the span box (half-extents `extent` along f_p), normals within
+  // normal_extent of the mean normal. Children's bounds are added so that the sphere and the
+  // cone hold everything the subtree generates.
+  float r = nd.extent.norm();
+  float cone = std::min(pi, nd.normal_extent);
   const vec3f axis = nd.normal_frame.col(2);
   for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
     const pca_node& ch = d.nodes[c];

@@ -39,6 +39,15 @@ pca_normal_result pca_normal_finish(const mat3d& frame, Eigen::Matrix2d m, std::
 void pca_set_statistics(pca_node& nd, const scatter_accumulator& positions,
                         const pca_normal_result& normals);
 
+/// What a leaf's points span (pca_node::extent, normal_extent, pca_colour::extent; colour may be
+/// null): from its count points p (relative to the origin), unit normals n and colours c (null
+/// without colour), about its statistics, which must be set, and its cell (for one point).
+void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
+                      const rgb8* c, std::size_t count, double parent_spacing);
+/// The same for inner node i of d from its children's (set before): the box of their boxes'
+/// corners in its frame, the cone of their cones, the ball of their colour balls.
+void pca_inner_extents(pca_data& d, std::size_t i);
+
 /// The points of a subtree being built: positions relative to the origin (double), unit normals,
 /// colours (or empty). pca_build_subtree() reorders them into octree order.
 struct pca_points {
@@ -56,7 +65,8 @@ struct pca_subtree_moments {
 /// every node's statistics; pts end in octree order. d.cube_min / cube_size become the cell.
 pca_subtree_moments pca_build_subtree(pca_data& d, pca_points& pts, const vec3d& cell_min,
                                       std::uint8_t depth, double root_size,
-                                      const pca_octree_options& o, unsigned threads);
+                                      const pca_octree_options& o, unsigned threads,
+                                      double root_parent_spacing = 0);
 
 /// Cells of every node from the root cube and the child masks (top-down). Before decoding:
 /// μ_p is quantised relative to the node's cell.
@@ -75,16 +85,17 @@ void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads);
 
 /// pca_quantise() in its steps, for a build whose nodes are not all in one pca_data (the chunked
 /// build numbers them as build_pca_data would, breadth first):
-/// the classification features of node i (log₂ σ_p / cell edge; σ_n; σ_c when `fc`),
-void pca_features(const pca_data& d, std::size_t i, vec3f& fp, vec3f& fn, vec3f* fc);
+/// the classification features of node i (pca_data's codebooks; colour when `fc`),
+void pca_features(const pca_data& d, std::size_t i, pca_feature& fp, pca_feature& fn,
+                  pca_feature* fc);
 /// which of n nodes k-means samples for codebook `stream` (1: σ_p, 2: σ_n, 3: σ_c), ascending,
 /// and the random state the seeding continues from,
 std::vector<std::uint32_t> pca_kmeans_picks(std::size_t n, const pca_octree_options& o,
                                             std::uint64_t stream, std::uint64_t& rng);
 /// the codebook trained on the picked nodes' features (in pick order),
-std::vector<vec3f> pca_kmeans_train(const std::vector<vec3f>& xs, std::uint32_t k,
-                                    const pca_octree_options& o, std::uint64_t& rng,
-                                    unsigned threads);
+std::vector<pca_feature> pca_kmeans_train(const std::vector<pca_feature>& xs, std::uint32_t k,
+                                          const pca_octree_options& o, std::uint64_t& rng,
+                                          unsigned threads);
 /// and every node of d encoded against d's codebooks and decoded back (d.records,
 /// d.colour_records, d.nodes, d.colours; the error stats of d.stats over d's nodes).
 void pca_encode(pca_data& d, unsigned threads);
@@ -136,6 +147,12 @@ void put_pca_nodes(byte_writer& w, const pca_data& d);
 void get_pca_nodes(byte_reader& r, pca_data& d, std::uint64_t nn, bool colour,
                    std::uint8_t root_depth, const std::string& path);
 std::size_t pca_record_bytes(bool quantised, bool colour);
+/// The codebooks as the files store them (pca_feature_dims numbers an entry, float), their
+/// bytes, and the validating read of kp, kn, kc entries into d.
+void put_pca_codebooks(byte_writer& w, const pca_data& d);
+std::uint64_t pca_codebook_bytes(std::uint64_t kp, std::uint64_t kn, std::uint64_t kc);
+void get_pca_codebooks(byte_reader& r, pca_data& d, std::uint32_t kp, std::uint32_t kn,
+                       std::uint32_t kc, const std::string& path);
 
 /// The bits each axis of μ_p gets, from the decoded f_p³ (10 for the axis least aligned).
 std::array<unsigned, 3> pca_mean_bits(const vec3f& f3);

@@ -4,16 +4,18 @@
 //   A. Kalaiah, A. Varshney. Statistical Point Geometry. SGP 2003, §3.1 and Fig. 5: the node
 //   records of 13 bytes (17 with colour) and the k-means codebooks they index.
 //
-// Little-endian file, version 1:
+// Little-endian file, version 2 (version 1 had classes of σ only, without the extents):
 //   header   "PBRLODSG" | u32 version | u32 flags (1 = colour, 2 = quantised)
 //            | u32 leaf_size | u32 max_depth | f32 γ | f32 curvature c | f32 λ_max
 //            | u64 input points | u64 nodes | u32 codebook sizes p, n, c (0 when not quantised;
 //            c is 0 without colour) | f64 origin[3] | f64 root cube min[3] (relative to origin)
 //            | f64 root cube edge | f64 input radius (origin = centre of the input's box)
-//   codebooks f32[3] × p (log₂ σ_p / cell edge) | f32[2] × n (σ_n, radians) | f32[3] × c (σ_c)
+//   codebooks f32[6] × p (log₂ of σ_p¹..³ and of the extents, over the cell edge)
+//            | f32[3] × n (σ_n¹, σ_n², normal extent; radians) | f32[4] × c (σ_c¹..³, extent)
 //   tree     u8 child mask per node, breadth first (first child and depth follow from them)
 //   records  quantised: 13 bytes per node [+ u32 colour record] (layout: pca_octree_internal.hpp)
-//            float: f32 μ_p[3] f_p[9] σ_p[3] f_n[9] σ_n[2] [+ μ_c[3] f_c[9] σ_c[3]]
+//            float: f32 μ_p[3] f_p[9] σ_p[3] f_n[9] σ_n[2] extent[3] normal extent
+//                   [+ μ_c[3] f_c[9] σ_c[3] colour extent]
 //   trailer  u64 FNV-1a of every byte before it
 // No timings: the same input and options give the same bytes.
 
@@ -31,9 +33,9 @@
 namespace pbr_lod::detail {
 
 namespace {
-constexpr file_format pca_format{"PCA octree", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'G'}, 1};
+constexpr file_format pca_format{"PCA octree", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'G'}, 2};
 constexpr std::size_t header_bytes = 8 + 4 * 2 + 4 * 2 + 4 * 3 + 8 * 2 + 4 * 3 + 8 * 8;
-constexpr std::size_t float_node_floats = 26, float_colour_floats = 15;
+constexpr std::size_t float_node_floats = 30, float_colour_floats = 16;
 
 std::size_t record_bytes(bool quantised, bool colour) {  // without the child mask
   if (quantised) return 13 + (colour ? 4 : 0);
@@ -48,10 +50,50 @@ std::size_t pca_record_bytes(bool quantised, bool colour) {
   return record_bytes(quantised, colour);
 }
 
+std::uint64_t pca_codebook_bytes(std::uint64_t kp, std::uint64_t kn, std::uint64_t kc) {
+  return 4 * (kp * pca_feature_dims[0] + kn * pca_feature_dims[1] + kc * pca_feature_dims[2]);
+}
+
 std::size_t pca_file_bytes(const pca_data& d) {
   const bool colour = !d.colours.empty();
-  return header_bytes + 12 * d.codebook_p.size() + 8 * d.codebook_n.size() +
-         12 * d.codebook_c.size() + d.nodes.size() * (1 + record_bytes(d.quantised, colour)) + 8;
+  return header_bytes +
+         pca_codebook_bytes(d.codebook_p.size(), d.codebook_n.size(), d.codebook_c.size()) +
+         d.nodes.size() * (1 + record_bytes(d.quantised, colour)) + 8;
+}
+
+void put_pca_codebooks(byte_writer& w, const pca_data& d) {
+  const std::vector<pca_feature>* books[3] = {&d.codebook_p, &d.codebook_n, &d.codebook_c};
+  for (int b = 0; b < 3; ++b)
+    for (const pca_feature& v : *books[b])
+      for (int k = 0; k < pca_feature_dims[b]; ++k) w.put(v[k]);
+}
+
+void get_pca_codebooks(byte_reader& r, pca_data& d, std::uint32_t kp, std::uint32_t kn,
+                       std::uint32_t kc, const std::string& path) {
+  const auto bad = [&](const std::string& what) { throw FormatError(path + ": " + what); };
+  const auto get = [&](int b, const char* what, std::uint32_t i) {
+    pca_feature v = pca_feature::Zero();
+    for (int k = 0; k < pca_feature_dims[b]; ++k) v[k] = r.get_finite(what, i);
+    return v;
+  };
+  d.codebook_p.resize(kp);
+  for (std::uint32_t i = 0; i < kp; ++i) {
+    d.codebook_p[i] = get(0, "position codebook entry", i);
+    if ((d.codebook_p[i].array().abs() > 128).any())
+      bad("position codebook entry " + std::to_string(i) + " out of range");
+  }
+  d.codebook_n.resize(kn);
+  for (std::uint32_t i = 0; i < kn; ++i) {
+    d.codebook_n[i] = get(1, "normal codebook entry", i);
+    if (!((d.codebook_n[i].array() >= 0).all() && (d.codebook_n[i].array() <= 4).all()))
+      bad("normal codebook entry " + std::to_string(i) + " outside [0, 4] radians");
+  }
+  d.codebook_c.resize(kc);
+  for (std::uint32_t i = 0; i < kc; ++i) {
+    d.codebook_c[i] = get(2, "colour codebook entry", i);
+    if ((d.codebook_c[i].array() < 0).any() || (d.codebook_c[i].array() > 2).any())
+      bad("colour codebook entry " + std::to_string(i) + " outside [0, 2]");
+  }
 }
 
 void put_pca_nodes(byte_writer& w, const pca_data& d) {
@@ -70,11 +112,14 @@ void put_pca_nodes(byte_writer& w, const pca_data& d) {
     put_mat(w, nd.normal_frame);
     w.put(nd.normal_sigma.x());
     w.put(nd.normal_sigma.y());
+    w.put_vec(nd.extent);
+    w.put(nd.normal_extent);
     if (colour) {
       const pca_colour& c = d.colours[i];
       w.put_vec(c.mean);
       put_mat(w, c.frame);
       w.put_vec(c.sigma);
+      w.put(c.extent);
     }
   }
 }
@@ -99,12 +144,7 @@ void save_pca_data(const pca_data& d, const std::string& path) {
   for (int k = 0; k < 3; ++k) w.put(d.cube_min[k]);
   w.put(d.cube_size);
   w.put(d.input_radius);
-  for (const auto& v : d.codebook_p) w.put_vec(v);
-  for (const auto& v : d.codebook_n) {
-    w.put(v.x());
-    w.put(v.y());
-  }
-  for (const auto& v : d.codebook_c) w.put_vec(v);
+  put_pca_codebooks(w, d);
   put_pca_nodes(w, d);
   append_checksum(w);
   save_file_bytes(path, w.bytes);
@@ -190,15 +230,20 @@ void get_pca_nodes(byte_reader& r, pca_data& d, std::uint64_t nn, bool colour,
       nd.normal_frame = get_frame(r, path, "normal frame", i);
       nd.normal_sigma.x() = r.get_finite("normal sigma", i);
       nd.normal_sigma.y() = r.get_finite("normal sigma", i);
+      nd.extent = r.get_vec("extent", i);
+      nd.normal_extent = r.get_finite("normal extent", i);
       if ((nd.sigma.array() < 0).any() || (nd.normal_sigma.array() < 0).any())
         bad("node " + std::to_string(i) + " has a negative sigma");
+      if ((nd.extent.array() < 0).any() || !(nd.normal_extent >= 0))
+        bad("node " + std::to_string(i) + " has a negative extent");
       if (colour) {
         pca_colour& c = d.colours[i];
         c.mean = r.get_vec("colour mean", i);
         c.frame = get_frame(r, path, "colour frame", i);
         c.sigma = r.get_vec("colour sigma", i);
-        if ((c.sigma.array() < 0).any())
-          bad("node " + std::to_string(i) + " has a negative colour sigma");
+        c.extent = r.get_finite("colour extent", i);
+        if ((c.sigma.array() < 0).any() || !(c.extent >= 0))
+          bad("node " + std::to_string(i) + " has a negative colour sigma or extent");
       }
     }
   }
@@ -251,33 +296,13 @@ pca_data load_pca_data(const std::string& path, bool colour) {
     bad("root cube is not finite or has no extent");
   const std::uint64_t size = bytes.size();
   const std::uint64_t rb = 1 + record_bytes(d.quantised, colour);
-  if (nn > size / rb || header_bytes + 12ull * kp + 8ull * kn + 12ull * kc + nn * rb + 8 != size)
+  if (nn > size / rb || header_bytes + pca_codebook_bytes(kp, kn, kc) + nn * rb + 8 != size)
     bad(std::to_string(nn) + " nodes and codebooks of " + std::to_string(kp) + ", " +
         std::to_string(kn) + ", " + std::to_string(kc) + " entries do not match the file size " +
         std::to_string(size));
   if (!checksum_matches(bytes)) bad("checksum mismatch (corrupt file)");
 
-  d.codebook_p.resize(kp);
-  for (std::uint32_t i = 0; i < kp; ++i) {
-    d.codebook_p[i] = r.get_vec("position codebook entry", i);
-    if ((d.codebook_p[i].array().abs() > 128).any())
-      bad("position codebook entry " + std::to_string(i) + " out of range");
-  }
-  d.codebook_n.resize(kn);
-  for (std::uint32_t i = 0; i < kn; ++i) {
-    const float a = r.get_finite("normal codebook entry", i),
-                b = r.get_finite("normal codebook entry", i);
-    if (!(a >= 0 && b >= 0 && a <= 4 && b <= 4))
-      bad("normal codebook entry " + std::to_string(i) + " outside [0, 4] radians");
-    d.codebook_n[i] = vec2f(a, b);
-  }
-  d.codebook_c.resize(kc);
-  for (std::uint32_t i = 0; i < kc; ++i) {
-    d.codebook_c[i] = r.get_vec("colour codebook entry", i);
-    if ((d.codebook_c[i].array() < 0).any() || (d.codebook_c[i].array() > 2).any())
-      bad("colour codebook entry " + std::to_string(i) + " outside [0, 2]");
-  }
-
+  get_pca_codebooks(r, d, kp, kn, kc, path);
   get_pca_nodes(r, d, nn, colour, 0, path);
   pca_derive_bounds(d);
   auto& st = d.stats;

@@ -9,7 +9,9 @@
 //                 indices; μ_p in 32 bits (10-11-11 over the node's octree cell), f_p and f_n as an
 //                 axis (16-bit normal code, core/normal_quantization) and a rotation about it (8
 //                 bits), μ_c 5-6-5, f_c as a 7-bit axis and a 3-bit rotation: 13 bytes a node, 17
-//                 with colour (pca_quantise(), encode_node(), pca_decode_node()).
+//                 with colour (pca_quantise(), encode_node(), pca_decode_node()). The classes also
+//                 hold the extents that bound generation (pca_feature), so the record keeps its
+//                 13 bytes.
 // Deviations (docs/pca-octree.md): σ_p is classified as log₂(σ_p / cell edge), so that one
 // codebook serves every octree level with a bounded relative error (the paper clusters raw
 // σ_p); the 10-bit axis of μ_p is the world axis least aligned with f_p³ (our cells are cubes,
@@ -39,6 +41,8 @@ std::uint64_t splitmix(std::uint64_t& s) {
 double uniform01(std::uint64_t& s) {
   return static_cast<double>(splitmix(s) >> 11) * 0x1p-53;
 }
+
+using feature_d = Eigen::Matrix<double, pca_feature::RowsAtCompileTime, 1>;
 
 const normal_quantizer& axis_quantizer() {
   static const auto q = normal_quantizer::shared(pca_layout::axis_bits);
@@ -73,20 +77,20 @@ mat3f decode_frame(const vec3f& z, std::uint32_t code, int bits) {
   return f;
 }
 
-/// Exact nearest codebook entry of a point: the least squared distance (in float, summed
-/// x, y, z), ties to the lowest entry, through a k-d tree over the entries (median splits on the
-/// widest axis, leaves of up to 8). A far side is skipped only when its slab distance exceeds
-/// the best distance, which float rounding keeps exact (rounding is monotone), so the answer
-/// is brute force's and does not depend on the tree's shape. Replaces a general k-NN index:
+/// Exact nearest codebook entry of a point: the least squared distance (in float, summed over
+/// the coordinates in order), ties to the lowest entry, through a k-d tree over the entries (median
+/// splits on the widest axis, leaves of up to 8). A far side is skipped only when its slab distance
+/// exceeds the best distance, which float rounding keeps exact (rounding is monotone), so the
+/// answer is brute force's and does not depend on the tree's shape. Replaces a general k-NN index:
 /// the codebooks are small and the queries many (every node of the tree).
 class nearest_entry {
  public:
-  explicit nearest_entry(const std::vector<vec3f>& centres) : c_(centres) {
+  explicit nearest_entry(const std::vector<pca_feature>& centres) : c_(centres) {
     order_.resize(centres.size());
     std::iota(order_.begin(), order_.end(), 0u);
     if (!centres.empty()) build(0, static_cast<std::uint32_t>(centres.size()));
   }
-  [[nodiscard]] std::uint32_t operator()(const vec3f& q) const {
+  [[nodiscard]] std::uint32_t operator()(const pca_feature& q) const {
     float best = std::numeric_limits<float>::infinity();
     std::uint32_t at = 0;
     if (!nodes_.empty()) search(0, q, best, at);
@@ -105,7 +109,7 @@ class nearest_entry {
     const auto id = static_cast<std::uint32_t>(nodes_.size());
     nodes_.push_back({b, e});
     if (e - b <= leaf_entries) return id;
-    vec3f lo = c_[order_[b]], hi = lo;
+    pca_feature lo = c_[order_[b]], hi = lo;
     for (std::uint32_t i = b; i < e; ++i) {
       lo = lo.cwiseMin(c_[order_[i]]);
       hi = hi.cwiseMax(c_[order_[i]]);
@@ -126,13 +130,16 @@ class nearest_entry {
     nd.right = right;
     return id;
   }
-  void search(std::uint32_t n, const vec3f& q, float& best, std::uint32_t& at) const {
+  void search(std::uint32_t n, const pca_feature& q, float& best, std::uint32_t& at) const {
     const kd_node& nd = nodes_[n];
     if (nd.axis < 0) {
       for (std::uint32_t i = nd.begin; i < nd.end; ++i) {
         const std::uint32_t k = order_[i];
-        const float dx = q.x() - c_[k].x(), dy = q.y() - c_[k].y(), dz = q.z() - c_[k].z();
-        const float d = dx * dx + dy * dy + dz * dz;
+        float d = 0;
+        for (int j = 0; j < pca_feature::RowsAtCompileTime; ++j) {
+          const float dj = q[j] - c_[k][j];
+          d += dj * dj;
+        }
         if (d < best || (d == best && k < at)) {
           best = d;
           at = k;
@@ -145,7 +152,7 @@ class nearest_entry {
     if (diff * diff <= best) search(diff < 0 ? nd.right : nd.left, q, best, at);
   }
 
-  const std::vector<vec3f>& c_;
+  const std::vector<pca_feature>& c_;
   std::vector<std::uint32_t> order_;
   std::vector<kd_node> nodes_;
 };
@@ -154,30 +161,26 @@ class nearest_entry {
 /// new centre drawn with probability proportional to the squared distance to the nearest
 /// chosen one. The distances are kept in blocks of a fixed size whose sums are taken in block
 /// order, so the draws do not depend on the number of threads.
-std::vector<vec3f> seed_centres(const std::vector<vec3f>& xs, std::uint32_t k, std::uint64_t& rng,
-                                unsigned threads) {
+std::vector<pca_feature> seed_centres(const std::vector<pca_feature>& xs, std::uint32_t k,
+                                      std::uint64_t& rng, unsigned threads) {
   const std::size_t s = xs.size();
   constexpr std::size_t block = 2048;
   const std::size_t blocks = (s + block - 1) / block;
-  std::vector<double> x(s), y(s), z(s), block_sum(blocks);
-  for (std::size_t i = 0; i < s; ++i) {
-    x[i] = xs[i].x();
-    y[i] = xs[i].y();
-    z[i] = xs[i].z();
-  }
-  std::vector<vec3f> centres;
+  std::vector<double> block_sum(blocks);
+  std::vector<feature_d> x(s);
+  for (std::size_t i = 0; i < s; ++i) x[i] = xs[i].cast<double>();
+  std::vector<pca_feature> centres;
   centres.reserve(k);
   std::vector<double> d2(s, std::numeric_limits<double>::infinity());
   std::size_t next =
       std::min(s - 1, static_cast<std::size_t>(uniform01(rng) * static_cast<double>(s)));
   while (true) {
     centres.push_back(xs[next]);
-    const double cx = x[next], cy = y[next], cz = z[next];
+    const feature_d cx = x[next];
     parallel_tasks(blocks, threads, [&](std::size_t b, unsigned) {
       double sum = 0;
       for (std::size_t i = b * block; i < std::min(s, (b + 1) * block); ++i) {
-        const double dx = x[i] - cx, dy = y[i] - cy, dz = z[i] - cz;
-        d2[i] = std::min(d2[i], dx * dx + dy * dy + dz * dz);
+        d2[i] = std::min(d2[i], (x[i] - cx).squaredNorm());
         sum += d2[i];
       }
       block_sum[b] = sum;
@@ -266,11 +269,11 @@ std::vector<std::uint32_t> pca_kmeans_picks(std::size_t n, const pca_octree_opti
   return pick;
 }
 
-std::vector<vec3f> pca_kmeans_train(const std::vector<vec3f>& xs, std::uint32_t k,
-                                    const pca_octree_options& o, std::uint64_t& rng,
-                                    unsigned threads) {
+std::vector<pca_feature> pca_kmeans_train(const std::vector<pca_feature>& xs, std::uint32_t k,
+                                          const pca_octree_options& o, std::uint64_t& rng,
+                                          unsigned threads) {
   const std::size_t s = xs.size();
-  std::vector<vec3f> centres = seed_centres(xs, k, rng, threads);
+  std::vector<pca_feature> centres = seed_centres(xs, k, rng, threads);
   std::vector<std::uint32_t> a, prev;
   for (std::uint32_t it = 0; it < o.kmeans_iterations; ++it) {
     const nearest_entry index(centres);
@@ -279,7 +282,7 @@ std::vector<vec3f> pca_kmeans_train(const std::vector<vec3f>& xs, std::uint32_t 
       for (std::size_t i = lo; i < hi; ++i) a[i] = index(xs[i]);
     });
     if (a == prev) break;
-    std::vector<vec3d> sum(centres.size(), vec3d::Zero());
+    std::vector<feature_d> sum(centres.size(), feature_d::Zero());
     std::vector<std::size_t> cnt(centres.size(), 0);
     for (std::size_t i = 0; i < s; ++i) {
       sum[a[i]] += xs[i].cast<double>();
@@ -292,13 +295,24 @@ std::vector<vec3f> pca_kmeans_train(const std::vector<vec3f>& xs, std::uint32_t 
   return centres;
 }
 
-void pca_features(const pca_data& d, std::size_t i, vec3f& fp, vec3f& fn, vec3f* fc) {
+void pca_features(const pca_data& d, std::size_t i, pca_feature& fp, pca_feature& fn,
+                  pca_feature* fc) {
   const pca_node& nd = d.nodes[i];
-  for (int k = 0; k < 3; ++k)
-    fp[k] = static_cast<float>(
-        std::log2(std::max(static_cast<double>(nd.sigma[k]) / nd.cell_size, 0x1p-60)));
-  fn = vec3f(nd.normal_sigma.x(), nd.normal_sigma.y(), 0);
-  if (fc != nullptr) *fc = d.colours[i].sigma;
+  const auto octaves = [&](float v) {
+    return static_cast<float>(std::log2(std::max(static_cast<double>(v) / nd.cell_size, 0x1p-60)));
+  };
+  for (int k = 0; k < 3; ++k) {
+    fp[k] = octaves(nd.sigma[k]);
+    fp[3 + k] = octaves(nd.extent[k]);
+  }
+  fn.setZero();
+  fn.head<2>() = nd.normal_sigma;
+  fn[2] = nd.normal_extent;
+  if (fc != nullptr) {
+    fc->setZero();
+    fc->head<3>() = d.colours[i].sigma;
+    (*fc)[3] = d.colours[i].extent;
+  }
 }
 
 std::array<unsigned, 3> pca_mean_bits(const vec3f& f3) {
@@ -318,11 +332,18 @@ void pca_decode_node(const pca_data& d, std::uint32_t i, pca_node& nd, pca_colou
   const vec3f z = q.decode(get_bits(r, L::fn_axis, L::axis_bits));
   nd.normal_frame = decode_frame(z, get_bits(r, L::fn_angle, L::angle_bits), L::angle_bits);
   // σ_p from its class: cell edge · 2^feature, floored (§3).
-  const vec3f& fp = d.codebook_p[get_bits(r, L::sp, 12)];
-  for (int k = 0; k < 3; ++k)
-    nd.sigma[k] =
-        static_cast<float>(std::max(nd.cell_size * std::exp2(static_cast<double>(fp[k])), 1e-15));
-  nd.normal_sigma = d.codebook_n[get_bits(r, L::sn, 12)].cwiseMax(0.0f);
+  const pca_feature& fp = d.codebook_p[get_bits(r, L::sp, 12)];
+  const auto length = [&](float octaves) {
+    return static_cast<float>(
+        std::max(nd.cell_size * std::exp2(static_cast<double>(octaves)), 1e-15));
+  };
+  for (int k = 0; k < 3; ++k) {
+    nd.sigma[k] = length(fp[k]);
+    nd.extent[k] = length(fp[3 + k]);
+  }
+  const pca_feature& fn = d.codebook_n[get_bits(r, L::sn, 12)];
+  nd.normal_sigma = fn.head<2>().cwiseMax(0.0f);
+  nd.normal_extent = std::max(0.0f, fn[2]);
   // μ_p over the cell, the 10-bit axis from the decoded f_p³.
   const auto bits = pca_mean_bits(f3);
   unsigned pos = L::mu;
@@ -336,7 +357,9 @@ void pca_decode_node(const pca_data& d, std::uint32_t i, pca_node& nd, pca_colou
   if (colour == nullptr) return;
   const std::uint32_t c = d.colour_records[i];
   const auto field = [&](unsigned at, unsigned bits_) { return (c >> at) & ((1u << bits_) - 1); };
-  colour->sigma = d.codebook_c[field(L::sc, 6)].cwiseMax(0.0f);
+  const pca_feature& fc = d.codebook_c[field(L::sc, 6)];
+  colour->sigma = fc.head<3>().cwiseMax(0.0f);
+  colour->extent = std::max(0.0f, fc[3]);
   const std::uint32_t m = field(L::muc, 16);
   colour->mean =
       vec3f(static_cast<float>(m >> 11) / 31.0f, static_cast<float>((m >> 5) & 63u) / 63.0f,
@@ -394,20 +417,19 @@ void pca_quantise(pca_data& d, const pca_octree_options& o, unsigned threads) {
   const auto t0 = std::chrono::steady_clock::now();
   const std::size_t n = d.nodes.size();
   const bool colour = !d.colours.empty();
-  std::vector<vec3f> fp(n), fn(n), fc(colour ? n : 0);
+  std::vector<pca_feature> fp(n), fn(n), fc(colour ? n : 0);
   for (std::size_t i = 0; i < n; ++i) pca_features(d, i, fp[i], fn[i], colour ? &fc[i] : nullptr);
   // k-means on a sample of each feature (its own random stream per codebook).
-  const auto codebook = [&](const std::vector<vec3f>& x, std::uint32_t k, std::uint64_t stream) {
+  const auto codebook = [&](const std::vector<pca_feature>& x, std::uint32_t k,
+                            std::uint64_t stream) {
     std::uint64_t rng = 0;
     const std::vector<std::uint32_t> pick = pca_kmeans_picks(n, o, stream, rng);
-    std::vector<vec3f> xs(pick.size());
+    std::vector<pca_feature> xs(pick.size());
     for (std::size_t i = 0; i < pick.size(); ++i) xs[i] = x[pick[i]];
     return pca_kmeans_train(xs, k, o, rng, threads);
   };
   d.codebook_p = codebook(fp, o.position_codebook, 1);
-  const auto cn = codebook(fn, o.normal_codebook, 2);
-  d.codebook_n.resize(cn.size());
-  for (std::size_t c = 0; c < cn.size(); ++c) d.codebook_n[c] = cn[c].head<2>();
+  d.codebook_n = codebook(fn, o.normal_codebook, 2);
   if (colour) d.codebook_c = codebook(fc, o.colour_codebook, 3);
   d.stats.kmeans_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -418,10 +440,7 @@ void pca_encode(pca_data& d, unsigned threads) {
   const auto t1 = std::chrono::steady_clock::now();
   const std::size_t n = d.nodes.size();
   const bool colour = !d.colours.empty();
-  std::vector<vec3f> cn(d.codebook_n.size());
-  for (std::size_t c = 0; c < cn.size(); ++c)
-    cn[c] = vec3f(d.codebook_n[c].x(), d.codebook_n[c].y(), 0);
-  const nearest_entry near_p(d.codebook_p), near_n(cn), near_c(d.codebook_c);
+  const nearest_entry near_p(d.codebook_p), near_n(d.codebook_n), near_c(d.codebook_c);
   d.records.assign(n, {});
   if (colour) d.colour_records.assign(n, 0);
   constexpr std::size_t block = 4096;
@@ -430,7 +449,7 @@ void pca_encode(pca_data& d, unsigned threads) {
     for (std::size_t i = b * block; i < std::min(n, (b + 1) * block); ++i) {
       const auto id = static_cast<std::uint32_t>(i);
       const pca_node before = d.nodes[i];
-      vec3f fp, fn, fc;
+      pca_feature fp, fn, fc;
       pca_features(d, i, fp, fn, colour ? &fc : nullptr);
       encode_node(d, id, near_p(fp), near_n(fn));
       if (colour) d.colour_records[i] = encode_colour(d.colours[i], near_c(fc));

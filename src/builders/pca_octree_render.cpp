@@ -3,21 +3,22 @@
 // This work is based on:
 //   A. Kalaiah, A. Varshney. Statistical Point Geometry. SGP 2003.
 // What this file implements:
-//   §4  pca_required_points(): a·ln a + c·a points for a node whose ellipsoid (semi-axes
-//       γ·λ·σ_p along f_p) covers a pixels; a from the eigen-analysis of the projected
-//       ellipsoid (its screen ellipse's semi-axes are the singular values of the projected
-//       axes). pca_generate(): the trivariate Box–Muller generator for positions
+//   §4  pca_required_points(): the points a node needs for the area its span covers on screen
+//       (a·ln a + c·a for the paper's random points). pca_generate(): the paper's generators —
+//       the trivariate Box–Muller generator for positions
 //           τ = √(−2 ln r₀), (x, y, z) = σ ∘ (τ√(1−r₂²) cos 2πr₁, τ√(1−r₂²) sin 2πr₁, τ r₂)
 //       and colours, the 2-D one for normals (α = σ_n¹τ cos 2πr₁, β = σ_n²τ sin 2πr₁,
 //       θ = √(α² + β²), φ = atan(β/α)), with r₀ drawn from [e^{−γ²/2}, 1] so that τ ≤ γ (the
 //       extent γ·σ of §3). Each point's uniforms come from a counter-based stream keyed by
 //       (seed, node, point index).
-// Deviations (docs/pca-octree.md): the minor semi-axis of the projected ellipse is at least half
-// a point, so a patch seen edge-on still gets a line of points; the paper's generator is used as
-// written, although its τ is the radius of a 2-D Gaussian: along each axis the points' variance
-// is E[τ²]/3·σ² ≈ 0.66 σ² (truncated at γ = 3.5), not σ².
+// Deviations (docs/pca-octree.md): every generated position, normal and colour stays inside
+// what the node's own points span (pca_node::extent, normal_extent, pca_colour::extent): a
+// draw outside is drawn again, and after four misses moved onto the boundary. The default
+// generator (pca_generator::span) places the tangential coordinates on a low-discrepancy
+// sequence, uniform over the span, so a node covers its pixels with ≈ density points a pixel
+// instead of a·ln a; the paper's generator is pca_generator::paper.
 
-#include <Eigen/Eigenvalues>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -54,64 +55,144 @@ vec3f box_muller3(stream& s, float tmin) {
   return {q * std::cos(phi), q * std::sin(phi), tau * r2};
 }
 
+/// A standard normal deviate (Box–Muller, one of the pair), radius truncated at γ.
+float box_muller1(stream& s, float tmin) {
+  const float r0 = 1.0f - (1.0f - tmin) * s.next();
+  return std::sqrt(-2.0f * std::log(r0)) * std::cos(2.0f * std::numbers::pi_v<float> * s.next());
+}
+
+/// Tries before a draw outside the span is moved onto its boundary: a node's extent is at least
+/// its σ along every axis (the largest |offset| is at least the root mean square), so a draw
+/// lands inside with probability ≥ 0.68 per axis and four misses are rare.
+constexpr int tries = 4;
+
+/// Roberts' R2 sequence (the plastic constant g: steps 1/g, 1/g² modulo 1) in 32-bit fixed
+/// point: x_k = frac(o + k·a) exactly for every k, so a node's first k points are evenly spread
+/// for every k.
+constexpr std::uint32_t r2_a1 = 3242174889u;   // 2³² / g
+constexpr std::uint32_t r2_a2 = 2447445414u;   // 2³² / g²
+constexpr std::uint32_t golden = 2654435769u;  // 2³² / φ
+
+/// Tiles of a tangential box with half-extents (e1, e2): the longer side is cut into
+/// round(ratio) squares among which the points are spread, so they are even in both directions.
+int tiles_of(float e1, float e2) {
+  const float lo = std::max(std::min(e1, e2), 1e-30f), hi = std::max(e1, e2);
+  return static_cast<int>(std::clamp(std::lround(hi / lo), 1l, 64l));
+}
+
+/// Node n's span box projected in view v: the screen vectors (pixels) of its three full axes
+/// 2·extent^k·f^k under the weak perspective of its centre; false when it reaches the eye plane.
+bool projected_axes(const pca_node& nd, const view& v, std::array<vec2f, 3>& ax) {
+  const vec3f e = v.to_eye(nd.mean);
+  if (!(e.z() > nd.extent.norm())) return false;
+  const float s = v.focal_px / e.z();
+  for (int k = 0; k < 3; ++k) {
+    const vec3f a = nd.frame.col(k) * (2 * nd.extent[k] * s);
+    ax[static_cast<std::size_t>(k)] = vec2f(a.dot(v.right), a.dot(v.up));
+  }
+  return true;
+}
+
+float cross2(const vec2f& a, const vec2f& b) {
+  return std::abs(a.x() * b.y() - a.y() * b.x());
+}
+
 }  // namespace
 
-float pca_required_points(const pca_data& d, std::uint32_t n, const view& v, float point_px,
-                          float c) {
+float pca_required_points(const pca_data& d, std::uint32_t n, const view& v,
+                          const pca_render_options& o) {
   const pca_node& nd = d.nodes[n];
-  const vec3f e = v.to_eye(nd.mean);
-  const vec3f axes = d.gamma * nd.lambda * nd.sigma;
-  const float c_ln = c;
-  const auto count = [c_ln](float a) {
-    return a > 1 ? std::max(1.0f, a * std::log(a) + c_ln * a) : 1.0f;
-  };
-  // A node reaching the eye plane has no bounded projection: it can cover at most the screen.
-  if (!(e.z() > axes.x()))
-    return count(static_cast<float>(v.width) * static_cast<float>(v.height) /
-                 (point_px * point_px));
-  // Weak perspective about the centre: the screen ellipse of the ellipsoid {μ + F·diag(a)·u,
-  // |u| ≤ 1} has the singular values of J·F·diag(a) as its semi-axes, J the 2×3 projection.
-  const float s = v.focal_px / e.z();
-  Eigen::Matrix<float, 2, 3> j;
-  j.row(0) = v.right.transpose() * s;
-  j.row(1) = v.up.transpose() * s;
-  const Eigen::Matrix<float, 2, 3> b = j * nd.frame * axes.asDiagonal();
-  const Eigen::Matrix2f m = b * b.transpose();
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2f> es;
-  es.computeDirect(m);
-  const float major = std::sqrt(std::max(0.0f, es.eigenvalues()[1]));
-  const float minor = std::sqrt(std::max(0.0f, es.eigenvalues()[0]));
-  const float half = 0.5f * point_px;
-  const float a = std::numbers::pi_v<float> * std::max(major, half) * std::max(minor, half) /
-                  (point_px * point_px);
-  return count(a);
+  const float p = o.point_px;
+  std::array<vec2f, 3> ax;
+  if (!projected_axes(nd, v, ax)) {  // reaching the eye plane: at most the whole screen
+    const float a = static_cast<float>(v.width) * static_cast<float>(v.height) / (p * p);
+    return o.generator == pca_generator::span ? o.density * a : a * std::log(a) + o.c * a;
+  }
+  if (o.generator == pca_generator::paper) {
+    // The projected box (a parallelepiped's projection: |v₁×v₂| + |v₁×v₃| + |v₂×v₃|) dilated by
+    // half a point (its perimeter is 2(|v₁| + |v₂| + |v₃|)), in point areas.
+    const float area = cross2(ax[0], ax[1]) + cross2(ax[0], ax[2]) + cross2(ax[1], ax[2]);
+    const float rim = ax[0].norm() + ax[1].norm() + ax[2].norm();
+    const float a = (area + rim * p + 0.25f * std::numbers::pi_v<float> * p * p) / (p * p);
+    return a > 1 ? std::max(1.0f, a * std::log(a) + o.c * a) : 1.0f;
+  }
+  // The span generator: each of the node's tiles (object-space squares along its tangential
+  // box) takes the same number q of points, evenly spread over it; on screen a tile spans the
+  // projected lengths (ℓ₁/m, ℓ₂) and needs q ≥ (its longer side in points + 1)² for a point
+  // every point size along both sides, whatever the view's slant.
+  const int m = tiles_of(nd.extent.x(), nd.extent.y());
+  const bool long1 = nd.extent.x() >= nd.extent.y();
+  const float l1 = ax[0].norm() / p, l2 = ax[1].norm() / p;
+  const float side = std::max(long1 ? l1 / float(m) : l1, long1 ? l2 : l2 / float(m)) + 1;
+  return o.density * float(m) * side * side;
 }
 
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
-                  std::uint32_t count, pca_sample* out) {
-  pca_generate(d, n, n, seed, first, count, out);
+                  std::uint32_t count, pca_sample* out, pca_generator g) {
+  pca_generate(d, n, n, seed, first, count, out, g);
 }
 
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
-                  std::uint32_t first, std::uint32_t count, pca_sample* out) {
+                  std::uint32_t first, std::uint32_t count, pca_sample* out, pca_generator g) {
   const pca_node& nd = d.nodes[n];
   const bool colour = !d.colours.empty();
   const float tmin = std::exp(-0.5f * d.gamma * d.gamma);
   const vec3f sp = nd.lambda * nd.sigma;
+  const vec3f& e = nd.extent;
   const float pi = std::numbers::pi_v<float>;
   const std::uint64_t key = mix(mix(seed) ^ (stream_id * 0xD1B54A32D192ED03ull));
+  const auto inside = [&](const vec3f& u) {
+    return std::abs(u.x()) <= e.x() && std::abs(u.y()) <= e.y() && std::abs(u.z()) <= e.z();
+  };
+  // The span generator's sequence: a per-node offset, the tiles along the longer side.
+  const std::uint64_t off = mix(key ^ 0x5851F42D4C957F2Dull);
+  const auto o1 = static_cast<std::uint32_t>(off), o2 = static_cast<std::uint32_t>(off >> 32);
+  const auto o3 = static_cast<std::uint32_t>(mix(off));
+  const int m = tiles_of(e.x(), e.y());
+  const bool long1 = e.x() >= e.y();
   for (std::uint32_t k = 0; k < count; ++k) {
-    stream s{mix(key ^ (static_cast<std::uint64_t>(first + k) * 0x9E3779B97F4A7C15ull))};
+    const std::uint32_t idx = first + k;
+    stream s{mix(key ^ (static_cast<std::uint64_t>(idx) * 0x9E3779B97F4A7C15ull))};
     pca_sample& o = out[k];
-    // Position.
-    o.position = nd.mean + nd.frame * sp.cwiseProduct(box_muller3(s, tmin));
-    // Normal: a Gaussian point of the normal ellipse, wrapped back onto the sphere.
-    const float r0 = 1.0f - (1.0f - tmin) * s.next();
-    const float tau = std::sqrt(-2.0f * std::log(r0));
-    const float phi = 2.0f * pi * s.next();
-    const float alpha = nd.normal_sigma.x() * tau * std::cos(phi);
-    const float beta = nd.normal_sigma.y() * tau * std::sin(phi);
-    const float theta = std::min(pi, std::sqrt(alpha * alpha + beta * beta));
+    // Position (in the node's frame, u inside the span box).
+    vec3f u;
+    if (g == pca_generator::span) {
+      // The tile from the golden-ratio sequence (any first k points spread over the tiles
+      // evenly, also when k < m), the place in it from R2.
+      const auto tile = static_cast<std::uint32_t>(
+          (static_cast<std::uint64_t>(o3 + idx * golden) * static_cast<std::uint64_t>(m)) >> 32);
+      const float x = static_cast<float>(o1 + idx * r2_a1) * 0x1p-32f;
+      const float y = static_cast<float>(o2 + idx * r2_a2) * 0x1p-32f;
+      const float along = (static_cast<float>(tile) + x) / static_cast<float>(m);
+      const float a = long1 ? along : y, b = long1 ? y : along;
+      float z = sp.z() * box_muller1(s, tmin);
+      for (int t = 1; t < tries && std::abs(z) > e.z(); ++t) z = sp.z() * box_muller1(s, tmin);
+      u = vec3f(e.x() * (2 * a - 1), e.y() * (2 * b - 1), std::clamp(z, -e.z(), e.z()));
+    } else {
+      u = sp.cwiseProduct(box_muller3(s, tmin));
+      for (int t = 1; t < tries && !inside(u); ++t) u = sp.cwiseProduct(box_muller3(s, tmin));
+      u = u.cwiseMax(-e).cwiseMin(e);
+    }
+    o.position = nd.mean + nd.frame * u;
+    // Normal: a Gaussian point of the normal ellipse, inside the normals' cone, wrapped back
+    // onto the sphere.
+    const auto draw_normal = [&](float& alpha, float& beta) {
+      const float r0 = 1.0f - (1.0f - tmin) * s.next();
+      const float tau = std::sqrt(-2.0f * std::log(r0));
+      const float phi = 2.0f * pi * s.next();
+      alpha = nd.normal_sigma.x() * tau * std::cos(phi);
+      beta = nd.normal_sigma.y() * tau * std::sin(phi);
+      return std::sqrt(alpha * alpha + beta * beta);
+    };
+    float alpha = 0, beta = 0, theta = draw_normal(alpha, beta);
+    for (int t = 1; t < tries && theta > nd.normal_extent; ++t) theta = draw_normal(alpha, beta);
+    if (theta > nd.normal_extent) {
+      const float f = nd.normal_extent / theta;
+      alpha *= f;
+      beta *= f;
+      theta = nd.normal_extent;
+    }
+    theta = std::min(pi, theta);
     vec3f local = vec3f::UnitZ();
     if (theta > 0) {
       const float f = std::sin(theta) / theta;
@@ -120,9 +201,14 @@ void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, s
     o.normal = (nd.normal_frame * local).normalized();
     if (colour) {
       const pca_colour& c = d.colours[n];
-      const vec3f rgb = (c.mean + c.frame * c.sigma.cwiseProduct(box_muller3(s, tmin)))
-                            .cwiseMax(0.0f)
-                            .cwiseMin(1.0f);
+      const auto draw_colour = [&]() -> vec3f {
+        const vec3f g3 = box_muller3(s, tmin);
+        return c.frame * vec3f(c.sigma.cwiseProduct(g3));
+      };
+      vec3f dc = draw_colour();
+      for (int t = 1; t < tries && dc.norm() > c.extent; ++t) dc = draw_colour();
+      if (dc.norm() > c.extent) dc *= c.extent / dc.norm();
+      const vec3f rgb = (c.mean + dc).cwiseMax(0.0f).cwiseMin(1.0f);
       o.colour = {static_cast<std::uint8_t>(std::lround(rgb.x() * 255)),
                   static_cast<std::uint8_t>(std::lround(rgb.y() * 255)),
                   static_cast<std::uint8_t>(std::lround(rgb.z() * 255))};

@@ -7,10 +7,13 @@
 //         normals on the unit sphere through the unwrap at the pole (pca_normals, unwrap_normal,
 //         wrap_normal) and of its colours (pca_colours). A file of its own: Eigen's eigen-
 //         solvers are most of the compile time of the builder.
+//   What a node's points span (pca_leaf_extents, pca_inner_extents): the bound every generated
+//   position, normal and colour stays within (docs/pca-octree.md, "Deviations").
 
 #include <Eigen/Eigenvalues>
 #include <array>
 #include <cmath>
+#include <numbers>
 
 #include "pca_octree_internal.hpp"
 
@@ -246,6 +249,76 @@ pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov) {
   r.frame = f.cast<float>();
   r.sigma = vec3d(std::sqrt(ev[2]), std::sqrt(ev[1]), std::sqrt(ev[0])).cast<float>();
   return r;
+}
+
+// ---------------------------------------------------------------------------------------------
+// What a node's points span.
+// ---------------------------------------------------------------------------------------------
+void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
+                      const rgb8* c, std::size_t count, double parent_spacing) {
+  const mat3d ft = nd.frame.cast<double>().transpose();
+  const vec3d mu = nd.mean.cast<double>();
+  vec3d e = vec3d::Zero();
+  for (std::size_t i = 0; i < count; ++i) e = e.cwiseMax((ft * (p[i] - mu)).cwiseAbs());
+  // Each point stands for the patch around it (the input's own render draws it as a disk of
+  // 0.8 × its 8th neighbour's distance, ≈ 1.3 spacings): widen the tangential extents by the
+  // points' spacing h — the side of the square each point gets (box area / count), or the gap
+  // along a line of points, whichever is larger, and at least half the parent's spacing (few
+  // points estimate their box poorly); two points: the parent's spacing (its cell edge over the
+  // square root of its count). h is at most the cell edge.
+  double h = parent_spacing;
+  if (count >= 3) {
+    const double k = static_cast<double>(count);
+    h = std::max({std::sqrt(4 * e.x() * e.y() / k), 2 * std::max(e.x(), e.y()) / (k - 1),
+                  0.5 * parent_spacing});
+  }
+  h = std::min(h, nd.cell_size);
+  // Only along the directions the points spread in: the points of a line (or of a scan line)
+  // stay on it, one point stays a point.
+  const double flat = 1e-6 * std::max(e.x(), mu.cwiseAbs().maxCoeff());
+  if (e.x() > flat) e.x() += h;
+  if (e.y() > flat) e.y() += h;
+  nd.extent = e.cwiseMax(sigma_floor).cast<float>();
+  const vec3d z = nd.normal_frame.col(2).cast<double>();
+  double theta = 0;
+  for (std::size_t i = 0; i < count; ++i)
+    theta =
+        std::max(theta, std::acos(std::clamp(z.dot(n[i].cast<double>().normalized()), -1.0, 1.0)));
+  nd.normal_extent = static_cast<float>(theta);
+  if (colour == nullptr) return;
+  const vec3d cm = colour->mean.cast<double>();
+  double r = 0;
+  for (std::size_t i = 0; i < count; ++i)
+    r = std::max(r, (vec3d(c[i].r, c[i].g, c[i].b) / 255.0 - cm).norm());
+  colour->extent = static_cast<float>(r);
+}
+
+void pca_inner_extents(pca_data& d, std::size_t i) {
+  pca_node& nd = d.nodes[i];
+  const mat3d ft = nd.frame.cast<double>().transpose();
+  const vec3d mu = nd.mean.cast<double>();
+  const vec3d z = nd.normal_frame.col(2).cast<double>();
+  const bool colour = !d.colours.empty();
+  vec3d e = vec3d::Zero();
+  double theta = 0, r = 0;
+  for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
+    const pca_node& ch = d.nodes[c];
+    const mat3d f = ch.frame.cast<double>();
+    const vec3d ce = ch.extent.cast<double>(), cm = ch.mean.cast<double>();
+    for (int corner = 0; corner < 8; ++corner) {
+      const vec3d s((corner & 1) ? 1 : -1, (corner & 2) ? 1 : -1, (corner & 4) ? 1 : -1);
+      e = e.cwiseMax((ft * (cm + f * s.cwiseProduct(ce) - mu)).cwiseAbs());
+    }
+    const double a = std::acos(std::clamp(z.dot(ch.normal_frame.col(2).cast<double>()), -1.0, 1.0));
+    theta = std::max(theta, a + static_cast<double>(ch.normal_extent));
+    if (colour)
+      r = std::max(r, (d.colours[c].mean - d.colours[i].mean).cast<double>().norm() +
+                          static_cast<double>(d.colours[c].extent));
+  }
+  nd.extent = e.cwiseMax(sigma_floor).cast<float>();
+  nd.normal_extent = static_cast<float>(std::min(theta, std::numbers::pi));
+  // (never beyond the diagonal of the RGB cube)
+  if (colour) d.colours[i].extent = static_cast<float>(std::min(r, std::sqrt(3.0)));
 }
 
 }  // namespace pbr_lod::detail

@@ -10,7 +10,8 @@ namespace pca_test {
 namespace {
 
 // Without colour the records are 13 bytes and there is no colour codebook; the file holds
-// exactly header + codebooks + (1 + 13) bytes per node + checksum.
+// exactly header + codebooks (6 floats a position class, 3 a normal class) + (1 + 13) bytes per
+// node + checksum.
 TEST(pca_octree, NoColourMeansNoColourBits) {
   auto cloud = sample_surface(make_demo_scene(16), 3000, 3);
   cloud.colours.clear();
@@ -18,7 +19,7 @@ TEST(pca_octree, NoColourMeansNoColourBits) {
   EXPECT_EQ(t.record_bytes(), 13u);
   EXPECT_EQ(t.codebook_size_c(), 0u);
   EXPECT_EQ(t.file_bytes(),
-            128 + 12 * t.codebook_size_p() + 8 * t.codebook_size_n() + t.nodes().size() * 14 + 8);
+            128 + 24 * t.codebook_size_p() + 12 * t.codebook_size_n() + t.nodes().size() * 14 + 8);
 }
 
 // save → load gives an equal hierarchy (every decoded value, code and codebook entry), and
@@ -58,7 +59,8 @@ TEST(pca_octree, FileBytesDoNotDependOnThreads) {
 }
 
 // The octree against a brute-force one: §3's rule (split a cell at its centre while it holds
-// more than leaf_size points that are not all equal) applied breadth first, one node at a time.
+// more than leaf_size points, or normals more than surface_angle = 60° from its first one, that
+// are not all equal) applied breadth first, one node at a time.
 // The builder partitions large nodes (≥ 65 536 points) in parallel chunks, splits the levels
 // below 256 nodes' worth in parallel and merges the parts back;
 // the result must be this tree node for node: same order, children, octant masks and depths,
@@ -95,9 +97,13 @@ TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
     ASSERT_LT((nd.mean.cast<double>() - ref.mean).norm(), 1e-6 * t.cube_size()) << i;
     for (int k = 0; k < 3; ++k)
       ASSERT_NEAR(nd.sigma[k], ref.sigma[k], 1e-5 * ref.sigma[0] + 1e-14) << i << " σ" << k;
-    bool same = true;
-    for (const auto k : c.points) same = same && rel(k) == rel(c.points[0]);
-    if (c.points.size() <= 4 || same) {
+    bool same = true, one_surface = true;
+    for (const auto k : c.points) {
+      same = same && rel(k) == rel(c.points[0]);
+      one_surface = one_surface &&
+                    pts.normals[k].normalized().dot(pts.normals[c.points[0]].normalized()) >= 0.5f;
+    }
+    if ((c.points.size() <= 4 && one_surface) || same) {
       ASSERT_EQ(nd.count, 0u) << i;
       continue;
     }

@@ -75,7 +75,8 @@ TEST(pca_octree, RootOfOneLeafHoldsTheStatistics) {
     };
     s.colours[i] = {b(c.x()), b(c.y()), b(c.z())};
   }
-  const auto t = build_pca_octree(s, {.leaf_size = 1u << 20, .quantise = false});
+  const auto t =
+      build_pca_octree(s, {.leaf_size = 1u << 20, .surface_angle = 180, .quantise = false});
   ASSERT_EQ(t.nodes().size(), 1u);
   const auto& nd = t.at(0);
   const vec3d mean_world = t.origin() + nd.mean.cast<double>();
@@ -242,11 +243,15 @@ TEST(pca_octree, QuantisedNodesDecodeWithinTheirStatedError) {
           << i;
     }
     EXPECT_LE((f.colour(i).mean - q.colour(i).mean).cwiseAbs().maxCoeff(), 0.5f / 31 + 1e-6f);
-    // σ_p: the decoded class is a nearest codebook entry of the node's feature.
-    vec3f feat;
-    for (int k = 0; k < 3; ++k)
+    // σ_p and the extents: the decoded class is a nearest codebook entry of the node's feature
+    // (log₂ of σ_p and of the extents over the cell edge).
+    detail::pca_feature feat;
+    for (int k = 0; k < 3; ++k) {
       feat[k] = static_cast<float>(
           std::log2(std::max(static_cast<double>(a.sigma[k]) / a.cell_size, 0x1p-60)));
+      feat[3 + k] = static_cast<float>(
+          std::log2(std::max(static_cast<double>(a.extent[k]) / a.cell_size, 0x1p-60)));
+    }
     float best = std::numeric_limits<float>::infinity();
     for (const auto& c : d.codebook_p) best = std::min(best, (c - feat).squaredNorm());
     const std::uint32_t idx = d.records[i][0] | (d.records[i][1] & 0xFu) << 8;
@@ -256,6 +261,9 @@ TEST(pca_octree, QuantisedNodesDecodeWithinTheirStatedError) {
     for (int k = 0; k < 3; ++k) {
       const double want = std::max(a.cell_size * std::exp2(double(d.codebook_p[idx][k])), 1e-15);
       EXPECT_NEAR(b.sigma[k], want, 1e-5 * want) << i << " σ" << k;
+      const double span =
+          std::max(a.cell_size * std::exp2(double(d.codebook_p[idx][3 + k])), 1e-15);
+      EXPECT_NEAR(b.extent[k], span, 1e-5 * span) << i << " extent" << k;
     }
   }
   EXPECT_LE(q.codebook_size_p(), 64u);

@@ -99,9 +99,9 @@ namespace detail {
 /// root depth | u64 points | u64 nodes | f64 cell min[3], cell edge | u32 levels | u32 per level:
 /// the whole-tree number of its first node | child masks and records | u64 FNV-1a checksum.
 inline constexpr file_format chunked_pca_format{
-    "chunked PCA octree", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'C'}, 1};
+    "chunked PCA octree", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'C'}, 2};
 inline constexpr file_format pca_chunk_format{
-    "PCA octree chunk", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'K'}, 1};
+    "PCA octree chunk", {'P', 'B', 'R', 'L', 'O', 'D', 'S', 'K'}, 2};
 
 /// A chunk as loaded: its subtree (node 0 its root, depths absolute) decoded with the top's
 /// codebooks, and the whole-tree number of each level's first node.
@@ -160,7 +160,7 @@ class chunked_pca_octree {
   template <class S>
   void emit(node_id n, const view& v, S& sink) const {
     const pca_render_options o;
-    emit_points(n, required_points(n, v, o), o, sink);
+    emit_points(n, required_points(n, v, o), o, sink, point_size(n, v, o));
   }
 
   // ---- what pca_octree_policy needs (as pca_octree's)
@@ -174,10 +174,15 @@ class chunked_pca_octree {
   }
   /// Points [0, count) of node n's random stream: the stream of its whole-tree number, so the
   /// points are those pca_octree draws for the same node.
-  template <class S>
-  void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink) const {
+  [[nodiscard]] float point_size(node_id n, const view& v, const pca_render_options& o) const {
     const auto [d, i] = where(n);
-    detail::pca_emit_points<A>(*d, i, global_id(n), count, o, sink);
+    return detail::pca_point_size(*d, i, v, o);
+  }
+  template <class S>
+  void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink,
+                   float size = 0) const {
+    const auto [d, i] = where(n);
+    detail::pca_emit_points<A>(*d, i, global_id(n), count, size > 0 ? size : o.point_px, o, sink);
   }
 
   // ---- inspection

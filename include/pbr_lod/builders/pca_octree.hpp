@@ -77,8 +77,14 @@ struct pca_octree_options {
   /// (λ = 1).
   float curvature_c = 1.0f;
   float lambda_max = 2.0f;
+  /// A node of at most leaf_size points is still split (down to max_depth) while two of its
+  /// normals differ by more than this angle (degrees; measured against the node's first
+  /// normal): such a node holds two surfaces (the sides of a thin sheet, two surfaces close
+  /// together, a crease), and one ellipsoid would bridge them. §6 of the paper names the
+  /// problem and suggests separating "spatial- and normal-coherent parts"; 180 turns it off.
+  float surface_angle = 60.0f;
   /// Classify and quantise the nodes (§3.1): 13 bytes a node (17 with colour). false keeps the
-  /// float statistics (for measuring what quantisation costs; 104 bytes a node, 164 with colour).
+  /// float statistics (for measuring what quantisation costs; 120 bytes a node, 184 with colour).
   bool quantise = true;
   /// k-means codebook sizes (§3.1; the paper uses 64–4096). Indices take 12, 12 and 6 bits, so
   /// at most 4096, 4096 and 64.
@@ -138,6 +144,14 @@ struct pca_node {
   mat3f normal_frame = mat3f::Identity();
   vec2f normal_sigma = vec2f::Zero();  ///< σ_n in radians on the unwrapped tangent plane
   float lambda = 1;                    ///< curvature scale λ (derived from σ_n, σ_p)
+  /// What the node's points span (generation never leaves it): half-extents about `mean` along
+  /// f¹, f², f³. A leaf's are its points' largest |f^k·(p − μ_p)|, the tangential ones (f¹, f²)
+  /// widened by half the points' spacing (each point stands for the patch around it, as in the
+  /// input's own render); an inner node's hold its children's boxes. At least 1e-15.
+  vec3f extent = vec3f::Zero();
+  /// Largest angle (radians) between a normal of the node and its mean normal (an inner node:
+  /// over its children's cones). Generated normals stay within it.
+  float normal_extent = 0;
   // ---- structure
   std::uint32_t first = 0;  ///< inner: first child; leaf: 0
   std::uint8_t count = 0;   ///< inner: children (1..8); leaf: 0
@@ -156,11 +170,19 @@ struct pca_colour {
   vec3f mean = vec3f::Zero();
   mat3f frame = mat3f::Identity();
   vec3f sigma = vec3f::Zero();
+  /// Largest distance of a colour of the node from `mean` (an inner node: over its children's
+  /// balls). Generated colours stay within it.
+  float extent = 0;
   friend bool operator==(const pca_colour&, const pca_colour&) = default;
 };
 
 namespace detail {
 struct chunked_pca_access;
+
+/// A codebook entry (§3.1 classes): up to 6 numbers, unused ones 0 (see pca_data).
+using pca_feature = Eigen::Matrix<float, 6, 1>;
+/// How many numbers of a position, normal and colour class the file stores.
+inline constexpr int pca_feature_dims[3] = {6, 3, 4};
 
 /// Everything a pca_octree holds, independent of its attribute set (colours empty without).
 struct pca_data {
@@ -177,11 +199,13 @@ struct pca_data {
   float gamma = 3.5f, curvature_c = 1, lambda_max = 2;
   float lambda_norm = 1;  ///< root ‖σ_p‖, the unit of ‖σ_p‖ in λ
   bool quantised = true;
-  // §3.1 storage: codebooks (features: log2 of σ_p / cell edge; σ_n in radians; σ_c) and
-  // per-node records (13 bytes; 4 more with colour).
-  std::vector<vec3f> codebook_p;
-  std::vector<vec2f> codebook_n;
-  std::vector<vec3f> codebook_c;
+  // §3.1 storage: codebooks and per-node records (13 bytes; 4 more with colour). A class holds
+  // the statistics k-means groups plus the extents that bound generation (pca_feature):
+  //   position: log₂(σ_p^k / cell edge), k = 1..3, then log₂(extent^k / cell edge);
+  //   normal: σ_n¹, σ_n² and the normal extent, radians;   colour: σ_c¹..³ and the extent.
+  std::vector<pca_feature> codebook_p;
+  std::vector<pca_feature> codebook_n;
+  std::vector<pca_feature> codebook_c;
   std::vector<std::array<std::uint8_t, 13>> records;
   std::vector<std::uint32_t> colour_records;
   pca_octree_build_stats stats;
@@ -227,25 +251,11 @@ struct pca_normal_result {
 /// Inverse of unwrap_normal: the unit direction at angle |uv| from z towards uv.
 [[nodiscard]] vec3d wrap_normal(const mat3d& frame, const vec2d& uv);
 
-/// Required number of points (§4) for node n seen in view v: a·ln a + c·a with a the area, in
-/// units of point_px² pixels, of the node's projected ellipsoid (semi-axes γ·λ·σ_p), at least
-/// 1; a node reaching the eye plane counts the whole viewport as its area.
-[[nodiscard]] float pca_required_points(const pca_data& d, std::uint32_t n, const view& v,
-                                        float point_px, float c);
 struct pca_sample {
   vec3f position;
   vec3f normal;
   rgb8 colour;
 };
-/// Points [first, first + count) of node n's random stream for `seed` (§4): the paper's
-/// trivariate Box–Muller for position and colour, the 2-D one for normals, truncated at γ.
-/// Point k depends only on (seed, n, k).
-void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
-                  std::uint32_t count, pca_sample* out);
-/// The same for node n of d drawing the stream of node `stream_id` of the whole hierarchy (a
-/// chunk of a chunked PCA octree holds a subtree; its nodes draw their whole-tree numbers).
-void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
-                  std::uint32_t first, std::uint32_t count, pca_sample* out);
 /// Decodes one quantised record (used by build and load, so both give the same bits).
 void pca_decode_node(const pca_data& d, std::uint32_t n, pca_node& out, pca_colour* colour);
 
@@ -260,8 +270,27 @@ template <attributes In>
 [[nodiscard]] pca_octree<pca_octree_attributes(In)> build_pca_octree(
     const point_set<In>& points, const pca_octree_options& options = {});
 
+/// How a node's points are generated (§4; docs/pca-octree.md, "Deviations"). Both stay inside
+/// what the node's points span (pca_node::extent, normal_extent, pca_colour::extent).
+enum class pca_generator : std::uint8_t {
+  /// Tangential positions (along f¹, f²) uniform over the span, from a per-node rotation of
+  /// Roberts' R2 low-discrepancy sequence (any first k points of a node are spread evenly, so a
+  /// node needs about as many points as its projection has pixels); the offset along f³
+  /// Gaussian (σ_p³) truncated at the span; normals and colours the paper's Gaussians
+  /// truncated at their extents. density × (projected area of the span) points.
+  span,
+  /// §4 as printed: the Box–Muller generators for positions, normals and colours, truncated at
+  /// γ·λ·σ and at the extents; a·ln a + c·a points for the projected span's area a.
+  paper,
+};
+
 /// How a PCA octree is drawn (§4).
 struct pca_render_options {
+  pca_generator generator = pca_generator::span;
+  /// pca_generator::span: points per point-sized cell of a node's projected span (its tiles
+  /// take (longer side in points + 1)² cells each, so a slanted view does not open gaps). Below
+  /// 1 the hard-cases scene opens holes (0.6: IoU 0.93 instead of 0.98).
+  float density = 1.0f;
   std::uint64_t seed = 1;  ///< the random stream; the same seed gives the same image
   float c = 0.2f;          ///< c of a·ln a + c·a (§4: 0.2 sufficed for the paper's models)
   /// Size of a generated point in pixels. The paper draws one-pixel points (1); a point of s
@@ -279,16 +308,49 @@ struct pca_render_options {
   /// Upper bound on the points of one node (a node reaching the eye plane counts the whole
   /// viewport as its area: at 512² that is 3.3 M points, so this cap applies).
   std::uint32_t max_points = 1u << 20;
+  /// pca_generator::span: most points a node draws. A node that needs more (a leaf seen close,
+  /// which cannot split) draws this many, each point_px·√(needed / node_points) pixels wide, so
+  /// its points still cover its span: a frame costs about node_points a drawn node instead of a
+  /// point a pixel (§6 of the paper leaves point size against count open). 0: no limit.
+  std::uint32_t node_points = 16;
 };
 
 namespace detail {
+/// Required number of points (§4) for node n seen in view v: for the area a, in units of
+/// o.point_px² pixels, of the node's projected span (the box of half-extents pca_node::extent
+/// about μ_p along f_p, dilated by half a point), o.density·a (pca_generator::span) or
+/// a·ln a + c·a (paper); at least 1. A node reaching the eye plane counts the whole viewport.
+[[nodiscard]] float pca_required_points(const pca_data& d, std::uint32_t n, const view& v,
+                                        const pca_render_options& o);
+/// Points [first, first + count) of node n's stream for `seed` (§4, generator g): point k
+/// depends only on (seed, n, k), so any first k points are the same whatever the total.
+void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
+                  std::uint32_t count, pca_sample* out, pca_generator g = pca_generator::span);
+/// The same for node n of d drawing the stream of node `stream_id` of the whole hierarchy (a
+/// chunk of a chunked PCA octree holds a subtree; its nodes draw their whole-tree numbers).
+void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
+                  std::uint32_t first, std::uint32_t count, pca_sample* out,
+                  pca_generator g = pca_generator::span);
+
 /// What pca_octree and chunked_pca_octree draw for node n of d (see pca_octree's members of the
 /// same names); stream_id is the node's number in the whole hierarchy.
 [[nodiscard]] inline std::uint32_t pca_point_count(const pca_data& d, std::uint32_t n,
                                                    const view& v, const pca_render_options& o) {
-  const float p = pca_required_points(d, n, v, o.point_px, o.c);
+  float p = pca_required_points(d, n, v, o);
+  if (o.generator == pca_generator::span && o.node_points > 0)
+    p = std::min(p, static_cast<float>(o.node_points));
   if (!(p < static_cast<float>(o.max_points))) return o.max_points;
   return std::max<std::uint32_t>(1, static_cast<std::uint32_t>(std::ceil(p)));
+}
+/// The size (pixels) of node n's points: o.point_px, grown by √(needed / drawn) when
+/// o.node_points caps the count (pca_render_options::node_points).
+[[nodiscard]] inline float pca_point_size(const pca_data& d, std::uint32_t n, const view& v,
+                                          const pca_render_options& o) {
+  if (o.generator != pca_generator::span || o.node_points == 0) return o.point_px;
+  const float p = pca_required_points(d, n, v, o);
+  const auto cap = static_cast<float>(o.node_points);
+  if (!(p > cap)) return o.point_px;
+  return o.point_px * std::min(std::sqrt(p / cap), 1e4f);
 }
 [[nodiscard]] inline float pca_split_measure(const sphere& s, const view& v,
                                              const pca_render_options& o) {
@@ -299,13 +361,13 @@ namespace detail {
 }
 template <attributes A, class S>
 void pca_emit_points(const pca_data& d, std::uint32_t n, std::uint64_t stream_id,
-                     std::uint32_t count, const pca_render_options& o, S& sink) {
+                     std::uint32_t count, float size, const pca_render_options& o, S& sink) {
   std::array<pca_sample, 64> buf;
   for (std::uint32_t first = 0; first < count; first += buf.size()) {
     const auto k = std::min<std::uint32_t>(buf.size(), count - first);
-    pca_generate(d, n, stream_id, o.seed, first, k, buf.data());
+    pca_generate(d, n, stream_id, o.seed, first, k, buf.data(), o.generator);
     for (std::uint32_t i = 0; i < k; ++i) {
-      point_prim<A> p{buf[i].position, o.point_px};
+      point_prim<A> p{buf[i].position, size};
       p.normal = buf[i].normal;
       if constexpr (A.colour) p.colour = buf[i].colour;
       sink.point(p);
@@ -346,7 +408,7 @@ class pca_octree {
   template <class S>
   void emit(node_id n, const view& v, S& sink) const {
     const pca_render_options o;
-    emit_points(n, required_points(n, v, o), o, sink);
+    emit_points(n, required_points(n, v, o), o, sink, point_size(n, v, o));
   }
 
   /// §4: the number of points node n needs in view v, clamped to [1, o.max_points].
@@ -359,10 +421,16 @@ class pca_octree {
   [[nodiscard]] float split_measure(node_id n, const view& v, const pca_render_options& o) const {
     return detail::pca_split_measure(bounding_sphere(n), v, o);
   }
-  /// Sends points [0, count) of node n's random stream to the sink, as squares of o.point_px.
+  /// The size in pixels of node n's points (o.point_px unless o.node_points caps its count).
+  [[nodiscard]] float point_size(node_id n, const view& v, const pca_render_options& o) const {
+    return detail::pca_point_size(d_, n, v, o);
+  }
+  /// Sends points [0, count) of node n's random stream to the sink, as squares of `size` pixels
+  /// (0: o.point_px).
   template <class S>
-  void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink) const {
-    detail::pca_emit_points<A>(d_, n, n, count, o, sink);
+  void emit_points(node_id n, std::uint32_t count, const pca_render_options& o, S& sink,
+                   float size = 0) const {
+    detail::pca_emit_points<A>(d_, n, n, count, size > 0 ? size : o.point_px, o, sink);
   }
 
   // ---- inspection
@@ -385,7 +453,7 @@ class pca_octree {
   /// Bytes of one node record in the file: 13 (17 with colour) quantised, as §3.1; the child
   /// mask (1 byte) and the codebooks come on top (file_bytes()).
   [[nodiscard]] std::size_t record_bytes() const {
-    return d_.quantised ? (A.colour ? 17 : 13) : (A.colour ? 164 : 104);
+    return d_.quantised ? (A.colour ? 17 : 13) : (A.colour ? 184 : 120);
   }
   [[nodiscard]] std::size_t file_bytes() const { return detail::pca_file_bytes(d_); }
   [[nodiscard]] const detail::pca_data& data() const { return d_; }
@@ -451,7 +519,7 @@ struct pca_octree_policy : default_policy {
   template <class H, class S>
   void emit(const H& h, const typename H::node_id& n, const view& v, float, const traverse_options&,
             S& sink) const {
-    h.emit_points(n, h.required_points(n, v, render), render, sink);
+    h.emit_points(n, h.required_points(n, v, render), render, sink, h.point_size(n, v, render));
   }
 };
 
@@ -554,11 +622,12 @@ class pca_octree_cut {
     for (const node_id d : drawn_) {
       ++(t_->is_leaf(d) ? st_.emitted_leaves : st_.emitted_nodes);
       const std::uint32_t count = t_->required_points(d, v, p.render);
+      const float size = t_->point_size(d, v, p.render);
       if (cache_)
-        emit_cached(d, count, p.render, out);
+        emit_cached(d, count, size, p.render, out);
       else {
         fs_.points_generated += count;
-        t_->emit_points(d, count, p.render, out);
+        t_->emit_points(d, count, p.render, out, size);
       }
     }
     st_.points = out.points;
@@ -651,7 +720,8 @@ class pca_octree_cut {
     filled_[n] = 0;
   }
   template <class S>
-  void emit_cached(node_id n, std::uint32_t count, const pca_render_options& r, S& sink) {
+  void emit_cached(node_id n, std::uint32_t count, float size, const pca_render_options& r,
+                   S& sink) {
     auto& bl = blocks_[n];
     if (filled_[n] < count) {
       while (bl.size() * block_points < count) {
@@ -664,9 +734,9 @@ class pca_octree_cut {
       }
       for (std::uint32_t first = filled_[n]; first < count;) {
         const std::uint32_t k = std::min(block_points - first % block_points, count - first);
-        detail::pca_generate(
-            t_->data(), n, r.seed, first, k,
-            &bank_[bl[first / block_points] * block_points + first % block_points]);
+        detail::pca_generate(t_->data(), n, r.seed, first, k,
+                             &bank_[bl[first / block_points] * block_points + first % block_points],
+                             r.generator);
         first += k;
       }
       fs_.points_generated += count - filled_[n];
@@ -677,7 +747,7 @@ class pca_octree_cut {
     }
     for (std::uint32_t i = 0; i < count; ++i) {
       const detail::pca_sample& g = bank_[bl[i / block_points] * block_points + i % block_points];
-      point_prim<A> pt{g.position, r.point_px};
+      point_prim<A> pt{g.position, size};
       pt.normal = g.normal;
       if constexpr (A.colour) pt.colour = g.colour;
       sink.point(pt);
