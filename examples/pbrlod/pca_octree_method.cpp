@@ -72,6 +72,8 @@ json pca_stats_json(const Tree& t, const std::string& path) {
   j.num("kmeans_seconds", st.has_timings ? st.kmeans_seconds : nan);
   j.num("estimation_seconds", st.has_timings ? st.estimation_seconds : nan);
   j.num("tree_seconds", st.has_timings ? st.tree_seconds : nan);
+  // Zero or non-finite input normals estimated from the positions (build only; a file: 0).
+  j.integer("normals_filled", static_cast<long long>(st.normals_filled));
   if (st.has_timings && t.quantised()) {
     j.num("max_mean_error_cell", st.max_mean_error_cell);
     j.num("max_axis_error_deg", st.max_axis_error_deg);

@@ -19,6 +19,7 @@
 #include "pbr_lod/builders/pca_octree.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pca_octree_internal.hpp"
 
@@ -89,9 +90,6 @@ void validate(const pca_input& in, const pca_octree_options& o) {
   for (std::size_t i = 0; i < in.positions.size(); ++i)
     if (!all_finite(in.positions[i]))
       throw InvalidArgument("pca-octree: position " + std::to_string(i) + " is not finite");
-  for (std::size_t i = 0; i < in.normals.size(); ++i)
-    if (!all_finite(in.normals[i]) || !(in.normals[i].squaredNorm() > 0))
-      throw InvalidArgument("pca-octree: normal " + std::to_string(i) + " is zero or not finite");
   pca_validate_options(o, !in.normals.empty());
 }
 
@@ -466,8 +464,17 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   } else {
     normals.resize(n);
     parallel_chunks(n, threads, 1u << 16, [&](std::size_t lo, std::size_t hi) {
-      for (std::size_t i = lo; i < hi; ++i) normals[i] = in.normals[i].normalized();
+      for (std::size_t i = lo; i < hi; ++i)
+        normals[i] =
+            missing_normal(in.normals[i]) ? vec3f::Zero() : vec3f(in.normals[i].normalized());
     });
+    // A zero or non-finite normal is no normal (3DGS files store zeros): estimated from the
+    // positions, oriented by the given normals around it.
+    const auto te = clock_type::now();
+    const normal_repair r = fill_missing_normals(in.positions, normals, o.knn, threads);
+    st.normals_filled = r.missing;
+    st.estimated_normals = r.all_estimated;
+    if (r.missing > 0) st.estimation_seconds = seconds_since(te);
   }
   check_progress(o, 0.2);
   const auto tt = clock_type::now();

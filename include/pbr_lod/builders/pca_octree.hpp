@@ -125,6 +125,9 @@ struct pca_octree_build_stats {
   std::size_t input_points = 0;
   std::size_t nodes = 0, leaves = 0, max_depth = 0;
   bool estimated_normals = false;
+  /// Input normals that were zero or not finite (no normal), estimated from the positions
+  /// (fill_missing_normals). Measured by the build; a loaded file reports 0.
+  std::size_t normals_filled = 0;
   // What quantisation cost (build only; 0 without quantisation). Positions relative to the
   // node's octree cell edge, angles in degrees, σ errors relative to the node's σ_p¹.
   double max_mean_error_cell = 0;        ///< max |μ_p − μ_p'|∞ / cell edge
@@ -263,9 +266,10 @@ void pca_decode_node(const pca_data& d, std::uint32_t n, pca_node& out, pca_colo
 
 template <attributes A>
 class pca_octree;
-/// Builds the PCA octree of `points` (normals estimated from k nearest neighbours when absent).
-/// Throws InvalidArgument on empty input, non-finite coordinates or normals, zero normals or
-/// bad options; Cancelled when the progress callback says so.
+/// Builds the PCA octree of `points` (normals estimated from k nearest neighbours when absent;
+/// a zero or non-finite normal is no normal and is estimated too: stats().normals_filled).
+/// Throws InvalidArgument on empty input, non-finite coordinates or bad options; Cancelled
+/// when the progress callback says so.
 template <attributes In>
 [[nodiscard]] pca_octree<pca_octree_attributes(In)> build_pca_octree(
     const point_set<In>& points, const pca_octree_options& options = {});
