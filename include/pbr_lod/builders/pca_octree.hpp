@@ -11,17 +11,21 @@
 //               degenerate rules (σ floor 1e-15; two zero variances keep the principal direction
 //               and align z with the mean normal; three use the normal and any tangent pair);
 //               extent γ·σ_p with γ = 3.5; curvature scale λ (see pca_octree_options).
-//               pca_octree_build.cpp.
+//               pca_octree_build.cpp. Not in the paper (docs/pca-octree.md, deviations): what a
+//               node's points span (pca_node::extent, normal_extent, pca_colour::extent) bounds
+//               every generated value; small nodes of two surfaces are split on (§6's remedy).
 //   §3.1, Fig 5 k-means over σ_p, σ_n, σ_c (codebook sizes are options, the paper uses 64–4096),
 //               12/12/6-bit indices; μ_p in 32 bits (10-11-11 over the node's octree cell),
 //               f_p as the f_p³ axis (16 bits) and a rotation about it (8 bits), f_n likewise
 //               (24 bits), μ_c 5-6-5, f_c 7 + 3 bits: 13 bytes a node, 17 with colour.
 //               pca_octree_quantise.cpp; the file format in pca_octree_io.cpp.
-//   §4          randomised rendering: the paper's trivariate Box–Muller generator for position
-//               and colour, the 2-D one for normals, truncated at γ; a·ln a + c·a points for a
-//               node whose ellipsoid covers a pixels (its projected ellipse from the eigen-
-//               analysis of the projected axes), c = 0.2; seeded per (seed, node, point), so
-//               the same seed gives the same points in any traversal order.
+//   §4          randomised rendering (pca_generator::paper): the paper's trivariate Box–Muller
+//               generator for position and colour, the 2-D one for normals, truncated at γ and
+//               at the span; a·ln a + c·a points for the span's projected area a, c = 0.2. The
+//               default (pca_generator::span) spreads tangential positions uniformly over the
+//               span on a low-discrepancy sequence, at most node_points points a node, grown to
+//               cover. Seeded per (seed, node, point), so the same seed gives the same points in
+//               any traversal order.
 //               pca_octree_render.cpp (generation) and emit() below (to the Sink).
 //   Fig. 6      view-dependent cut kept across frames: pca_octree_cut (split, merge with merge
 //               counters and time stamps, normal-cone culling).
