@@ -27,6 +27,32 @@ uniform vec3 light_dir;
 uniform float ambient;
 uniform int shading, colouring, cull;
 uniform vec3 flat_colour;  // 0..255
+// Blending (rasterizer.hpp, Botsch et al. 2005): 0 = off; 1 = the visibility pass (points and
+// splats pushed back along their view rays by epsilon times their radius); 2 = the
+// accumulation pass (weighted colour, normal and weight summed into four float targets: the
+// fragments facing the eye in 0 and 1, those facing away in 2 and 3).
+uniform int blend_pass;
+uniform float blend_epsilon;
+)";
+
+// Fragment shaders only: the outputs.
+constexpr const char* kFragmentCommon = R"(
+// The accumulation pass's outputs for one fragment of weight w, albedo (0..255) and unit
+// normal turned towards the eye.
+layout(location = 0) out vec4 out_colour;
+layout(location = 1) out vec4 out_normal;
+layout(location = 2) out vec4 out_away_colour;
+layout(location = 3) out vec4 out_away_normal;
+void accumulate(float w, vec3 albedo, vec3 n, bool away) {
+  vec4 c = vec4(w * albedo, w), m = vec4(w * n, 0.0);
+  out_colour = away ? vec4(0.0) : c;
+  out_normal = away ? vec4(0.0) : m;
+  out_away_colour = away ? c : vec4(0.0);
+  out_away_normal = away ? m : vec4(0.0);
+}
+)";
+
+constexpr const char* kCommonFunctions = R"(
 vec3 to_eye(vec3 p) {
   vec3 d = p - eye;
   return vec3(dot(d, right_axis), dot(d, up_axis), dot(d, forward_axis));
@@ -55,20 +81,32 @@ layout(location = 1) in float size_px;
 layout(location = 2) in vec3 normal;
 layout(location = 3) in vec3 colour;
 uniform vec2 viewport;
+uniform float focal_px;
 flat out vec3 frag_colour;
 flat out vec2 centre_px;  // window coordinates of the projected centre
 flat out float half_side;
+flat out vec3 frag_albedo;  // accumulation: albedo and the normal turned to the eye
+flat out vec3 frag_normal;
+flat out float frag_away;
 void main() {
   vec3 d = position - eye;
   if (cull != 0 && dot(normal, d) > 0.0) {
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);  // outside the clip volume: dropped
     return;
   }
-  gl_Position = project(position);
+  vec3 p = position;
+  // A square is at one depth: the visibility pass pushes it back by epsilon times half its
+  // side in the world, keeping its pixels (rasterizer::blended_point).
+  if (blend_pass == 1) p = eye + d * (1.0 + blend_epsilon * 0.5 * max(size_px, 1.0) / focal_px);
+  gl_Position = project(p);
   centre_px = (gl_Position.xy / gl_Position.w * 0.5 + 0.5) * viewport;
   half_side = 0.5 * max(size_px, 1.0);
   gl_PointSize = size_px > 1.0 ? ceil(size_px) + 2.0 : 3.0;  // the shader trims it
   frag_colour = shade_flat(colour, normal, d);
+  frag_albedo = colouring != 0 ? colour : flat_colour;
+  frag_away = dot(normal, d) > 0.0 ? 1.0 : 0.0;
+  float len = length(normal);
+  frag_normal = len > 0.0 ? normal / (frag_away > 0.5 ? -len : len) : vec3(0.0);
 }
 )";
 
@@ -79,7 +117,9 @@ constexpr const char* kPointFs = R"(
 flat in vec3 frag_colour;
 flat in vec2 centre_px;
 flat in float half_side;
-out vec4 out_colour;
+flat in vec3 frag_albedo;
+flat in vec3 frag_normal;
+flat in float frag_away;
 void main() {
   vec2 p = gl_FragCoord.xy;
   bool inside;
@@ -89,6 +129,15 @@ void main() {
     inside = p.x >= centre_px.x - half_side && p.x < centre_px.x + half_side &&
              p.y > centre_px.y - half_side && p.y <= centre_px.y + half_side;
   if (!inside) discard;
+  if (blend_pass == 2) {
+    // Weight 1 − r², r² the squared distance to the centre over the half-diagonal's; 1 for a
+    // one-pixel point.
+    vec2 q = p - centre_px;
+    float w = half_side <= 0.5 ? 1.0 : 1.0 - dot(q, q) / (2.0 * half_side * half_side);
+    if (!(w > 0.0)) discard;
+    accumulate(w, frag_albedo, frag_normal, frag_away > 0.5);
+    return;
+  }
   out_colour = vec4(frag_colour / 255.0, 1.0);
 }
 )";
@@ -101,6 +150,9 @@ layout(location = 3) in vec3 normal;
 layout(location = 4) in vec3 colour;
 out vec2 st;
 flat out vec3 frag_colour;
+flat out vec3 frag_albedo;  // accumulation: albedo and the normal turned to the eye
+flat out vec3 frag_normal;
+flat out float frag_away;
 void main() {
   vec2 corner = vec2((gl_VertexID & 1) != 0 ? 1.0 : -1.0, (gl_VertexID & 2) != 0 ? 1.0 : -1.0);
   vec3 d = centre - eye;
@@ -109,8 +161,19 @@ void main() {
     return;
   }
   st = corner;
-  gl_Position = project(centre + corner.x * axis_u + corner.y * axis_v);
+  vec3 p = centre + corner.x * axis_u + corner.y * axis_v;
+  // The visibility pass scales the splat about the eye by 1 + epsilon r / |c − eye|: the same
+  // pixels, pushed back along the view rays by about epsilon r (rasterizer::blended_splat).
+  if (blend_pass == 1) {
+    float f = 1.0 + blend_epsilon * sqrt(max(dot(axis_u, axis_u), dot(axis_v, axis_v))) / length(d);
+    p = eye + (p - eye) * f;
+  }
+  gl_Position = project(p);
   frag_colour = shade_flat(colour, normal, d);
+  frag_albedo = colouring != 0 ? colour : flat_colour;
+  frag_away = dot(normal, d) > 0.0 ? 1.0 : 0.0;
+  float len = length(normal);
+  frag_normal = len > 0.0 ? normal / (frag_away > 0.5 ? -len : len) : vec3(0.0);
 }
 )";
 
@@ -118,9 +181,17 @@ void main() {
 constexpr const char* kSplatFs = R"(
 in vec2 st;
 flat in vec3 frag_colour;
-out vec4 out_colour;
+flat in vec3 frag_albedo;
+flat in vec3 frag_normal;
+flat in float frag_away;
 void main() {
   if (dot(st, st) > 1.0) discard;
+  if (blend_pass == 2) {
+    float w = 1.0 - dot(st, st);  // 1 − s² − t²: 0 on the ellipse
+    if (!(w > 0.0)) discard;
+    accumulate(w, frag_albedo, frag_normal, frag_away > 0.5);
+    return;
+  }
   out_colour = vec4(frag_colour / 255.0, 1.0);
 }
 )";
@@ -153,11 +224,19 @@ in vec3 frag_albedo;
 in vec2 frag_st;
 flat in float frag_textured;
 uniform sampler2D tex;
-out vec4 out_colour;
 void main() {
+  bool textured = colouring != 0 && frag_textured > 0.5;
+  vec3 texel = clamp(floor(texture(tex, frag_st).rgb * 255.0 + 0.5), 0.0, 255.0);
+  if (blend_pass == 2) {
+    // An exact surface: weight 1, its interpolated colour (not rounded; a texel is) and normal.
+    float len = length(frag_normal);
+    vec3 n = len > 0.0 ? frag_normal / (gl_FrontFacing ? len : -len) : vec3(0.0);
+    vec3 a = textured ? texel : colouring != 0 ? frag_albedo : flat_colour;
+    accumulate(1.0, a, n, !gl_FrontFacing);
+    return;
+  }
   vec3 albedo = colouring != 0 ? clamp(floor(frag_albedo + 0.5), 0.0, 255.0) : flat_colour;
-  if (colouring != 0 && frag_textured > 0.5)
-    albedo = clamp(floor(texture(tex, frag_st).rgb * 255.0 + 0.5), 0.0, 255.0);
+  if (textured) albedo = texel;
   vec3 c = albedo;
   if (shading != 0) {
     float len = length(frag_normal);
@@ -165,6 +244,45 @@ void main() {
     c = floor(albedo * lambert(n) + 0.5);
   }
   out_colour = vec4(c / 255.0, 1.0);
+}
+)";
+
+// The normalisation pass (rasterizer::normalise_blend): one triangle over the viewport; per
+// pixel the facing sums where they have weight, else those facing away; colour = Σw·c / Σw
+// rounded, the summed normal normalised and shaded (deferred shading); pixels no weighted
+// fragment reached keep the visibility pass's colour and depth.
+constexpr const char* kNormaliseVs = R"(
+void main() {
+  vec2 p = vec2((gl_VertexID & 1) != 0 ? 3.0 : -1.0, (gl_VertexID & 2) != 0 ? 3.0 : -1.0);
+  gl_Position = vec4(p, 0.0, 1.0);
+}
+)";
+constexpr const char* kNormaliseFs = R"(
+uniform sampler2D vis_colour, vis_depth, sum_colour, sum_normal, sum_away_colour, sum_away_normal;
+void main() {
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  vec4 c = texelFetch(sum_colour, p, 0);
+  vec3 n = texelFetch(sum_normal, p, 0).xyz;
+  if (!(c.w > 0.0)) {
+    c = texelFetch(sum_away_colour, p, 0);
+    n = texelFetch(sum_away_normal, p, 0).xyz;
+  }
+  float depth = texelFetch(vis_depth, p, 0).r;
+  if (!(c.w > 0.0)) {
+    if (!(depth < 1.0)) discard;  // background
+    out_colour = texelFetch(vis_colour, p, 0);
+    gl_FragDepth = depth;
+    return;
+  }
+  vec3 albedo = colouring != 0 ? clamp(floor(c.xyz * (1.0 / c.w) + 0.5), 0.0, 255.0) : flat_colour;
+  vec3 colour = albedo;
+  if (shading != 0) {
+    float len = length(n);
+    colour = floor(albedo * lambert(len > 0.0 ? n / len : vec3(0.0)) + 0.5);
+  }
+  out_colour = vec4(colour / 255.0, 1.0);
+  // Covered in the accumulation pass only (a rim pixel): in front of the far plane.
+  gl_FragDepth = depth < 1.0 ? depth : 0.99999994;
 }
 )";
 
@@ -199,8 +317,9 @@ void copy_colour(std::uint8_t* out, const pbr_lod::rgb8& c) {
 
 GLuint compile(GLenum kind, const char* body) {
   const GLuint s = glCreateShader(kind);
-  const char* parts[2] = {kCommon, body};
-  glShaderSource(s, 2, parts, nullptr);
+  const bool fragment = kind == GL_FRAGMENT_SHADER;
+  const char* parts[4] = {kCommon, fragment ? kFragmentCommon : "", kCommonFunctions, body};
+  glShaderSource(s, 4, parts, nullptr);
   glCompileShader(s);
   GLint ok = 0;
   glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
@@ -244,8 +363,14 @@ void attribute(GLuint index, GLint size, GLenum type, GLsizei stride, std::size_
 }  // namespace
 
 struct gl_renderer::impl {
-  GLuint programs[3] = {};  // points, splats, triangles
-  GLuint vao[3] = {}, vbo[3] = {};
+  GLuint programs[4] = {};  // points, splats, triangles, blend normalisation
+  GLuint vao[4] = {}, vbo[3] = {};
+  /// Blending's offscreen targets, made at the first blended frame and remade when the size
+  /// changes: the visibility pass's colour (RGBA8) and depth (32-bit float), and the four
+  /// accumulation sums (RGBA32F, summed by additive blending).
+  GLuint vis_fbo = 0, sum_fbo = 0;
+  GLuint vis_colour = 0, vis_depth = 0, sums[4] = {};
+  int target_w = 0, target_h = 0;
   std::vector<point_vertex> points;
   std::vector<splat_instance> splats;
   std::vector<triangle_vertex> triangles;
@@ -285,6 +410,52 @@ struct gl_renderer::impl {
                 o.flat_colour.b);
     glUniform2f(glGetUniformLocation(p, "viewport"), static_cast<float>(v.width),
                 static_cast<float>(v.height));
+    glUniform1f(glGetUniformLocation(p, "focal_px"), v.focal_px);
+    glUniform1f(glGetUniformLocation(p, "blend_epsilon"), o.blend_depth_epsilon);
+    glUniform1i(glGetUniformLocation(p, "blend_pass"), 0);
+  }
+
+  /// The blending targets at the view's size (see vis_fbo).
+  void blend_targets() {
+    if (vis_fbo != 0 && target_w == v.width && target_h == v.height) return;
+    free_targets();
+    target_w = v.width;
+    target_h = v.height;
+    const auto texture = [&](GLuint& t, GLint internal, GLenum format, GLenum type) {
+      glGenTextures(1, &t);
+      glBindTexture(GL_TEXTURE_2D, t);
+      glTexImage2D(GL_TEXTURE_2D, 0, internal, v.width, v.height, 0, format, type, nullptr);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    };
+    texture(vis_colour, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
+    texture(vis_depth, GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT);
+    for (GLuint& t : sums) texture(t, GL_RGBA32F, GL_RGBA, GL_FLOAT);
+    glGenFramebuffers(1, &vis_fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, vis_fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, vis_colour, 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, vis_depth, 0);
+    const bool vis_ok = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
+    glGenFramebuffers(1, &sum_fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, sum_fbo);
+    const GLenum bufs[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2,
+                            GL_COLOR_ATTACHMENT3};
+    for (int i = 0; i < 4; ++i)
+      glFramebufferTexture2D(GL_FRAMEBUFFER, bufs[i], GL_TEXTURE_2D, sums[i], 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, vis_depth, 0);
+    glDrawBuffers(4, bufs);
+    const bool sum_ok = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
+    if (!vis_ok || !sum_ok)
+      throw std::runtime_error("gl_viewer: the blending framebuffers are incomplete");
+  }
+  void free_targets() {
+    glDeleteFramebuffers(1, &vis_fbo);
+    glDeleteFramebuffers(1, &sum_fbo);
+    glDeleteTextures(1, &vis_colour);
+    glDeleteTextures(1, &vis_depth);
+    glDeleteTextures(4, sums);
+    vis_fbo = sum_fbo = vis_colour = vis_depth = 0;
+    for (GLuint& t : sums) t = 0;
   }
 };
 
@@ -292,7 +463,8 @@ gl_renderer::gl_renderer() : d_(std::make_unique<impl>()) {
   d_->programs[0] = link(kPointVs, kPointFs);
   d_->programs[1] = link(kSplatVs, kSplatFs);
   d_->programs[2] = link(kTriangleVs, kTriangleFs);
-  glGenVertexArrays(3, d_->vao);
+  d_->programs[3] = link(kNormaliseVs, kNormaliseFs);
+  glGenVertexArrays(4, d_->vao);
   glGenBuffers(3, d_->vbo);
   constexpr GLenum F = GL_FLOAT, B = GL_UNSIGNED_BYTE;
 
@@ -326,8 +498,9 @@ gl_renderer::gl_renderer() : d_(std::make_unique<impl>()) {
 
 gl_renderer::~gl_renderer() {
   glDeleteTextures(1, &d_->gl_texture);
+  d_->free_targets();
   glDeleteBuffers(3, d_->vbo);
-  glDeleteVertexArrays(3, d_->vao);
+  glDeleteVertexArrays(4, d_->vao);
   for (const GLuint p : d_->programs) glDeleteProgram(p);
 }
 
@@ -402,13 +575,24 @@ double gl_renderer::draw() {
   const auto t0 = std::chrono::steady_clock::now();
   impl& d = *d_;
   counts_ = {d.points.size(), d.splats.size(), d.triangles.size() / 3};
+  // Blending as the CPU rasteriser applies it: with shading or colour to average, and only
+  // when there are splats or points (triangles alone draw the unblended image).
+  const bool blend = d.o.fx.blending && (d.o.fx.shading || d.o.fx.colour) &&
+                     (!d.points.empty() || !d.splats.empty());
+  GLint target = 0;
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &target);
   glViewport(0, 0, d.v.width, d.v.height);
   const pbr_lod::rgb8 bg = d.o.background;
   glClearColor(bg.r / 255.0f, bg.g / 255.0f, bg.b / 255.0f, 0.0f);
   glClearDepth(1.0);
+  if (blend) {
+    d.blend_targets();
+    glBindFramebuffer(GL_FRAMEBUFFER, d.vis_fbo);
+  }
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);  // ties keep the first primitive drawn, as the CPU rasteriser does
+  glDepthMask(GL_TRUE);
   glDisable(GL_BLEND);
   glEnable(GL_PROGRAM_POINT_SIZE);
   glFrontFace(GL_CCW);
@@ -438,23 +622,74 @@ double gl_renderer::draw() {
       d.uploaded = d.frame_texture;
     }
     glUniform1i(glGetUniformLocation(d.programs[2], "tex"), 0);
-    if (d.o.fx.backface_cull)
-      glEnable(GL_CULL_FACE);
-    else
-      glDisable(GL_CULL_FACE);
     upload(d.vao[2], d.vbo[2], d.triangles);
-    glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(d.triangles.size()));
-    glDisable(GL_CULL_FACE);
   }
-  if (!d.splats.empty()) {
-    d.uniforms(d.programs[1]);
-    upload(d.vao[1], d.vbo[1], d.splats);
-    glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, static_cast<GLsizei>(d.splats.size()));
-  }
-  if (!d.points.empty()) {
-    d.uniforms(d.programs[0]);
-    upload(d.vao[0], d.vbo[0], d.points);
-    glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(d.points.size()));
+  if (!d.splats.empty()) upload(d.vao[1], d.vbo[1], d.splats);
+  if (!d.points.empty()) upload(d.vao[0], d.vbo[0], d.points);
+  // One pass over the frame's primitives (pass: blending's, 0 without).
+  const auto draw_all = [&](int pass) {
+    if (!d.triangles.empty()) {
+      d.uniforms(d.programs[2]);
+      glUniform1i(glGetUniformLocation(d.programs[2], "tex"), 0);
+      glUniform1i(glGetUniformLocation(d.programs[2], "blend_pass"), pass);
+      if (d.o.fx.backface_cull)
+        glEnable(GL_CULL_FACE);
+      else
+        glDisable(GL_CULL_FACE);
+      glBindVertexArray(d.vao[2]);
+      glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(d.triangles.size()));
+      glDisable(GL_CULL_FACE);
+    }
+    if (!d.splats.empty()) {
+      d.uniforms(d.programs[1]);
+      glUniform1i(glGetUniformLocation(d.programs[1], "blend_pass"), pass);
+      glBindVertexArray(d.vao[1]);
+      glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, static_cast<GLsizei>(d.splats.size()));
+    }
+    if (!d.points.empty()) {
+      d.uniforms(d.programs[0]);
+      glUniform1i(glGetUniformLocation(d.programs[0], "blend_pass"), pass);
+      glBindVertexArray(d.vao[0]);
+      glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(d.points.size()));
+    }
+  };
+  if (!blend) {
+    draw_all(0);
+  } else {
+    // 1. Visibility: depth (points and splats pushed back) and the unblended colour.
+    draw_all(1);
+    // 2. Accumulation: every fragment not behind the visibility depth adds its weighted
+    //    colour, normal and weight; nothing is depth-written.
+    glBindFramebuffer(GL_FRAMEBUFFER, d.sum_fbo);
+    const float zero[4] = {0, 0, 0, 0};
+    for (GLint i = 0; i < 4; ++i) glClearBufferfv(GL_COLOR, i, zero);
+    glDepthFunc(GL_LEQUAL);
+    glDepthMask(GL_FALSE);
+    glEnable(GL_BLEND);
+    glBlendEquation(GL_FUNC_ADD);
+    glBlendFunc(GL_ONE, GL_ONE);
+    draw_all(2);
+    glDisable(GL_BLEND);
+    // 3. Normalisation into the caller's framebuffer, with the depth of the visibility pass.
+    glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(target));
+    glDepthMask(GL_TRUE);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    glDepthFunc(GL_ALWAYS);
+    const GLuint np = d.programs[3];
+    d.uniforms(np);
+    const GLuint inputs[6] = {d.vis_colour, d.vis_depth, d.sums[0],
+                              d.sums[1],    d.sums[2],   d.sums[3]};
+    const char* names[6] = {"vis_colour", "vis_depth",       "sum_colour",
+                            "sum_normal", "sum_away_colour", "sum_away_normal"};
+    for (int i = 0; i < 6; ++i) {
+      glActiveTexture(static_cast<GLenum>(GL_TEXTURE1 + i));
+      glBindTexture(GL_TEXTURE_2D, inputs[i]);
+      glUniform1i(glGetUniformLocation(np, names[i]), 1 + i);
+    }
+    glBindVertexArray(d.vao[3]);
+    glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+    glActiveTexture(GL_TEXTURE0);
+    glDepthFunc(GL_LESS);
   }
   glBindVertexArray(0);
   glFinish();

@@ -14,8 +14,15 @@
 //
 // Shading as the CPU rasteriser: Lambert with one directional light and ambient, two-sided
 // (the normal turned towards the eye; for triangles, flipped on the back face), per primitive for
-// points and splats, per pixel for triangles; colours rounded as it rounds them. Effects it does
-// not draw: shadows, hole filling, blending (see docs/gl_viewer.md).
+// points and splats, per pixel for triangles; colours rounded as it rounds them.
+//
+// Blending (render_options::fx.blending, the tool's default) as the CPU rasteriser does it,
+// deferred (Botsch, Hornung, Zwicker & Kobbelt 2005): a visibility pass into an offscreen depth
+// and colour target with points and splats pushed back by ε times their radius, an accumulation
+// pass that sums w·colour, w·normal and w into four RGBA32F targets by additive blending (the
+// fragments facing the eye and those facing away apart), and a normalisation pass that divides,
+// shades the summed normal and writes colour and depth into the caller's framebuffer. Effects
+// it does not draw: shadows, hole filling (see docs/gl_viewer.md).
 //
 // Needs a current OpenGL 3.3 core context (a GLFW window or the headless EGL context) for its
 // whole life. No OpenGL type appears in this header.

@@ -45,9 +45,9 @@ struct options {
 
 /// Effects the GL renderer does not draw: said once, not silently dropped.
 void warn_unsupported(const pbr_lod::render_options& o) {
-  if (o.fx.shadows || o.fx.hole_filling || o.fx.blending)
-    std::cerr << "gl_viewer: shadows, hole filling and blending are drawn by the CPU rasteriser "
-                 "only; the OpenGL image leaves them out\n";
+  if (o.fx.shadows || o.fx.hole_filling)
+    std::cerr << "gl_viewer: shadows and hole filling are drawn by the CPU rasteriser only; the "
+                 "OpenGL image leaves them out\n";
 }
 
 int run_headless(const options& opt, const scene& sc) {
@@ -236,8 +236,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"y", "z"}))
       ->capture_default_str();
   app.add_option("--effects", opt.frame.view.effects_list,
-                 "as pbrlod render: shading, colour, backface_cull (shadows, hole_filling and "
-                 "blending are CPU-only)");
+                 "as pbrlod render: shading, colour, backface_cull, blending (the default blends "
+                 "splats and points; shadows and hole_filling are CPU-only)");
   app.add_option("--tolerance", opt.frame.tolerance, "the method's tolerance, as pbrlod render")
       ->capture_default_str();
   app.add_option("--seed", opt.frame.seed, "random stream of methods that generate points")

@@ -50,7 +50,8 @@ void add_view_options(CLI::App* cmd, view_args& a) {
       "--effects", a.effects_list,
       "comma list of shading, colour, backface_cull, shadows, hole_filling, blending; 'none'; "
       "'all'; 'default' = shading where the data has normals (or faces), colour where "
-      "it has colours");
+      "it has colours, and splats and points blended (a list without 'blending', e.g. "
+      "'shading,colour', draws them unblended)");
   cmd->add_option("--supersample", a.supersample,
                   "draw at K x K the resolution (the same cut) and box-filter down: antialiasing")
       ->check(CLI::Range(1, 16))

@@ -37,6 +37,7 @@ render_options make_render_options(const loaded_input& in, const view_args& a) {
     o.fx = no_effects;
     o.fx.shading = in.is_mesh() || !in.mesh.vertices.normals.empty();
     o.fx.colour = !in.mesh.vertices.colours.empty();
+    o.fx.blending = !in.is_mesh();  // a cloud's splats blended, as its hierarchies' finest cuts
   } else {
     o.fx = parse_effects(a.effects_list);
   }

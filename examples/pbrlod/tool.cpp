@@ -158,6 +158,9 @@ render_options lod_render_options(const view_args& a, bool has_colour) {
     o.fx = no_effects;
     o.fx.shading = true;
     o.fx.colour = has_colour;
+    // Splats and points blended (Botsch et al. 2005): a frame without them (triangles only)
+    // skips the accumulation pass and draws the unblended image (rasterizer.hpp).
+    o.fx.blending = true;
   } else {
     o.fx = parse_effects(a.effects_list);
   }

@@ -203,9 +203,10 @@ camera make_camera(const point_cloud& c, const view_args& a);
 /// The same around a world-space bounding sphere (a hierarchy's recorded input bounds).
 camera make_camera(const vec3d& centre, double radius, const view_args& a);
 /// --effects for an input file drawn at full detail: 'default' = shading where it has normals
-/// (or faces), colour where it has colours.
+/// (or faces), colour where it has colours, and a point cloud's splats blended.
 render_options make_render_options(const loaded_input& in, const view_args& a);
-/// --effects for a hierarchy: 'default' = shading, and colour when the hierarchy has colours.
+/// --effects for a hierarchy: 'default' = shading, colour when the hierarchy has colours, and
+/// blending (of splats and points; a frame of triangles only is drawn unblended).
 render_options lod_render_options(const view_args& a, bool has_colour);
 json error_json(const image_error& e);
 

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <iterator>
 #include <limits>
 #include <numbers>
@@ -16,10 +17,12 @@
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
+#include "pbr_lod/raster/png.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
 #include "support/data.hpp"
 #include "support/policies.hpp"
+#include "support/user_view.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -958,6 +961,126 @@ TEST(PointOctree, ToleranceOnePixelIsCloseToFullDetail) {
       c1.splats, c0.splats, err.psnr, err.hole_fraction, c4.splats, err4.psnr, err4.hole_fraction);
   EXPECT_GT(err.psnr, 25.0);
   EXPECT_LT(err.hole_fraction, 0.005);
+}
+
+// ---- What the user sees: the finest cut against the input mesh's own render ----------------
+
+/// The finest cut (τ = 1, blended splats: the tool's default effects) of a point-octree built
+/// from `cloud`, scored against the mesh's render from test::user_views, and its distance to the
+/// mesh (cut positions: splat centres and rims).
+struct finest_cut_result {
+  test::user_view_score score;
+  double cut_to_input = 0;
+  std::size_t splats = 0;
+};
+
+template <attributes In>
+finest_cut_result finest_cut_against(const triangle_mesh& mesh, const point_cloud& cloud,
+                                     int size = 256) {
+  const auto t = build_point_octree(point_set<In>::from(cloud));
+  constexpr attributes A = decltype(t)::attrs;
+  const auto cams = test::user_views(test::frame_of(mesh.vertices), size);
+  render_options ro;
+  ro.fx = effects{.shading = true, .colour = true, .blending = true};
+  finest_cut_result r;
+  // PBR_LOD_TEST_PNG=prefix writes each view's two images (prefix_input_N.png, prefix_cut_N.png).
+  const char* png = std::getenv("PBR_LOD_TEST_PNG");
+  int vi = 0, ci = 0;
+  r.score = test::score_views(
+      cams,
+      [&](const camera& c) {
+        image img = render_reference(mesh, c, ro);
+        if (png) write_png(std::string(png) + "_input_" + std::to_string(vi++) + ".png", img);
+        return img;
+      },
+      [&](const camera& c) {
+        const view v(c, t.origin());
+        image img = render<A>(v, ro, [&](auto& sink) {
+          traverse(t, v, {.tolerance_px = 1}, sink, point_octree_policy{});
+        });
+        if (png) write_png(std::string(png) + "_cut_" + std::to_string(ci++) + ".png", img);
+        return img;
+      });
+  buffer_sink<A> cut;
+  const view v0(cams[0], t.origin());
+  traverse(t, v0, {.tolerance_px = 1, .frustum_cull = false}, cut, point_octree_policy{});
+  r.splats = cut.splats.size();
+  r.cut_to_input = test::cut_to_input(mesh, test::cut_positions(cut), t.origin());
+  for (std::size_t i = 0; i < r.score.per_view.size(); ++i)
+    std::printf("  view %zu: interior PSNR %.2f dB, IoU %.4f, interior holes %zu of %zu\n", i,
+                r.score.per_view[i].psnr_interior, r.score.per_view[i].silhouette_iou,
+                r.score.per_view[i].interior_holes, r.score.per_view[i].interior_pixels);
+  std::printf(
+      "finest cut: %zu splats, interior PSNR min %.2f / mean %.2f dB, IoU min %.4f, "
+      "cut->input %.5f of the diagonal\n",
+      r.splats, r.score.psnr_interior_min, r.score.psnr_interior_mean, r.score.iou_min,
+      r.cut_to_input);
+  return r;
+}
+
+// The hard cases (two spheres 0.04 apart, an open floor with a hole, a concave crease, colours)
+// sampled as a scan would be: points with normals and colours, splats estimated from k-NN,
+// against the mesh's render. Issue 39's targets are ≥ 28 dB inside the silhouette, IoU ≥ 0.97
+// and cut → input ≤ 0.01 of the diagonal; the builder does not reach them yet (measured: worst
+// view 25.56 dB, IoU 0.959, cut → input 0.0137 — splats larger than the sampling at the open
+// edges and the crease; docs/point-octree.md). The floors hold what it reaches, a little below,
+// so a regression fails.
+TEST(PointOctree, FinestCutLooksLikeTheHardCasesMesh) {
+  const triangle_mesh mesh = make_hard_cases_scene(48);
+  const point_cloud cloud = sample_surface(mesh, 120000, 3);
+  const auto r = finest_cut_against<attributes{.normal = true, .colour = true}>(mesh, cloud);
+  EXPECT_GE(r.score.psnr_interior_min, 25.0);  // target 28
+  EXPECT_GE(r.score.psnr_interior_mean, 29.5);
+  EXPECT_GE(r.score.iou_min, 0.95);  // target 0.97
+  EXPECT_LE(r.cut_to_input, 0.016);  // target 0.01
+}
+
+// The same surface from its positions alone (normals estimated, no colours).
+TEST(PointOctree, FinestCutLooksLikeTheHardCasesMeshFromPositions) {
+  const triangle_mesh mesh = make_hard_cases_scene(48);
+  point_cloud cloud = sample_surface(mesh, 120000, 5);
+  cloud.normals.clear();
+  cloud.colours.clear();
+  triangle_mesh grey = mesh;
+  grey.vertices.colours.clear();
+  const auto r = finest_cut_against<positions_only>(grey, cloud);
+  // Measured: worst view 24.27 dB, mean 32.06, IoU 0.958, cut → input 0.0141 (targets as above).
+  EXPECT_GE(r.score.psnr_interior_min, 23.5);
+  EXPECT_GE(r.score.psnr_interior_mean, 31.0);
+  EXPECT_GE(r.score.iou_min, 0.95);
+  EXPECT_LE(r.cut_to_input, 0.016);
+}
+
+// Meshes it was not tuned on, built from their vertices as `pbrlod build` builds them (no
+// normals: estimated): the happy Buddha (res3) and the cow. Skipped without the shared data.
+// Far from issue 39's targets (28 dB, IoU 0.97): measured worst view / IoU / cut → input
+// 21.72 dB / 0.950 / 0.0168 (Buddha), 23.10 dB / 0.870 / 0.0233 (cow, 2,930 vertices: blobby
+// silhouettes from large estimated splats, dark patches from estimated normals). Floors a
+// little below, per mesh.
+TEST(PointOctree, FinestCutLooksLikeUnseenMeshes) {
+  struct floors {
+    const char* name;
+    double psnr, iou, cut;
+  };
+  for (const floors f :
+       {floors{"happy_vrip_res3.ply", 21.0, 0.94, 0.02}, floors{"cow.obj", 22.5, 0.86, 0.026}}) {
+    const char* name = f.name;
+    triangle_mesh mesh;
+    try {
+      mesh = read_mesh(test::data_file(name));
+    } catch (const std::runtime_error& e) {
+      GTEST_SKIP() << e.what();
+    }
+    std::printf("%s\n", name);
+    point_cloud cloud = mesh.vertices;
+    cloud.normals.clear();
+    cloud.colours.clear();
+    mesh.vertices.colours.clear();
+    const auto r = finest_cut_against<positions_only>(mesh, cloud);
+    EXPECT_GE(r.score.psnr_interior_min, f.psnr) << name;
+    EXPECT_GE(r.score.iou_min, f.iou) << name;
+    EXPECT_LE(r.cut_to_input, f.cut) << name;
+  }
 }
 
 }  // namespace

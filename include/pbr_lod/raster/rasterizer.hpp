@@ -105,14 +105,19 @@ namespace detail {
 ///  1. visibility: every splat and point is drawn scaled about the eye by 1 + ε·r/|c − eye| (r its
 ///     radius, ε = render_options::blend_depth_epsilon): the same pixels, each pushed along its own
 ///     view ray by about ε·r. Depth and its unblended colour are written (the colour is kept for
-///     the rare pixel that no weighted fragment reaches). Triangles are drawn as without blending.
-///  2. accumulation (after begin_accumulation(), the same primitives again): every fragment whose
-///     own, unshifted depth is not behind the pass-1 depth adds weight·colour and, with shading,
-///     weight·normal (turned towards the eye) to the pixel. Weight 1 − r² for splats (r² = s² + t²
-///     in the splat's plane, so it falls to 0 on the ellipse), for squares r² = |pixel − centre|²
-///     over the squared half-diagonal, 1 for one-pixel points and for triangles (an exact surface:
-///     no offset, so a triangle hides what lies behind it and blends with splats less than their
-///     ε in front of it). Nothing is depth-written in this pass.
+///     the rare pixel that no weighted fragment reaches). Triangles are drawn as without blending,
+///     and each of their fragments that is still the front-most at the end of the pass is kept as
+///     the pixel's first weight-1 contribution (an exact surface: no offset, so a triangle hides
+///     what lies behind it and blends with splats less than their ε in front of it).
+///  2. accumulation (after begin_accumulation(), the same primitives again; triangles are skipped,
+///     their fragments are those kept by pass 1): every fragment whose own, unshifted depth is
+///     not behind the pass-1 depth adds weight·colour and, with shading, weight·normal (turned
+///     towards the eye) to the pixel. Weight 1 − r² for splats (r² = s² + t² in the splat's
+///     plane, so it falls to 0 on the ellipse; −Q/g₃² from the visibility kernel's four-wide conic
+///     scan), for squares r² = |pixel − centre|² over the squared half-diagonal, 1 for one-pixel
+///     points. Nothing is depth-written in this pass. A frame without splats or points has
+///     nothing to blend: needs_accumulation() is false and render() skips this pass, so its image
+///     is the unblended one.
 ///  3. finish(): colour = Σ w·colour / Σ w, normal = Σ w·n normalised and shaded per pixel
 ///     (deferred shading, as Botsch et al.: a blended normal varies smoothly across splats, as a
 ///     triangle's interpolated normal does; blending shaded colours would only smear each splat's
@@ -139,6 +144,7 @@ class rasterizer {
         colour_(pixel_count(v), detail::pack(opt.background)),
         flat_(opt.flat_colour) {
     if constexpr (kLitBuffer) lit_.assign(pixel_count(v), 1.0f);
+    if constexpr (fx.blending) blend_.allocate(pixel_count(v));
     kb_ = key_.data();
     cb_ = colour_.data();
     lb_ = lit_.data();
@@ -274,10 +280,7 @@ class rasterizer {
   /// A triangle with per-vertex normal and colour interpolated perspective-correctly.
   void triangle(const triangle_prim<A>& t) {
     if constexpr (fx.blending)
-      if (blend_.accumulating) {
-        accumulate_triangle(t);
-        return;
-      }
+      if (blend_.accumulating) return;  // its fragments were recorded by the visibility pass
     std::array<detail::tri_vertex<kNP>, 3> v;
     for (std::size_t k = 0; k < 3; ++k) {
       v[k].h = proj_.point(t.p[k]);
@@ -294,6 +297,7 @@ class rasterizer {
         proj_, v, [kb](std::size_t i, float k) { return k > kb[i]; },
         [this](std::size_t i, float k, const std::array<float, kNP>& a, bool front) {
           kb_[i] = k;
+          if constexpr (fx.blending) record_triangle(i, k, a, front);
           fragment_colour c{flat_, 1.0f};
           if constexpr (fx.colour)
             c.albedo = {detail::to_channel(a[kColourAt]), detail::to_channel(a[kColourAt + 1]),
@@ -313,12 +317,15 @@ class rasterizer {
   /// as triangle()'s attributes) and the texture is sampled bilinearly between the four nearest
   /// texel centres, wrapping at the edges (GL_REPEAT, as POP's texel averages do). The sample is
   /// the albedo in place of the vertex colours; depth test, coverage, back-face culling and
-  /// shading are triangle()'s. Without the colour effect, without a texture, or with blending
-  /// (whose passes average per-vertex colours), it is triangle(t.triangle).
+  /// shading are triangle()'s; with blending, each fragment is recorded with the sampled colour
+  /// as triangle()'s are. Without the colour effect or without a texture it is
+  /// triangle(t.triangle).
   void textured_triangle(const textured_triangle_prim<A>& t) {
-    if constexpr (!fx.colour || fx.blending) {
+    if constexpr (!fx.colour) {
       triangle(t.triangle);
     } else {
+      if constexpr (fx.blending)
+        if (blend_.accumulating) return;  // recorded by the visibility pass
       const texture_image* const tex = t.texture;
       if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
           tex->texels.size() !=
@@ -347,6 +354,14 @@ class rasterizer {
           [this, tex](std::size_t i, float k, const std::array<float, NT>& a, bool front) {
             kb_[i] = k;
             fragment_colour c{detail::sample_bilinear_repeat(*tex, a[kUvAt], a[kUvAt + 1]), 1.0f};
+            if constexpr (fx.blending) {
+              std::array<float, kNP> rec{};
+              for (std::size_t q = 0; q < kColourAt; ++q) rec[q] = a[q];
+              rec[kColourAt] = c.albedo.r;
+              rec[kColourAt + 1] = c.albedo.g;
+              rec[kColourAt + 2] = c.albedo.b;
+              record_triangle(i, k, rec, front);
+            }
             if constexpr (fx.shading) {
               vec3f n(a[0], a[1], a[2]);
               const float len = n.norm();
@@ -359,10 +374,22 @@ class rasterizer {
   }
 
   /// Blending only: ends the visibility pass. Send the same primitives again, then finish().
+  /// Keeps the triangle fragments the visibility pass recorded where they are still the
+  /// front-most (a splat or point drawn later and nearer wrote a larger key): the accumulation
+  /// pass then skips triangles, whose weight-1 fragments are exactly those.
   void begin_accumulation() requires(fx.blending) {
-    blend_.acc.assign(key_.size(), blend_sample{});
     blend_.accumulating = true;
+    const std::size_t n = key_.size();
+    const float* const w = blend_.plane(kW);
+    const float* const key = blend_.plane(kKey);
+    for (std::size_t i = 0; i < n; ++i)
+      if (w[i] > 0 && std::abs(key[i]) != kb_[i]) blend_.clear(i);
   }
+
+  /// Blending only: whether the visibility pass drew any splat or point. Without them there is
+  /// nothing to blend: the visibility image is the unblended one, and render() skips the
+  /// accumulation pass.
+  [[nodiscard]] bool needs_accumulation() const requires(fx.blending) { return blend_.drew_splats; }
 
   /// Runs the per-frame passes the effect set has (blend normalisation, shadow resolve, hole
   /// filling) and returns the image. Call once; the rasteriser is empty afterwards.
@@ -399,22 +426,103 @@ class rasterizer {
     float lit;  ///< Lambert factor (1 without shading)
   };
 
-  /// Blending: the sums of the accumulation pass over one side of the surfaces.
-  struct blend_sums {
-    float r = 0, g = 0, b = 0;                            ///< Σ w·colour (with colour)
-    float nx = 0, ny = 0, nz = 0;                         ///< Σ w·normal (with shading)
-    float w = 0;                                          ///< Σ w
-    float key = -std::numeric_limits<float>::infinity();  ///< front-most contributing key
+  /// Blending: per pixel, the sums of the accumulation pass over one side of the surfaces, in
+  /// planes of kBlendChannels floats (structure of arrays, so four pixels are summed at once):
+  /// Σw, the front-most contributing key, and with colour Σw·colour, with shading Σw·normal.
+  /// The key's sign says which side the sums are of: > 0 the fragments facing the eye (also
+  /// splats and points without normals), < 0 those facing away, 0 none yet. The facing side
+  /// wins where it has weight, so that the two sides of a part thinner than ε (a fin, a sheet
+  /// seen edge-on) are not averaged: its first fragment of positive weight drops what the
+  /// facing-away ones summed, and fragments facing away are ignored from then on. This is the
+  /// same as summing the two sides apart and taking the facing sums wherever they have weight.
+  static constexpr std::size_t kW = 0, kKey = 1, kR = 2, kNx = fx.colour ? 5 : 2;
+  static constexpr std::size_t kBlendChannels = 2 + (fx.colour ? 3 : 0) + (fx.shading ? 3 : 0);
+  struct splat_record {
+    detail::ellipse_conic conic;  ///< of the splat drawn by the visibility pass (scaled by f)
+    float f;
+    /// The accumulation pass scans `conic` (the unscaled splat lies wholly in front of the near
+    /// plane too); otherwise it projects the splat again.
+    bool cached;
   };
-  /// Per pixel: the fragments facing the eye ([0]; also splats and points without normals) and
-  /// those facing away ([1]), kept apart so that the two sides of a thin part less than ε thick
-  /// (a fin, a sheet seen edge-on) are not averaged: the facing side wins where it has weight.
-  struct blend_sample {
-    std::array<blend_sums, 2> side;
+  /// The blending buffers, kept from frame to frame on each thread (as render() keeps its
+  /// primitive buffer): allocating the sums (5–8 MB at 512²) and the splat records (~20 MB for
+  /// 200,000 splats, grown by doubling) afresh each frame cost more in page faults and copies
+  /// than the accumulation itself (measured: 250 ms a frame against 40). A rasteriser made while
+  /// another on the same thread holds them gets buffers of its own.
+  struct blend_buffers {
+    std::vector<float> sums;
+    std::vector<splat_record> splats;
+  };
+  class pooled_buffers {
+   public:
+    pooled_buffers() {
+      if (!pool().busy) {
+        pool().busy = true;
+        b_ = &pool().kept;
+      } else {
+        b_ = &own_;
+      }
+    }
+    pooled_buffers(pooled_buffers&& o) noexcept
+        : own_(std::move(o.own_)), b_(o.b_ == &o.own_ ? &own_ : o.b_) {
+      o.b_ = nullptr;
+    }
+    pooled_buffers& operator=(pooled_buffers&& o) noexcept {
+      if (this != &o) {
+        release();
+        own_ = std::move(o.own_);
+        b_ = o.b_ == &o.own_ ? &own_ : o.b_;
+        o.b_ = nullptr;
+      }
+      return *this;
+    }
+    ~pooled_buffers() { release(); }
+    blend_buffers& operator*() const { return *b_; }
+    blend_buffers* operator->() const { return b_; }
+
+   private:
+    struct thread_pool {
+      blend_buffers kept;
+      bool busy = false;
+    };
+    static thread_pool& pool() {
+      thread_local thread_pool p;
+      return p;
+    }
+    void release() {
+      if (b_ == &pool().kept) pool().busy = false;
+      b_ = nullptr;
+    }
+    blend_buffers own_;
+    blend_buffers* b_ = nullptr;
   };
   struct blend_state {
-    std::vector<blend_sample> acc;  ///< allocated by begin_accumulation()
+    pooled_buffers buf;
+    float* sums = nullptr;  ///< kBlendChannels planes of one float per pixel, `stride` apart
+    /// Floats from one plane to the next: the pixel count rounded up to 16 and 80 more, so that
+    /// the planes do not start a multiple of 4 KiB apart. A 512² plane is exactly 1 MiB: the
+    /// eight planes of shading + colour and the depth buffer then share one set of every cache
+    /// and evict each other (measured: shading + colour + blending 120 ms a frame against 41 ms
+    /// for colour + blending's five planes, until the planes were staggered).
+    std::size_t stride = 0;
     bool accumulating = false;
+    bool drew_splats = false;  ///< the visibility pass drew a splat or point
+    /// Per splat of the visibility pass, in order: its screen conic, which the accumulation pass
+    /// scans again instead of projecting the splat a second time (the projection and the conic's
+    /// set-up in double are most of a small splat's cost). The visibility pass draws the splat
+    /// scaled by f about the eye, whose conic is the unscaled splat's up to the factors f² in Q
+    /// and 1/f in the key, so the weight −Q/key² is the same and the key is f times.
+    std::size_t next_splat = 0;  ///< the accumulation pass's position in `splats`
+    void allocate(std::size_t pixels) {
+      stride = (pixels + 15) / 16 * 16 + 80;
+      buf->sums.assign(kBlendChannels * stride, 0.0f);
+      sums = buf->sums.data();
+      buf->splats.clear();
+    }
+    [[nodiscard]] float* plane(std::size_t c) { return sums + c * stride; }
+    void clear(std::size_t i) {
+      for (std::size_t c = 0; c < kBlendChannels; ++c) sums[c * stride + i] = 0;
+    }
   };
   struct no_blend_state {};
 
@@ -483,22 +591,69 @@ class rasterizer {
     return bv;
   }
 
-  /// Accumulation: fragment of key k and weight w at pixel i, if not behind the offset surface.
-  void accumulate(std::size_t i, float k, float w, const blend_value& bv) {
-    if (!(k >= kb_[i])) return;
-    blend_sums& a = blend_.acc[i].side[bv.away];
+  /// The value of every channel of one fragment (its colour, its normal turned to the eye).
+  [[nodiscard]] static std::array<float, kBlendChannels> channel_values(const blend_value& bv) {
+    std::array<float, kBlendChannels> v{};
     if constexpr (fx.colour) {
-      a.r += w * bv.r;
-      a.g += w * bv.g;
-      a.b += w * bv.b;
+      v[kR] = bv.r;
+      v[kR + 1] = bv.g;
+      v[kR + 2] = bv.b;
     }
-    if constexpr (fx.shading) {
-      a.nx += w * bv.n.x();
-      a.ny += w * bv.n.y();
-      a.nz += w * bv.n.z();
+    if constexpr (fx.shading)
+      for (std::size_t c = 0; c < 3; ++c) v[kNx + c] = bv.n[static_cast<Eigen::Index>(c)];
+    return v;
+  }
+
+  /// Accumulation: fragment of key k and weight w at pixel i with channel values v, if not
+  /// behind the offset surface (blend_state says how the two sides are kept apart).
+  void accumulate(std::size_t i, float k, float w, const std::array<float, kBlendChannels>& v,
+                  bool away) {
+    if (!(k >= kb_[i]) || !(w > 0)) return;
+    float* const key = blend_.plane(kKey);
+    if (!away) {
+      if (key[i] < 0) blend_.clear(i);  // facing-away sums so far: dropped
+      key[i] = std::max(key[i], k);
+    } else {
+      if (key[i] > 0) return;  // the facing side has weight here
+      key[i] = std::min(key[i], -k);
     }
-    a.w += w;
-    a.key = std::max(a.key, k);
+    blend_.plane(kW)[i] += w;
+    for (std::size_t c = 2; c < kBlendChannels; ++c) blend_.plane(c)[i] += w * v[c];
+  }
+
+  /// accumulate() of four pixels from index i at once (the lanes from `skip` on): keys k and
+  /// weights w (1 − s² − t² = −Q/key² from the conic scan, weight_of). Per lane the same IEEE
+  /// operations as accumulate(), so a pixel's sums do not depend on which of the two summed it.
+  void accumulate4(std::size_t i, detail::f4 k, detail::f4 w, int lanes, int skip,
+                   const std::array<float, kBlendChannels>& v, bool away) {
+    using detail::f4;
+    const f4 zero(0.0f);
+    if (lanes < 4) {  // a viewport narrower than four pixels
+      float kk[4], ww[4];
+      k.store(kk);
+      w.store(ww);
+      for (int l = skip; l < lanes; ++l) accumulate(i + std::size_t(l), kk[l], ww[l], v, away);
+      return;
+    }
+    float* const key = blend_.plane(kKey) + i;
+    const f4 ks = f4::load(key);
+    f4 m = (w > zero) & (k >= f4::load(kb_ + i)) & f4::lanes_from(skip);
+    if (!any(m)) return;  // the bounding box's corners, and splats hidden behind others
+    f4 reset = zero;      // lanes whose sums are dropped before adding
+    if (!away) {
+      reset = m & (ks < zero);
+      select(m, max(ks, k), ks).store(key);  // ks < 0 < k: a reset lane's key becomes k
+    } else {
+      m = and_not(ks > zero, m);
+      select(m, min(ks, zero - k), ks).store(key);
+    }
+    const f4 wm = m & w;  // the weight where the fragment counts, +0 elsewhere
+    float* const sw = blend_.plane(kW) + i;
+    (and_not(reset, f4::load(sw)) + wm).store(sw);
+    for (std::size_t c = 2; c < kBlendChannels; ++c) {
+      float* const sc = blend_.plane(c) + i;
+      (and_not(reset, f4::load(sc)) + wm * f4(v[c])).store(sc);
+    }
   }
 
   void blended_point(const point_prim<A>& p) {
@@ -512,6 +667,7 @@ class rasterizer {
     const float sy = proj_.cy - d.dot(proj_.up_px) * key;
     const float size = std::max(p.size_px, 1.0f);
     if (!blend_.accumulating) {
+      blend_.drew_splats = true;
       // A square is at one depth: pushing it back by ε·(half its side in the world) divides
       // its key, and keeps its pixels.
       const float push = 1 + opt_.blend_depth_epsilon * 0.5f * size / proj_.focal;
@@ -527,9 +683,11 @@ class rasterizer {
       return;
     }
     const blend_value bv = blend_value_of(p, d);
+    const auto v = channel_values(bv);
+    const bool away = bv.away != 0;
     if (!(p.size_px > 1)) {
       detail::raster_square(view_.width, view_.height, sx, sy, p.size_px, key,
-                            [&](std::size_t i, float k) { accumulate(i, k, 1.0f, bv); });
+                            [&](std::size_t i, float k) { accumulate(i, k, 1.0f, v, away); });
       return;
     }
     // r² = |pixel centre − centre|² / (half-diagonal)²: 1 at the corners.
@@ -539,8 +697,13 @@ class rasterizer {
                           [&](std::size_t i, float k) {
                             const float dx = static_cast<float>(i % w) + 0.5f - sx;
                             const float dy = static_cast<float>(i / w) + 0.5f - sy;
-                            accumulate(i, k, std::max(0.0f, 1 - (dx * dx + dy * dy) * inv_h2), bv);
+                            accumulate(i, k, 1 - (dx * dx + dy * dy) * inv_h2, v, away);
                           });
+  }
+
+  /// The blending weight 1 − s² − t² of a conic scan's lanes: −Q/g₃², g₃ the key (scan_conic).
+  [[nodiscard]] static detail::f4 weight_of(detail::f4 key, detail::f4 q) {
+    return (detail::f4(0.0f) - q) / (key * key);
   }
 
   void blended_splat(const splat_prim<A>& s) {
@@ -548,49 +711,75 @@ class rasterizer {
     if constexpr (kCullNormals)
       if (s.normal.dot(d) > 0) return;
     if (!blend_.accumulating) {
+      blend_.drew_splats = true;
       const float f =
           blend_push(std::sqrt(std::max(s.u.squaredNorm(), s.v.squaredNorm())), d.norm());
       const fragment_colour c = shade(s, d);
       const detail::span_target<true, kLitBuffer> out{kb_, cb_, lb_, packed(c), c.lit};
-      detail::raster_ellipse(proj_, vec3f(proj_.eye + d * f), vec3f(s.u * f), vec3f(s.v * f), out);
+      splat_record rec{{}, f, false};
+      detail::ellipse_map m;
+      if (detail::map_ellipse(proj_, vec3f(proj_.eye + d * f), vec3f(s.u * f), vec3f(s.v * f), m)) {
+        if (!m.in_front) {
+          detail::raster_ellipse_mapped(proj_, m, out);
+        } else if (detail::conic_of(m, view_.width, view_.height, rec.conic)) {
+          const auto write4 = out.four();
+          detail::scan_conic(rec.conic, view_.width,
+                             [&](std::size_t i, detail::f4 k, detail::f4 q, int lanes, int) {
+                               write4(i, k, non_positive(q), lanes);
+                             });
+          // The unscaled splat in front of the near plane as well: its distance to it,
+          // w_c/f − w_near, at least its reach along the view axis, |(w_u, w_v)|/f.
+          const double t = m.hc.w - double(f) * proj_.w_near;
+          rec.cached = t >= 0 && t * t >= m.hu.w * m.hu.w + m.hv.w * m.hv.w;
+        }
+      }
+      blend_.buf->splats.push_back(rec);
       return;
     }
     const blend_value bv = blend_value_of(s, d);
+    const auto v = channel_values(bv);
+    const bool away = bv.away != 0;
+    const std::size_t at = blend_.next_splat++;
+    if (at < blend_.buf->splats.size() && blend_.buf->splats[at].cached) {
+      const splat_record& rec = blend_.buf->splats[at];
+      const detail::f4 f(rec.f);
+      detail::scan_conic(rec.conic, view_.width,
+                         [&](std::size_t i, detail::f4 k, detail::f4 q, int lanes, int skip) {
+                           accumulate4(i, k * f, weight_of(k, q), lanes, skip, v, away);
+                         });
+      return;
+    }
+    detail::ellipse_map m;
+    if (!detail::map_ellipse(proj_, s.centre, s.u, s.v, m)) return;
+    if (m.in_front) {
+      (void)detail::scan_ellipse_conic(
+          m, view_.width, view_.height,
+          [&](std::size_t i, detail::f4 k, detail::f4 q, int lanes, int skip) {
+            accumulate4(i, k, weight_of(k, q), lanes, skip, v, away);
+          });
+      return;
+    }
+    // Straddles the near plane: per pixel, clipped (rare).
     detail::raster_ellipse_radial(proj_, s.centre, s.u, s.v, [&](std::size_t i, float k, float r2) {
-      accumulate(i, k, std::max(0.0f, 1 - r2), bv);
+      accumulate(i, k, 1 - r2, v, away);
     });
   }
 
-  void accumulate_triangle(const triangle_prim<A>& t) {
-    std::array<detail::tri_vertex<kNP>, 3> v;
-    for (std::size_t k = 0; k < 3; ++k) {
-      v[k].h = proj_.point(t.p[k]);
-      if constexpr (fx.shading)
-        for (int c = 0; c < 3; ++c) v[k].a[static_cast<std::size_t>(c)] = t.normal[k][c];
-      if constexpr (fx.colour) {
-        v[k].a[kColourAt + 0] = t.colour[k].r;
-        v[k].a[kColourAt + 1] = t.colour[k].g;
-        v[k].a[kColourAt + 2] = t.colour[k].b;
-      }
+  /// Visibility pass: a triangle fragment that passed the depth test is recorded as the pixel's
+  /// accumulation sums with weight 1 (an exact surface, not offset), replacing what was there;
+  /// begin_accumulation() keeps it where it is still the front-most fragment.
+  void record_triangle(std::size_t i, float k, const std::array<float, kNP>& a, bool front) {
+    blend_.plane(kW)[i] = 1;
+    blend_.plane(kKey)[i] = front ? k : -k;
+    if constexpr (fx.colour)
+      for (std::size_t c = 0; c < 3; ++c) blend_.plane(kR + c)[i] = a[kColourAt + c];
+    if constexpr (fx.shading) {
+      const vec3f nn(a[0], a[1], a[2]);
+      const float len = nn.norm();
+      const vec3f u = len > 0 ? vec3f(nn / (front ? len : -len)) : vec3f::Zero();
+      for (std::size_t c = 0; c < 3; ++c)
+        blend_.plane(kNx + c)[i] = u[static_cast<Eigen::Index>(c)];
     }
-    float* const kb = kb_;
-    detail::raster_triangle<fx.backface_cull>(
-        proj_, v, [kb](std::size_t i, float k) { return k >= kb[i]; },
-        [this](std::size_t i, float k, const std::array<float, kNP>& a, bool front) {
-          blend_value bv;
-          bv.away = front ? 0 : 1;
-          if constexpr (fx.colour) {
-            bv.r = a[kColourAt];
-            bv.g = a[kColourAt + 1];
-            bv.b = a[kColourAt + 2];
-          }
-          if constexpr (fx.shading) {
-            const vec3f n(a[0], a[1], a[2]);
-            const float len = n.norm();
-            if (len > 0) bv.n = n / (front ? len : -len);
-          }
-          accumulate(i, k, 1.0f, bv);
-        });
   }
 
   /// Pixels where an occluder is still the front-most thing drawn (nothing nearer wrote a larger
@@ -604,26 +793,31 @@ class rasterizer {
       }
   }
 
-  /// colour = Σ w·colour / Σ w, normal = Σ w·n shaded per pixel, depth = front-most fragment,
-  /// over the fragments facing the eye, or where there are none, those facing away.
-  /// Pixels no weighted fragment reached keep the visibility pass's colour and depth.
+  /// colour = Σ w·colour / Σ w, normal = Σ w·n shaded per pixel (deferred shading), depth =
+  /// the front-most contributing fragment, over the fragments facing the eye, or where there
+  /// are none, those facing away. Pixels no weighted fragment reached keep the visibility
+  /// pass's colour and depth.
   void normalise_blend() {
     if (!blend_.accumulating) return;  // no accumulation pass was run: the visibility image
-    for (std::size_t i = 0; i < blend_.acc.size(); ++i) {
-      const blend_sample& both = blend_.acc[i];
-      const blend_sums& a = both.side[both.side[0].w > 0 ? 0 : 1];
-      if (!(a.w > 0)) continue;
-      kb_[i] = a.key;
+    const std::size_t n = key_.size();
+    const float* const w = blend_.plane(kW);
+    const float* const key = blend_.plane(kKey);
+    const std::size_t stride = blend_.stride;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!(w[i] > 0)) continue;
+      kb_[i] = std::abs(key[i]);
       fragment_colour c{flat_, 1.0f};
       if constexpr (fx.colour) {
-        const float inv = 1.0f / a.w;
-        c.albedo = {detail::to_channel(a.r * inv), detail::to_channel(a.g * inv),
-                    detail::to_channel(a.b * inv)};
+        const float inv = 1.0f / w[i];
+        const float* const r = blend_.plane(kR);
+        c.albedo = {detail::to_channel(r[i] * inv), detail::to_channel(r[stride + i] * inv),
+                    detail::to_channel(r[2 * stride + i] * inv)};
       }
       if constexpr (fx.shading) {
-        const vec3f n(a.nx, a.ny, a.nz);
-        const float len = n.norm();
-        c.lit = detail::lambert(len > 0 ? vec3f(n / len) : vec3f::Zero(), light_, ambient_);
+        const float* const nx = blend_.plane(kNx);
+        const vec3f nn(nx[i], nx[stride + i], nx[2 * stride + i]);
+        const float len = nn.norm();
+        c.lit = detail::lambert(len > 0 ? vec3f(nn / len) : vec3f::Zero(), light_, ambient_);
       }
       store(i, c);
     }
@@ -715,6 +909,7 @@ template <class R, attributes A>
 void replay_passes(R& r, const buffer_sink<A>& prims) {
   prims.replay(r);
   if constexpr (R::fx.blending) {
+    if (!r.needs_accumulation()) return;  // triangles only: nothing to blend
     r.begin_accumulation();
     prims.replay(r);
   }
@@ -738,12 +933,21 @@ template <attributes A, effects E>
 template <attributes A, effects E, class DrawFn>
 [[nodiscard]] image render_streamed(const view& v, const render_options& opt, DrawFn& draw) {
   constexpr bool blend = rasterizer<A, E>::fx.blending;
-  if constexpr (E.shadows || blend) {
-    // Shadows: the light pass and the camera pass see the same primitives; blending: the
-    // visibility and the accumulation pass do.
+  if constexpr (E.shadows) {
+    // The light pass and the camera pass (and with blending, its two) see the same primitives.
     buffer_sink<A> prims;
     draw(prims);
     return render_prims<A, E>(v, opt, prims);
+  } else if constexpr (blend) {
+    // The visibility and the accumulation pass: the draw is called once for each, straight into
+    // the rasteriser (no copy of the frame).
+    rasterizer<A, E> r(v, opt);
+    draw(r);
+    if (r.needs_accumulation()) {
+      r.begin_accumulation();
+      draw(r);
+    }
+    return r.finish();
   } else {
     rasterizer<A, E> r(v, opt);
     draw(r);
@@ -860,10 +1064,11 @@ template <attributes A, effects Compiled = all_effects, class DrawFn>
 }
 
 /// render() without the buffer: `draw(sink)` writes straight into the rasteriser<A, E>& (with
-/// shadows or blending, a buffer_sink<A>&) it is given. The same image as render(); no copy of the
-/// frame, but the caller's draw is compiled once per effect combination in the calling file. For
-/// measuring the rasteriser itself, and for frames too large to buffer. Supersamples as render()
-/// does.
+/// shadows, a buffer_sink<A>&) it is given. With blending it is called once per pass (visibility,
+/// then accumulation, which a frame without splats or points skips) and must emit the same
+/// primitives each time. The same image as render(); no copy of the frame, but the caller's draw
+/// is compiled once per effect combination in the calling file. For measuring the rasteriser
+/// itself, and for frames too large to buffer. Supersamples as render() does.
 template <attributes A, effects Compiled = all_effects, class DrawFn>
 [[nodiscard]] image render_direct(const view& v, const render_options& opt, DrawFn&& draw) {
   const detail::drawing d =

@@ -28,6 +28,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -202,6 +203,30 @@ struct f4 {
   /// All-ones lanes where x ≤ 0.
   friend f4 non_positive(f4 x) { return f4(_mm_cmple_ps(x.v, _mm_setzero_ps())); }
   void store(float* out) const { _mm_storeu_ps(out, v); }
+  // For the blending pass's accumulation (rasterizer::accumulate4): loads, division, min/max,
+  // comparisons giving all-ones lane masks, and bitwise selection by such masks.
+  static f4 load(const float* p) { return f4(_mm_loadu_ps(p)); }
+  friend f4 operator-(f4 a, f4 b) { return f4(_mm_sub_ps(a.v, b.v)); }
+  friend f4 operator/(f4 a, f4 b) { return f4(_mm_div_ps(a.v, b.v)); }
+  friend f4 min(f4 a, f4 b) { return f4(_mm_min_ps(a.v, b.v)); }
+  friend f4 max(f4 a, f4 b) { return f4(_mm_max_ps(a.v, b.v)); }
+  friend f4 operator>=(f4 a, f4 b) { return f4(_mm_cmpge_ps(a.v, b.v)); }
+  friend f4 operator>(f4 a, f4 b) { return f4(_mm_cmpgt_ps(a.v, b.v)); }
+  friend f4 operator<(f4 a, f4 b) { return f4(_mm_cmplt_ps(a.v, b.v)); }
+  friend f4 operator&(f4 a, f4 b) { return f4(_mm_and_ps(a.v, b.v)); }
+  /// The lanes of b where mask is clear (~mask & b).
+  friend f4 and_not(f4 mask, f4 b) { return f4(_mm_andnot_ps(mask.v, b.v)); }
+  /// a where mask is set, else b.
+  friend f4 select(f4 mask, f4 a, f4 b) {
+    return f4(_mm_or_ps(_mm_and_ps(mask.v, a.v), _mm_andnot_ps(mask.v, b.v)));
+  }
+  /// Whether any lane of a mask is set.
+  friend bool any(f4 mask) { return _mm_movemask_ps(mask.v) != 0; }
+  /// All-ones in lanes l with first ≤ l (first in 0..4).
+  static f4 lanes_from(int first) {
+    const __m128i l = _mm_set_epi32(3, 2, 1, 0);
+    return f4(_mm_castsi128_ps(_mm_cmpgt_epi32(l, _mm_set1_epi32(first - 1))));
+  }
 };
 #else
 struct f4 {
@@ -221,13 +246,74 @@ struct f4 {
     for (int i = 0; i < 4; ++i) a.v[i] *= b.v[i];
     return a;
   }
-  friend f4 non_positive(f4 x) {  // 1 where x ≤ 0 (a mask only ever tested for ≠ 0)
-    for (int i = 0; i < 4; ++i) x.v[i] = x.v[i] <= 0 ? 1.0f : 0.0f;
+  friend f4 non_positive(f4 x) {  // all-ones bits where x ≤ 0, as _mm_cmple_ps
+    for (int i = 0; i < 4; ++i) x.v[i] = mask_of(x.v[i] <= 0);
     return x;
   }
   void store(float* out) const {
     for (int i = 0; i < 4; ++i) out[i] = v[i];
   }
+  static f4 load(const float* p) {
+    f4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = p[i];
+    return r;
+  }
+  friend f4 operator-(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] -= b.v[i];
+    return a;
+  }
+  friend f4 operator/(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] /= b.v[i];
+    return a;
+  }
+  // min/max as minps/maxps: the second operand when either is NaN.
+  friend f4 min(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = a.v[i] < b.v[i] ? a.v[i] : b.v[i];
+    return a;
+  }
+  friend f4 max(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = a.v[i] > b.v[i] ? a.v[i] : b.v[i];
+    return a;
+  }
+  friend f4 operator>=(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = mask_of(a.v[i] >= b.v[i]);
+    return a;
+  }
+  friend f4 operator>(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = mask_of(a.v[i] > b.v[i]);
+    return a;
+  }
+  friend f4 operator<(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = mask_of(a.v[i] < b.v[i]);
+    return a;
+  }
+  friend f4 operator&(f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = from_bits(bits(a.v[i]) & bits(b.v[i]));
+    return a;
+  }
+  friend f4 and_not(f4 mask, f4 b) {
+    for (int i = 0; i < 4; ++i) b.v[i] = from_bits(~bits(mask.v[i]) & bits(b.v[i]));
+    return b;
+  }
+  friend f4 select(f4 mask, f4 a, f4 b) {
+    for (int i = 0; i < 4; ++i) a.v[i] = bits(mask.v[i]) ? a.v[i] : b.v[i];
+    return a;
+  }
+  friend bool any(f4 mask) {
+    for (int i = 0; i < 4; ++i)
+      if (bits(mask.v[i]) != 0) return true;
+    return false;
+  }
+  static f4 lanes_from(int first) {
+    f4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = mask_of(i >= first);
+    return r;
+  }
+
+ private:
+  static std::uint32_t bits(float f) { return std::bit_cast<std::uint32_t>(f); }
+  static float from_bits(std::uint32_t u) { return std::bit_cast<float>(u); }
+  static float mask_of(bool b) { return from_bits(b ? 0xffffffffu : 0u); }
 };
 #endif
 
@@ -414,6 +500,137 @@ inline bool map_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const ve
   return true;
 }
 
+/// The screen conic of an ellipse wholly in front of the near plane (ellipse_map::in_front),
+/// relative to the image (x₀, y₀) of its centre, where g = (0, 0, 1/w_c) exactly and the terms
+/// stay small: Q(X, Y) = g₁² + g₂² − g₃² = αX² + 2βXY + γY² + 2δX + 2εY + ζ (inside iff Q ≤ 0),
+/// the key kc + kx·X + ky·Y, and the pixel box [i0, i1] × [j0, j1] of its exact bounding box
+/// (empty when i0 > i1 or j0 > j1). What scan_conic needs: computed once per splat, and kept by
+/// the blending passes from the visibility pass for the accumulation pass.
+struct ellipse_conic {
+  double x0, y0, alpha, beta, gamma, delta, eps, zeta, kc, kx, ky;
+  int i0, i1, j0, j1;
+};
+
+/// The conic of m (m.in_front); false when it is numerically not an ellipse (no area).
+inline bool conic_of(const ellipse_map& m, int width, int height, ellipse_conic& c) {
+  const hom4& hc = m.hc;
+  const double* r1 = m.r1;
+  const double* r2 = m.r2;
+  const double* r3 = m.r3;
+  const double g3 = 1.0 / hc.w;
+  const double x0 = hc.x * g3, y0 = hc.y * g3;
+  const double a1 = r1[0], b1 = r1[1], a2 = r2[0], b2 = r2[1], a3 = r3[0], b3 = r3[1];
+  const double alpha = a1 * a1 + a2 * a2 - a3 * a3;
+  const double beta = a1 * b1 + a2 * b2 - a3 * b3;
+  const double gamma = b1 * b1 + b2 * b2 - b3 * b3;
+  const double delta = -a3 * g3, eps = -b3 * g3, zeta = -g3 * g3;
+  const double pdet = alpha * gamma - beta * beta;
+  if (!(alpha > 0 && pdet > 0)) return false;  // numerically not an ellipse: no area
+  // Bounding box: the rows Y with a real span, (βY + δ)² − α(γY² + 2εY + ζ) ≥ 0, and likewise
+  // the columns X: two downward parabolas, whose roots are the extremes of the ellipse.
+  const double hy = beta * delta - alpha * eps, hx = beta * eps - gamma * delta;
+  const double dy = hy * hy + pdet * (delta * delta - alpha * zeta);
+  const double dx = hx * hx + pdet * (eps * eps - gamma * zeta);
+  if (!(dy > 0 && dx > 0)) return false;
+  const double inv_pdet = 1.0 / pdet, sy = std::sqrt(dy), sx = std::sqrt(dx);
+  c = {x0,   y0,   alpha, beta, gamma, delta, eps, zeta, hc.k * g3 /* key at the centre */,
+       m.kx, m.ky, 0,     0,    0,     0};
+  c.j0 = first_centre_at_or_after(y0 + (hy - sy) * inv_pdet, height);
+  c.j1 = last_centre_at_or_before(y0 + (hy + sy) * inv_pdet, height);
+  c.i0 = first_centre_at_or_after(x0 + (hx - sx) * inv_pdet, width);
+  c.i1 = last_centre_at_or_before(x0 + (hx + sx) * inv_pdet, width);
+  return true;
+}
+
+/// The pixels of a conic's box, four at a time: calls chunk(i, key, q, lanes, skip) for chunks
+/// of four consecutive pixels from index i along a row, with the depth key and Q of each lane
+/// (the pixel centre is inside iff Q ≤ 0; for the camera key = g₃, so 1 − s² − t² = −Q/key²).
+/// A chunk is shifted left to stay inside the row, so its first `skip` lanes were already given
+/// by the chunk before it (or lie left of the box); only the first `lanes` (< 4 on viewports
+/// narrower than four pixels) exist. Evaluated in float relative to the centre's image, with no
+/// branch on the data (the boundary moves by ~1e-7 of the splat's radius at most).
+template <class Chunk>
+inline void scan_conic(const ellipse_conic& c, int width, Chunk&& chunk) {
+  const int i0 = c.i0, i1 = c.i1, j0 = c.j0, j1 = c.j1;
+  if (i0 > i1 || j0 > j1) return;
+  const double x0 = c.x0, y0 = c.y0, beta = c.beta, gamma = c.gamma, delta = c.delta, eps = c.eps,
+               zeta = c.zeta, kc = c.kc, kx = c.kx, ky = c.ky;
+  // Row by row, four pixels at a time: a row of Q(X) = (αX + B)X + C. Chunks start at `xs` and
+  // are shifted left to stay inside the row.
+  const int span = i1 - i0 + 1;
+  const int chunks = (span + 3) / 4;
+  const int lanes = std::min(width, 4);
+  const f4 lane = f4::lanes(), va(static_cast<float>(c.alpha));
+  const f4 lane_key = f4(static_cast<float>(kx)) * lane;
+  const auto chunk_start = [&](int k) { return std::max(std::min(i0 + 4 * k, width - 4), 0); };
+  if (chunks <= 2) {
+    // Small splats (the common case: ≤ 8 pixels wide): forward differences down the rows.
+    // Q(X, Y+1) − Q(X, Y) = 2βX + γ(2Y + 1) + 2ε, whose own row difference is 2γ; the key
+    // steps by ky. Per row and chunk: three additions, a compare and the blended write.
+    const double Y0 = j0 + 0.5 - y0;
+    const f4 b0(static_cast<float>(2 * (beta * Y0 + delta)));
+    const f4 c0(static_cast<float>((gamma * Y0 + 2 * eps) * Y0 + zeta));
+    const f4 d0(static_cast<float>(gamma * (2 * Y0 + 1) + 2 * eps));
+    const f4 two_beta(static_cast<float>(2 * beta)), dd(static_cast<float>(2 * gamma));
+    const f4 dk(static_cast<float>(ky));
+    struct chunk_state {
+      std::size_t xs;
+      int skip;
+      f4 q, dq, key;
+    };
+    const auto start = [&](int k) {
+      const int xs = chunk_start(k);
+      const double X0 = xs + 0.5 - x0;
+      const f4 X = f4(static_cast<float>(X0)) + lane;
+      return chunk_state{static_cast<std::size_t>(xs), i0 + 4 * k - xs, (va * X + b0) * X + c0,
+                         two_beta * X + d0,
+                         f4(static_cast<float>(kc + ky * Y0 + kx * X0)) + lane_key};
+    };
+    const auto step = [&](chunk_state& ch, std::size_t row) {
+      chunk(row + ch.xs, ch.key, ch.q, lanes, ch.skip);
+      ch.q = ch.q + ch.dq;
+      ch.dq = ch.dq + dd;
+      ch.key = ch.key + dk;
+    };
+    chunk_state a = start(0);
+    std::size_t row = static_cast<std::size_t>(j0) * static_cast<std::size_t>(width);
+    if (chunks == 1) {
+      for (int j = j0; j <= j1; ++j, row += static_cast<std::size_t>(width)) step(a, row);
+    } else {
+      chunk_state b = start(1);
+      for (int j = j0; j <= j1; ++j, row += static_cast<std::size_t>(width)) {
+        step(a, row);
+        step(b, row);
+      }
+    }
+    return;
+  }
+  // Wider splats: the row polynomial is evaluated afresh on every row (forward differences
+  // over hundreds of rows would accumulate rounding).
+  for (int j = j0; j <= j1; ++j) {
+    const double Y = j + 0.5 - y0;
+    const f4 b(static_cast<float>(2 * (beta * Y + delta)));
+    const f4 cq(static_cast<float>((gamma * Y + 2 * eps) * Y + zeta));
+    const std::size_t row = static_cast<std::size_t>(j) * static_cast<std::size_t>(width);
+    for (int k = 0; k < chunks; ++k) {
+      const int xs = chunk_start(k);
+      const double X0 = xs + 0.5 - x0;
+      const f4 X = f4(static_cast<float>(X0)) + lane;
+      const f4 key = f4(static_cast<float>(kc + ky * Y + kx * X0)) + lane_key;
+      chunk(row + static_cast<std::size_t>(xs), key, (va * X + b) * X + cq, lanes, i0 + 4 * k - xs);
+    }
+  }
+}
+
+/// conic_of(m) scanned by scan_conic; false when m is numerically not an ellipse.
+template <class Chunk>
+inline bool scan_ellipse_conic(const ellipse_map& m, int width, int height, Chunk&& chunk) {
+  ellipse_conic c;
+  if (!conic_of(m, width, height, c)) return false;
+  scan_conic(c, width, chunk);
+  return true;
+}
+
 /// Rasterises the ellipse {c + s·u + t·v : s² + t² ≤ 1} (c, u, v in the primitives' frame) into
 /// `out`, depth-tested.
 ///
@@ -425,112 +642,36 @@ inline bool map_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const ve
 /// rectangle; splats whose axes are zero or parallel, or whose plane contains the eye
 /// (edge-on), have no area and draw nothing.
 template <class Proj, bool Colour, bool Lit>
+inline void raster_ellipse_mapped(const Proj& pr, const ellipse_map& m,
+                                  const span_target<Colour, Lit>& out);
+template <class Proj, bool Colour, bool Lit>
 inline void raster_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const vec3f& v,
                            const span_target<Colour, Lit>& out) {
   ellipse_map m;
   if (!map_ellipse(pr, c, u, v, m)) return;
+  raster_ellipse_mapped(pr, m, out);
+}
+
+/// raster_ellipse() of the ellipse map_ellipse() mapped.
+template <class Proj, bool Colour, bool Lit>
+inline void raster_ellipse_mapped(const Proj& pr, const ellipse_map& m,
+                                  const span_target<Colour, Lit>& out) {
   const hom4 &hc = m.hc, &hu = m.hu, &hv = m.hv;
   const double* r1 = m.r1;
   const double* r2 = m.r2;
   const double* r3 = m.r3;
   const double kx = m.kx, ky = m.ky, k0 = m.k0;
-  const bool in_front = m.in_front;
   const int width = pr.width, height = pr.height;
 
-  if (in_front) {
-    // Whole ellipse in front of the near plane: its image is a bounded ellipse. Work relative to
-    // the image (x₀, y₀) of the centre, where g = (0, 0, 1/w_c) exactly, for conditioning.
-    const double g3 = 1.0 / hc.w;
-    const double x0 = hc.x * g3, y0 = hc.y * g3;
-    const double a1 = r1[0], b1 = r1[1], a2 = r2[0], b2 = r2[1], a3 = r3[0], b3 = r3[1];
-    // Q(X, Y) = g₁² + g₂² − g₃² = αX² + 2βXY + γY² + 2δX + 2εY + ζ; inside iff Q ≤ 0.
-    const double alpha = a1 * a1 + a2 * a2 - a3 * a3;
-    const double beta = a1 * b1 + a2 * b2 - a3 * b3;
-    const double gamma = b1 * b1 + b2 * b2 - b3 * b3;
-    const double delta = -a3 * g3, eps = -b3 * g3, zeta = -g3 * g3;
-    const double pdet = alpha * gamma - beta * beta;
-    if (!(alpha > 0 && pdet > 0)) return;  // numerically not an ellipse: no area
-    // Bounding box: the rows Y with a real span, (βY + δ)² − α(γY² + 2εY + ζ) ≥ 0, and likewise
-    // the columns X: two downward parabolas, whose roots are the extremes of the ellipse.
-    const double hy = beta * delta - alpha * eps, hx = beta * eps - gamma * delta;
-    const double dy = hy * hy + pdet * (delta * delta - alpha * zeta);
-    const double dx = hx * hx + pdet * (eps * eps - gamma * zeta);
-    if (!(dy > 0 && dx > 0)) return;
-    const double inv_pdet = 1.0 / pdet, sy = std::sqrt(dy), sx = std::sqrt(dx);
-    const int j0 = first_centre_at_or_after(y0 + (hy - sy) * inv_pdet, height);
-    const int j1 = last_centre_at_or_before(y0 + (hy + sy) * inv_pdet, height);
-    const int i0 = first_centre_at_or_after(x0 + (hx - sx) * inv_pdet, width);
-    const int i1 = last_centre_at_or_before(x0 + (hx + sx) * inv_pdet, width);
-    if (i0 > i1 || j0 > j1) return;
-
-    // Scan the box row by row, four pixels at a time, with no branch on the data: a row of
-    // Q(X) = (αX + B)X + C is evaluated in float relative to the centre, where the terms stay
-    // small (the boundary moves by ~1e-7 of the splat's radius at most). Chunks start at `xs`
-    // and are shifted left to stay inside the row; a pixel seen by two chunks gets the same
-    // value twice, which the strict depth test makes harmless. Rows narrower than four pixels
-    // (tiny viewports) write only their own lanes.
-    const int span = i1 - i0 + 1;
-    const int chunks = (span + 3) / 4;
-    const int lanes = std::min(width, 4);
+  if (m.in_front) {
+    // Whole ellipse in front of the near plane: its image is a bounded ellipse, scanned four
+    // pixels at a time; a pixel seen by two chunks gets the same value twice, which the strict
+    // depth test makes harmless. Rows narrower than four pixels (tiny viewports) write only
+    // their own lanes.
     const auto write4 = out.four();
-    const f4 lane = f4::lanes(), va(static_cast<float>(alpha));
-    const f4 lane_key = f4(static_cast<float>(kx)) * lane;
-    const double kc = hc.k * g3;  // key at the centre
-    const auto chunk_start = [&](int k) { return std::max(std::min(i0 + 4 * k, width - 4), 0); };
-    if (chunks <= 2) {
-      // Small splats (the common case: ≤ 8 pixels wide): forward differences down the rows.
-      // Q(X, Y+1) − Q(X, Y) = 2βX + γ(2Y + 1) + 2ε, whose own row difference is 2γ; the key
-      // steps by ky. Per row and chunk: three additions, a compare and the blended write.
-      const double Y0 = j0 + 0.5 - y0;
-      const f4 b0(static_cast<float>(2 * (beta * Y0 + delta)));
-      const f4 c0(static_cast<float>((gamma * Y0 + 2 * eps) * Y0 + zeta));
-      const f4 d0(static_cast<float>(gamma * (2 * Y0 + 1) + 2 * eps));
-      const f4 two_beta(static_cast<float>(2 * beta)), dd(static_cast<float>(2 * gamma));
-      const f4 dk(static_cast<float>(ky));
-      struct chunk {
-        std::size_t xs;
-        f4 q, dq, key;
-      };
-      const auto start = [&](int xs) {
-        const double X0 = xs + 0.5 - x0;
-        const f4 X = f4(static_cast<float>(X0)) + lane;
-        return chunk{static_cast<std::size_t>(xs), (va * X + b0) * X + c0, two_beta * X + d0,
-                     f4(static_cast<float>(kc + ky * Y0 + kx * X0)) + lane_key};
-      };
-      const auto step = [&](chunk& ch, std::size_t row) {
-        write4(row + ch.xs, ch.key, non_positive(ch.q), lanes);
-        ch.q = ch.q + ch.dq;
-        ch.dq = ch.dq + dd;
-        ch.key = ch.key + dk;
-      };
-      chunk a = start(chunk_start(0));
-      std::size_t row = static_cast<std::size_t>(j0) * static_cast<std::size_t>(width);
-      if (chunks == 1) {
-        for (int j = j0; j <= j1; ++j, row += static_cast<std::size_t>(width)) step(a, row);
-      } else {
-        chunk b = start(chunk_start(1));
-        for (int j = j0; j <= j1; ++j, row += static_cast<std::size_t>(width)) {
-          step(a, row);
-          step(b, row);
-        }
-      }
-      return;
-    }
-    // Wider splats: the row polynomial is evaluated afresh on every row (forward differences
-    // over hundreds of rows would accumulate rounding).
-    for (int j = j0; j <= j1; ++j) {
-      const double Y = j + 0.5 - y0;
-      const f4 b(static_cast<float>(2 * (beta * Y + delta)));
-      const f4 cq(static_cast<float>((gamma * Y + 2 * eps) * Y + zeta));
-      const std::size_t row = static_cast<std::size_t>(j) * static_cast<std::size_t>(width);
-      for (int k = 0; k < chunks; ++k) {
-        const int xs = chunk_start(k);
-        const double X0 = xs + 0.5 - x0;
-        const f4 X = f4(static_cast<float>(X0)) + lane;
-        const f4 key = f4(static_cast<float>(kc + ky * Y + kx * X0)) + lane_key;
-        write4(row + static_cast<std::size_t>(xs), key, non_positive((va * X + b) * X + cq), lanes);
-      }
-    }
+    (void)scan_ellipse_conic(m, width, height, [&](std::size_t i, f4 key, f4 q, int lanes, int) {
+      write4(i, key, non_positive(q), lanes);
+    });
     return;
   }
 
