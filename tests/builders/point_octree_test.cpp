@@ -1063,7 +1063,7 @@ TEST(PointOctree, FinestCutLooksLikeUnseenMeshes) {
     double psnr, iou, cut;
   };
   for (const floors f :
-       {floors{"happy_vrip_res3.ply", 21.0, 0.94, 0.02}, floors{"cow.obj", 22.5, 0.86, 0.026}}) {
+       {floors{"happy_vrip_res3.ply", 20.5, 0.93, 0.02}, floors{"cow.obj", 22.5, 0.86, 0.027}}) {
     const char* name = f.name;
     triangle_mesh mesh;
     try {
