@@ -35,6 +35,19 @@ struct builder {
   }
   void tri(std::uint32_t a, std::uint32_t b, std::uint32_t c) { m.faces.push_back({a, b, c}); }
 
+  // The faces of a latitude/longitude sphere whose (rings + 1) × (segs + 1) vertices start at
+  // `base`, ring by ring; the pole rings get one triangle per segment.
+  void sphere_faces(std::uint32_t base, int rings, int segs) {
+    const auto at = [&](int i, int j) {
+      return base + static_cast<std::uint32_t>(j * (segs + 1) + i);
+    };
+    for (int j = 0; j < rings; ++j)
+      for (int i = 0; i < segs; ++i) {
+        if (j > 0) tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+        if (j < rings - 1) tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+      }
+  }
+
   // A grid patch p(u,v) = o + u·U + v·V, u,v in [0,1], with n×k quads, flat normal U×V.
   void patch(const vec3f& o, const vec3f& U, const vec3f& V, int n, int k, const vec3f& colour,
              bool stripes) {
@@ -98,14 +111,7 @@ triangle_mesh make_demo_scene(int detail) {
         b.vertex(c + r * n, n, hue(0.6f * t + 0.05f));
       }
     }
-    const auto at = [&](int i, int j) {
-      return base + static_cast<std::uint32_t>(j * (segs + 1) + i);
-    };
-    for (int j = 0; j < rings; ++j)
-      for (int i = 0; i < segs; ++i) {
-        if (j > 0) b.tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
-        if (j < rings - 1) b.tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
-      }
+    b.sphere_faces(base, rings, segs);
   }
   // 2. A box with sharp creases, one colour per face.
   b.box(vec3f(0.4f, 0.0f, -0.7f), vec3f(1.8f, 1.4f, 0.7f), detail,
@@ -139,14 +145,7 @@ triangle_mesh make_hard_cases_scene(int detail) {
         b.vertex(c + r * n, n, colour);
       }
     }
-    const auto at = [&](int i, int j) {
-      return base + static_cast<std::uint32_t>(j * (segs + 1) + i);
-    };
-    for (int j = 0; j < rings; ++j)
-      for (int i = 0; i < segs; ++i) {
-        if (j > 0) b.tri(at(i, j), at(i + 1, j), at(i + 1, j + 1));
-        if (j < rings - 1) b.tri(at(i, j), at(i + 1, j + 1), at(i, j + 1));
-      }
+    b.sphere_faces(base, rings, segs);
   };
   sphere(vec3f(-0.52f, 0.6f, 0), 0.5f, vec3f(0.85f, 0.2f, 0.2f));
   sphere(vec3f(0.52f, 0.6f, 0), 0.5f, vec3f(0.2f, 0.3f, 0.9f));

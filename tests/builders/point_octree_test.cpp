@@ -1065,12 +1065,8 @@ TEST(PointOctree, FinestCutLooksLikeUnseenMeshes) {
   for (const floors f :
        {floors{"happy_vrip_res3.ply", 20.5, 0.93, 0.02}, floors{"cow.obj", 22.5, 0.86, 0.027}}) {
     const char* name = f.name;
-    triangle_mesh mesh;
-    try {
-      mesh = read_mesh(test::data_file(name));
-    } catch (const std::runtime_error& e) {
-      GTEST_SKIP() << e.what();
-    }
+    // data_file throws when the scan is missing: ctest reports that as skipped, CI=true fails.
+    triangle_mesh mesh = read_mesh(test::data_file(name));
     std::printf("%s\n", name);
     point_cloud cloud = mesh.vertices;
     cloud.normals.clear();
