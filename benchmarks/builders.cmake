@@ -1,7 +1,6 @@
-pbr_lod_add_benchmark(bench_point_octree ${CMAKE_CURRENT_LIST_DIR}/point_octree_benchmark.cpp)
-pbr_lod_add_benchmark(bench_pop ${CMAKE_CURRENT_LIST_DIR}/pop_benchmark.cpp)
-pbr_lod_add_benchmark(bench_rho_grid ${CMAKE_CURRENT_LIST_DIR}/rho_grid_benchmark.cpp)
-pbr_lod_add_benchmark(bench_pmr ${CMAKE_CURRENT_LIST_DIR}/pmr_benchmark.cpp)
+foreach(id IN LISTS PBR_LOD_BUILDERS)  # cmake/builders.cmake: bench_ID from ID_benchmark.cpp
+  pbr_lod_add_benchmark(bench_${id} ${CMAKE_CURRENT_LIST_DIR}/${id}_benchmark.cpp)
+endforeach()
 # PCA octree; CGAL's hierarchy_simplify_point_set in an object library of its own so that CGAL's
 # compile options (-frounding-math) stay on that file (find_package(CGAL) ran in
 # src/core/estimation.cmake).
@@ -10,6 +9,5 @@ target_link_libraries(bench_pca_octree_cgal PRIVATE CGAL::CGAL pbr_lod::pbr_lod 
                       pbr_lod_warnings)
 target_include_directories(bench_pca_octree_cgal PRIVATE ${PROJECT_SOURCE_DIR}/tests)
 target_compile_definitions(bench_pca_octree_cgal PRIVATE PBR_LOD_DATA_DIR="${PBR_LOD_DATA_DIR}")
-pbr_lod_add_benchmark(bench_pca_octree ${CMAKE_CURRENT_LIST_DIR}/pca_octree_benchmark.cpp
-                      $<TARGET_OBJECTS:bench_pca_octree_cgal>)
+target_sources(bench_pca_octree PRIVATE $<TARGET_OBJECTS:bench_pca_octree_cgal>)
 target_link_libraries(bench_pca_octree PRIVATE $<LINK_ONLY:CGAL::CGAL>)

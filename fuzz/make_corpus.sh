@@ -9,7 +9,9 @@
 # three encodings (ascii, binary, binary_compressed) instead.
 set -euo pipefail
 pbrlod="$1" data="$2" out="$3"
-for t in ply obj off pcd las point_octree rho_grid pop pca_octree pmr; do mkdir -p "$out/fuzz_$t"; done
+# The builders (one fuzz target each) are those of cmake/builders.cmake.
+builders=$(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/\1/p' "$(dirname "$0")/../cmake/builders.cmake")
+for t in ply obj off pcd las $builders; do mkdir -p "$out/fuzz_$t"; done
 
 # --- meshes and point clouds ---------------------------------------------------------------------
 cp --no-preserve=mode "$data/bun_zipper_res4.ply" "$out/fuzz_ply/bunny_res4.ply"

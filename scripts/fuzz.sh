@@ -21,8 +21,9 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 seconds="${1:-10}"
 shift $(($# > 0 ? 1 : 0))
-all=(fuzz_ply fuzz_obj fuzz_off fuzz_pcd fuzz_las fuzz_point_octree fuzz_rho_grid fuzz_pop
-     fuzz_pca_octree fuzz_pmr)
+# The readers' targets, then one per builder of cmake/builders.cmake.
+mapfile -t builders < <(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/fuzz_\1/p' cmake/builders.cmake)
+all=(fuzz_ply fuzz_obj fuzz_off fuzz_pcd fuzz_las "${builders[@]}")
 targets=("${@:-${all[@]}}")
 jobs="${JOBS:-$(nproc)}"
 data="${PBR_LOD_DATA:-$root/../shared/data}"

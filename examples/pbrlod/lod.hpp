@@ -198,11 +198,9 @@ frame draw_frame(const H& h, const view& v, const render_options& o, const trave
   if (r.host) return host_frame<Compiled>(h, v, o, t, policy_for(policy, v), *r.host);
   frame f;
   f.fx = o.fx;
-  // Supersampled, the cut is the one of v: the tolerance in v's pixels is k of the k× view's.
-  const int k = o.supersample;
-  const view dv = k == 1 ? v : v.supersampled(k);
-  traverse_options tk = t;
-  tk.tolerance_px = t.tolerance_px * static_cast<float>(k);
+  const supersampled_cut cut(v, t, o.supersample);  // supersampled, still v's cut
+  const view& dv = cut.drawn;
+  const traverse_options& tk = cut.options;
   decltype(auto) pd = policy_for(policy, dv);
   const auto t0 = clock_type::now();
   f.img = render<H::attrs, Compiled>(

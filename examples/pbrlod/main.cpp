@@ -26,6 +26,7 @@
 #include "papers.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/texture.hpp"
 #include "pbr_lod/raster/png.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
@@ -163,7 +164,7 @@ int cmd_stats(const std::string& input, bool as_json) {
     j.integer("dropped_non_finite", static_cast<long long>(in.report.dropped_non_finite));
     j.integer("faces_dropped", static_cast<long long>(in.report.faces_dropped));
     j.str("attributes", a.to_string());
-    j.boolean("textured", !in.mesh.texture_path.empty());
+    j.boolean("textured", in.mesh.texture != nullptr && !in.mesh.face_texcoords.empty());
     j.integer("bytes_per_point", static_cast<long long>(bpp));
     j.num("bits_per_point", 8.0 * static_cast<double>(bpp));
     json o;
@@ -184,7 +185,8 @@ int cmd_stats(const std::string& input, bool as_json) {
 }
 
 int cmd_compare(const std::string& a, const std::string& b, bool as_json) {
-  const image ia = read_png(a), ib = read_png(b);
+  const image ia = image_from_texture(read_png_texture(a)),
+              ib = image_from_texture(read_png_texture(b));
   if (ia.width != ib.width || ia.height != ib.height)
     throw InvalidArgument("compare: " + a + " is " + std::to_string(ia.width) + "x" +
                           std::to_string(ia.height) + " but " + b + " is " +
@@ -487,8 +489,9 @@ int main(int argc, char** argv) {
   auto* render = app.add_subcommand("render", "render a hierarchy or an input file (full detail)");
   render->add_option("input", render_input_path, "OUT.lod or a mesh/point cloud file")->required();
   render->add_option("-o,--output", render_output, "PNG to write")->capture_default_str();
-  render->add_option("--tolerance", tolerance, "screen-space tolerance in pixels")
-      ->capture_default_str();
+  std::string tolerance_help = "what a hierarchy's cut is drawn at; per method:";
+  for (const auto& m : methods()) tolerance_help += "\n  " + m.name + ": " + m.tolerance_means;
+  render->add_option("--tolerance", tolerance, tolerance_help)->capture_default_str();
   std::uint64_t seed = 1;
   render->add_option("--seed", seed, "random stream of methods that generate points (pca-octree)")
       ->capture_default_str();

@@ -7,7 +7,9 @@ namespace pbrlod_tool {
 
 const std::vector<method_entry>& methods() {
   static const std::vector<method_entry> m = {
-      point_octree_method(), rho_grid_method(), pop_method(), pca_octree_method(), pmr_method(),
+#define PBRLOD_METHOD(id) id##_method(),
+#include "methods.inc"  // cmake/builders.cmake's builders, in its order
+#undef PBRLOD_METHOD
   };
   return m;
 }

@@ -191,7 +191,10 @@ method_entry pca_octree_method() {
           .build = &build,
           .load = &load,
           .build_chunked = &build_chunked,
-          .demo_tolerances = {4, 2, 1}};
+          .demo_tolerances = {4, 2, 1},
+          .tolerance_means =
+              "pixels: a node is drawn once it projects to at most this, its "
+              "generated points this size (§4)"};
 }
 
 }  // namespace pbrlod_tool

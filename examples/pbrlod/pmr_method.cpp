@@ -222,7 +222,10 @@ method_entry pmr_method() {
           .load = &load,
           .build_chunked = &build_chunked,
           .demo_tolerances = {8, 3, 1},
-          .tolerance_key = "factor"};
+          .tolerance_key = "factor",
+          .tolerance_means =
+              "a factor: each leaf's level has umbrellas closest to factor x the "
+              "pixel size at its nearest corner (§3, ramped as §4)"};
 }
 
 }  // namespace pbrlod_tool

@@ -217,7 +217,10 @@ method_entry point_octree_method() {
           .build = &build,
           .load = &load,
           .build_chunked = &build_chunked,
-          .demo_tolerances = {16, 4, 1}};
+          .demo_tolerances = {16, 4, 1},
+          .tolerance_means =
+              "pixels: a node's splat is drawn once the diameter of its projected "
+              "disk's area is at most this (§6, Fig. 11)"};
 }
 
 }  // namespace pbrlod_tool

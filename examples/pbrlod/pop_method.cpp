@@ -111,7 +111,10 @@ method_entry pop_method() {
           .builds_from_mesh = true,
           .build = &build,
           .load = &load,
-          .demo_tolerances = {8, 3, 1}};
+          .demo_tolerances = {8, 3, 1},
+          .tolerance_means =
+              "pixels: a node is drawn once its sphere's eye-z size is at most this "
+              "(§3.3); also the hole-filling radius (§3.4)"};
 }
 
 }  // namespace pbrlod_tool

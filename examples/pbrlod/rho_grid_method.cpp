@@ -67,10 +67,9 @@ struct rho_method {
           const auto order = rho_grid_light_order<R>(o.sun.direction.normalized());
           // The policy's tables are for the view the frame is drawn in: supersampled, the k×
           // view, which render_one_pass_shadows traverses with k × the tolerance.
-          const int k = o.supersample;
-          const view dv = k == 1 ? v : v.supersampled(k);
-          traverse_options tk = t;
-          tk.tolerance_px = t.tolerance_px * static_cast<float>(k);
+          const supersampled_cut cut(v, t, o.supersample);
+          const view& dv = cut.drawn;
+          const traverse_options& tk = cut.options;
           // Light-map positions from §4.2's displacement table; occluders outside the frame
           // still cast into it (§4.2 with culling).
           rho_grid_light_policy<R> p(g, dv, one_pass_light_frame(h, o), &order);
@@ -162,7 +161,10 @@ method_entry rho_grid_method() {
           .builds_from_mesh = true,
           .build = &build,
           .load = &load,
-          .demo_tolerances = {8, 3, 1}};
+          .demo_tolerances = {8, 3, 1},
+          .tolerance_means =
+              "s, the splat size in pixels: a cell whose projection fits in s is "
+              "drawn as one s x s splat (§4.1)"};
 }
 
 }  // namespace pbrlod_tool

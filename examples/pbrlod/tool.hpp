@@ -283,17 +283,18 @@ struct method_entry {
                                         const distributed_rank* part) = nullptr;
   std::vector<float> demo_tolerances;          ///< what `demo` draws, coarse to fine
   std::string tolerance_key = "tolerance_px";  ///< the --tolerance field in `render --json`
+  /// What --tolerance (traverse_options::tolerance_px) means for this method, in one line: the
+  /// one place it is said (`pbrlod render --help`, docs/traversal.md's table).
+  std::string tolerance_means;
 };
 const std::vector<method_entry>& methods();
 /// The method that wrote a .lod file, by its magic (throws FormatError for an unknown one).
 const method_entry& lod_method(const std::string& path);
 
-// One per source file under examples/pbrlod/.
-method_entry point_octree_method();
-method_entry rho_grid_method();
-method_entry pop_method();
-method_entry pmr_method();
-method_entry pca_octree_method();
+// One per builder of cmake/builders.cmake, each in its examples/pbrlod/ID_method.cpp.
+#define PBRLOD_METHOD(id) method_entry id##_method();
+#include "methods.inc"
+#undef PBRLOD_METHOD
 
 /// Whether the --param items ask for a chunked build (memory=SIZE or chunk_points=N).
 bool wants_chunked_build(const std::vector<std::string>& params);

@@ -71,7 +71,7 @@ struct chunked_pmr_builder : chunked_pass_base {
     po.progress = {};
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pmr_chunked: more than 2^32 - 2 points");
-    workers = po.threads ? po.threads : std::max(1u, std::thread::hardware_concurrency());
+    workers = resolve_threads(po.threads);
     // Chunks are built `workers` at a time: the budget is theirs together.
     chunk_points = opt.chunk_points
                        ? opt.chunk_points

@@ -21,6 +21,7 @@
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
 namespace detail {
@@ -126,7 +127,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
         oo(o.octree),
         n(s.size()) {
     oo.progress = {};
-    threads = oo.threads ? oo.threads : std::max(1u, std::thread::hardware_concurrency());
+    threads = resolve_threads(oo.threads);
     chunk_points = opt.chunk_points
                        ? opt.chunk_points
                        : std::max<std::uint64_t>(1, opt.memory_bytes / chunk_bytes_per_point);

@@ -62,8 +62,7 @@ void pca_validate_options(const pca_octree_options& o, bool input_normals) {
 }
 
 unsigned pca_threads(unsigned requested) {
-  if (requested != 0) return requested;
-  return std::max(1u, std::thread::hardware_concurrency());
+  return resolve_threads(requested);
 }
 
 namespace {

@@ -325,8 +325,7 @@ struct builder {
   }
 
   void process_leaves(pmr_build_stats& st) {
-    const unsigned threads =
-        opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
+    const unsigned threads = resolve_threads(opt.threads);
     results.assign(leaf_nodes.size(), {});
     find_blocks();
     // Largest blocks first: the last to start is a small one.

@@ -35,7 +35,6 @@
 #include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
 #include "pbr_lod/core/parallel.hpp"
-#include "pbr_lod/io/texture.hpp"
 #include "pop_internal.hpp"
 
 namespace pbr_lod::detail {
@@ -719,11 +718,11 @@ struct pop_build_state {
         colour(c),
         shared_quant(normal_quantizer::shared(o.normal_bits)),
         quant(*shared_quant),
-        textured(!m.face_texcoords.empty() && !m.texture_path.empty()),
+        textured(!m.face_texcoords.empty() && m.texture != nullptr),
         qn(o.quantise_nodes),
         exact(o.spheres == pop_sphere_rule::exact),
         keep_texture(c && textured),
-        threads(o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency())),
+        threads(resolve_threads(o.threads)),
         nv(m.num_vertices()),
         nf(m.num_faces()),
         P(m.vertices.positions) {}
@@ -769,11 +768,15 @@ void check_pop_input(const triangle_mesh& mesh, const pop_options& opt, bool col
     throw InvalidArgument(
         "build_pop: the edge-sort adjacency indexes 3 edges per face in 32 bits: at most " +
         std::to_string(none / 3) + " triangles");
-  const bool textured = !mesh.face_texcoords.empty() && !mesh.texture_path.empty();
+  const bool textured = !mesh.face_texcoords.empty() && mesh.texture != nullptr;
   if (colour && !textured && mesh.vertices.colours.empty())
     throw InvalidArgument(
-        "build_pop: colours requested but the mesh has neither vertex colours nor a texture "
-        "(build pop_tree<with_normals> instead)");
+        "build_pop: colours requested but the mesh has neither vertex colours nor a texture" +
+        std::string(mesh.texture_path.empty() || mesh.face_texcoords.empty()
+                        ? ""
+                        : " (" + mesh.texture_path +
+                              " was not loaded: read_mesh's report says why)") +
+        " (build pop_tree<with_normals> instead)");
 }
 
 // ---- Stage 1 (§3.5): vertices quantised, leaves grouped from the adjacency -------------------
@@ -913,12 +916,13 @@ void pop_build_state::quantise_vertices(std::size_t lo, std::size_t hi, bool est
 /// Vertex colours, or with a texture the texel under each corner averaged per vertex.
 void pop_build_state::colour_vertices() {
   if (textured) {
-    tex.img = read_png_texture(mesh.texture_path);
+    tex.img = *mesh.texture;
     if (tex.img.width <= 0 || tex.img.height <= 0)
-      throw FormatError(mesh.texture_path + ": empty texture");
+      throw InvalidArgument("build_pop: " + mesh.texture_path + ": empty texture");
     if (tex.img.texels.size() !=
         static_cast<std::size_t>(tex.img.width) * static_cast<std::size_t>(tex.img.height))
-      throw FormatError(mesh.texture_path + ": texel count does not match the size");
+      throw InvalidArgument("build_pop: " + mesh.texture_path +
+                            ": texel count does not match the size");
     for (std::size_t f = 0; f < nf; ++f)
       for (const auto& uv : mesh.face_texcoords[f])
         if (!all_finite(uv))

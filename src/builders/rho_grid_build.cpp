@@ -428,8 +428,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
 
   // The library's pool with an explicit thread count (core/parallel.hpp): no process-wide TBB
   // limit that would also cap every other thread of the caller's program.
-  const unsigned threads =
-      o.threads ? o.threads : std::max(1u, std::thread::hardware_concurrency());
+  const unsigned threads = resolve_threads(o.threads);
 
   rho_grid<Rho> g;
   access::set_frame(g, k, f.min, f.side, nb, mb);

@@ -49,10 +49,6 @@ void parallel_over(std::size_t n, unsigned threads, const Body& body) {
   detail::parallel_pieces(n, threads, 4 * std::size_t(threads), grain, body);
 }
 
-unsigned resolve_threads(unsigned threads) {
-  return threads ? threads : std::max(1u, std::thread::hardware_concurrency());
-}
-
 /// The distinct positions sorted along a Morton curve, and the way back to the caller's points.
 ///
 /// Exact duplicates (the same position bits; with `normals`, the same normal bits too) are

@@ -50,7 +50,7 @@ normal_repair fill_missing_normals(std::span<const vec3f> positions, std::span<v
     r.all_estimated = true;
     return r;
   }
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  threads = resolve_threads(threads);
   const knn_index index(positions);  // throws on a non-finite position
   // Unoriented PCA normals and neighbourhoods of the missing points (in parallel: each entry
   // is its own point's, so the result does not depend on the thread count).

@@ -10,6 +10,15 @@
 #include <algorithm>
 #include <array>
 #include <mutex>
+#include <thread>
+
+namespace pbr_lod {
+
+unsigned resolve_threads(unsigned threads) {
+  return threads != 0 ? threads : std::max(1u, std::thread::hardware_concurrency());
+}
+
+}  // namespace pbr_lod
 
 namespace pbr_lod::detail {
 namespace {

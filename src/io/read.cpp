@@ -2,6 +2,8 @@
 #include "pbr_lod/io/read.hpp"
 
 #include "io_internal.hpp"
+#include "pbr_lod/core/error.hpp"
+#include "pbr_lod/io/texture.hpp"
 
 namespace pbr_lod {
 
@@ -13,12 +15,8 @@ namespace {
                                    : detail::cat("unsupported extension '", ext, "'; ", what));
 }
 
-}  // namespace
-
-triangle_mesh read_mesh(const std::string& path, read_report* report) {
-  read_report local;
-  read_report& r = report ? *report : local;
-  r = read_report{};
+/// The mesh without its texture image (read_points has no use for it).
+triangle_mesh read_mesh_geometry(const std::string& path, read_report& r) {
   const std::string ext = detail::lower_extension(path);
   detail::raw_geometry g;
   if (ext == ".ply")
@@ -34,13 +32,37 @@ triangle_mesh read_mesh(const std::string& path, read_report* report) {
   return detail::finish_mesh(std::move(g), path, r);
 }
 
-point_cloud read_points(const std::string& path, read_report* report) {
-  const std::string ext = detail::lower_extension(path);
-  if (ext == ".ply" || ext == ".obj" || ext == ".off")
-    return std::move(read_mesh(path, report).vertices);
+/// Loads the texture a textured mesh names. One that cannot be read (missing, not a PNG) leaves
+/// the mesh untextured with a warning naming the file and the reason: its geometry is still
+/// good for every builder, and a colour build that needs the texture says it has none.
+void load_texture(triangle_mesh& m, const std::string& path, read_report& r) {
+  if (m.face_texcoords.empty() || m.texture_path.empty()) return;
+  try {
+    m.texture = std::make_shared<const texture_image>(read_png_texture(m.texture_path));
+  } catch (const Error& e) {
+    r.warnings.push_back(
+        detail::cat(path, ": texture not loaded, the mesh is read untextured: ", e.what()));
+  }
+}
+
+}  // namespace
+
+triangle_mesh read_mesh(const std::string& path, read_report* report) {
   read_report local;
   read_report& r = report ? *report : local;
   r = read_report{};
+  triangle_mesh m = read_mesh_geometry(path, r);
+  load_texture(m, path, r);
+  return m;
+}
+
+point_cloud read_points(const std::string& path, read_report* report) {
+  const std::string ext = detail::lower_extension(path);
+  read_report local;
+  read_report& r = report ? *report : local;
+  r = read_report{};
+  if (ext == ".ply" || ext == ".obj" || ext == ".off")
+    return std::move(read_mesh_geometry(path, r).vertices);
   detail::raw_geometry g;
   if (ext == ".pcd")
     g = detail::read_pcd_file(path, r);

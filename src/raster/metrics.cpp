@@ -139,18 +139,16 @@ one_sided_distance one_sided(std::span<const vec3f> from, const knn_index& to, u
   constexpr std::size_t chunk = 4096;
   const std::size_t chunks = (from.size() + chunk - 1) / chunk;
   std::vector<one_sided_distance> part(chunks);
-  detail::parallel_tasks(chunks,
-                         threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : threads,
-                         [&](std::size_t c, unsigned) {
-                           one_sided_distance& r = part[c];
-                           const std::size_t end = std::min(from.size(), (c + 1) * chunk);
-                           for (std::size_t i = c * chunk; i < end; ++i) {
-                             const double d = to.nearest_distance(from[i]);
-                             r.max = std::max(r.max, d);
-                             r.mean += d;
-                             r.rms += d * d;
-                           }
-                         });
+  detail::parallel_tasks(chunks, resolve_threads(threads), [&](std::size_t c, unsigned) {
+    one_sided_distance& r = part[c];
+    const std::size_t end = std::min(from.size(), (c + 1) * chunk);
+    for (std::size_t i = c * chunk; i < end; ++i) {
+      const double d = to.nearest_distance(from[i]);
+      r.max = std::max(r.max, d);
+      r.mean += d;
+      r.rms += d * d;
+    }
+  });
   one_sided_distance r;
   for (const auto& p : part) {
     r.max = std::max(r.max, p.max);

@@ -1,20 +1,21 @@
 // pbr_lod — PNG output through libpng's simplified API (png_image, libpng ≥ 1.6), which reports
 // errors through a return code and a message instead of longjmp, so no C++ frame is skipped. Input
-// is io/texture.hpp's read_png_texture().
+// is io/texture.hpp's read_png_texture(), turned into an image by image_from_texture().
 #include "pbr_lod/raster/png.hpp"
 
 #include <png.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/error.hpp"
-#include "pbr_lod/io/texture.hpp"
 
 namespace pbr_lod {
 
@@ -63,8 +64,15 @@ void write_png(const std::string& path, const image& img) {
   file.commit();
 }
 
-image read_png(const std::string& path) {
-  const texture_image t = read_png_texture(path);
+image image_from_texture(const texture_image& t) {
+  const auto n = static_cast<std::size_t>(std::max(t.width, 0)) *
+                 static_cast<std::size_t>(std::max(t.height, 0));
+  if (t.width <= 0 || t.height <= 0 || t.texels.size() != n ||
+      (!t.alpha.empty() && t.alpha.size() != n))
+    throw InvalidArgument("image_from_texture: " + std::to_string(t.width) + " x " +
+                          std::to_string(t.height) + " texture with " +
+                          std::to_string(t.texels.size()) + " texels and " +
+                          std::to_string(t.alpha.size()) + " alpha values");
   image img(t.width, t.height);
   img.colour = t.texels;
   for (std::size_t i = 0; i < img.depth.size(); ++i)

@@ -789,7 +789,8 @@ TEST(PopRealData, TexturedCowAveragesTexels) {
   ASSERT_TRUE(pop_mesh_has_colour(m));
   const auto t = build_pop<with_normals_colours>(m, {.quantise_nodes = false});
   check_invariants(t);
-  const texture_image tex = read_png_texture(m.texture_path);
+  ASSERT_NE(m.texture, nullptr);
+  const texture_image& tex = *m.texture;
   std::map<std::array<std::uint32_t, 3>, std::size_t> face_of;
   for (std::size_t f = 0; f < m.faces.size(); ++f) face_of.emplace(m.faces[f], f);
   std::size_t checked = 0, off = 0, discriminating = 0;
@@ -1425,6 +1426,7 @@ triangle_mesh textured_grid(int n, const std::string& png) {
   write_png(png, tex);
   triangle_mesh m = grid_mesh(n);
   m.texture_path = png;
+  m.texture = std::make_shared<const texture_image>(read_png_texture(png));
   for (const auto& f : m.faces) {
     std::array<vec2f, 3> uv;
     for (std::size_t k = 0; k < 3; ++k)
@@ -1461,6 +1463,7 @@ TEST(PopTexture, TexturedRoundTripAndDamage) {
     auto u = m;
     u.face_texcoords.clear();
     u.texture_path.clear();
+    u.texture.reset();
     u.vertices.colours.assign(u.vertices.positions.size(), rgb8{});
     return build_pop<with_normals_colours>(u);
   }();

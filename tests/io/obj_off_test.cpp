@@ -88,12 +88,19 @@ TEST_F(ObjOff, ObjMaterialLibraryMustBeARegularFile) {
   }
 }
 
-// A material with map_Kd: texture_path is resolved against the OBJ's folder.
+// A material with map_Kd: texture_path is resolved against the OBJ's folder. A texture that is
+// no PNG leaves the mesh untextured, with a warning naming the file and the reason.
 TEST_F(ObjOff, ObjTextureFromMaterial) {
   write("m.mtl", "newmtl skin\nmap_Kd skin.png\n");
   write("skin.png", "not really a png");
-  const auto m = read_mesh(write("tex.obj", std::string("mtllib m.mtl\nusemtl skin\n") + quad_obj));
+  read_report r;
+  const auto m =
+      read_mesh(write("tex.obj", std::string("mtllib m.mtl\nusemtl skin\n") + quad_obj), &r);
   EXPECT_EQ(m.texture_path, path("skin.png"));
+  EXPECT_EQ(m.texture, nullptr);
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_NE(r.warnings[0].find("texture not loaded"), std::string::npos) << r.warnings[0];
+  EXPECT_NE(r.warnings[0].find("skin.png"), std::string::npos) << r.warnings[0];
 }
 
 TEST_F(ObjOff, ObjFaceIndexOutOfRange) {

@@ -126,6 +126,11 @@ TEST(RealData, CowObjWithTexture) {
     }
   EXPECT_EQ(std::filesystem::path(m.texture_path).filename(), "cow_texture.png");
   EXPECT_TRUE(std::filesystem::exists(m.texture_path)) << m.texture_path;
+  ASSERT_NE(m.texture, nullptr);  // loaded with the mesh: 1024 × 1024 RGB (`file` says so)
+  EXPECT_EQ(m.texture->width, 1024);
+  EXPECT_EQ(m.texture->height, 1024);
+  EXPECT_EQ(m.texture->texels.size(), 1024u * 1024u);
+  EXPECT_TRUE(m.texture->alpha.empty());
   EXPECT_TRUE(r.warnings.empty()) << r.warnings.front();
   EXPECT_NO_THROW(m.validate());
   expect_bounds(m.vertices, {-0.471552, -0.736784, -0.668909}, {0.471552, 0.953646, 1.049}, 1e-6);

@@ -5,7 +5,6 @@
 
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/io/read.hpp"
-#include "pbr_lod/io/texture.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "support/data.hpp"
 
@@ -14,7 +13,7 @@ namespace pbr_lod::test {
 struct spot_cow {
   triangle_mesh mesh = read_mesh(data_file("cow.obj"));
   pop_tree<with_normals_colours> tree = build_pop<with_normals_colours>(mesh);
-  texture_image tex = read_png_texture(mesh.texture_path);
+  texture_image tex = *mesh.texture;
 
   static const spot_cow& get() {
     static const spot_cow s;

@@ -294,7 +294,7 @@ class point_octree {
   friend struct detail::chunked_point_octree_builder;
   friend class chunked_point_octree<A>;
   [[nodiscard]] bool equal(const point_octree& o) const;
-  void derive_selection(unsigned threads = std::thread::hardware_concurrency()) {
+  void derive_selection(unsigned threads = resolve_threads(0)) {
     detail::resize_fresh(selection_, nodes_.size(), std::max(1u, threads));
     detail::parallel_chunks(nodes_.size(), std::max(1u, threads), 1u << 15,
                             [&](std::size_t lo, std::size_t hi) {

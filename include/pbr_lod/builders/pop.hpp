@@ -356,10 +356,10 @@ class pop_tree {
 
 /// Builds the POP tree of a triangle mesh. Vertex normals are the mesh's, else area-weighted
 /// face normals. With colours (A.colour): the texture's texels when the mesh has texture
-/// coordinates and a texture, else its vertex colours; InvalidArgument when it has neither. A
-/// tree built from a texture keeps it and the leaves' texture coordinates (emit_triangles()).
-/// Throws InvalidArgument on an empty or invalid mesh (NaN/Inf, out-of-range indices) or bad
-/// options, IoError/FormatError when the texture cannot be read.
+/// coordinates and a loaded texture (triangle_mesh::texture, which read_mesh loads), else its
+/// vertex colours; InvalidArgument when it has neither. A tree built from a texture keeps it and
+/// the leaves' texture coordinates (emit_triangles()). Throws InvalidArgument on an empty or
+/// invalid mesh (NaN/Inf, out-of-range indices, an empty texture) or bad options.
 template <attributes A>
 [[nodiscard]] pop_tree<A> build_pop(const triangle_mesh& mesh, const pop_options& options = {}) {
   pop_tree<A> t;
@@ -370,7 +370,7 @@ template <attributes A>
 
 /// True when build_pop<with_normals_colours> can colour this mesh (texture or vertex colours).
 [[nodiscard]] inline bool pop_mesh_has_colour(const triangle_mesh& m) {
-  return (!m.face_texcoords.empty() && !m.texture_path.empty()) || !m.vertices.colours.empty();
+  return (!m.face_texcoords.empty() && m.texture != nullptr) || !m.vertices.colours.empty();
 }
 
 /// How inner nodes are drawn when their splat is within the threshold (§3.4).

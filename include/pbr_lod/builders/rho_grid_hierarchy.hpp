@@ -68,7 +68,7 @@
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
-#include "pbr_lod/raster/light_frame.hpp"
+#include "pbr_lod/core/light_map_frame.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
 

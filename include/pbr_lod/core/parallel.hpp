@@ -10,6 +10,14 @@
 #include <type_traits>
 #include <utility>
 
+namespace pbr_lod {
+
+/// What a `threads` option means, in every builder, estimation, metric and the tool: 0 is every
+/// core the machine reports (at least 1), any other value is itself.
+[[nodiscard]] unsigned resolve_threads(unsigned threads);
+
+}  // namespace pbr_lod
+
 namespace pbr_lod::detail {
 
 /// fn(ctx, task, worker) for every task in [0, n), each exactly once, on at most `threads`

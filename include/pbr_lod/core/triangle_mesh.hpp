@@ -3,22 +3,28 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "pbr_lod/core/point_set.hpp"
+#include "pbr_lod/core/texture_image.hpp"
 
 namespace pbr_lod {
 
 /// V  vertices (positions relative to vertices.origin, optional per-vertex normals/colours)
 /// F  #F by 3 vertex indices, counter-clockwise seen from the front
-/// TC #F by 3 texture coordinates (per face corner), or empty
+/// TC #F by 3 texture coordinates (per face corner), or empty, into `texture`
 struct triangle_mesh {
   point_cloud vertices;
   std::vector<std::array<std::uint32_t, 3>> faces;
   std::vector<std::array<vec2f, 3>> face_texcoords;  ///< per corner; empty when untextured
   std::string texture_path;  ///< image file of the texture (absolute or as found), or empty
+  /// The texture image, loaded by read_mesh from texture_path (null when the mesh names none or
+  /// it could not be read: read_report's warnings say why). Shared, never modified: copies of a
+  /// mesh share one image.
+  std::shared_ptr<const texture_image> texture;
 
   [[nodiscard]] std::size_t num_vertices() const { return vertices.size(); }
   [[nodiscard]] std::size_t num_faces() const { return faces.size(); }

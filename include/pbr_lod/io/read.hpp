@@ -43,7 +43,9 @@ struct read_report {
 /// Reads a triangle mesh from a .ply, .obj or .off file. Polygons are fan-triangulated. A file
 /// without faces (a vertex-only PLY, say) gives a mesh with empty `faces`. Vertex normals and
 /// colours are kept when the file has them; OBJ texture coordinates become `face_texcoords` and
-/// the map_Kd image of the .mtl `texture_path` (resolved relative to the OBJ's folder).
+/// the map_Kd image of the .mtl `texture_path` (resolved relative to the OBJ's folder; a PLY's
+/// `comment TextureFile`), loaded into `texture` when the mesh has texture coordinates (a PNG; one
+/// that cannot be read leaves `texture` null with a warning in the report).
 /// Throws IoError (cannot open/read) or FormatError (malformed content, unsupported format).
 [[nodiscard]] triangle_mesh read_mesh(const std::string& path, read_report* report = nullptr);
 

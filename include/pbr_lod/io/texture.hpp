@@ -1,21 +1,12 @@
-// pbr_lod — reading texture images, for builders that colour a mesh from its texture (POP §3.1).
-// Pixels in, texels out: no rendering types, so a builder needs nothing from raster/.
+// pbr_lod — reading texture images (read_mesh loads a mesh's texture with it; POP §3.1 colours
+// from it). The type itself lives in core/texture_image.hpp.
 #pragma once
 
-#include <cstdint>
 #include <string>
-#include <vector>
 
-#include "pbr_lod/core/math.hpp"
+#include "pbr_lod/core/texture_image.hpp"
 
 namespace pbr_lod {
-
-/// An 8-bit RGB texture, rows top to bottom.
-struct texture_image {
-  int width = 0, height = 0;
-  std::vector<rgb8> texels;         ///< width × height
-  std::vector<std::uint8_t> alpha;  ///< width × height, or empty when the file has no alpha
-};
 
 /// Reads a PNG of any colour type (converted to 8-bit RGB(A)) through libpng. Throws IoError
 /// when the file cannot be opened, FormatError (naming the file and libpng's reason) when it is

@@ -34,7 +34,7 @@
 
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/error.hpp"
-#include "pbr_lod/raster/light_frame.hpp"
+#include "pbr_lod/core/light_map_frame.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/traverse/hierarchy.hpp"
 #include "pbr_lod/traverse/traverse.hpp"
@@ -259,9 +259,7 @@ template <Hierarchy H, class Policy>
   ro.fx = effects{.colour = true, .hole_filling = o.fx.hole_filling};
   traverse_stats ts;
   one_pass_shadow_stats ss;
-  // Supersampled (o.supersample = k), the cut is v's: k times the tolerance in the k× view.
-  traverse_options tk = t;
-  tk.tolerance_px = t.tolerance_px * static_cast<float>(std::max(o.supersample, 1));
+  const traverse_options tk = supersampled_cut(v, t, o.supersample).options;  // v's cut
   image img = render<C>(v, ro, [&](auto& sink, const view& dv) {
     if (h.empty()) return;
     using sink_type = std::decay_t<decltype(sink)>;

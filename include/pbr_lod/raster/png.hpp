@@ -1,11 +1,14 @@
-// pbr_lod — PNG output and input of rendered images (libpng, fenced off in src/raster/png.cpp).
+// pbr_lod — PNG output of rendered images (libpng, fenced off in src/raster/png.cpp), and the
+// image of a PNG read by io (io/texture.hpp's read_png_texture): raster/ does not read files.
 //
 // Coverage survives the round trip through the alpha channel: covered pixels are written with
-// alpha 255, background pixels with alpha 0 (their RGB keeps the background colour).
+// alpha 255, background pixels with alpha 0 (their RGB keeps the background colour):
+// image_from_texture(read_png_texture(path)) reads back what write_png(path, img) wrote.
 #pragma once
 
 #include <string>
 
+#include "pbr_lod/core/texture_image.hpp"
 #include "pbr_lod/raster/image.hpp"
 
 namespace pbr_lod {
@@ -15,10 +18,9 @@ namespace pbr_lod {
 /// when it cannot be written.
 void write_png(const std::string& path, const image& img);
 
-/// Reads a PNG of any colour type (converted to 8-bit RGB(A)). Pixels with alpha 0 are
-/// background (depth +inf), every other pixel is covered with depth 0; a PNG without an alpha
-/// channel is covered everywhere. Throws IoError when the file cannot be opened, FormatError
-/// (naming the file and libpng's reason) when it is not a valid PNG.
-[[nodiscard]] image read_png(const std::string& path);
+/// The image of a texture (a PNG as read_png_texture reads it): texels with alpha 0 are background
+/// (depth +inf), every other texel is covered with depth 0; a texture without alpha is covered
+/// everywhere.
+[[nodiscard]] image image_from_texture(const texture_image& t);
 
 }  // namespace pbr_lod

@@ -11,7 +11,7 @@
 
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/math.hpp"
-#include "pbr_lod/io/texture.hpp"
+#include "pbr_lod/core/texture_image.hpp"
 
 namespace pbr_lod {
 

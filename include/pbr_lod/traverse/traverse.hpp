@@ -50,6 +50,17 @@ struct traverse_options {
   enum class volume { planes, view_cone } cull_volume = volume::planes;
 };
 
+/// Where v's cut is drawn at k × k the resolution (render_options::supersample = k): the k× view
+/// with k times the tolerance, since k of its pixels are one of v's — the same nodes as v's cut.
+struct supersampled_cut {
+  view drawn;
+  traverse_options options;
+  supersampled_cut(const view& v, const traverse_options& t, int k)
+      : drawn(k == 1 ? v : v.supersampled(k)), options(t) {  // throws for k < 1
+    options.tolerance_px = t.tolerance_px * static_cast<float>(std::max(k, 1));
+  }
+};
+
 struct traverse_stats {
   std::size_t visited = 0;          ///< nodes whose bounds were tested
   std::size_t culled_frustum = 0;   ///< subtrees rejected by the frustum

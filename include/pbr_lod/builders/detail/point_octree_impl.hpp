@@ -32,9 +32,9 @@
 #include "pbr_lod/core/covariance.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
-#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/memory.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
@@ -825,8 +825,7 @@ point_octree<A> point_octree_builder<A>::run(const point_set<In>& points,
   if (opt.normal_bits != 0 && (opt.normal_bits < 6 || opt.normal_bits > 24))
     throw InvalidArgument("build_point_octree: normal_bits must be 0 or 6..24");
   if (!all_finite(points.origin)) throw InvalidArgument("build_point_octree: origin is not finite");
-  const unsigned threads =
-      opt.threads ? opt.threads : std::max(1u, std::thread::hardware_concurrency());
+  const unsigned threads = resolve_threads(opt.threads);
   const std::size_t n = points.size();
   {
     std::atomic<std::size_t> bad{n};  // the first non-finite position
