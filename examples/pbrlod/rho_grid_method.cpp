@@ -4,7 +4,7 @@
 
 #include "lod.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
+#include "pbr_lod/builders/rho_grid_policy.hpp"
 #include "pbr_lod/raster/one_pass_shadows.hpp"
 
 namespace pbrlod_tool {

@@ -43,7 +43,7 @@
 #include "pbr_lod/builders/point_octree.hpp"
 #include "pbr_lod/builders/pop.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
+#include "pbr_lod/builders/rho_grid_policy.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
+#include "pbr_lod/builders/rho_grid_policy.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"

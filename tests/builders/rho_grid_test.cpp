@@ -14,7 +14,7 @@
 #include "pbr_lod/builders/detail/rho_grid_coder.hpp"
 #include "pbr_lod/builders/detail/rho_grid_impl.hpp"
 #include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_hierarchy.hpp"
+#include "pbr_lod/builders/rho_grid_policy.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"

@@ -19,13 +19,13 @@
 //                Eq. 4 (Table 1).
 //   §3.3         the in-core runtime structure: per inner cell its code, its attribute and a
 //                32-bit index into one contiguous child table; leaves hold their attribute only.
-//   §4, §4.1     flexible rendering (rho_grid_hierarchy.hpp): the grid as a Hierarchy and the
-//                paper's traversal as a policy of the common traverse — transform
+//   §4, §4.1     flexible rendering (rho_grid_hierarchy.hpp, rho_grid_policy.hpp): the grid as a
+//                Hierarchy and the paper's traversal as a policy of the common traverse — transform
 //                factorisation (displacement tables), conservative screen bounds from a bounds
 //                table, the splat condition dx ≤ w·s, dy ≤ w·s in homogeneous coordinates,
 //                frustum culling; §5.1 the same traversal in fixed point.
 //   §4.2         one-pass shadows for a directional light: the light's child order
-//                (rho_grid_hierarchy.hpp) and the shading sink (raster/one_pass_shadows.hpp).
+//                (rho_grid_policy.hpp) and the shading sink (raster/one_pass_shadows.hpp).
 // The build runs level by level (§5.2: "constructed level-by-level"): only the cells of the
 // current level are held besides the output, so memory stays bounded by the structure itself.
 //

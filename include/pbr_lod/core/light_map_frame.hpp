@@ -1,6 +1,6 @@
 // pbr_lod — the frame of the one-pass light map (Duguet & Drettakis 2004, §4.2): shared by the
 // map (raster/one_pass_shadows.hpp) and the traversals that carry light-space positions down a
-// tree (the ρ-grid's light displacement table, builders/rho_grid_hierarchy.hpp), so that both
+// tree (the ρ-grid's light displacement table, builders/rho_grid_policy.hpp), so that both
 // compute the same coordinates.
 #pragma once
 

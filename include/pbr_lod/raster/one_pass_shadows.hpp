@@ -8,7 +8,7 @@
 // × two-sided Lambert when lit, × ambient in shadow, what the rasteriser's two-pass shadows
 // compose) and forwards it with that colour. render_one_pass_shadows() wires it up for any
 // Hierarchy and a policy that visits front to back from the light (for the ρ-grid:
-// rho_grid_policy with rho_grid_light_order, builders/rho_grid_hierarchy.hpp).
+// rho_grid_policy with rho_grid_light_order, builders/rho_grid_policy.hpp).
 //
 // The map stores each occluder's far extent (the depth of its node's centre + the node's
 // bounding radius r) over its footprint (a disk of r/√3 — half the side of a cube whose
