@@ -124,6 +124,247 @@ void put_header(std::vector<unsigned char>& out, const rho_grid<Rho>& g, rho_gri
     h.put(std::uint64_t(g.depth_begin(l + 1) - g.depth_begin(l)));
 }
 
+/// What every layout's header holds after the magic and version (put_header's fields), read and
+/// checked: the grid's frame, its attribute layout, the input's bounds and the cells per level.
+struct rho_file_head {
+  std::uint32_t depth, layout, nb, mb, cb;
+  vec3d origin, in_centre;
+  double side, in_radius;
+  std::vector<std::uint64_t> per_level;  ///< cells at levels 0..depth
+  std::uint64_t total;                   ///< cells in all
+};
+
+template <int Rho>
+rho_file_head read_header(detail::byte_reader& r, const std::string& what) {
+  // Versions 1 (NIS, IS) and 2 (compressed) did not record the input's bounds, 1–3 stored the
+  // build's time.
+  const std::uint32_t version = read_rho_head(r);
+  const auto rho_in = r.get<std::uint32_t>("rho");
+  if (rho_in != std::uint32_t(Rho))
+    throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
+                      " grid, a rho=" + std::to_string(Rho) + " grid was expected");
+  const auto depth = r.get<std::uint32_t>("leaf depth");
+  if (depth > std::uint32_t(rho_grid_max_leaf_depth(Rho)))
+    throw FormatError(what + ": leaf depth " + std::to_string(depth) + " exceeds the maximum " +
+                      std::to_string(rho_grid_max_leaf_depth(Rho)));
+  const auto layout = r.get<std::uint32_t>("layout");
+  if (layout > 2) throw FormatError(what + ": unknown layout " + std::to_string(layout));
+  const auto nb = r.get<std::uint32_t>("normal bits");
+  const auto mb = r.get<std::uint32_t>("material bits");
+  if ((nb != 0 && (nb < std::uint32_t(normal_quantizer::min_bits) || nb > 16)) || mb > 8 ||
+      nb + mb > 16)
+    throw FormatError(what + ": unsupported attribute layout (" + std::to_string(nb) +
+                      " normal bits, " + std::to_string(mb) + " material bits)");
+  const auto cb = version == coloured_version ? r.get<std::uint32_t>("colour bits") : 0u;
+  if (version == coloured_version && (cb < 3 || cb > 16))
+    throw FormatError(what + ": version " + std::to_string(coloured_version) + " with " +
+                      std::to_string(cb) + " colour bits (expected 3 to 16)");
+  vec3d origin;
+  origin.x() = r.get<double>("origin");
+  origin.y() = r.get<double>("origin");
+  origin.z() = r.get<double>("origin");
+  const double side = r.get<double>("cube side");
+  if (!all_finite(origin) || !std::isfinite(side) || !(side > 0))
+    throw FormatError(what + ": origin or cube side is not finite and positive");
+  vec3d in_centre;
+  in_centre.x() = r.get<double>("input centre");
+  in_centre.y() = r.get<double>("input centre");
+  in_centre.z() = r.get<double>("input centre");
+  const double in_radius = r.get<double>("input radius");
+  if (!all_finite(in_centre) || !std::isfinite(in_radius) || !(in_radius >= 0))
+    throw FormatError(what + ": input bounds are not finite (radius ≥ 0)");
+  constexpr std::uint64_t R3 = std::uint64_t(Rho) * Rho * Rho;
+  std::vector<std::uint64_t> per_level(depth + 1);
+  std::uint64_t total = 0;
+  for (std::uint32_t l = 0; l <= depth; ++l) {
+    per_level[l] = r.get<std::uint64_t>("cells per level");
+    const std::uint64_t prev = l == 0 ? 1 : per_level[l - 1];
+    if ((l == 0 && per_level[l] != 1) ||
+        (l > 0 && (per_level[l] < prev || per_level[l] > prev * R3)))
+      throw FormatError(what + ": level " + std::to_string(l) + " has " +
+                        std::to_string(per_level[l]) + " cells, impossible below " +
+                        std::to_string(prev) + " cells");
+    total += per_level[l];
+    if (total > 0xffffffffull)
+      throw FormatError(what + ": more cells than 32-bit child indices address");
+  }
+  return {depth, layout, nb, mb, cb, origin, in_centre, side, in_radius, std::move(per_level),
+          total};
+}
+
+/// The compressed layout (2): the coded geometry and attribute streams after their lengths.
+template <int Rho>
+rho_grid<Rho> parse_compressed(const rho_file_head& h, detail::byte_reader& r,
+                               const std::vector<unsigned char>& bytes, const std::string& what) {
+  using access = detail::rho_grid_access<Rho>;
+  const auto& [depth, layout, nb, mb, cb, origin, in_centre, side, in_radius, per_level, total] = h;
+  rho_grid<Rho> g;
+  access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+  access::set_colour_bits(g, int(cb));
+  access::set_input_bounds(g, in_centre, in_radius);
+  const auto gm = r.get<std::uint32_t>("geometry context model");
+  const auto am = r.get<std::uint32_t>("attribute predictor");
+  if (gm > 2 || am > 1)
+    throw FormatError(what + ": unknown context model " + std::to_string(gm) + "/" +
+                      std::to_string(am));
+  const auto gbytes = r.get<std::uint64_t>("geometry bytes");
+  const auto abytes = r.get<std::uint64_t>("attribute bytes");
+  const std::uint64_t left = bytes.size() - r.pos;
+  if (left < 8 || gbytes > left - 8 || abytes != left - 8 - gbytes)
+    throw FormatError(what + ": " + std::to_string(bytes.size()) + " bytes, the header declares " +
+                      std::to_string(gbytes) + " + " + std::to_string(abytes) +
+                      " coded bytes (truncated or padded)");
+  if (!detail::checksum_matches(bytes))
+    throw FormatError(what + ": checksum mismatch (corrupt stream)");
+  const detail::rho_coder_options opt{.geometry = detail::rho_geometry_context(gm),
+                                      .attributes = detail::rho_attribute_predictor(am)};
+  detail::rho_grid_decode(g, bytes.data() + r.pos, std::size_t(gbytes),
+                          bytes.data() + r.pos + gbytes, std::size_t(abytes), per_level, opt, what);
+  return g;
+}
+
+/// NIS (layout 0) without inner samples: each inner cell's sample from its children, bottom up —
+/// the mean normal re-quantised, the first child's material, the mean colour re-quantised.
+template <int Rho>
+void rebuild_inner_samples(rho_grid<Rho>& g, const rho_file_head& h, const normal_quantizer* q,
+                           std::uint64_t inner) {
+  using access = detail::rho_grid_access<Rho>;
+  const auto [nb, mb, cb] = std::array{h.nb, h.mb, h.cb};
+  auto& attrs = access::attrs(g);
+  auto& colours = access::colours(g);
+  // Rebuild the intermediate samples bottom-up: mean normal of the children, re-quantised;
+  // the first child's material; the mean colour of the children, re-quantised.
+  for (std::size_t c = inner; c-- > 0;) {
+    const auto cc = std::uint32_t(c);
+    const std::uint32_t first = g.first_child(cc);
+    const int n = g.code(cc).count();
+    if (nb + mb > 0) {
+      std::uint32_t nc = 0;
+      if (q) {
+        vec3f sum = vec3f::Zero();
+        for (int i = 0; i < n; ++i) sum += q->decode(g.normal_code(first + std::uint32_t(i)));
+        nc = q->encode(sum.squaredNorm() > 0 ? vec3f(sum) : q->decode(g.normal_code(first)));
+      }
+      const std::uint32_t mat = g.material(first);
+      attrs[c] = std::uint16_t(nc | (mat << nb));
+    }
+    if (cb > 0) {
+      std::array<int, 3> sum{};
+      for (int i = 0; i < n; ++i) {
+        const rgb8 k = g.colour(first + std::uint32_t(i));
+        sum[0] += k.r;
+        sum[1] += k.g;
+        sum[2] += k.b;
+      }
+      const auto mean = [n](int v) { return std::uint8_t((v + n / 2) / n); };
+      colours[c] = std::uint16_t(
+          rho_grid_encode_colour(rgb8{mean(sum[0]), mean(sum[1]), mean(sum[2])}, int(cb)));
+    }
+  }
+}
+
+/// The NIS (0) and IS (1) layouts: the childhood codes depth first, the samples after them (NIS,
+/// leaves only) or with each cell (IS).
+template <int Rho>
+rho_grid<Rho> parse_bitstream(const rho_file_head& h, detail::byte_reader& r,
+                              const std::vector<unsigned char>& bytes, const std::string& what) {
+  using access = detail::rho_grid_access<Rho>;
+  using code_type = typename rho_grid<Rho>::code_type;
+  constexpr std::uint64_t R3 = std::uint64_t(Rho) * Rho * Rho;
+  const auto& [depth, layout, nb, mb, cb, origin, in_centre, side, in_radius, per_level, total] = h;
+  const std::uint64_t sigma = nb + mb + cb, leaves = per_level[depth], inner = total - leaves;
+  const std::uint64_t expect = inner * R3 + leaves * sigma + (layout == 1 ? inner * sigma : 0);
+  const auto bits = r.get<std::uint64_t>("payload bits");
+  if (bits != expect)
+    throw FormatError(what + ": payload of " + std::to_string(bits) + " bits, the counts need " +
+                      std::to_string(expect));
+  const std::uint64_t payload_bytes = (bits + 7) / 8;
+  if (bytes.size() - r.pos < 8 || bytes.size() - r.pos - 8 != payload_bytes)
+    throw FormatError(what + ": " + std::to_string(bytes.size()) + " bytes, expected " +
+                      std::to_string(r.pos + payload_bytes + 8) + " (truncated or padded)");
+  if (!detail::checksum_matches(bytes))
+    throw FormatError(what + ": checksum mismatch (corrupt stream)");
+  if (bits % 8 != 0 && (bytes[r.pos + payload_bytes - 1] >> (bits % 8)) != 0)
+    throw FormatError(what + ": non-zero padding bits after the payload");
+
+  rho_grid<Rho> g;
+  access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
+  access::set_colour_bits(g, int(cb));
+  access::set_input_bounds(g, in_centre, in_radius);
+  auto& codes = access::codes(g);
+  auto& attrs = access::attrs(g);
+  auto& colours = access::colours(g);
+  std::vector<std::vector<code_type>> lcodes(depth);
+  std::vector<std::vector<std::uint16_t>> lattrs(depth + 1), lcolours(depth + 1);
+  detail::bit_reader br(bytes.data() + r.pos, bits, what);
+  // The process-wide table: building one per parse was most of the cost of loading a small grid.
+  std::shared_ptr<const normal_quantizer> q;
+  if (nb > 0) q = normal_quantizer::shared(int(nb));
+  const auto read_attr = [&](std::uint32_t l) {
+    const auto a = std::uint32_t(br.get(int(sigma), "attribute"));
+    if (q && !q->valid(a & ((1u << nb) - 1u)))
+      throw FormatError(what + ": invalid normal code " + std::to_string(a & ((1u << nb) - 1u)) +
+                        " at bit " + std::to_string(br.position()));
+    if (nb + mb > 0) lattrs[l].push_back(std::uint16_t(a & ((1u << (nb + mb)) - 1u)));
+    if (cb > 0) lcolours[l].push_back(std::uint16_t(a >> (nb + mb)));  // every cb-bit code valid
+  };
+  std::vector<std::uint32_t> stack{0};  // levels of the cells still to read
+  while (!stack.empty()) {
+    const std::uint32_t l = stack.back();
+    stack.pop_back();
+    if (layout == 1) read_attr(l);
+    if (l == depth) {
+      if (layout == 1 && std::max(lattrs[l].size(), lcolours[l].size()) > leaves && sigma > 0)
+        throw FormatError(what + ": more leaves than the " + std::to_string(leaves) + " declared");
+      continue;
+    }
+    const auto c = get_code<code_type>(br, int(R3));
+    const int n = c.count();
+    if (n == 0)
+      throw FormatError(what + ": empty childhood code at level " + std::to_string(l) + ", bit " +
+                        std::to_string(br.position()));
+    lcodes[l].push_back(c);
+    if (lcodes[l].size() > per_level[l])
+      throw FormatError(what + ": level " + std::to_string(l) + " has more cells than the " +
+                        std::to_string(per_level[l]) + " declared");
+    for (int i = 0; i < n; ++i) stack.push_back(l + 1);
+  }
+  std::uint64_t leaf_seen = 0;
+  for (std::uint32_t l = 0; l < depth; ++l) {
+    if (lcodes[l].size() != per_level[l])
+      throw FormatError(what + ": level " + std::to_string(l) + " holds " +
+                        std::to_string(lcodes[l].size()) + " cells, " +
+                        std::to_string(per_level[l]) + " declared");
+    leaf_seen = 0;
+    for (const auto& c : lcodes[l]) leaf_seen += std::uint64_t(c.count());
+    if (leaf_seen != per_level[l + 1])
+      throw FormatError(what + ": level " + std::to_string(l + 1) + " holds " +
+                        std::to_string(leaf_seen) + " cells, " + std::to_string(per_level[l + 1]) +
+                        " declared");
+    codes.insert(codes.end(), lcodes[l].begin(), lcodes[l].end());
+  }
+  if (layout == 0) {
+    for (std::uint64_t i = 0; i < leaves; ++i) read_attr(depth);
+  }
+  if (br.position() != bits)
+    throw FormatError(what + ": payload has " + std::to_string(bits - br.position()) +
+                      " bits left over");
+  const auto gather = [&](std::vector<std::uint16_t>& dst,
+                          const std::vector<std::vector<std::uint16_t>>& per) {
+    if (layout == 1)
+      for (const auto& la : per) dst.insert(dst.end(), la.begin(), la.end());
+    else {
+      dst.assign(inner, 0);
+      dst.insert(dst.end(), per[depth].begin(), per[depth].end());
+    }
+  };
+  if (nb + mb > 0) gather(attrs, lattrs);
+  if (cb > 0) gather(colours, lcolours);
+  access::finish(g, total, what);
+  if (layout == 0 && sigma > 0 && inner > 0) rebuild_inner_samples(g, h, q.get(), inner);
+  return g;
+}
+
 }  // namespace
 
 namespace detail {
@@ -204,207 +445,10 @@ std::vector<unsigned char> rho_grid<Rho>::serialise(rho_grid_layout layout) cons
 template <int Rho>
 rho_grid<Rho> rho_grid<Rho>::parse(const std::vector<unsigned char>& bytes,
                                    const std::string& what) {
-  using access = detail::rho_grid_access<Rho>;
   detail::byte_reader r{bytes, 0, what};
-  // Versions 1 (NIS, IS) and 2 (compressed) did not record the input's bounds, 1–3 stored the
-  // build's time.
-  const std::uint32_t version = read_rho_head(r);
-  const auto rho_in = r.get<std::uint32_t>("rho");
-  if (rho_in != std::uint32_t(Rho))
-    throw FormatError(what + ": the stream holds a rho=" + std::to_string(rho_in) +
-                      " grid, a rho=" + std::to_string(Rho) + " grid was expected");
-  const auto depth = r.get<std::uint32_t>("leaf depth");
-  if (depth > std::uint32_t(rho_grid_max_leaf_depth(Rho)))
-    throw FormatError(what + ": leaf depth " + std::to_string(depth) + " exceeds the maximum " +
-                      std::to_string(rho_grid_max_leaf_depth(Rho)));
-  const auto layout = r.get<std::uint32_t>("layout");
-  if (layout > 2) throw FormatError(what + ": unknown layout " + std::to_string(layout));
-  const auto nb = r.get<std::uint32_t>("normal bits");
-  const auto mb = r.get<std::uint32_t>("material bits");
-  if ((nb != 0 && (nb < std::uint32_t(normal_quantizer::min_bits) || nb > 16)) || mb > 8 ||
-      nb + mb > 16)
-    throw FormatError(what + ": unsupported attribute layout (" + std::to_string(nb) +
-                      " normal bits, " + std::to_string(mb) + " material bits)");
-  const auto cb = version == coloured_version ? r.get<std::uint32_t>("colour bits") : 0u;
-  if (version == coloured_version && (cb < 3 || cb > 16))
-    throw FormatError(what + ": version " + std::to_string(coloured_version) + " with " +
-                      std::to_string(cb) + " colour bits (expected 3 to 16)");
-  vec3d origin;
-  origin.x() = r.get<double>("origin");
-  origin.y() = r.get<double>("origin");
-  origin.z() = r.get<double>("origin");
-  const double side = r.get<double>("cube side");
-  if (!all_finite(origin) || !std::isfinite(side) || !(side > 0))
-    throw FormatError(what + ": origin or cube side is not finite and positive");
-  vec3d in_centre;
-  in_centre.x() = r.get<double>("input centre");
-  in_centre.y() = r.get<double>("input centre");
-  in_centre.z() = r.get<double>("input centre");
-  const double in_radius = r.get<double>("input radius");
-  if (!all_finite(in_centre) || !std::isfinite(in_radius) || !(in_radius >= 0))
-    throw FormatError(what + ": input bounds are not finite (radius ≥ 0)");
-  constexpr std::uint64_t R3 = std::uint64_t(Rho) * Rho * Rho;
-  std::vector<std::uint64_t> per_level(depth + 1);
-  std::uint64_t total = 0;
-  for (std::uint32_t l = 0; l <= depth; ++l) {
-    per_level[l] = r.get<std::uint64_t>("cells per level");
-    const std::uint64_t prev = l == 0 ? 1 : per_level[l - 1];
-    if ((l == 0 && per_level[l] != 1) ||
-        (l > 0 && (per_level[l] < prev || per_level[l] > prev * R3)))
-      throw FormatError(what + ": level " + std::to_string(l) + " has " +
-                        std::to_string(per_level[l]) + " cells, impossible below " +
-                        std::to_string(prev) + " cells");
-    total += per_level[l];
-    if (total > 0xffffffffull)
-      throw FormatError(what + ": more cells than 32-bit child indices address");
-  }
-  if (layout == 2) {
-    rho_grid g;
-    access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
-    access::set_colour_bits(g, int(cb));
-    access::set_input_bounds(g, in_centre, in_radius);
-    const auto gm = r.get<std::uint32_t>("geometry context model");
-    const auto am = r.get<std::uint32_t>("attribute predictor");
-    if (gm > 2 || am > 1)
-      throw FormatError(what + ": unknown context model " + std::to_string(gm) + "/" +
-                        std::to_string(am));
-    const auto gbytes = r.get<std::uint64_t>("geometry bytes");
-    const auto abytes = r.get<std::uint64_t>("attribute bytes");
-    const std::uint64_t left = bytes.size() - r.pos;
-    if (left < 8 || gbytes > left - 8 || abytes != left - 8 - gbytes)
-      throw FormatError(what + ": " + std::to_string(bytes.size()) +
-                        " bytes, the header declares " + std::to_string(gbytes) + " + " +
-                        std::to_string(abytes) + " coded bytes (truncated or padded)");
-    if (!detail::checksum_matches(bytes))
-      throw FormatError(what + ": checksum mismatch (corrupt stream)");
-    const detail::rho_coder_options opt{.geometry = detail::rho_geometry_context(gm),
-                                        .attributes = detail::rho_attribute_predictor(am)};
-    detail::rho_grid_decode(g, bytes.data() + r.pos, std::size_t(gbytes),
-                            bytes.data() + r.pos + gbytes, std::size_t(abytes), per_level, opt,
-                            what);
-    return g;
-  }
-  const std::uint64_t sigma = nb + mb + cb, leaves = per_level[depth], inner = total - leaves;
-  const std::uint64_t expect = inner * R3 + leaves * sigma + (layout == 1 ? inner * sigma : 0);
-  const auto bits = r.get<std::uint64_t>("payload bits");
-  if (bits != expect)
-    throw FormatError(what + ": payload of " + std::to_string(bits) + " bits, the counts need " +
-                      std::to_string(expect));
-  const std::uint64_t payload_bytes = (bits + 7) / 8;
-  if (bytes.size() - r.pos < 8 || bytes.size() - r.pos - 8 != payload_bytes)
-    throw FormatError(what + ": " + std::to_string(bytes.size()) + " bytes, expected " +
-                      std::to_string(r.pos + payload_bytes + 8) + " (truncated or padded)");
-  if (!detail::checksum_matches(bytes))
-    throw FormatError(what + ": checksum mismatch (corrupt stream)");
-  if (bits % 8 != 0 && (bytes[r.pos + payload_bytes - 1] >> (bits % 8)) != 0)
-    throw FormatError(what + ": non-zero padding bits after the payload");
-
-  rho_grid g;
-  access::set_frame(g, int(depth), origin, side, int(nb), int(mb));
-  access::set_colour_bits(g, int(cb));
-  access::set_input_bounds(g, in_centre, in_radius);
-  auto& codes = access::codes(g);
-  auto& attrs = access::attrs(g);
-  auto& colours = access::colours(g);
-  std::vector<std::vector<code_type>> lcodes(depth);
-  std::vector<std::vector<std::uint16_t>> lattrs(depth + 1), lcolours(depth + 1);
-  detail::bit_reader br(bytes.data() + r.pos, bits, what);
-  // The process-wide table: building one per parse was most of the cost of loading a small grid.
-  std::shared_ptr<const normal_quantizer> q;
-  if (nb > 0) q = normal_quantizer::shared(int(nb));
-  const auto read_attr = [&](std::uint32_t l) {
-    const auto a = std::uint32_t(br.get(int(sigma), "attribute"));
-    if (q && !q->valid(a & ((1u << nb) - 1u)))
-      throw FormatError(what + ": invalid normal code " + std::to_string(a & ((1u << nb) - 1u)) +
-                        " at bit " + std::to_string(br.position()));
-    if (nb + mb > 0) lattrs[l].push_back(std::uint16_t(a & ((1u << (nb + mb)) - 1u)));
-    if (cb > 0) lcolours[l].push_back(std::uint16_t(a >> (nb + mb)));  // every cb-bit code valid
-  };
-  std::vector<std::uint32_t> stack{0};  // levels of the cells still to read
-  while (!stack.empty()) {
-    const std::uint32_t l = stack.back();
-    stack.pop_back();
-    if (layout == 1) read_attr(l);
-    if (l == depth) {
-      if (layout == 1 && std::max(lattrs[l].size(), lcolours[l].size()) > leaves && sigma > 0)
-        throw FormatError(what + ": more leaves than the " + std::to_string(leaves) + " declared");
-      continue;
-    }
-    const auto c = get_code<code_type>(br, int(R3));
-    const int n = c.count();
-    if (n == 0)
-      throw FormatError(what + ": empty childhood code at level " + std::to_string(l) + ", bit " +
-                        std::to_string(br.position()));
-    lcodes[l].push_back(c);
-    if (lcodes[l].size() > per_level[l])
-      throw FormatError(what + ": level " + std::to_string(l) + " has more cells than the " +
-                        std::to_string(per_level[l]) + " declared");
-    for (int i = 0; i < n; ++i) stack.push_back(l + 1);
-  }
-  std::uint64_t leaf_seen = 0;
-  for (std::uint32_t l = 0; l < depth; ++l) {
-    if (lcodes[l].size() != per_level[l])
-      throw FormatError(what + ": level " + std::to_string(l) + " holds " +
-                        std::to_string(lcodes[l].size()) + " cells, " +
-                        std::to_string(per_level[l]) + " declared");
-    leaf_seen = 0;
-    for (const auto& c : lcodes[l]) leaf_seen += std::uint64_t(c.count());
-    if (leaf_seen != per_level[l + 1])
-      throw FormatError(what + ": level " + std::to_string(l + 1) + " holds " +
-                        std::to_string(leaf_seen) + " cells, " + std::to_string(per_level[l + 1]) +
-                        " declared");
-    codes.insert(codes.end(), lcodes[l].begin(), lcodes[l].end());
-  }
-  if (layout == 0) {
-    for (std::uint64_t i = 0; i < leaves; ++i) read_attr(depth);
-  }
-  if (br.position() != bits)
-    throw FormatError(what + ": payload has " + std::to_string(bits - br.position()) +
-                      " bits left over");
-  const auto gather = [&](std::vector<std::uint16_t>& dst,
-                          const std::vector<std::vector<std::uint16_t>>& per) {
-    if (layout == 1)
-      for (const auto& la : per) dst.insert(dst.end(), la.begin(), la.end());
-    else {
-      dst.assign(inner, 0);
-      dst.insert(dst.end(), per[depth].begin(), per[depth].end());
-    }
-  };
-  if (nb + mb > 0) gather(attrs, lattrs);
-  if (cb > 0) gather(colours, lcolours);
-  access::finish(g, total, what);
-  if (layout == 0 && sigma > 0 && inner > 0) {
-    // Rebuild the intermediate samples bottom-up: mean normal of the children, re-quantised;
-    // the first child's material; the mean colour of the children, re-quantised.
-    for (std::size_t c = inner; c-- > 0;) {
-      const auto cc = std::uint32_t(c);
-      const std::uint32_t first = g.first_child(cc);
-      const int n = g.code(cc).count();
-      if (nb + mb > 0) {
-        std::uint32_t nc = 0;
-        if (q) {
-          vec3f sum = vec3f::Zero();
-          for (int i = 0; i < n; ++i) sum += q->decode(g.normal_code(first + std::uint32_t(i)));
-          nc = q->encode(sum.squaredNorm() > 0 ? vec3f(sum) : q->decode(g.normal_code(first)));
-        }
-        const std::uint32_t mat = g.material(first);
-        attrs[c] = std::uint16_t(nc | (mat << nb));
-      }
-      if (cb > 0) {
-        std::array<int, 3> sum{};
-        for (int i = 0; i < n; ++i) {
-          const rgb8 k = g.colour(first + std::uint32_t(i));
-          sum[0] += k.r;
-          sum[1] += k.g;
-          sum[2] += k.b;
-        }
-        const auto mean = [n](int v) { return std::uint8_t((v + n / 2) / n); };
-        colours[c] = std::uint16_t(
-            rho_grid_encode_colour(rgb8{mean(sum[0]), mean(sum[1]), mean(sum[2])}, int(cb)));
-      }
-    }
-  }
-  return g;
+  const rho_file_head h = read_header<Rho>(r, what);
+  return h.layout == 2 ? parse_compressed<Rho>(h, r, bytes, what)
+                       : parse_bitstream<Rho>(h, r, bytes, what);
 }
 
 template <int Rho>
