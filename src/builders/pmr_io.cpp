@@ -239,9 +239,13 @@ void check_sources(const reader& r, const pmr_data& d) {
     r.fail("source indices out of range or repeated");
 }
 
-pmr_data decode(reader& r, const unsigned char* bytes) {
-  pmr_data d;
-  r.skip_head();  // checked by read_head() in load_pmr_data
+/// The counts the header declares, which size and bound every table after it.
+struct pmr_counts {
+  std::uint32_t flags, levels, samples, nodes, leaves, triangles, umbrellas, umbrella_indices, own;
+};
+
+/// Flags, origin and bounds, options, thresholds, build counts and the table sizes.
+pmr_counts decode_header(reader& r, pmr_data& d) {
   const auto flags = r.get<std::uint32_t>("flags");
   if ((flags & ~(flag_colours | flag_part)) != 0) r.fail("unknown flags");
   for (vec3d* v : {&d.origin, &d.input_min, &d.input_max})
@@ -277,6 +281,12 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
   if (d.stats.input_points != own) r.fail("sample count differs from the input count");
   if (npts == 0 || nnodes == 0 || nleaves == 0) r.fail("empty hierarchy");
 
+  return {flags, levels, npts, nnodes, nleaves, ntris, numb, nidx, own};
+}
+
+/// Positions, normals and source indices (a permutation, or a part's distinct indices), colours.
+void decode_samples(reader& r, pmr_data& d, const pmr_counts& c) {
+  const std::uint32_t npts = c.samples;
   r.need(npts, 28, "samples");
   d.positions.resize(npts);
   d.normals.resize(npts);
@@ -285,16 +295,20 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
   for (std::uint32_t i = 0; i < npts; ++i) d.normals[i] = r.vec("normal", i);
   for (std::uint32_t i = 0; i < npts; ++i) d.source[i] = r.get<std::uint32_t>("source index");
   check_sources(r, d);
-  if (flags & flag_colours) {
+  if (c.flags & flag_colours) {
     r.need(npts, 3, "sample colours");
     d.colours.resize(npts);
-    for (auto& c : d.colours) {
-      c.r = r.get<std::uint8_t>("colour");
-      c.g = r.get<std::uint8_t>("colour");
-      c.b = r.get<std::uint8_t>("colour");
+    for (auto& k : d.colours) {
+      k.r = r.get<std::uint8_t>("colour");
+      k.g = r.get<std::uint8_t>("colour");
+      k.b = r.get<std::uint8_t>("colour");
     }
   }
+}
 
+/// The octree's nodes, checked to form one tree in breadth-first order with each leaf once.
+void decode_nodes(reader& r, pmr_data& d, const pmr_counts& c) {
+  const std::uint32_t nnodes = c.nodes, nleaves = c.leaves;
   r.need(nnodes, node_bytes, "nodes");
   d.nodes.resize(nnodes);
   for (std::uint32_t k = 0; k < nnodes; ++k) {
@@ -328,7 +342,11 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
     next += n.count;
   }
   if (next != nnodes) r.fail("nodes not reachable from the root");
+}
 
+/// The leaf table: contiguous sample ranges covering every own sample, each naming its node.
+void decode_leaves(reader& r, pmr_data& d, const pmr_counts& c) {
+  const std::uint32_t nleaves = c.leaves, npts = c.samples, nnodes = c.nodes;
   d.leaf_list.resize(nleaves);
   std::uint64_t expect = 0;
   for (std::uint32_t l = 0; l < nleaves; ++l) {
@@ -343,8 +361,13 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
     if (L.node >= nnodes || !d.nodes[L.node].leaf || d.nodes[L.node].first != l)
       r.fail("leaf " + std::to_string(l) + ": node does not point back to it");
   }
-  if (expect != own) r.fail("leaves do not cover every sample");
+  if (expect != c.own) r.fail("leaves do not cover every sample");
+}
 
+/// Per leaf and level: nested sample counts and the triangle and umbrella ranges.
+void decode_levels(reader& r, pmr_data& d, const pmr_counts& c) {
+  const std::uint32_t nleaves = c.leaves, levels = c.levels, ntris = c.triangles,
+                      numb = c.umbrellas;
   const std::uint64_t nlev = static_cast<std::uint64_t>(nleaves) * levels;
   r.need(nlev, level_bytes, "levels");
   d.levels.resize(nlev);
@@ -363,7 +386,12 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
         static_cast<std::uint64_t>(L.first_entry) + L.points > numb)
       r.fail("level " + std::to_string(k) + ": triangle or umbrella range out of range");
   }
+}
 
+/// Triangles, umbrellas and their indices, each umbrella naming triangles of its own level.
+void decode_umbrellas(reader& r, pmr_data& d, const pmr_counts& c) {
+  const std::uint32_t ntris = c.triangles, npts = c.samples, numb = c.umbrellas,
+                      nidx = c.umbrella_indices;
   r.need(ntris, tri_bytes, "triangles");
   d.triangles.resize(ntris);
   for (std::uint32_t t = 0; t < ntris; ++t)
@@ -392,6 +420,17 @@ pmr_data decode(reader& r, const unsigned char* bytes) {
         if (d.umbrella_index[j] >= L.tris)
           r.fail("umbrella index " + std::to_string(j) + " beyond its level's triangles");
     }
+}
+
+pmr_data decode(reader& r, const unsigned char* bytes) {
+  pmr_data d;
+  r.skip_head();  // checked by read_head() in load_pmr_data
+  const pmr_counts c = decode_header(r, d);
+  decode_samples(r, d, c);
+  decode_nodes(r, d, c);
+  decode_leaves(r, d, c);
+  decode_levels(r, d, c);
+  decode_umbrellas(r, d, c);
   const std::size_t body = r.pos();
   const auto sum = r.get<std::uint64_t>("checksum");
   if (sum != fnv1a(bytes, body)) r.fail("checksum mismatch (the file is corrupted)");
