@@ -4,6 +4,7 @@
 #include "lod.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/builders/point_octree.hpp"
+#include "pbr_lod/core/mesh_splats.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
 namespace pbrlod_tool {
@@ -159,7 +160,11 @@ std::unique_ptr<lod> open_chunked(const std::string& dir) {
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool on_terminal) {
   auto opt = octree_options(items, on_terminal);
-  const point_cloud& cloud = in.get().mesh.vertices;
+  // A mesh's vertices as splats bounding their dual cells, with the mesh's normals
+  // (core/mesh_splats.hpp); a cloud's points as they are (normals, ellipses estimated if absent).
+  const loaded_input& data = in.get();
+  const point_cloud splats = data.is_mesh() ? mesh_splats(data.mesh) : point_cloud{};
+  const point_cloud& cloud = data.is_mesh() ? splats : data.mesh.vertices;
   if (!opt.viewpoint) opt.viewpoint = cloud.sensor;  // a PCD's scanner, unless overridden
   return with_point_set(cloud, in.name(), [&](const auto& pts) {
     return make_lod(octree_method{}, build_point_octree(pts, opt));
@@ -217,7 +222,8 @@ method_entry point_octree_method() {
           .build = &build,
           .load = &load,
           .build_chunked = &build_chunked,
-          .demo_tolerances = {16, 4, 1}};
+          .demo_tolerances = {16, 4, 1},
+          .splats_from_mesh = true};
 }
 
 }  // namespace pbrlod_tool

@@ -283,6 +283,9 @@ struct method_entry {
                                         const distributed_rank* part) = nullptr;
   std::vector<float> demo_tolerances;          ///< what `demo` draws, coarse to fine
   std::string tolerance_key = "tolerance_px";  ///< the --tolerance field in `render --json`
+  /// A point builder that, given a mesh, draws its vertices as splats from the faces around
+  /// them (core/mesh_splats.hpp): the sweep and `papers` pass it the mesh, not the vertices.
+  bool splats_from_mesh = false;
 };
 const std::vector<method_entry>& methods();
 /// The method that wrote a .lod file, by its magic (throws FormatError for an unknown one).
