@@ -126,9 +126,10 @@ int cmd_sweep_build(const std::string& method, const std::string& spec, const st
                                  [&](const method_entry& e) { return e.name == method; });
     if (it == methods().end() || !it->build)
       throw InvalidArgument("sweep-build: unknown method '" + method + "'");
-    // Point builders take the mesh's vertices (with their normals and colours), as in the sweep.
+    // Point builders take the mesh's vertices (with their normals and colours), as in the sweep;
+    // one that draws a mesh's vertices as splats from its faces takes the mesh.
     loaded_input points;
-    const bool as_mesh = it->builds_from_mesh || !in->is_mesh();
+    const bool as_mesh = it->builds_from_mesh || it->splats_from_mesh || !in->is_mesh();
     if (!as_mesh) points.mesh.vertices = in->mesh.vertices;
     const build_input bi(as_mesh ? std::move(*in) : std::move(points), spec);
     in.reset();

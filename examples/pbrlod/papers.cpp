@@ -94,7 +94,7 @@ std::unique_ptr<lod> build(const std::string& method, const model& m) {
   const auto it = std::find_if(methods().begin(), methods().end(),
                                [&](const method_entry& e) { return e.name == method; });
   loaded_input points;
-  const bool as_mesh = it->builds_from_mesh || !m.data.is_mesh();
+  const bool as_mesh = it->builds_from_mesh || it->splats_from_mesh || !m.data.is_mesh();
   if (!as_mesh) points.mesh.vertices = m.data.mesh.vertices;
   return it->build({}, build_input(as_mesh ? m.data : points, m.name), false);
 }

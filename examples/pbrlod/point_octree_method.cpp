@@ -4,6 +4,7 @@
 #include "lod.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/builders/point_octree.hpp"
+#include "pbr_lod/core/mesh_splats.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
 namespace pbrlod_tool {
@@ -15,8 +16,11 @@ struct chunking {
   std::uint64_t chunk_points = 0;
 };
 
+/// `from_faces`: where the in-memory build asks, mesh=faces (the default: a mesh's vertices as
+/// splats bounding their dual cells) or mesh=vertices (its vertices as a bare cloud, normals
+/// and ellipses estimated, as a chunked build streams them).
 point_octree_options octree_options(const std::vector<std::string>& items, bool on_terminal,
-                                    chunking* chunked = nullptr) {
+                                    chunking* chunked = nullptr, bool* from_faces = nullptr) {
   params m(items);
   if (chunked) {
     chunked->memory = m.bytes("memory");
@@ -39,9 +43,10 @@ point_octree_options octree_options(const std::vector<std::string>& items, bool 
                     ? ellipse_axis_rule::sqrt_eigenvalue
                     : ellipse_axis_rule::eigenvalue;
   o.circle_guard = m.flag("circle_guard", true);
+  if (from_faces) *from_faces = m.choice("mesh", "faces", {"faces", "vertices"}) == "faces";
   m.finish("point-octree",
            "leaf_size, max_depth, normal_bits, knn, knn_ellipses, viewpoint, threads, covariance, "
-           "axes, circle_guard, memory, chunk_points");
+           "axes, circle_guard, mesh, memory, chunk_points");
   o.progress = progress_callback("point-octree", on_terminal);
   return o;
 }
@@ -158,8 +163,14 @@ std::unique_ptr<lod> open_chunked(const std::string& dir) {
 
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool on_terminal) {
-  auto opt = octree_options(items, on_terminal);
-  const point_cloud& cloud = in.get().mesh.vertices;
+  bool from_faces = true;
+  auto opt = octree_options(items, on_terminal, nullptr, &from_faces);
+  // A mesh's vertices as splats bounding their dual cells, with the mesh's normals
+  // (core/mesh_splats.hpp); a cloud's points as they are (normals, ellipses estimated if absent).
+  const loaded_input& data = in.get();
+  const bool splat_mesh = from_faces && data.is_mesh();
+  const point_cloud splats = splat_mesh ? mesh_splats(data.mesh) : point_cloud{};
+  const point_cloud& cloud = splat_mesh ? splats : data.mesh.vertices;
   if (!opt.viewpoint) opt.viewpoint = cloud.sensor;  // a PCD's scanner, unless overridden
   return with_point_set(cloud, in.name(), [&](const auto& pts) {
     return make_lod(octree_method{}, build_point_octree(pts, opt));
@@ -220,7 +231,8 @@ method_entry point_octree_method() {
           .demo_tolerances = {16, 4, 1},
           .tolerance_means =
               "pixels: a node's splat is drawn once the diameter of its projected "
-              "disk's area is at most this (§6, Fig. 11)"};
+              "disk's area is at most this (§6, Fig. 11)",
+          .splats_from_mesh = true};
 }
 
 }  // namespace pbrlod_tool

@@ -286,6 +286,9 @@ struct method_entry {
   /// What --tolerance (traverse_options::tolerance_px) means for this method, in one line: the
   /// one place it is said (`pbrlod render --help`, docs/traversal.md's table).
   std::string tolerance_means;
+  /// A point builder that, given a mesh, draws its vertices as splats from the faces around
+  /// them (core/mesh_splats.hpp): the sweep and `papers` pass it the mesh, not the vertices.
+  bool splats_from_mesh = false;
 };
 const std::vector<method_entry>& methods();
 /// The method that wrote a .lod file, by its magic (throws FormatError for an unknown one).

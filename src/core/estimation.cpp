@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <numbers>
 #include <numeric>
 #include <string>
 #include <thread>
@@ -424,6 +425,51 @@ std::pair<double, double> capped_axes(double major, double minor, double cap,
   return {cap, std::clamp(need * (1 + 1e-5), splat_min_axis_ratio * cap, cap)};
 }
 
+/// ellipse_rule::local_spacing at open edges and creases: the ellipse (semi-axes major along
+/// e1, minor along e2, centred at the sample) is compressed, direction by direction, until its
+/// reach in every tangent direction d is at most the neighbourhood's own reach on the nearer
+/// side, min(max_j q_j·d, max_j −q_j·d), plus `margin`. Inside a surface both sides reach about
+/// ρ and nothing changes; at an open edge the neighbours lie on one side and the splat no longer
+/// sticks out by ρ beyond it (nor beyond a crease, where the other face's neighbours project
+/// onto the crease line). The compression along d keeps the reach across d; returns the new
+/// (major, minor, e1), minor ≥ splat_min_axis_ratio·major.
+constexpr double local_spacing_clip_min_ratio = 0.25;
+struct clipped_ellipse {
+  double major, minor;
+  vec2d e1;
+};
+clipped_ellipse clip_to_neighbourhood(double major, double minor, const vec2d& e1,
+                                      const std::vector<vec2d>& xy, double margin) {
+  constexpr int directions = 16;
+  // M: the ellipse's shape matrix (reach along unit d: √(dᵀ M d)).
+  const vec2d e2(-e1.y(), e1.x());
+  Eigen::Matrix2d m = major * major * e1 * e1.transpose() + minor * minor * e2 * e2.transpose();
+  bool changed = false;
+  for (int pass = 0; pass < 2; ++pass)
+    for (int k = 0; k < directions; ++k) {
+      const double a = std::numbers::pi * k / directions;
+      const vec2d d(std::cos(a), std::sin(a));
+      double fwd = 0, back = 0;
+      for (const auto& q : xy) {
+        fwd = std::max(fwd, q.dot(d));
+        back = std::max(back, -q.dot(d));
+      }
+      const double allowed = std::min(fwd, back) + margin, reach = std::sqrt(d.dot(m * d));
+      if (!(reach > allowed * (1 + 1e-9))) continue;
+      const Eigen::Matrix2d squeeze =
+          Eigen::Matrix2d::Identity() - (1 - allowed / reach) * d * d.transpose();
+      m = squeeze * m * squeeze.transpose();
+      changed = true;
+    }
+  if (!changed) return {major, minor, e1};
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(m);  // ascending eigenvalues
+  const double l1 = std::max(eig.eigenvalues()(1), 0.0);
+  const double l2 = std::max(eig.eigenvalues()(0), 0.0);
+  const double big = std::sqrt(l1);
+  return {big, std::max(std::sqrt(l2), splat_min_axis_ratio * big),
+          vec2d(eig.eigenvectors().col(1))};
+}
+
 /// Splat ellipses from the first kk neighbours of each row of `table` (rows of `stride`).
 splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f> normals,
                          const knn_index& index, const std::vector<std::uint32_t>& table,
@@ -540,9 +586,22 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
       const double f = std::sqrt(f2) * cover_margin;
       const vec3d axis1 = e1.x() * t1 + e1.y() * t2, axis2 = e2.x() * t1 + e2.y() * t2;
       auto [major, minor] = std::pair(f * std::sqrt(l1), f * std::sqrt(l2));
+      vec3d dir1 = axis1, dir2 = axis2;
       if (bounded) std::tie(major, minor) = capped_axes(major, minor, bounds.cap[i], xy, e1, e2);
-      out.u[i] = (major * axis1).cast<float>();
-      out.v[i] = (minor * axis2).cast<float>();
+      // Clipped at open edges and creases where the neighbours spread in two directions about
+      // the sample (second moments λ₂ ≥ 0.25·λ₁): a neighbourhood stretched along a scan line
+      // sees the next line on one side only, and clipping it would open gaps between lines.
+      if (bounded && 0.5 * (a + c) - r >= local_spacing_clip_min_ratio * l1) {
+        const double margin = local_spacing_edge_margin *
+                              (positions[idx[disk_neighbour]] - positions[i]).cast<double>().norm();
+        const auto clip = clip_to_neighbourhood(major, minor, e1, xy, margin);
+        major = clip.major;
+        minor = clip.minor;
+        dir1 = clip.e1.x() * t1 + clip.e1.y() * t2;
+        dir2 = nrm.cross(dir1);
+      }
+      out.u[i] = (major * dir1).cast<float>();
+      out.v[i] = (minor * dir2).cast<float>();
     }
   });
   return out;

@@ -411,7 +411,7 @@ TEST(SplatEllipses, CoverAPlane) {
   for (const int k : {6, 8, 10, 12, 16}) {
     SCOPED_TRACE(k);
     const auto s = make_plane(4000, 1.0f, 1.0f, 11);
-    const auto e = estimate_splat_ellipses(s.pts, s.normals, k);
+    const auto e = estimate_splat_ellipses(s.pts, s.normals, k, 0, ellipse_rule::neighbours);
     expect_axes_valid(e, s.normals);
     const knn_index index(s.pts);
     std::vector<std::uint32_t> idx;
@@ -431,6 +431,17 @@ TEST(SplatEllipses, CoverAPlane) {
     } else {
       std::printf("k = %2d: %zu of %d grid points uncovered\n", k, uncovered, 301 * 301);
       EXPECT_LT(double(uncovered), 0.02 * 301 * 301);
+    }
+    // The default rule clips splats at the square's edges (they no longer hold every
+    // neighbour there) and leaves the grid covered but for a few points.
+    const auto bounded = estimate_splat_ellipses(s.pts, s.normals, k);
+    expect_axes_valid(bounded, s.normals);
+    const std::size_t bounded_uncovered =
+        count_uncovered(s.pts, bounded, s.o, s.t1, s.t2, s.n, 300);
+    std::printf("k = %2d: local_spacing leaves %zu grid points uncovered\n", k, bounded_uncovered);
+    // Measured: k = 12 → 13 of 90,601 (0.014 %, where the clip trims splats), k = 16 → 0.
+    if (k >= 12) {
+      EXPECT_LE(bounded_uncovered, k >= 16 ? 0u : 30u);
     }
   }
 }
@@ -699,7 +710,10 @@ TEST(SplatEllipses, LidarTileLooksLikeItsRender) {
           "lidar %.1f radii, azimuth %.0f: holes %.2f %% (interior %.2f %%), covered %.3f\n", dist,
           az, 100 * all, 100 * inner, covered);
       EXPECT_LE(inner, 0.01) << dist << " " << az;
-      EXPECT_LE(all, 0.025) << dist << " " << az;
+      // All holes: the reference's view-facing squares overhang the tile's outer edge and the
+      // silhouettes of roofs by 0.8·d₈, splats clipped at those edges do not (measured 1.79–
+      // 3.02 %, 2.26 % before the clip; interior 0.37–0.93 %, 0.81 % before).
+      EXPECT_LE(all, 0.032) << dist << " " << az;
       EXPECT_LE(covered, 1.03) << dist << " " << az;
     }
 }

@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstdlib>
 #include <functional>
 #include <limits>
 #include <vector>
@@ -113,6 +115,25 @@ inline double cut_to_input(const triangle_mesh& input, const std::vector<vec3f>&
   for (std::size_t i = 0; i < cut.size(); ++i) moved[i] = cut[i] + shift;
   const knn_index index(dense.positions);
   return distance_to(moved, index).max / frame_of(input.vertices).diagonal;
+}
+
+/// Three images side by side for looking at a cut: the input's render `a`, the cut's `b` (same
+/// size) and their absolute difference × 4 per channel.
+inline image side_by_side_with_error(const image& a, const image& b) {
+  image out(3 * a.width, a.height);
+  std::fill(out.depth.begin(), out.depth.end(), 0.0f);  // opaque: write_png keys on depth
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) {
+      const rgb8 p = a.colour[a.index(x, y)], q = b.colour[b.index(x, y)];
+      const auto diff = [](std::uint8_t u, std::uint8_t v) {
+        return static_cast<std::uint8_t>(std::min(255, 4 * std::abs(int(u) - int(v))));
+      };
+      out.colour[out.index(x, y)] = p;
+      out.colour[out.index(a.width + x, y)] = q;
+      out.colour[out.index(2 * a.width + x, y)] =
+          rgb8{diff(p.r, q.r), diff(p.g, q.g), diff(p.b, q.b)};
+    }
+  return out;
 }
 
 }  // namespace pbr_lod::test

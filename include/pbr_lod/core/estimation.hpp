@@ -52,7 +52,12 @@ enum class ellipse_rule {
   ///    local_spacing_sparse_factor × the cloud's median ρ is sparse: either gets a round disk
   ///    of radius non_surface_disk_factor × d₈ (d₈ its distance to the 8th nearest neighbour),
   ///    bounded as above, and a sparse one at most the typical sample's: non_surface_disk_factor
-  ///    × the cloud's median d₈.
+  ///    × the cloud's median d₈;
+  ///  * at an open edge or a crease the ellipse is compressed, direction by direction, until it
+  ///    reaches in no tangent direction farther than its neighbourhood does on the nearer side
+  ///    plus local_spacing_edge_margin × d₈: inside a surface the neighbours surround the sample
+  ///    and nothing changes, at an edge they lie on one side and the splat no longer sticks out
+  ///    by the neighbourhood's radius beyond it.
   local_spacing,
 };
 
@@ -65,6 +70,9 @@ inline constexpr double local_spacing_max_thickness = 0.1;
 /// ellipse_rule::local_spacing: a sample whose neighbourhood radius exceeds this many times the
 /// cloud's median neighbourhood radius is sparse (an isolated return, a stray hit).
 inline constexpr double local_spacing_sparse_factor = 16.0;
+/// ellipse_rule::local_spacing: how far (over d₈, the distance to the 8th nearest neighbour) a
+/// splat may reach beyond the nearer side of its neighbourhood in any tangent direction.
+inline constexpr double local_spacing_edge_margin = 0.75;
 /// ellipse_rule::local_spacing: the radius of the round splat of a non-surface or sparse sample
 /// over its distance to the 8th nearest neighbour d₈. A disk of radius r seen from a uniformly
 /// random direction covers πr²/2 on average; the full-detail reference draws a bare position as
