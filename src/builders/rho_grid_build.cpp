@@ -345,6 +345,172 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
 // ------------------------------------------------------------------------------------------
 // Triangle meshes
 // ------------------------------------------------------------------------------------------
+/// A mesh's surface in the grid's frame: the cube over the vertices its faces use, and its
+/// triangles relative to the cube's corner (exact repeats and zero-area faces dropped), each with
+/// the index of its face.
+struct mesh_surface {
+  frame f;
+  tri_vector tris;
+  std::vector<std::uint32_t> face_of;
+};
+
+mesh_surface surface_of(const triangle_mesh& m, int rho, int k) {
+  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& fc : m.faces)
+    for (auto v : fc) {
+      const vec3d w = m.vertices.world(v);
+      lo = lo.cwiseMin(w);
+      hi = hi.cwiseMax(w);
+    }
+  mesh_surface ms{make_frame(lo, hi, rho, k), {}, {}};
+  const vec3d shift = m.vertices.origin - ms.f.min;
+  const auto rel = [&](std::uint32_t v) {
+    const vec3d p = shift + m.vertices.positions[v].cast<double>();
+    return K::Point_3(p.x(), p.y(), p.z());
+  };
+  ms.tris.reserve(m.faces.size());
+  // Exact repeats add nothing to the surface; without this their count set the AABB tree's
+  // cost and the depth of the k-d tree of its distance queries (a stack overflow at 50,000
+  // copies of one triangle).
+  for (const std::uint32_t i : unique_faces(m)) {
+    const auto& fc = m.faces[i];
+    const K::Point_3 a = rel(fc[0]), b = rel(fc[1]), cc = rel(fc[2]);
+    if (CGAL::collinear(a, b, cc)) continue;  // zero area: measure-zero geometry, skipped
+    ms.tris.emplace_back(a, b, cc);
+    ms.face_of.push_back(std::uint32_t(i));
+  }
+  return ms;
+}
+
+/// The vertices a mesh without surface is sampled from as a point cloud: those of its faces, or
+/// all of them when it has none.
+point_cloud vertices_of(const triangle_mesh& m) {
+  point_cloud pc;
+  pc.origin = m.vertices.origin;
+  std::vector<std::uint32_t> used;
+  if (m.faces.empty()) {
+    used.resize(m.vertices.size());
+    std::iota(used.begin(), used.end(), 0u);
+  } else {
+    for (const auto& fc : m.faces) used.insert(used.end(), fc.begin(), fc.end());
+    std::sort(used.begin(), used.end());
+    used.erase(std::unique(used.begin(), used.end()), used.end());
+  }
+  for (auto v : used) {
+    pc.positions.push_back(m.vertices.positions[v]);
+    if (!m.vertices.normals.empty()) pc.normals.push_back(m.vertices.normals[v]);
+    if (!m.vertices.materials.empty()) pc.materials.push_back(m.vertices.materials[v]);
+    if (!m.vertices.colours.empty()) pc.colours.push_back(m.vertices.colours[v]);
+  }
+  return pc;
+}
+
+/// A cell's sample attributes from the closest point s on triangle ti: the normal interpolated
+/// from the vertex normals, the nearest corner's material, the colour interpolated as the mesh's
+/// render does.
+struct mesh_attributes {
+  const triangle_mesh& m;
+  const mesh_surface& ms;
+  const std::vector<vec3f>& vnormals;
+  const normal_quantizer* q;
+  int nb, mb, cb;
+
+  void operator()(std::size_t ti, const vec3d& s, std::uint16_t* attr,
+                  std::uint16_t* colour) const {
+    const auto& tris = ms.tris;
+    const auto& fc = m.faces[ms.face_of[ti]];
+    // Barycentric coordinates of the closest point (double, Cramer on the normal
+    // equations).
+    const auto P = [&](int i) {
+      const auto& v = tris[ti].vertex(i);
+      return vec3d(v.x(), v.y(), v.z());
+    };
+    const vec3d a = P(0), e1 = P(1) - a, e2 = P(2) - a, d = s - a;
+    const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
+    const double den = d11 * d22 - d12 * d12;
+    double b1 = 0, b2 = 0;
+    if (den > 0) {
+      b1 = std::clamp((d22 * e1.dot(d) - d12 * e2.dot(d)) / den, 0.0, 1.0);
+      b2 = std::clamp((d11 * e2.dot(d) - d12 * e1.dot(d)) / den, 0.0, 1.0 - b1);
+    }
+    const double b0 = 1 - b1 - b2;
+    std::uint32_t nc = 0, mc = 0;
+    if (nb > 0) {
+      vec3d nrm = b0 * vnormals[fc[0]].cast<double>() + b1 * vnormals[fc[1]].cast<double>() +
+                  b2 * vnormals[fc[2]].cast<double>();
+      if (!(nrm.norm() > 1e-12) || !all_finite(nrm)) nrm = e1.cross(e2);
+      nc = q->encode(nrm.cast<float>());
+    }
+    if (mb > 0) {
+      const int vmax = b0 >= b1 && b0 >= b2 ? 0 : (b1 >= b2 ? 1 : 2);
+      mc = m.vertices.materials[fc[std::size_t(vmax)]];
+    }
+    if (nb + mb > 0) *attr = std::uint16_t(pack_attr(nc, mc, nb));
+    if (cb > 0) {
+      // The colour at the closest point, interpolated as the mesh's render does.
+      const auto& vc = m.vertices.colours;
+      const auto mix = [&](std::uint8_t rgb8::*ch) {
+        const double x = b0 * (vc[fc[0]].*ch) + b1 * (vc[fc[1]].*ch) + b2 * (vc[fc[2]].*ch);
+        return std::uint8_t(std::clamp(std::lround(x), 0l, 255l));
+      };
+      *colour = std::uint16_t(
+          rho_grid_encode_colour(rgb8{mix(&rgb8::r), mix(&rgb8::g), mix(&rgb8::b)}, cb));
+    }
+  }
+};
+
+/// The childhood code of cell p (side `span` leaves, children of `child_span`): the children
+/// that a triangle meeting the cell intersects, by exact triangle/box tests; s, the cell's
+/// sample, names the one child kept when rounding at a cell face leaves none.
+template <int Rho>
+typename level_builder<Rho>::code childhood_code(const aabb_tree& tree, const frame& f,
+                                                 const cell_pos& p, std::uint64_t span,
+                                                 std::uint64_t child_span, const vec3d& s,
+                                                 std::vector<tri_vector::const_iterator>& hits) {
+  using lb = level_builder<Rho>;
+  // Childhood code: exact triangle/box tests of the triangles meeting this cell.
+  const auto box = [&](std::uint64_t x0, std::uint64_t y0, std::uint64_t z0, std::uint64_t sp) {
+    return CGAL::Bbox_3(double(x0) * f.leaf, double(y0) * f.leaf, double(z0) * f.leaf,
+                        double(x0 + sp) * f.leaf, double(y0 + sp) * f.leaf,
+                        double(z0 + sp) * f.leaf);
+  };
+  const std::uint64_t bx = p[0] * span, by = p[1] * span, bz = p[2] * span;
+  hits.clear();
+  tree.all_intersected_primitives(box(bx, by, bz, span), std::back_inserter(hits));
+  typename lb::code cd;
+  const double cs = double(child_span) * f.leaf;
+  for (const auto& h : hits) {
+    const CGAL::Bbox_3 tb = h->bbox();
+    const auto range_of = [&](double lo_, double hi_, std::uint64_t base) {
+      const double o0 = double(base) * f.leaf;
+      const int a0 = std::clamp(int(std::floor((lo_ - o0) / cs)) - 1, 0, Rho - 1);
+      const int a1 = std::clamp(int(std::floor((hi_ - o0) / cs)) + 1, 0, Rho - 1);
+      return std::pair{a0, a1};
+    };
+    const auto [x0, x1] = range_of(tb.xmin(), tb.xmax(), bx);
+    const auto [y0, y1] = range_of(tb.ymin(), tb.ymax(), by);
+    const auto [z0, z1] = range_of(tb.zmin(), tb.zmax(), bz);
+    for (int z = z0; z <= z1; ++z)
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+          const int j = x + Rho * y + Rho * Rho * z;
+          if (cd.test(j)) continue;
+          if (CGAL::do_intersect(
+                  *h, box(bx + std::uint64_t(x) * child_span, by + std::uint64_t(y) * child_span,
+                          bz + std::uint64_t(z) * child_span, child_span)))
+            cd.set(j);
+        }
+  }
+  if (cd.empty()) {
+    // Only possible through rounding at a cell face: keep the child holding the sample.
+    const auto axis = [&](double v, std::uint64_t base) {
+      return std::clamp(int(std::floor((v - double(base) * f.leaf) / cs)), 0, Rho - 1);
+    };
+    cd.set(axis(s.x(), bx) + Rho * axis(s.y(), by) + Rho * Rho * axis(s.z(), bz));
+  }
+  return cd;
+}
+
 template <int Rho>
 rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o) {
   using lb = level_builder<Rho>;
@@ -356,56 +522,9 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   if (m.vertices.empty()) throw InvalidArgument("rho-grid: the input mesh has no vertices");
   // Leaf depth: the paper's level l is a ρ^(l+1) grid.
   const int k = (o.level ? *o.level : display_level(Rho)) + 1;
-
-  // Frame from the vertices the faces use (all vertices when there are no faces).
-  vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (const auto& fc : m.faces)
-    for (auto v : fc) {
-      const vec3d w = m.vertices.world(v);
-      lo = lo.cwiseMin(w);
-      hi = hi.cwiseMax(w);
-    }
-  const frame f = make_frame(lo, hi, Rho, k);
-  const vec3d shift = m.vertices.origin - f.min;
-  const auto rel = [&](std::uint32_t v) {
-    const vec3d p = shift + m.vertices.positions[v].cast<double>();
-    return K::Point_3(p.x(), p.y(), p.z());
-  };
-  tri_vector tris;
-  std::vector<std::uint32_t> face_of;
-  tris.reserve(m.faces.size());
-  // Exact repeats add nothing to the surface; without this their count set the AABB tree's
-  // cost and the depth of the k-d tree of its distance queries (a stack overflow at 50,000
-  // copies of one triangle).
-  for (const std::uint32_t i : unique_faces(m)) {
-    const auto& fc = m.faces[i];
-    const K::Point_3 a = rel(fc[0]), b = rel(fc[1]), cc = rel(fc[2]);
-    if (CGAL::collinear(a, b, cc)) continue;  // zero area: measure-zero geometry, skipped
-    tris.emplace_back(a, b, cc);
-    face_of.push_back(std::uint32_t(i));
-  }
-  if (tris.empty()) {
-    // No surface: sample the vertices (of the faces, or all of them) as a point cloud.
-    point_cloud pc;
-    pc.origin = m.vertices.origin;
-    std::vector<std::uint32_t> used;
-    if (m.faces.empty()) {
-      used.resize(m.vertices.size());
-      std::iota(used.begin(), used.end(), 0u);
-    } else {
-      for (const auto& fc : m.faces) used.insert(used.end(), fc.begin(), fc.end());
-      std::sort(used.begin(), used.end());
-      used.erase(std::unique(used.begin(), used.end()), used.end());
-    }
-    for (auto v : used) {
-      pc.positions.push_back(m.vertices.positions[v]);
-      if (!m.vertices.normals.empty()) pc.normals.push_back(m.vertices.normals[v]);
-      if (!m.vertices.materials.empty()) pc.materials.push_back(m.vertices.materials[v]);
-      if (!m.vertices.colours.empty()) pc.colours.push_back(m.vertices.colours[v]);
-    }
-    return build_from_points<Rho>(pc, o);
-  }
-
+  const mesh_surface ms = surface_of(m, Rho, k);
+  if (ms.tris.empty()) return build_from_points<Rho>(vertices_of(m), o);  // no surface
+  const frame& f = ms.f;
   const int nb = o.normal_bits;  // a mesh always has (geometric) normals
   const int mb = m.vertices.materials.empty() ? 0 : o.material_bits;
   const int cb = m.vertices.colours.empty() ? 0 : o.colour_bits;
@@ -421,7 +540,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
       nb == 0 ? std::vector<vec3f>{}
               : (m.vertices.normals.empty() ? area_weighted_normals(m) : m.vertices.normals);
 
-  aabb_tree tree(tris.cbegin(), tris.cend());
+  aabb_tree tree(ms.tris.cbegin(), ms.tris.cend());
   tree.build();
   tree.accelerate_distance_queries();
   (void)tree.closest_point(K::Point_3(0, 0, 0));  // builds the search structure before threads
@@ -429,6 +548,7 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
   // The library's pool with an explicit thread count (core/parallel.hpp): no process-wide TBB
   // limit that would also cap every other thread of the caller's program.
   const unsigned threads = resolve_threads(o.threads);
+  const mesh_attributes attributes{m, ms, vnormals, q ? &*q : nullptr, nb, mb, cb};
 
   rho_grid<Rho> g;
   access::set_frame(g, k, f.min, f.side, nb, mb);
@@ -460,92 +580,11 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
                 tree.closest_point_and_primitive(K::Point_3(ctr.x(), ctr.y(), ctr.z()));
             const vec3d s(pt.x(), pt.y(), pt.z());
             if (o.keep_sample_points) lsamples[ci] = s.cast<float>();
-            const std::size_t ti = std::size_t(it - tris.cbegin());
-            const auto& fc = m.faces[face_of[ti]];
-            if (nb + mb + cb > 0) {
-              // Barycentric coordinates of the closest point (double, Cramer on the normal
-              // equations).
-              const auto P = [&](int i) {
-                const auto& v = tris[ti].vertex(i);
-                return vec3d(v.x(), v.y(), v.z());
-              };
-              const vec3d a = P(0), e1 = P(1) - a, e2 = P(2) - a, d = s - a;
-              const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
-              const double den = d11 * d22 - d12 * d12;
-              double b1 = 0, b2 = 0;
-              if (den > 0) {
-                b1 = std::clamp((d22 * e1.dot(d) - d12 * e2.dot(d)) / den, 0.0, 1.0);
-                b2 = std::clamp((d11 * e2.dot(d) - d12 * e1.dot(d)) / den, 0.0, 1.0 - b1);
-              }
-              const double b0 = 1 - b1 - b2;
-              std::uint32_t nc = 0, mc = 0;
-              if (nb > 0) {
-                vec3d nrm = b0 * vnormals[fc[0]].cast<double>() +
-                            b1 * vnormals[fc[1]].cast<double>() +
-                            b2 * vnormals[fc[2]].cast<double>();
-                if (!(nrm.norm() > 1e-12) || !all_finite(nrm)) nrm = e1.cross(e2);
-                nc = q->encode(nrm.cast<float>());
-              }
-              if (mb > 0) {
-                const int vmax = b0 >= b1 && b0 >= b2 ? 0 : (b1 >= b2 ? 1 : 2);
-                mc = m.vertices.materials[fc[std::size_t(vmax)]];
-              }
-              if (nb + mb > 0) lattrs[ci] = std::uint16_t(pack_attr(nc, mc, nb));
-              if (cb > 0) {
-                // The colour at the closest point, interpolated as the mesh's render does.
-                const auto& vc = m.vertices.colours;
-                const auto mix = [&](std::uint8_t rgb8::*ch) {
-                  const double x =
-                      b0 * (vc[fc[0]].*ch) + b1 * (vc[fc[1]].*ch) + b2 * (vc[fc[2]].*ch);
-                  return std::uint8_t(std::clamp(std::lround(x), 0l, 255l));
-                };
-                lcolours[ci] = std::uint16_t(
-                    rho_grid_encode_colour(rgb8{mix(&rgb8::r), mix(&rgb8::g), mix(&rgb8::b)}, cb));
-              }
-            }
-            if (l == k) continue;
-            // Childhood code: exact triangle/box tests of the triangles meeting this cell.
-            const auto box = [&](std::uint64_t x0, std::uint64_t y0, std::uint64_t z0,
-                                 std::uint64_t sp) {
-              return CGAL::Bbox_3(double(x0) * f.leaf, double(y0) * f.leaf, double(z0) * f.leaf,
-                                  double(x0 + sp) * f.leaf, double(y0 + sp) * f.leaf,
-                                  double(z0 + sp) * f.leaf);
-            };
-            const std::uint64_t bx = p[0] * span, by = p[1] * span, bz = p[2] * span;
-            hits.clear();
-            tree.all_intersected_primitives(box(bx, by, bz, span), std::back_inserter(hits));
-            typename lb::code cd;
-            const double cs = double(child_span) * f.leaf;
-            for (const auto& h : hits) {
-              const CGAL::Bbox_3 tb = h->bbox();
-              const auto range_of = [&](double lo_, double hi_, std::uint64_t base) {
-                const double o0 = double(base) * f.leaf;
-                const int a0 = std::clamp(int(std::floor((lo_ - o0) / cs)) - 1, 0, Rho - 1);
-                const int a1 = std::clamp(int(std::floor((hi_ - o0) / cs)) + 1, 0, Rho - 1);
-                return std::pair{a0, a1};
-              };
-              const auto [x0, x1] = range_of(tb.xmin(), tb.xmax(), bx);
-              const auto [y0, y1] = range_of(tb.ymin(), tb.ymax(), by);
-              const auto [z0, z1] = range_of(tb.zmin(), tb.zmax(), bz);
-              for (int z = z0; z <= z1; ++z)
-                for (int y = y0; y <= y1; ++y)
-                  for (int x = x0; x <= x1; ++x) {
-                    const int j = x + Rho * y + Rho * Rho * z;
-                    if (cd.test(j)) continue;
-                    if (CGAL::do_intersect(*h, box(bx + std::uint64_t(x) * child_span,
-                                                   by + std::uint64_t(y) * child_span,
-                                                   bz + std::uint64_t(z) * child_span, child_span)))
-                      cd.set(j);
-                  }
-            }
-            if (cd.empty()) {
-              // Only possible through rounding at a cell face: keep the child holding the sample.
-              const auto axis = [&](double v, std::uint64_t base) {
-                return std::clamp(int(std::floor((v - double(base) * f.leaf) / cs)), 0, Rho - 1);
-              };
-              cd.set(axis(s.x(), bx) + Rho * axis(s.y(), by) + Rho * Rho * axis(s.z(), bz));
-            }
-            lcodes[ci] = cd;
+            const std::size_t ti = std::size_t(it - ms.tris.cbegin());
+            if (nb + mb + cb > 0)
+              attributes(ti, s, nb + mb > 0 ? &lattrs[ci] : nullptr,
+                         cb > 0 ? &lcolours[ci] : nullptr);
+            if (l < k) lcodes[ci] = childhood_code<Rho>(tree, f, p, span, child_span, s, hits);
           }
         });
     cells += nl;
