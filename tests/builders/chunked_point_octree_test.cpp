@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <sstream>
 #include <thread>
 
@@ -238,6 +239,41 @@ TEST(ChunkedPointOctreeEstimated, PositionsOnlyWithViewpointEqualsInMemory) {
   const auto whole = H::open(dir).assemble();
   const auto memory = build_point_octree(point_set<attributes{}>::from(all), o.octree);
   EXPECT_TRUE(whole == memory);
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPointOctreeEstimated, ZeroNormalsAreEstimatedAndCounted) {
+  // Every sixth normal zero and one NaN: "no normal", estimated over the chunk and its halo
+  // (whose reach then covers the normals' k neighbours too) and oriented by the given normals
+  // around each — what build_point_octree does over the whole input: the same tree, every
+  // sample's normal within 0.1° of the in-memory build's.
+  point_cloud c = make_wavy_surface(20000, 6);
+  std::size_t zeroed = 0;
+  for (std::size_t i = 0; i < c.size(); i += 6, ++zeroed) c.normals[i].setZero();
+  c.normals[1].z() = std::numeric_limits<float>::infinity();
+  ++zeroed;
+  chunked_build_options o;
+  o.chunk_points = 3000;
+  const std::string dir = temp_dir("zero_normals");
+  const chunked_build_report r = build_point_octree_chunked(cloud_point_source(c), dir, o);
+  EXPECT_GE(r.chunks, 5u);
+  EXPECT_EQ(r.normals_filled, zeroed);
+  EXPECT_FALSE(r.estimated_normals);
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  const auto whole = H::open(dir).assemble();
+  const auto memory =
+      build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(c), o.octree);
+  EXPECT_EQ(memory.stats().normals_filled, zeroed);
+  ASSERT_EQ(whole.samples().size(), memory.samples().size());
+  ASSERT_EQ(whole.nodes().size(), memory.nodes().size());
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < whole.samples().size(); ++i) {
+    ASSERT_EQ(whole.samples().positions[i], memory.samples().positions[i]);
+    ASSERT_TRUE(all_finite(whole.samples().normals[i]));
+    off += whole.samples().normals[i].dot(memory.samples().normals[i]) <
+           std::cos(0.1f * 3.14159265f / 180);
+  }
+  EXPECT_EQ(off, 0u) << "normals differing from the in-memory estimate";
   fs::remove_all(dir);
 }
 
