@@ -804,8 +804,8 @@ void pop_build_state::prepare() {
   // without normals does (the ρ-grid's rule too).
   d.stats.normals_filled =
       estimate ? 0
-               : static_cast<std::size_t>(std::count_if(mesh.vertices.normals.begin(),
-                                                        mesh.vertices.normals.end(), missing_normal));
+               : static_cast<std::size_t>(std::count_if(
+                     mesh.vertices.normals.begin(), mesh.vertices.normals.end(), missing_normal));
   // Without vertex normals, or with some missing: area_weighted_normal_sums(mesh).
   std::vector<vec3d> normal_sum;
   const auto set_up_vertices = [&] {

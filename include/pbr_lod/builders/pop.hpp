@@ -135,8 +135,8 @@ struct pop_build_stats {
   /// Vertex normals that were zero or not finite ("no normal"), replaced by the area-weighted
   /// normal of the vertex's faces (area_weighted_normals). A loaded file reports 0.
   std::size_t normals_filled = 0;
-  std::size_t contained_inner = 0;    ///< inner nodes whose sphere is one child's (rule 0, §3.1)
-  std::size_t file_bytes = 0;         ///< size of the file save() writes
+  std::size_t contained_inner = 0;  ///< inner nodes whose sphere is one child's (rule 0, §3.1)
+  std::size_t file_bytes = 0;       ///< size of the file save() writes
   /// The file's sections: vertex records, face index lists, node records (header + checksum
   /// are the rest).
   std::size_t vertex_file_bytes = 0, face_file_bytes = 0, node_file_bytes = 0;
