@@ -309,6 +309,11 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
   const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
   const chunked_build_report r1 = build_point_octree_chunked(src, one, o);
   ASSERT_GE(r1.chunks, 8u);
+  // An earlier build in `many` with more chunks: the ranks' folder replaces it whole (a chunk
+  // file of the earlier build left behind would be one file too many below).
+  chunked_build_options finer = o;
+  finer.chunk_points = 400;
+  ASSERT_GT(build_point_octree_chunked(src, many, finer).chunks, r1.chunks);
   std::barrier sync(3);
   std::vector<chunked_build_report> reports(3);
   std::vector<std::thread> ranks;
@@ -325,6 +330,7 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
   EXPECT_EQ(reports[0].halo_points, r1.halo_points);
   expect_same_folders(one, many);
   EXPECT_FALSE(fs::exists(fs::path(many) / "tmp-build"));
+  EXPECT_FALSE(fs::exists(many + ".partial")) << "the staging folder was left";
   fs::remove_all(one);
   fs::remove_all(many);
 }
