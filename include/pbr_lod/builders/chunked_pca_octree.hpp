@@ -143,7 +143,9 @@ class chunked_pca_octree {
   };
   using node = pca_node;
 
-  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file.
+  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
+  /// and a FormatError saying so when `dir` is a folder an unfinished build left
+  /// (check_chunked_folder).
   [[nodiscard]] static chunked_pca_octree open(const std::string& dir);
 
   // ---- the Hierarchy interface

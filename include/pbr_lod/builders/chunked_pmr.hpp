@@ -125,7 +125,9 @@ class chunked_pmr {
     friend bool operator==(const node_id&, const node_id&) = default;
   };
 
-  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file.
+  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
+  /// and a FormatError saying so when `dir` is a folder an unfinished build left
+  /// (check_chunked_folder).
   [[nodiscard]] static chunked_pmr open(const std::string& dir);
 
   // ---- the Hierarchy interface
