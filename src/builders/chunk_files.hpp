@@ -291,9 +291,8 @@ struct chunked_pass_base {
   /// cannot bound its neighbours by its own: one cell that takes every point.
   [[nodiscard]] std::vector<halo_cell> halo_cells(std::size_t c, const chunk_extent& ci, int k,
                                                   unsigned threads) const {
-    if (ci.count < static_cast<std::uint64_t>(k))
-      return {{ci.lo, ci.hi, std::numeric_limits<double>::infinity()}};
     const auto recs = read_records(temp_path("chunk", c));
+    if (recs.size() != ci.count) throw IoError(temp_path("chunk", c) + ": cut short");
     std::vector<vec3f> pts(recs.size());
     vec3f lo = recs[0].position, hi = lo;
     for (std::size_t i = 0; i < recs.size(); ++i) {
@@ -301,6 +300,9 @@ struct chunked_pass_base {
       lo = lo.cwiseMin(pts[i]);
       hi = hi.cwiseMax(pts[i]);
     }
+    // The box from the records, not from ci: only rank 0 has the chunks' boxes.
+    if (ci.count < static_cast<std::uint64_t>(k))
+      return {{lo, hi, std::numeric_limits<double>::infinity()}};
     const knn_graph g = nearest_neighbour_graph(pts, k, threads);
     constexpr int m = cells_per_axis;
     const vec3f ext = (hi - lo).cwiseMax(vec3f::Constant(1e-30f));

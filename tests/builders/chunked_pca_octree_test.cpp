@@ -176,14 +176,15 @@ TEST(ChunkedPcaOptions, UnquantisedAndOneChunkEqualTheInMemoryBuild) {
   }
 }
 
-TEST(ChunkedPcaDistributed, ThreeRanksWriteTheOneProcessFolder) {
-  const point_cloud c = make_wavy_surface(8000, 9);
+/// Three "ranks" as threads with a barrier write the one-process folder of `c`.
+void expect_three_ranks_write_the_one_process_folder(const point_cloud& c,
+                                                     const std::string& name) {
   const cloud_point_source src(c);
   chunked_pca_octree_options o;
   o.pca = small_codebooks();
   o.pca.threads = 1;
   o.chunk_points = 500;
-  const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
+  const std::string one = temp_dir(name + "_one"), many = temp_dir(name + "_many");
   const chunked_build_report r1 = build_pca_octree_chunked(src, one, o);
   ASSERT_GE(r1.chunks, 6u);
   std::barrier sync(3);
@@ -198,6 +199,18 @@ TEST(ChunkedPcaDistributed, ThreeRanksWriteTheOneProcessFolder) {
   expect_same_folders(one, many);
   fs::remove_all(one);
   fs::remove_all(many);
+}
+
+TEST(ChunkedPcaDistributed, ThreeRanksWriteTheOneProcessFolder) {
+  expect_three_ranks_write_the_one_process_folder(make_wavy_surface(8000, 9), "dist");
+}
+
+// Without normals: the halo cells come from every rank, the estimation from rank 0, and the
+// chunks are built round robin from the files it rewrote.
+TEST(ChunkedPcaDistributed, ThreeRanksEstimateMissingNormalsAsOneProcess) {
+  point_cloud c = make_wavy_surface(8000, 9);
+  c.normals.clear();
+  expect_three_ranks_write_the_one_process_folder(c, "dist_bare");
 }
 
 TEST(ChunkedPcaFiles, BadInputAndDamagedDirectoriesAreErrors) {
