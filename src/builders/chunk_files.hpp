@@ -26,6 +26,7 @@
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
@@ -410,6 +411,53 @@ struct chunked_pass_base {
       points += f.count();
     }
     return points;
+  }
+
+  /// The missing normals (zero or not finite) of every chunk's file, estimated chunk after chunk
+  /// in `order` (rank 0, after halos()): fill_missing_normals over the chunk and its halo, the
+  /// halo's points of chunks already done carrying their estimates. Those orient the chunk's, so
+  /// that one orientation spreads from chunk to chunk as the in-memory builds' spreads over the
+  /// whole input's k-NN graph. Each chunk's file is rewritten with its normals.
+  template <class ChunkOf>
+  void fill_normals_in_turn(const std::vector<std::uint32_t>& order, std::size_t chunks, int k,
+                            unsigned threads, ChunkOf&& chunk_of) {
+    index_file filled((tmp.path / "filled").string(), src.size(), true);
+    std::vector<char> done(chunks, 0);
+    std::vector<vec3f> one;
+    const auto given = [](const vec3f& v) {
+      return missing_normal(v) ? vec3f(vec3f::Zero()) : vec3f(v.normalized());
+    };
+    for (const std::uint32_t c : order) {
+      std::vector<point_record> recs = read_records(temp_path("chunk", c));
+      const std::vector<point_record> halo =
+          chunks > 1 ? read_records(temp_path("halo", c)) : std::vector<point_record>{};
+      std::vector<vec3f> pos, nrm;
+      pos.reserve(recs.size() + halo.size());
+      nrm.reserve(recs.size() + halo.size());
+      for (const point_record& r : recs) {
+        pos.push_back(r.position);
+        nrm.push_back(given(r.normal));
+      }
+      for (const point_record& r : halo) {
+        pos.push_back(r.position);
+        if (done[chunk_of(r.position)]) {
+          filled.read(r.index, 1, one);
+          nrm.push_back(one[0]);
+        } else {
+          nrm.push_back(given(r.normal));
+        }
+      }
+      (void)fill_missing_normals(pos, nrm, k, threads);
+      nrm.resize(recs.size());
+      filled.scatter(recs, nrm);
+      append_file out(temp_path("chunk", c), buffer_bytes(1));
+      for (std::size_t i = 0; i < recs.size(); ++i) {
+        recs[i].normal = nrm[i];
+        out.put(recs[i]);
+      }
+      out.flush();
+      done[c] = 1;
+    }
   }
 
   /// f(first index, block) over the whole source, block by block; one full pass.

@@ -303,45 +303,9 @@ struct chunked_pca_builder : chunked_pass_base {
     const std::size_t m = chunk_top.size();
     rep.halo_points = halos(extents, po.knn, workers,
                             [&](const vec3f& p) { return nodes[descend(local(p))].chunk; });
-    if (rank == 0) {
-      index_file filled((tmp.path / "filled").string(), n, true);
-      std::vector<char> done(m, 0);
-      std::vector<vec3f> one;
-      const auto given = [](const vec3f& v) {
-        return missing_normal(v) ? vec3f(vec3f::Zero()) : vec3f(v.normalized());
-      };
-      for (const std::uint32_t c : chunks_in_order()) {
-        std::vector<point_record> recs = read_records(temp_path("chunk", c));
-        const std::vector<point_record> halo =
-            m > 1 ? read_records(temp_path("halo", c)) : std::vector<point_record>{};
-        std::vector<vec3f> pos, nrm;
-        pos.reserve(recs.size() + halo.size());
-        nrm.reserve(recs.size() + halo.size());
-        for (const point_record& r : recs) {
-          pos.push_back(r.position);
-          nrm.push_back(given(r.normal));
-        }
-        for (const point_record& r : halo) {
-          pos.push_back(r.position);
-          if (done[nodes[descend(local(r.position))].chunk]) {
-            filled.read(r.index, 1, one);
-            nrm.push_back(one[0]);
-          } else {
-            nrm.push_back(given(r.normal));
-          }
-        }
-        (void)fill_missing_normals(pos, nrm, po.knn, workers);
-        nrm.resize(recs.size());
-        filled.scatter(recs, nrm);
-        append_file out(temp_path("chunk", c), buffer_bytes(1));
-        for (std::size_t i = 0; i < recs.size(); ++i) {
-          recs[i].normal = nrm[i];
-          out.put(recs[i]);
-        }
-        out.flush();
-        done[c] = 1;
-      }
-    }
+    if (rank == 0)
+      fill_normals_in_turn(chunks_in_order(), m, po.knn, workers,
+                           [&](const vec3f& p) { return nodes[descend(local(p))].chunk; });
     barrier();
   }
 

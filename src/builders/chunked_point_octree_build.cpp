@@ -258,14 +258,36 @@ struct chunked_point_octree_builder : chunked_pass_base {
     return In.normal && missing == 0 ? oo.knn_ellipses : std::max(oo.knn, oo.knn_ellipses);
   }
 
-  /// Step 3: the halos (chunked_pass_base::halos).
+  /// The chunks in octree order (depth first, octants in order): neighbours follow each other.
+  [[nodiscard]] std::vector<std::uint32_t> chunks_in_order() const {
+    std::vector<std::uint32_t> out, stack{0};
+    while (!stack.empty()) {
+      const std::uint32_t x = stack.back();
+      stack.pop_back();
+      if (nodes[x].st != top_node::state::split) {
+        out.push_back(nodes[x].chunk);
+        continue;
+      }
+      for (std::size_t o = 8; o-- > 0;)
+        if (nodes[x].child[o] != none) stack.push_back(nodes[x].child[o]);
+    }
+    return out;
+  }
+
+  /// Step 3: the halos (chunked_pass_base::halos); when input normals are missing, those
+  /// estimated chunk after chunk (fill_normals_in_turn), so that one orientation spreads over
+  /// the chunks (step 4 then finds none missing among a chunk's own points).
   void halos() {
     std::vector<chunk_extent> ext(chunks.size());
     for (std::size_t c = 0; c < chunks.size(); ++c)
       ext[c] = {chunks[c].lo, chunks[c].hi, chunks[c].count};
-    rep.halo_points = chunked_pass_base::halos(ext, knn_needed(), threads, [&](const vec3f& p) {
-      return nodes[descend(p.cast<double>())].chunk;
-    });
+    const auto chunk_of = [&](const vec3f& p) { return nodes[descend(p.cast<double>())].chunk; };
+    rep.halo_points = chunked_pass_base::halos(ext, knn_needed(), threads, chunk_of);
+    if (In.normal && missing > 0) {
+      if (rank == 0)
+        fill_normals_in_turn(chunks_in_order(), chunks.size(), oo.knn, threads, chunk_of);
+      barrier();
+    }
   }
 
   /// Step 4: per chunk (by its rank), the estimation over the chunk and its halo, the

@@ -3,12 +3,16 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <barrier>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -274,6 +278,48 @@ TEST(ChunkedPointOctreeEstimated, ZeroNormalsAreEstimatedAndCounted) {
            std::cos(0.1f * 3.14159265f / 180);
   }
   EXPECT_EQ(off, 0u) << "normals differing from the in-memory estimate";
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPointOctreeEstimated, AllZeroNormalsTakeOneOrientationOverTheChunks) {
+  // Every normal zero (a 3-D Gaussian Splatting file): estimated chunk after chunk, each chunk
+  // oriented by its finished neighbours' estimates in its halo, so the whole closed surface
+  // comes out one way (≥ 99 % of the samples agree in sign with the true normals, or ≥ 99 %
+  // disagree), on the true normals' lines (|n·n'| ≥ cos 20° for ≥ 99 %).
+  const point_cloud truth = make_wavy_surface(20000, 6);
+  point_cloud c = truth;
+  for (auto& n : c.normals) n.setZero();
+  chunked_build_options o;
+  o.chunk_points = 2500;
+  const std::string dir = temp_dir("all_zero_normals");
+  const chunked_build_report r = build_point_octree_chunked(cloud_point_source(c), dir, o);
+  EXPECT_GE(r.chunks, 5u);
+  EXPECT_EQ(r.normals_filled, c.size());
+  EXPECT_TRUE(r.estimated_normals);
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  const auto whole = H::open(dir).assemble();
+  // The samples are in octree order: match them to the input by position (all distinct here).
+  std::map<std::array<float, 3>, vec3f> true_normal;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    true_normal[{truth.positions[i].x(), truth.positions[i].y(), truth.positions[i].z()}] =
+        truth.normals[i];
+  ASSERT_EQ(true_normal.size(), truth.size());
+  std::size_t same = 0, on_line = 0;
+  const auto& s = whole.samples();
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    const auto it = true_normal.find({s.positions[i].x(), s.positions[i].y(), s.positions[i].z()});
+    ASSERT_NE(it, true_normal.end());
+    const float d = s.normals[i].dot(it->second);
+    same += d > 0;
+    on_line += std::abs(d) >= std::cos(20.0f * 3.14159265f / 180);
+  }
+  const double n = static_cast<double>(s.size());
+  std::printf(
+      "%zu chunks; %zu of %zu samples agree in sign with the true normals, %zu on their "
+      "lines\n",
+      r.chunks, same, s.size(), on_line);
+  EXPECT_TRUE(same >= 0.99 * n || same <= 0.01 * n) << same << " of " << s.size();
+  EXPECT_GE(static_cast<double>(on_line), 0.99 * n);
   fs::remove_all(dir);
 }
 
