@@ -11,6 +11,7 @@
 #include "lod.hpp"
 #include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/atomic_file.hpp"
 
 namespace pbrlod_tool {
 namespace {
@@ -92,10 +93,12 @@ struct pmr_method_traits {
   }
   void save(const pmr_hierarchy& h, const std::string& path) const {
     h.save(path);
-    if (std::isfinite(build_seconds)) {
-      std::ofstream t(timing_path(path));
+    if (std::isfinite(build_seconds)) {  // whole or not at all, as the .lod file
+      std::ostringstream t;
       t.precision(10);
       t << build_seconds << "\n";
+      const std::string text = t.str();
+      write_file_atomically(timing_path(path), text.data(), text.size());
     }
   }
   std::size_t samples(const pmr_hierarchy& h) const { return h.positions().size(); }

@@ -213,6 +213,7 @@ void chunked_report_json(const chunked_build_report& r, json& report) {
   report.integer("chunk_points_limit", static_cast<long long>(r.chunk_points))
       .integer("largest_chunk", static_cast<long long>(r.largest_chunk))
       .integer("halo_points", static_cast<long long>(r.halo_points))
+      .integer("normals_filled", static_cast<long long>(r.normals_filled))
       .integer("passes", r.passes)
       .num("build_seconds", r.seconds)
       .num("pass_seconds", r.pass_seconds)

@@ -38,6 +38,8 @@ json pop_stats_json(const Tree& t, const std::string& path) {
   j.num("prepare_seconds", st.has_timings ? st.prepare_seconds : nan);
   j.num("adjacency_seconds", st.has_timings ? st.adjacency_seconds : nan);
   j.num("tree_seconds", st.has_timings ? st.tree_seconds : nan);
+  // Zero or non-finite vertex normals given their faces' normal (build only; a file: 0).
+  j.integer("normals_filled", static_cast<long long>(st.normals_filled));
   return j;
 }
 

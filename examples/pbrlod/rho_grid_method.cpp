@@ -36,6 +36,7 @@ json grid_stats_json(const rho_grid<R>& g, const std::string& path) {
   if (st.has_timings) {
     j.boolean("estimated_normals", st.estimated_normals);
     j.num("estimation_seconds", st.estimation_seconds);
+    j.integer("normals_filled", static_cast<long long>(st.normals_filled));
   }
   return j;
 }

@@ -26,6 +26,9 @@ bool is_hierarchy_file(const std::string& path) {
   // file that starts with a method's magic (a chunk of a chunked folder, say).
   std::error_code ec;
   const bool folder = fs::is_directory(path, ec);
+  // A folder is only ever a chunked build: one without its top file (an interrupted build, say)
+  // is an error that says so, not an input with no file extension.
+  if (folder) check_chunked_folder(path);
   const std::string file = folder ? (fs::path(path) / chunked_top_file).string() : path;
   if (!fs::is_regular_file(file, ec)) return false;
   const auto head = detail::load_file_prefix(file, 8);

@@ -163,7 +163,8 @@ inline bool interactive(bool as_json) {
 }
 
 // ---- inputs
-/// A .lod file (a hierarchy written by `pbrlod build`).
+/// A .lod file or a chunked build's folder (a hierarchy written by `pbrlod build`). A folder that
+/// is not a finished chunked build is a FormatError saying what it is (check_chunked_folder).
 bool is_hierarchy_file(const std::string& path);
 
 /// The first 8 bytes (the method's magic) and the u32 flags after the u32 version of a .lod

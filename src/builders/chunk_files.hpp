@@ -1,6 +1,7 @@
 // Temporary files of the chunked (out-of-core) builds: the records the distribution and halo
-// passes append to every chunk's file, an index file of one vec3f per input point, and the
-// temporary folder. Internal to src/builders (no public header includes it).
+// passes append to every chunk's file, an index file of one vec3f per input point, the
+// temporary folder, and the staging folder the output is built in. Internal to src/builders (no
+// public header includes it).
 #pragma once
 
 #include <fcntl.h>
@@ -16,11 +17,16 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
+#include "pbr_lod/builders/chunked.hpp"
+#include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
@@ -56,8 +62,12 @@ class append_file {
   void flush() {
     if (buf_.empty()) return;
     std::ofstream f(path_, std::ios::binary | std::ios::app);
+    errno = 0;
     f.write(reinterpret_cast<const char*>(buf_.data()), static_cast<std::streamsize>(buf_.size()));
-    if (!f) throw IoError(path_ + ": write failed");
+    f.flush();
+    if (!f)
+      throw IoError(path_ + ": write failed" +
+                    (errno ? std::string(": ") + std::strerror(errno) : ""));
     buf_.clear();
   }
   [[nodiscard]] std::uint64_t count() const { return count_; }
@@ -135,16 +145,6 @@ class index_file {
   int fd_ = -1;
 };
 
-/// Removes the temporary folder however the build ends.
-struct temp_dir {
-  std::filesystem::path path;
-  bool owner = false;  // rank 0 removes it (after the last barrier)
-  ~temp_dir() {
-    std::error_code ec;
-    if (owner) std::filesystem::remove_all(path, ec);
-  }
-};
-
 /// Items by the cells of a 32³ grid over the box [lo, lo + ext] that their boxes touch (a box may
 /// reach beyond the grid, to infinity): a point then tests only the items of its cell.
 class box_grid {
@@ -175,21 +175,29 @@ class box_grid {
   std::vector<std::vector<std::uint32_t>> lists_;
 };
 
-/// What every chunked build does with its source, its ranks and its temporary folder.
+/// What every chunked build does with its source, its ranks and its folders. The output is built
+/// in a staging folder beside it (atomic_directory) and renamed onto it by finish(): every rank
+/// writes into the staging folder (`dir`), rank 0 creates it, writes the top file last, and
+/// commits it; a build that fails or is killed leaves the previous output as it was.
 struct chunked_pass_base {
   const point_source& src;
-  std::filesystem::path dir;
+  atomic_directory output;
+  std::filesystem::path dir;  // where the build writes: the staging folder
   std::size_t block_points;
   int rank = 0, ranks = 1;
   std::function<void()> barrier_fn;
-  temp_dir tmp;
+  /// The passes' temporary files, in the staging folder (removed with it should the build fail).
+  struct {
+    std::filesystem::path path;
+  } tmp;
   int passes = 0;
   const char* who;  // the build's name in messages
 
   chunked_pass_base(const point_source& s, const std::string& d, std::size_t block,
                     const distributed_build& dist, const char* name)
       : src(s),
-        dir(d),
+        output(d, dist.rank == 0),
+        dir(output.staging_path()),
         block_points(block),
         rank(dist.rank),
         ranks(dist.ranks),
@@ -218,24 +226,238 @@ struct chunked_pass_base {
                                    256 * 1024);
   }
 
-  /// Checks the source, creates `dir` and (rank 0) the temporary folder in it.
+  /// Checks the source and the output, and (rank 0) creates the staging folder and the
+  /// temporary folder in it.
   void start() {
     if (src.size() == 0)
       throw InvalidArgument(std::string(who) + ": " + src.name() + " has no points");
     if (!all_finite(src.origin()))
       throw InvalidArgument(std::string(who) + ": " + src.name() + ": origin not finite");
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec || !std::filesystem::is_directory(dir))
-      throw IoError(dir.string() + ": cannot create the output folder");
+    check_chunked_output(output.target());
     tmp.path = dir / "tmp-build";
-    tmp.owner = rank == 0;
     if (rank == 0) {
-      std::filesystem::remove_all(tmp.path, ec);
+      output.create();
+      std::error_code ec;
       std::filesystem::create_directories(tmp.path, ec);
       if (ec) throw IoError(tmp.path.string() + ": cannot create: " + ec.message());
     }
     barrier();
+  }
+
+  /// Once every rank has written its files and rank 0 the top file: rank 0 removes the temporary
+  /// folder and renames the staging folder onto the output. The output is whole when any rank
+  /// returns.
+  void finish() {
+    barrier();
+    if (rank == 0) {
+      std::error_code ec;
+      std::filesystem::remove_all(tmp.path, ec);
+      if (ec) throw IoError(tmp.path.string() + ": cannot remove: " + ec.message());
+      output.commit();
+    }
+    barrier();
+    std::error_code ec;
+    if (!std::filesystem::exists(std::filesystem::path(output.target()) / chunked_top_file, ec))
+      throw IoError(output.target() + ": rank 0 did not finish the build (no " + chunked_top_file +
+                    ")");
+  }
+
+  /// A chunk's box and size, which its halo starts from.
+  struct chunk_extent {
+    vec3f lo = vec3f::Constant(std::numeric_limits<float>::infinity());
+    vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
+    std::uint64_t count = 0;
+  };
+  /// Part of a chunk for its halo: the box of some of its points and how far from that box the
+  /// halo must reach for them.
+  struct halo_cell {
+    vec3f lo, hi;
+    double reach;
+  };
+  static constexpr int cells_per_axis = 8;
+
+  static double box_distance2(const vec3f& p, const vec3f& lo, const vec3f& hi) {
+    const vec3d q = p.cast<double>();
+    const vec3d d = (lo.cast<double>() - q).cwiseMax(q - hi.cast<double>()).cwiseMax(vec3d::Zero());
+    return d.squaredNorm();
+  }
+
+  /// Chunk c's halo cells. A chunk point p has its k neighbours within its k-th neighbour
+  /// distance d_k(p), and its splat is also bounded by its neighbours' own neighbourhood radii
+  /// (ellipse_rule::local_spacing): a neighbour q has d_k(q) ≤ |q − p| + d_k(p) ≤ 2·d_k(p) (p's
+  /// ball holds k points), so everything p's estimate reads lies within 3·d_k(p) of p. d_k over
+  /// the chunk alone bounds the true one from above. Per cell of an 8³ grid over the chunk's box
+  /// the largest 3·d_k — so that one isolated point (a bird above a LiDAR tile) widens the halo
+  /// around itself only — a hair wider than the float distances. A chunk of fewer than k points
+  /// cannot bound its neighbours by its own: one cell that takes every point.
+  [[nodiscard]] std::vector<halo_cell> halo_cells(std::size_t c, const chunk_extent& ci, int k,
+                                                  unsigned threads) const {
+    const auto recs = read_records(temp_path("chunk", c));
+    if (recs.size() != ci.count) throw IoError(temp_path("chunk", c) + ": cut short");
+    std::vector<vec3f> pts(recs.size());
+    vec3f lo = recs[0].position, hi = lo;
+    for (std::size_t i = 0; i < recs.size(); ++i) {
+      pts[i] = recs[i].position;
+      lo = lo.cwiseMin(pts[i]);
+      hi = hi.cwiseMax(pts[i]);
+    }
+    // The box from the records, not from ci: only rank 0 has the chunks' boxes.
+    if (ci.count < static_cast<std::uint64_t>(k))
+      return {{lo, hi, std::numeric_limits<double>::infinity()}};
+    const knn_graph g = nearest_neighbour_graph(pts, k, threads);
+    constexpr int m = cells_per_axis;
+    const vec3f ext = (hi - lo).cwiseMax(vec3f::Constant(1e-30f));
+    std::vector<halo_cell> cells(
+        m * m * m, halo_cell{vec3f::Constant(INFINITY), vec3f::Constant(-INFINITY), 0.0});
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      int at = 0;
+      for (int ax = 2; ax >= 0; --ax)
+        at = at * m + std::clamp(static_cast<int>((pts[i][ax] - lo[ax]) / ext[ax] * m), 0, m - 1);
+      halo_cell& h = cells[static_cast<std::size_t>(at)];
+      h.lo = h.lo.cwiseMin(pts[i]);
+      h.hi = h.hi.cwiseMax(pts[i]);
+      const double dk = std::sqrt(static_cast<double>(g.dist2[i * g.k + g.k - 1]));
+      h.reach = std::max(h.reach, 3 * dk * (1 + 1e-5) + 1e-30);
+    }
+    std::erase_if(cells, [](const halo_cell& h) { return h.lo.x() > h.hi.x(); });
+    return cells;
+  }
+
+  /// The halo step: each chunk's halo cells for k neighbours (by the rank that owns the chunk,
+  /// into a file), then one pass (rank 0) appending to the temporary file "halo<c>" every point
+  /// of another chunk within reach of c's cells. `chunks`: every chunk's extent (rank 0 needs the
+  /// boxes); chunk_of(position) → the chunk a point belongs to. Returns the halo points (rank 0).
+  template <class ChunkOf>
+  std::uint64_t halos(const std::vector<chunk_extent>& chunks, int k, unsigned threads,
+                      ChunkOf&& chunk_of) {
+    if (chunks.size() < 2) return 0;
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      if (!mine(c)) continue;
+      const std::vector<halo_cell> cells = halo_cells(c, chunks[c], k, threads);
+      byte_writer w;
+      w.put(static_cast<std::uint64_t>(cells.size()));
+      for (const halo_cell& h : cells) {
+        w.put_vec(h.lo);
+        w.put_vec(h.hi);
+        w.put(h.reach);
+      }
+      save_file_bytes(temp_path("cells", c), w.bytes);
+    }
+    barrier();
+    std::uint64_t points = 0;
+    if (rank == 0) points = collect_halos(chunks, chunk_of);
+    barrier();
+    return points;
+  }
+
+  /// One pass: every point into the halo of each other chunk that has a cell within its reach.
+  template <class ChunkOf>
+  std::uint64_t collect_halos(const std::vector<chunk_extent>& chunks, ChunkOf&& chunk_of) {
+    struct entry {
+      std::uint32_t chunk;
+      halo_cell cell;
+    };
+    std::vector<entry> all;
+    for (std::uint32_t c = 0; c < chunks.size(); ++c) {
+      const std::string path = temp_path("cells", c);
+      const std::vector<unsigned char> bytes = load_file_bytes(path);
+      byte_reader r{bytes, 0, path};
+      const auto m = r.get<std::uint64_t>("cells");
+      for (std::uint64_t i = 0; i < m; ++i) {
+        entry e{c, {}};
+        e.cell.lo = r.get_vec("cell", i);
+        e.cell.hi = r.get_vec("cell", i);
+        e.cell.reach = r.get<double>("cell");
+        all.push_back(e);
+      }
+    }
+    std::vector<append_file> files;
+    files.reserve(chunks.size());
+    for (std::size_t c = 0; c < chunks.size(); ++c)
+      files.emplace_back(temp_path("halo", c), buffer_bytes(chunks.size()));
+    // Cells listed by the cells of a coarse grid over the data their reach touches.
+    vec3f lo = chunks[0].lo, hi = chunks[0].hi;
+    for (const auto& c : chunks) {
+      lo = lo.cwiseMin(c.lo);
+      hi = hi.cwiseMax(c.hi);
+    }
+    box_grid grid(lo.cast<double>(), (hi - lo).cast<double>());
+    for (std::uint32_t e = 0; e < all.size(); ++e) {
+      const halo_cell& h = all[e].cell;  // an infinite reach lists it everywhere
+      grid.add(e, h.lo.template cast<double>() - vec3d::Constant(h.reach),
+               h.hi.template cast<double>() + vec3d::Constant(h.reach));
+    }
+    const attributes a = src.attrs();
+    std::vector<std::uint32_t> taken;  // chunks this point already went to
+    stream([&](std::uint64_t first, const point_block& b) {
+      for (std::size_t k = 0; k < b.size(); ++k) {
+        const vec3f& p = b.positions[k];
+        const std::uint32_t own = chunk_of(p);
+        taken.clear();
+        for (const std::uint32_t e : grid.at(p.cast<double>())) {
+          const std::uint32_t c = all[e].chunk;
+          const halo_cell& h = all[e].cell;
+          if (c == own || std::find(taken.begin(), taken.end(), c) != taken.end()) continue;
+          if (std::isfinite(h.reach) && box_distance2(p, h.lo, h.hi) > h.reach * h.reach) continue;
+          taken.push_back(c);
+          files[c].put({first + k, p, a.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                        a.colour ? b.colours[k] : rgb8{}});
+        }
+      }
+    });
+    std::uint64_t points = 0;
+    for (auto& f : files) {
+      f.flush();
+      points += f.count();
+    }
+    return points;
+  }
+
+  /// The missing normals (zero or not finite) of every chunk's file, estimated chunk after chunk
+  /// in `order` (rank 0, after halos()): fill_missing_normals over the chunk and its halo, the
+  /// halo's points of chunks already done carrying their estimates. Those orient the chunk's, so
+  /// that one orientation spreads from chunk to chunk as the in-memory builds' spreads over the
+  /// whole input's k-NN graph. Each chunk's file is rewritten with its normals.
+  template <class ChunkOf>
+  void fill_normals_in_turn(const std::vector<std::uint32_t>& order, std::size_t chunks, int k,
+                            unsigned threads, ChunkOf&& chunk_of) {
+    index_file filled((tmp.path / "filled").string(), src.size(), true);
+    std::vector<char> done(chunks, 0);
+    std::vector<vec3f> one;
+    const auto given = [](const vec3f& v) {
+      return missing_normal(v) ? vec3f(vec3f::Zero()) : vec3f(v.normalized());
+    };
+    for (const std::uint32_t c : order) {
+      std::vector<point_record> recs = read_records(temp_path("chunk", c));
+      const std::vector<point_record> halo =
+          chunks > 1 ? read_records(temp_path("halo", c)) : std::vector<point_record>{};
+      std::vector<vec3f> pos, nrm;
+      pos.reserve(recs.size() + halo.size());
+      nrm.reserve(recs.size() + halo.size());
+      for (const point_record& r : recs) {
+        pos.push_back(r.position);
+        nrm.push_back(given(r.normal));
+      }
+      for (const point_record& r : halo) {
+        pos.push_back(r.position);
+        if (done[chunk_of(r.position)]) {
+          filled.read(r.index, 1, one);
+          nrm.push_back(one[0]);
+        } else {
+          nrm.push_back(given(r.normal));
+        }
+      }
+      (void)fill_missing_normals(pos, nrm, k, threads);
+      nrm.resize(recs.size());
+      filled.scatter(recs, nrm);
+      append_file out(temp_path("chunk", c), buffer_bytes(1));
+      for (std::size_t i = 0; i < recs.size(); ++i) {
+        recs[i].normal = nrm[i];
+        out.put(recs[i]);
+      }
+      out.flush();
+      done[c] = 1;
+    }
   }
 
   /// f(first index, block) over the whole source, block by block; one full pass.
@@ -255,6 +477,20 @@ struct chunked_pass_base {
     }
   }
 };
+
+/// run() of a chunked build into `target`; an IoError on the way (a full disk, a file-size limit)
+/// comes out naming the build and the output, and saying that what was there is kept.
+template <class Run>
+chunked_build_report build_or_keep(const std::string& target, const char* who, Run&& run) {
+  std::error_code ec;
+  const bool existed = std::filesystem::exists(target, ec);
+  try {
+    return run();
+  } catch (const IoError& e) {
+    throw IoError(std::string(who) + ": " + target + " not written" +
+                  (existed ? " (what was there is kept)" : "") + ": " + e.what());
+  }
+}
 
 /// Chunks and top nodes refer to each other one to one; an inner top node's children come
 /// after it and each is reached once; the chunks' samples add up to the input.

@@ -110,6 +110,7 @@ bool is_chunked_pca_octree(const std::string& dir) {
 }
 
 bool chunked_pca_octree_has_colours(const std::string& dir) {
+  check_chunked_folder(dir);
   const std::string path = detail::top_path(dir);
   const auto head = detail::load_file_prefix(path, 16);
   if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
@@ -118,6 +119,7 @@ bool chunked_pca_octree_has_colours(const std::string& dir) {
 
 template <attributes A>
 chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
+  check_chunked_folder(dir);
   using namespace detail;
   const std::string path = top_path(dir);
   const std::vector<unsigned char> bytes = load_file_bytes(path);

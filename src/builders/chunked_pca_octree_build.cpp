@@ -14,6 +14,7 @@
 #include "chunk_files.hpp"
 #include "pbr_lod/builders/chunked_pca_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pca_octree_internal.hpp"
 
@@ -142,7 +143,9 @@ struct chunked_pca_builder : chunked_pass_base {
   std::vector<std::vector<std::uint32_t>> chunk_global;  // per chunk: whole-tree number per level
   std::vector<std::uint32_t> top_global;                 // per top cell
   std::uint64_t total_nodes = 0;
-  pca_data top;  // the top cells as nodes (a chunk's root: a leaf here)
+  std::uint64_t missing = 0;          // input normals absent, zero or not finite
+  std::vector<chunk_extent> extents;  // per chunk: its box (rank 0) and points
+  pca_data top;                       // the top cells as nodes (a chunk's root: a leaf here)
   chunked_build_report rep;
 
   chunked_pca_builder(const point_source& s, const std::string& d,
@@ -153,10 +156,6 @@ struct chunked_pca_builder : chunked_pass_base {
         n(s.size()),
         in(s.attrs()) {
     po.progress = {};
-    if (!in.normal)
-      throw InvalidArgument("build_pca_octree_chunked: " + s.name() +
-                            " has no normals (the in-memory build estimates and orients them "
-                            "over the whole input; build_pca_octree does that)");
     pca_validate_options(po, true);
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pca_octree_chunked: more than 2^32 - 2 points");
@@ -194,9 +193,7 @@ struct chunked_pca_builder : chunked_pass_base {
         if (!all_finite(b.positions[k]))
           throw InvalidArgument("build_pca_octree_chunked: " + src.name() + ": position " +
                                 std::to_string(first + k) + " is not finite");
-        if (!all_finite(b.normals[k]) || !(b.normals[k].squaredNorm() > 0))
-          throw InvalidArgument("build_pca_octree_chunked: " + src.name() + ": normal " +
-                                std::to_string(first + k) + " is zero or not finite");
+        missing += !in.normal || missing_normal(b.normals[k]) ? 1 : 0;
         lo = lo.cwiseMin(b.positions[k].cast<double>());
         hi = hi.cwiseMax(b.positions[k].cast<double>());
       }
@@ -268,6 +265,7 @@ struct chunked_pca_builder : chunked_pass_base {
   /// Step 3 (rank 0): every point into its chunk's file, input order kept.
   void distribute() {
     const std::size_t m = chunk_top.size();
+    extents.assign(m, {});
     if (rank == 0) {
       std::vector<append_file> files;
       files.reserve(m);
@@ -277,8 +275,11 @@ struct chunked_pca_builder : chunked_pass_base {
         for (std::size_t k = 0; k < b.size(); ++k) {
           const vec3d p = local(b.positions[k]);
           input_radius = std::max(input_radius, p.norm());
-          files[nodes[descend(p)].chunk].put(
-              {first + k, b.positions[k], b.normals[k], in.colour ? b.colours[k] : rgb8{}});
+          const std::uint32_t c = nodes[descend(p)].chunk;
+          extents[c].lo = extents[c].lo.cwiseMin(b.positions[k]);
+          extents[c].hi = extents[c].hi.cwiseMax(b.positions[k]);
+          files[c].put({first + k, b.positions[k], in.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                        in.colour ? b.colours[k] : rgb8{}});
         }
       });
       for (auto& f : files) f.flush();
@@ -287,8 +288,25 @@ struct chunked_pca_builder : chunked_pass_base {
     chunk_count.resize(m);
     for (std::size_t c = 0; c < m; ++c) {
       chunk_count[c] = fs::file_size(temp_path("chunk", c)) / record_bytes;
+      extents[c].count = chunk_count[c];
       rep.largest_chunk = std::max(rep.largest_chunk, chunk_count[c]);
     }
+  }
+
+  /// Step 3b, when normals are missing (none given, or some zero or not finite): the k-NN halos
+  /// (chunked_pass_base::halos, as the chunked point-octree's), then (rank 0) chunk after chunk
+  /// in octree order fill_missing_normals over the chunk and its halo, the halo's points of
+  /// chunks already done carrying their estimates: those orient the chunk's, so that one
+  /// orientation spreads from chunk to chunk as the in-memory build's spreads over the whole
+  /// input. The chunk's file is rewritten with its normals.
+  void fill_normals() {
+    const std::size_t m = chunk_top.size();
+    rep.halo_points = halos(extents, po.knn, workers,
+                            [&](const vec3f& p) { return nodes[descend(local(p))].chunk; });
+    if (rank == 0)
+      fill_normals_in_turn(chunks_in_order(), m, po.knn, workers,
+                           [&](const vec3f& p) { return nodes[descend(local(p))].chunk; });
+    barrier();
   }
 
   /// f(chunk, threads) over this rank's chunks: side by side, one thread each, when there are
@@ -695,6 +713,13 @@ struct chunked_pca_builder : chunked_pass_base {
     structure();
     distribute();
     rep.pass_seconds = std::chrono::duration<double>(clk::now() - t0).count();
+    rep.normals_filled = missing;
+    rep.estimated_normals = missing == n;
+    if (missing > 0) {
+      const auto te = clk::now();
+      fill_normals();
+      rep.estimation_seconds = std::chrono::duration<double>(clk::now() - te).count();
+    }
     progress(0.1);
     const auto tc = clk::now();
     over_my_chunks(0.1, 0.5, [&](std::size_t c, unsigned t) { build_chunk(c, t); });
@@ -708,7 +733,7 @@ struct chunked_pca_builder : chunked_pass_base {
     barrier();
     chunk_seconds += std::chrono::duration<double>(clk::now() - tf).count();
     if (rank == 0) write_top();
-    barrier();
+    finish();  // the folder is whole when any rank returns
     rep.chunk_build_seconds = chunk_seconds;
     rep.input_points = n;
     rep.chunk_points = chunk_points;
@@ -724,8 +749,10 @@ struct chunked_pca_builder : chunked_pass_base {
 
 chunked_build_report build_pca_octree_chunked(const point_source& src, const std::string& dir,
                                               const chunked_pca_octree_options& options) {
-  detail::chunked_pca_builder b(src, dir, options);
-  return b.run();
+  return detail::build_or_keep(dir, "build_pca_octree_chunked", [&] {
+    detail::chunked_pca_builder b(src, dir, options);
+    return b.run();
+  });
 }
 
 std::string pca_chunk_file_name(std::uint32_t c) {

@@ -60,6 +60,7 @@ bool is_chunked_pmr(const std::string& dir) {
 }
 
 bool chunked_pmr_has_colours(const std::string& dir) {
+  check_chunked_folder(dir);
   const std::string path = top_path(dir);
   const auto head = detail::load_file_prefix(path, 16);
   if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
@@ -68,6 +69,7 @@ bool chunked_pmr_has_colours(const std::string& dir) {
 
 template <attributes A>
 chunked_pmr<A> chunked_pmr<A>::open(const std::string& dir) {
+  check_chunked_folder(dir);
   const std::string path = top_path(dir);
   const std::vector<unsigned char> bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};

@@ -523,7 +523,7 @@ struct chunked_pmr_builder : chunked_pass_base {
       for (std::size_t c = 0; c < m; ++c) roots.push_back(load_root(c));
       write_top(roots);
     }
-    barrier();  // the folder is whole when any rank returns
+    finish();  // the folder is whole when any rank returns
     progress(1);
     rep.passes = passes;
     rep.chunks = m;
@@ -544,7 +544,9 @@ std::string pmr_chunk_file_name(std::uint32_t c) {
 
 chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
                                        const chunked_pmr_options& options) {
-  return detail::chunked_pmr_builder(src, dir, options).run();
+  return detail::build_or_keep(dir, "build_pmr_chunked", [&] {
+    return detail::chunked_pmr_builder(src, dir, options).run();
+  });
 }
 
 }  // namespace pbr_lod

@@ -26,6 +26,7 @@ bool is_chunked_point_octree(const std::string& dir) {
 }
 
 bool chunked_point_octree_has_colours(const std::string& dir) {
+  check_chunked_folder(dir);
   const std::string path = top_path(dir);
   const auto head = detail::load_file_prefix(path, 16);
   if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
@@ -34,6 +35,7 @@ bool chunked_point_octree_has_colours(const std::string& dir) {
 
 template <attributes A>
 chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
+  check_chunked_folder(dir);
   using io = detail::point_octree_io<A>;
   const std::string path = top_path(dir);
   const std::vector<unsigned char> bytes = detail::load_file_bytes(path);

@@ -21,6 +21,7 @@
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod {
@@ -119,6 +120,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
   box3 box;              // of the input's positions (the root pass)
   double sphere_r2 = 0;  // about box.centre() (the distribution pass)
   std::vector<std::uint64_t> chunk_nodes;
+  std::uint64_t missing = 0;  // input normals zero or not finite (the structure pass counts)
 
   chunked_point_octree_builder(const point_source& s, const std::string& d,
                                const chunked_build_options& o)
@@ -155,6 +157,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
         if (!all_finite(b.positions[k]))
           throw InvalidArgument("build_point_octree_chunked: " + src.name() + ": position " +
                                 std::to_string(first + k) + " is not finite");
+        if constexpr (In.normal) missing += missing_normal(b.normals[k]) ? 1 : 0;
         root.add(0, b.positions[k].cast<double>(), nullptr, nullptr, block);
         box.extend(b.positions[k]);
       }
@@ -250,141 +253,41 @@ struct chunked_point_octree_builder : chunked_pass_base {
     return chunked_pass_base::buffer_bytes(chunks.size());
   }
 
+  /// Neighbours the estimation reads: the ellipses', and the normals' where any is missing
+  /// (none given, or some zero or not finite: fill_missing_normals).
   [[nodiscard]] int knn_needed() const {
-    return In.normal ? oo.knn_ellipses : std::max(oo.knn, oo.knn_ellipses);
+    return In.normal && missing == 0 ? oo.knn_ellipses : std::max(oo.knn, oo.knn_ellipses);
   }
 
-  /// Part of a chunk for its halo: the box of some of its points and how far from that box the
-  /// halo must reach for them.
-  struct halo_cell {
-    vec3f lo, hi;
-    double reach;
-  };
-  static constexpr int cells_per_axis = 8;
-
-  static double box_distance2(const vec3f& p, const vec3f& lo, const vec3f& hi) {
-    const vec3d q = p.cast<double>();
-    const vec3d d = (lo.cast<double>() - q).cwiseMax(q - hi.cast<double>()).cwiseMax(vec3d::Zero());
-    return d.squaredNorm();
-  }
-
-  /// Chunk c's halo cells. A chunk point p has its k neighbours within its k-th neighbour
-  /// distance d_k(p), and its splat is also bounded by its neighbours' own neighbourhood radii
-  /// (ellipse_rule::local_spacing): a neighbour q has d_k(q) ≤ |q − p| + d_k(p) ≤ 2·d_k(p) (p's
-  /// ball holds k points), so everything p's estimate reads lies within 3·d_k(p) of p. d_k over
-  /// the chunk alone bounds the true one from above. Per cell of an 8³ grid over the chunk's box
-  /// the largest 3·d_k — so that one isolated point (a bird above a LiDAR tile) widens the halo
-  /// around itself only — a hair wider than the float distances. A chunk of fewer than k points
-  /// cannot bound its neighbours by its own: one cell that takes every point.
-  std::vector<halo_cell> halo_cells(std::size_t c) const {
-    const int k = knn_needed();
-    const chunk_info& ci = chunks[c];
-    if (ci.count < static_cast<std::uint64_t>(k))
-      return {{ci.lo, ci.hi, std::numeric_limits<double>::infinity()}};
-    const auto recs = read_records(temp_path("chunk", c));
-    std::vector<vec3f> pts(recs.size());
-    vec3f lo = recs[0].position, hi = lo;
-    for (std::size_t i = 0; i < recs.size(); ++i) {
-      pts[i] = recs[i].position;
-      lo = lo.cwiseMin(pts[i]);
-      hi = hi.cwiseMax(pts[i]);
+  /// The chunks in octree order (depth first, octants in order): neighbours follow each other.
+  [[nodiscard]] std::vector<std::uint32_t> chunks_in_order() const {
+    std::vector<std::uint32_t> out, stack{0};
+    while (!stack.empty()) {
+      const std::uint32_t x = stack.back();
+      stack.pop_back();
+      if (nodes[x].st != top_node::state::split) {
+        out.push_back(nodes[x].chunk);
+        continue;
+      }
+      for (std::size_t o = 8; o-- > 0;)
+        if (nodes[x].child[o] != none) stack.push_back(nodes[x].child[o]);
     }
-    const knn_graph g = nearest_neighbour_graph(pts, k, threads);
-    constexpr int m = cells_per_axis;
-    const vec3f ext = (hi - lo).cwiseMax(vec3f::Constant(1e-30f));
-    std::vector<halo_cell> cells(
-        m * m * m, halo_cell{vec3f::Constant(INFINITY), vec3f::Constant(-INFINITY), 0.0});
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      int at = 0;
-      for (int ax = 2; ax >= 0; --ax)
-        at = at * m + std::clamp(static_cast<int>((pts[i][ax] - lo[ax]) / ext[ax] * m), 0, m - 1);
-      halo_cell& h = cells[static_cast<std::size_t>(at)];
-      h.lo = h.lo.cwiseMin(pts[i]);
-      h.hi = h.hi.cwiseMax(pts[i]);
-      const double dk = std::sqrt(static_cast<double>(g.dist2[i * g.k + g.k - 1]));
-      h.reach = std::max(h.reach, 3 * dk * (1 + 1e-5) + 1e-30);
-    }
-    std::erase_if(cells, [](const halo_cell& h) { return h.lo.x() > h.hi.x(); });
-    return cells;
+    return out;
   }
 
-  /// Step 3: each chunk's halo cells (by the rank that owns the chunk, into a file), then one
-  /// pass (rank 0) collecting the halos.
+  /// Step 3: the halos (chunked_pass_base::halos); when input normals are missing, those
+  /// estimated chunk after chunk (fill_normals_in_turn), so that one orientation spreads over
+  /// the chunks (step 4 then finds none missing among a chunk's own points).
   void halos() {
-    if (chunks.size() < 2) return;
-    for (std::size_t c = 0; c < chunks.size(); ++c) {
-      if (!mine(c)) continue;
-      const std::vector<halo_cell> cells = halo_cells(c);
-      byte_writer w;
-      w.put(static_cast<std::uint64_t>(cells.size()));
-      for (const halo_cell& h : cells) {
-        w.put_vec(h.lo);
-        w.put_vec(h.hi);
-        w.put(h.reach);
-      }
-      save_file_bytes(temp_path("cells", c), w.bytes);
-    }
-    barrier();
-    if (rank == 0) collect_halos();
-    barrier();
-  }
-
-  /// One pass: every point into the halo of each other chunk that has a cell within its reach.
-  void collect_halos() {
-    struct entry {
-      std::uint32_t chunk;
-      halo_cell cell;
-    };
-    std::vector<entry> all;
-    for (std::uint32_t c = 0; c < chunks.size(); ++c) {
-      const std::string path = temp_path("cells", c);
-      const std::vector<unsigned char> bytes = load_file_bytes(path);
-      byte_reader r{bytes, 0, path};
-      const auto m = r.get<std::uint64_t>("cells");
-      for (std::uint64_t i = 0; i < m; ++i) {
-        entry e{c, {}};
-        e.cell.lo = r.get_vec("cell", i);
-        e.cell.hi = r.get_vec("cell", i);
-        e.cell.reach = r.get<double>("cell");
-        all.push_back(e);
-      }
-    }
-    std::vector<append_file> files;
-    files.reserve(chunks.size());
+    std::vector<chunk_extent> ext(chunks.size());
     for (std::size_t c = 0; c < chunks.size(); ++c)
-      files.emplace_back(temp_path("halo", c), buffer_bytes());
-    // Cells listed by the cells of a coarse grid over the data their reach touches.
-    vec3f lo = chunks[0].lo, hi = chunks[0].hi;
-    for (const auto& c : chunks) {
-      lo = lo.cwiseMin(c.lo);
-      hi = hi.cwiseMax(c.hi);
-    }
-    box_grid grid(lo.cast<double>(), (hi - lo).cast<double>());
-    for (std::uint32_t e = 0; e < all.size(); ++e) {
-      const halo_cell& h = all[e].cell;  // an infinite reach lists it everywhere
-      grid.add(e, h.lo.template cast<double>() - vec3d::Constant(h.reach),
-               h.hi.template cast<double>() + vec3d::Constant(h.reach));
-    }
-    std::vector<std::uint32_t> taken;  // chunks this point already went to
-    stream([&](std::uint64_t first, const point_block& b) {
-      for (std::size_t k = 0; k < b.size(); ++k) {
-        const vec3f& p = b.positions[k];
-        const std::uint32_t own = nodes[descend(p.cast<double>())].chunk;
-        taken.clear();
-        for (const std::uint32_t e : grid.at(p.cast<double>())) {
-          const std::uint32_t c = all[e].chunk;
-          const halo_cell& h = all[e].cell;
-          if (c == own || std::find(taken.begin(), taken.end(), c) != taken.end()) continue;
-          if (std::isfinite(h.reach) && box_distance2(p, h.lo, h.hi) > h.reach * h.reach) continue;
-          taken.push_back(c);
-          files[c].put({first + k, p, In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
-                        In.colour ? b.colours[k] : rgb8{}});
-        }
-      }
-    });
-    for (auto& f : files) {
-      f.flush();
-      rep.halo_points += f.count();
+      ext[c] = {chunks[c].lo, chunks[c].hi, chunks[c].count};
+    const auto chunk_of = [&](const vec3f& p) { return nodes[descend(p.cast<double>())].chunk; };
+    rep.halo_points = chunked_pass_base::halos(ext, knn_needed(), threads, chunk_of);
+    if (In.normal && missing > 0) {
+      if (rank == 0)
+        fill_normals_in_turn(chunks_in_order(), chunks.size(), oo.knn, threads, chunk_of);
+      barrier();
     }
   }
 
@@ -689,6 +592,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
     if constexpr (A.colour) r.colour = t.node_colours_[0];
     if (quant) r.code = t.node_codes_[0];
     write_top(finish_top({r}));
+    finish();
     progress(1);
     rep.passes = passes;
     rep.chunks = 1;
@@ -708,6 +612,8 @@ struct chunked_point_octree_builder : chunked_pass_base {
     rep.estimated_normals = !In.normal;
     progress(0);
     structure();
+    rep.normals_filled = missing;
+    rep.estimated_normals = rep.estimated_normals || (n > 0 && missing == n);
     if (nodes.size() == 1 && ranks == 1) return build_whole(t0);
     distribute();
     halos();
@@ -745,7 +651,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
       for (std::size_t c = 0; c < chunks.size(); ++c) roots.push_back(load_root(c));
       write_top(finish_top(roots));
     }
-    barrier();  // the folder is whole when any rank returns
+    finish();  // the folder is whole when any rank returns
     rep.passes = passes;
     rep.chunks = chunks.size();
     rep.top_nodes = nodes.size();
@@ -764,17 +670,19 @@ std::string chunk_file_name(std::uint32_t c) {
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
                                                 const chunked_build_options& options) {
   const attributes a = src.attrs();
-  if (a.normal && a.colour)
-    return detail::chunked_point_octree_builder<attributes{.normal = true, .colour = true}>(
-               src, dir, options)
-        .run();
-  if (a.normal)
-    return detail::chunked_point_octree_builder<attributes{.normal = true}>(src, dir, options)
-        .run();
-  if (a.colour)
-    return detail::chunked_point_octree_builder<attributes{.colour = true}>(src, dir, options)
-        .run();
-  return detail::chunked_point_octree_builder<attributes{}>(src, dir, options).run();
+  return detail::build_or_keep(dir, "build_point_octree_chunked", [&] {
+    if (a.normal && a.colour)
+      return detail::chunked_point_octree_builder<attributes{.normal = true, .colour = true}>(
+                 src, dir, options)
+          .run();
+    if (a.normal)
+      return detail::chunked_point_octree_builder<attributes{.normal = true}>(src, dir, options)
+          .run();
+    if (a.colour)
+      return detail::chunked_point_octree_builder<attributes{.colour = true}>(src, dir, options)
+          .run();
+    return detail::chunked_point_octree_builder<attributes{}>(src, dir, options).run();
+  });
 }
 
 }  // namespace pbr_lod

@@ -22,6 +22,7 @@
 #include "lanes.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/mesh_normals.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pop_build_state.hpp"
 
 namespace pbr_lod::detail::pop_stages {
@@ -282,7 +283,14 @@ void pop_build_state::prepare() {
   std::atomic<std::size_t> next_bucket{0}, buckets_done{0}, next_vertex{0}, nonmanifold{0};
 
   const bool estimate = mesh.vertices.normals.empty();
-  std::vector<vec3d> normal_sum;  // without vertex normals: area_weighted_normal_sums(mesh)
+  // A zero or non-finite vertex normal is no normal: it takes the area-weighted one, as a mesh
+  // without normals does (the ρ-grid's rule too).
+  d.stats.normals_filled =
+      estimate ? 0
+               : static_cast<std::size_t>(std::count_if(
+                     mesh.vertices.normals.begin(), mesh.vertices.normals.end(), missing_normal));
+  // Without vertex normals, or with some missing: area_weighted_normal_sums(mesh).
+  std::vector<vec3d> normal_sum;
   const auto set_up_vertices = [&] {
     box3 bb = box3::of(P);
     d.q_min = bb.min;
@@ -297,7 +305,7 @@ void pop_build_state::prepare() {
     // area_weighted_normals(mesh), bit for bit, from its double sums, normalised in the vertex
     // loop: no float copy (its 36 MB of fresh 4 kB pages were a visible part of a 2 M-triangle
     // build).
-    if (estimate) normal_sum = area_weighted_normal_sums(mesh);
+    if (estimate || d.stats.normals_filled > 0) normal_sum = area_weighted_normal_sums(mesh);
     normals_ready.store(true, std::memory_order_release);
   };
   // One piece of either kind, if one is ready: true when it did one.
@@ -382,6 +390,12 @@ void pop_build_state::quantise_vertices(std::size_t lo, std::size_t hi, bool est
     std::span<const vec3f> in;
     if (estimate) {  // the mesh has no normals (no offset into its empty array)
       for (std::size_t k = 0; k < m; ++k) unit[k] = unit_or_zero(normal_sum[a + k]);
+      in = std::span<const vec3f>(unit.data(), m);
+    } else if (!normal_sum.empty()) {  // some missing
+      for (std::size_t k = 0; k < m; ++k) {
+        const vec3f& v = mesh.vertices.normals[a + k];
+        unit[k] = missing_normal(v) ? unit_or_zero(normal_sum[a + k]) : v;
+      }
       in = std::span<const vec3f>(unit.data(), m);
     } else {
       in = std::span<const vec3f>(mesh.vertices.normals.data() + a, m);

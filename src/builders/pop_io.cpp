@@ -450,10 +450,12 @@ pop_data load_pop_data(const std::string& path, bool colour) {
 }
 
 bool operator==(const pop_data& a, const pop_data& b) {
-  // The build's timings are not part of the hierarchy (the file does not hold them).
+  // The build's timings and normals_filled are not part of the hierarchy (the file does not
+  // hold them).
   const auto untimed = [](pop_build_stats s) {
     s.has_timings = false;
     s.build_seconds = s.prepare_seconds = s.adjacency_seconds = s.tree_seconds = 0;
+    s.normals_filled = 0;
     return s;
   };
   return a.origin == b.origin && a.positions == b.positions && a.normals == b.normals &&

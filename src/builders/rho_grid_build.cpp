@@ -35,6 +35,7 @@
 #include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/normal_quantization.hpp"
+#include "pbr_lod/core/normal_repair.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/core/repeated_faces.hpp"
 
@@ -165,6 +166,19 @@ std::vector<vec3f> estimated_normals(const point_cloud& c, const rho_grid_option
   return estimate_normals(c.positions, e);
 }
 
+/// The cloud's normals with every zero or non-finite one ("no normal") estimated from the
+/// positions (fill_missing_normals); empty when none is missing or normals are not stored.
+std::vector<vec3f> repaired_normals(const point_cloud& c, const rho_grid_options& o,
+                                    std::size_t& filled) {
+  filled = 0;
+  if (c.normals.empty() || o.normal_bits == 0 ||
+      std::none_of(c.normals.begin(), c.normals.end(), missing_normal))
+    return {};
+  std::vector<vec3f> n = c.normals;
+  filled = fill_missing_normals(c.positions, n, o.knn ? o.knn : 16, o.threads).missing;
+  return n;
+}
+
 /// The leaf cell and path key (k base-ρ³ digits, the first level most significant) of every
 /// point of a cloud at leaf depth k, and the points sorted by key: the cells of every depth are
 /// then runs of `order`.
@@ -256,9 +270,12 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
   check_options(o, Rho);
   const std::size_t n = c.size();
   const std::vector<vec3f> estimated = estimated_normals(c, o);
+  std::size_t filled = 0;
+  const std::vector<vec3f> repaired = repaired_normals(c, o, filled);
   const double estimation_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const std::vector<vec3f>& normals = estimated.empty() ? c.normals : estimated;
+  const std::vector<vec3f>& normals =
+      !estimated.empty() ? estimated : (!repaired.empty() ? repaired : c.normals);
 
   // Leaf paths at the requested depth, or (no level given) at the display depth, then cut to
   // the finest depth the sampling supports (point_paths::auto_depth).
@@ -338,7 +355,8 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
   st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.has_timings = true;
   st.estimated_normals = !estimated.empty();
-  st.estimation_seconds = st.estimated_normals ? estimation_seconds : 0.0;
+  st.normals_filled = filled;
+  st.estimation_seconds = st.estimated_normals || filled > 0 ? estimation_seconds : 0.0;
   return g;
 }
 

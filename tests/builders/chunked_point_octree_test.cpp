@@ -3,11 +3,16 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <barrier>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -241,6 +246,83 @@ TEST(ChunkedPointOctreeEstimated, PositionsOnlyWithViewpointEqualsInMemory) {
   fs::remove_all(dir);
 }
 
+TEST(ChunkedPointOctreeEstimated, ZeroNormalsAreEstimatedAndCounted) {
+  // Every sixth normal zero and one NaN: "no normal", estimated over the chunk and its halo
+  // (whose reach then covers the normals' k neighbours too) and oriented by the given normals
+  // around each — what build_point_octree does over the whole input: the same tree, every
+  // sample's normal within 0.1° of the in-memory build's.
+  point_cloud c = make_wavy_surface(20000, 6);
+  std::size_t zeroed = 0;
+  for (std::size_t i = 0; i < c.size(); i += 6, ++zeroed) c.normals[i].setZero();
+  c.normals[1].z() = std::numeric_limits<float>::infinity();
+  ++zeroed;
+  chunked_build_options o;
+  o.chunk_points = 3000;
+  const std::string dir = temp_dir("zero_normals");
+  const chunked_build_report r = build_point_octree_chunked(cloud_point_source(c), dir, o);
+  EXPECT_GE(r.chunks, 5u);
+  EXPECT_EQ(r.normals_filled, zeroed);
+  EXPECT_FALSE(r.estimated_normals);
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  const auto whole = H::open(dir).assemble();
+  const auto memory =
+      build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(c), o.octree);
+  EXPECT_EQ(memory.stats().normals_filled, zeroed);
+  ASSERT_EQ(whole.samples().size(), memory.samples().size());
+  ASSERT_EQ(whole.nodes().size(), memory.nodes().size());
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < whole.samples().size(); ++i) {
+    ASSERT_EQ(whole.samples().positions[i], memory.samples().positions[i]);
+    ASSERT_TRUE(all_finite(whole.samples().normals[i]));
+    off += whole.samples().normals[i].dot(memory.samples().normals[i]) <
+           std::cos(0.1f * 3.14159265f / 180);
+  }
+  EXPECT_EQ(off, 0u) << "normals differing from the in-memory estimate";
+  fs::remove_all(dir);
+}
+
+TEST(ChunkedPointOctreeEstimated, AllZeroNormalsTakeOneOrientationOverTheChunks) {
+  // Every normal zero (a 3-D Gaussian Splatting file): estimated chunk after chunk, each chunk
+  // oriented by its finished neighbours' estimates in its halo, so the whole closed surface
+  // comes out one way (≥ 99 % of the samples agree in sign with the true normals, or ≥ 99 %
+  // disagree), on the true normals' lines (|n·n'| ≥ cos 20° for ≥ 99 %).
+  const point_cloud truth = make_wavy_surface(20000, 6);
+  point_cloud c = truth;
+  for (auto& n : c.normals) n.setZero();
+  chunked_build_options o;
+  o.chunk_points = 2500;
+  const std::string dir = temp_dir("all_zero_normals");
+  const chunked_build_report r = build_point_octree_chunked(cloud_point_source(c), dir, o);
+  EXPECT_GE(r.chunks, 5u);
+  EXPECT_EQ(r.normals_filled, c.size());
+  EXPECT_TRUE(r.estimated_normals);
+  using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
+  const auto whole = H::open(dir).assemble();
+  // The samples are in octree order: match them to the input by position (all distinct here).
+  std::map<std::array<float, 3>, vec3f> true_normal;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    true_normal[{truth.positions[i].x(), truth.positions[i].y(), truth.positions[i].z()}] =
+        truth.normals[i];
+  ASSERT_EQ(true_normal.size(), truth.size());
+  std::size_t same = 0, on_line = 0;
+  const auto& s = whole.samples();
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    const auto it = true_normal.find({s.positions[i].x(), s.positions[i].y(), s.positions[i].z()});
+    ASSERT_NE(it, true_normal.end());
+    const float d = s.normals[i].dot(it->second);
+    same += d > 0;
+    on_line += std::abs(d) >= std::cos(20.0f * 3.14159265f / 180);
+  }
+  const double n = static_cast<double>(s.size());
+  std::printf(
+      "%zu chunks; %zu of %zu samples agree in sign with the true normals, %zu on their "
+      "lines\n",
+      r.chunks, same, s.size(), on_line);
+  EXPECT_TRUE(same >= 0.99 * n || same <= 0.01 * n) << same << " of " << s.size();
+  EXPECT_GE(static_cast<double>(on_line), 0.99 * n);
+  fs::remove_all(dir);
+}
+
 TEST(ChunkedPointOctreeEstimated, GraphOrientationDiffersOnlyInSign) {
   // Without a viewpoint the signs are propagated over the k-NN graph, which a chunk and its
   // halo see only part of: the normals agree up to sign, the tree's structure exactly.
@@ -273,6 +355,11 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
   const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
   const chunked_build_report r1 = build_point_octree_chunked(src, one, o);
   ASSERT_GE(r1.chunks, 8u);
+  // An earlier build in `many` with more chunks: the ranks' folder replaces it whole (a chunk
+  // file of the earlier build left behind would be one file too many below).
+  chunked_build_options finer = o;
+  finer.chunk_points = 400;
+  ASSERT_GT(build_point_octree_chunked(src, many, finer).chunks, r1.chunks);
   std::barrier sync(3);
   std::vector<chunked_build_report> reports(3);
   std::vector<std::thread> ranks;
@@ -289,6 +376,7 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
   EXPECT_EQ(reports[0].halo_points, r1.halo_points);
   expect_same_folders(one, many);
   EXPECT_FALSE(fs::exists(fs::path(many) / "tmp-build"));
+  EXPECT_FALSE(fs::exists(many + ".partial")) << "the staging folder was left";
   fs::remove_all(one);
   fs::remove_all(many);
 }

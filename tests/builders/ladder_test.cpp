@@ -199,6 +199,9 @@ std::vector<ladder_case> make_ladder() {
     auto m = grid(20, 20);
     for (std::size_t i = 0; i < m.vertices.normals.size(); i += 7) m.vertices.normals[i].setZero();
     l.push_back({"zero_normals", m, {}, {}});
+    // Every normal zero, as every trained 3-D Gaussian Splatting `.ply` stores them.
+    for (auto& n : m.vertices.normals) n.setZero();
+    l.push_back({"all_zero_normals", m, {}, {}});
   }
   {
     // One triangle written 50,000 times (its three vertices shared): the ρ-grid's AABB tree
@@ -267,6 +270,10 @@ struct point_octree_adapter {
   static void visit(const built& b, F&& f) {
     f(b, [](const view&) { return point_octree_policy{}; });
   }
+  /// Input normals the build reported as missing and estimated.
+  static std::optional<std::size_t> normals_filled(const built& b) {
+    return b.stats().normals_filled;
+  }
   static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
 };
 
@@ -286,6 +293,8 @@ struct rho_grid_adapter {
     else
       f(rho_grid_hierarchy<3, positions_only>(g), policy);
   }
+  /// No count: a mesh's missing vertex normal takes its faces' normal where it is used.
+  static std::optional<std::size_t> normals_filled(const built&) { return std::nullopt; }
   static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
 };
 
@@ -295,6 +304,9 @@ struct rho_grid_points_adapter : rho_grid_adapter {
   static constexpr const char* name = "rho_grid_points";
   static built build(const triangle_mesh& m, unsigned threads) {
     return build_rho_grid<3>(m.vertices, {.level = 4, .threads = threads});
+  }
+  static std::optional<std::size_t> normals_filled(const built& b) {
+    return b.stats().normals_filled;
   }
 };
 
@@ -311,6 +323,10 @@ struct pop_adapter {
   template <class F>
   static void visit(const built& b, F&& f) {
     f(b, [](const view&) { return pop_policy{}; });
+  }
+  /// Input normals the build reported as missing and estimated.
+  static std::optional<std::size_t> normals_filled(const built& b) {
+    return b.stats().normals_filled;
   }
   static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
 };
@@ -329,6 +345,10 @@ struct pca_octree_adapter {
     f(b, [](const view&) { return pca_octree_policy{}; });
   }
   /// Documented (build_pca_octree): a zero input normal is an error, named by its index.
+  /// Input normals the build reported as missing and estimated.
+  static std::optional<std::size_t> normals_filled(const built& b) {
+    return b.stats().normals_filled;
+  }
   static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
 };
 
@@ -346,6 +366,8 @@ struct pmr_adapter {
   static void visit(const built& b, F&& f) {
     f(b, [](const view&) { return pmr_policy{}; });
   }
+  /// No count: PMR estimates its own normals and ignores the input's.
+  static std::optional<std::size_t> normals_filled(const built&) { return std::nullopt; }
   static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
 };
 
@@ -637,16 +659,91 @@ void run_concurrent(const ladder_case& c) {
   });
 }
 
+/// Cut normals against the sphere's radial directions: how many primitives' normals lie within
+/// 25° of the radial line (either sign), and how many point outwards.
+struct radial_agreement {
+  std::size_t normals = 0, on_line = 0, outward = 0;
+  [[nodiscard]] double line_fraction() const { return double(on_line) / double(normals); }
+  [[nodiscard]] double outward_fraction() const { return double(outward) / double(normals); }
+};
+
+template <class Adapter>
+radial_agreement agreement(const typename Adapter::built& b, const point_cloud& pts,
+                           const vec3d& centre) {
+  radial_agreement a;
+  Adapter::visit(b, [&](const auto& h, const auto& make_policy) {
+    using H = std::decay_t<decltype(h)>;
+    if constexpr (H::attrs.normal) {
+      const view v(ladder_camera(pts, 128), h.origin());
+      buffer_sink<H::attrs> s;
+      traverse(h, v, {.tolerance_px = 1}, s, make_policy(v));
+      const auto add = [&](const vec3f& p, const vec3f& n) {
+        ASSERT_TRUE(all_finite(p) && all_finite(n));
+        const vec3d r = (h.origin() + p.cast<double>() - centre).normalized();
+        const double c = r.dot(n.cast<double>().normalized());
+        ++a.normals;
+        a.on_line += std::abs(c) >= std::cos(25 * std::numbers::pi / 180) ? 1 : 0;
+        a.outward += c > 0 ? 1 : 0;
+      };
+      for (const auto& q : s.points) add(q.position, q.normal);
+      for (const auto& q : s.splats) add(q.centre, q.normal);
+      for (const auto& t : s.triangles)
+        for (std::size_t k = 0; k < 3; ++k) add(t.p[k], t.normal[k]);
+    }
+  });
+  return a;
+}
+
+/// A zero or non-finite normal is no normal. The jittered sphere with every fifth normal zero
+/// (and one NaN), and with every normal zero: each build reports how many it estimated (where
+/// it reports), and draws normals that agree with the sphere as the build from the true normals
+/// does — within 5 % of its primitives on the radial line; the partly zeroed sphere also
+/// outwards (the given normals orient the estimates), the all-zero one inwards or outwards as a
+/// whole (≥ 95 % one way: an estimate has no outside to go by).
+template <class Adapter>
+void run_missing_normals(const ladder_case& sphere) {
+  const triangle_mesh& truth = sphere.mesh;
+  triangle_mesh some = truth, none = truth;
+  std::size_t zeroed = 0;
+  for (std::size_t i = 0; i < some.vertices.normals.size(); i += 5, ++zeroed)
+    some.vertices.normals[i].setZero();
+  some.vertices.normals[3].x() = std::numeric_limits<float>::quiet_NaN();
+  ++zeroed;
+  for (auto& n : none.vertices.normals) n.setZero();
+  const auto ref = agreement<Adapter>(Adapter::build(truth, 1), truth.vertices, kSphereCentre);
+  ASSERT_GT(ref.normals, 100u);
+  std::printf("%s: true normals %.3f on the line, %.3f outward\n", Adapter::name,
+              ref.line_fraction(), ref.outward_fraction());
+  for (const auto* m : {&some, &none}) {
+    const bool all = m == &none;
+    const auto b = Adapter::build(*m, 1);
+    if (const auto filled = Adapter::normals_filled(b)) {
+      EXPECT_EQ(*filled, all ? m->vertices.size() : zeroed) << (all ? "all zero" : "some zero");
+    }
+    const auto a = agreement<Adapter>(b, m->vertices, kSphereCentre);
+    std::printf("%s, %s zero: %.3f on the line, %.3f outward\n", Adapter::name,
+                all ? "all" : "some", a.line_fraction(), a.outward_fraction());
+    EXPECT_GE(a.line_fraction(), ref.line_fraction() - 0.05) << (all ? "all zero" : "some zero");
+    if (all) {
+      EXPECT_GE(std::max(a.outward_fraction(), 1 - a.outward_fraction()), 0.95);
+    } else {
+      EXPECT_GE(a.outward_fraction(), std::min(0.95, ref.outward_fraction()));
+    }
+  }
+}
+
 struct builder_entry {
   std::string name;
   std::function<void(const ladder_case&)> run;
   std::function<void(const ladder_case&, const ladder_case&)> far;
   std::function<void(const ladder_case&)> concurrent;
+  std::function<void(const ladder_case&)> missing_normals;
 };
 
 template <class Adapter>
 builder_entry entry() {
-  return {Adapter::name, &run_case<Adapter>, &run_far<Adapter>, &run_concurrent<Adapter>};
+  return {Adapter::name, &run_case<Adapter>, &run_far<Adapter>, &run_concurrent<Adapter>,
+          &run_missing_normals<Adapter>};
 }
 
 /// The builders on the ladder: one line each.
@@ -706,6 +803,18 @@ TEST_P(ConcurrentTraversal, ThreadsDrawWhatOneThreadDraws) {
 }
 
 INSTANTIATE_TEST_SUITE_P(AllBuilders, ConcurrentTraversal,
+                         ::testing::Range<std::size_t>(0, builders().size()),
+                         [](const auto& p) { return builders()[p.param].name; });
+
+class MissingNormals : public ::testing::TestWithParam<std::size_t> {};
+
+TEST_P(MissingNormals, EstimatedLikeTheTrueOnes) {
+  builders()[GetParam()].missing_normals(
+      *std::find_if(ladder().begin(), ladder().end(),
+                    [](const ladder_case& c) { return c.name == "cospherical"; }));
+}
+
+INSTANTIATE_TEST_SUITE_P(AllBuilders, MissingNormals,
                          ::testing::Range<std::size_t>(0, builders().size()),
                          [](const auto& p) { return builders()[p.param].name; });
 

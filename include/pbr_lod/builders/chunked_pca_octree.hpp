@@ -14,7 +14,10 @@
 //  1. Bounds pass: the input's box gives the origin and the root cube (as build_pca_octree's).
 //  2. Structure passes: one per level, counting the points of every cell above chunk_points by
 //     octant (and their box: a cell of one repeated position is not split, as in memory).
-//  3. Distribution pass: every point into its chunk's file, input order kept.
+//  3. Distribution pass: every point into its chunk's file, input order kept. When normals are
+//     missing (none given, or some zero or not finite): the point-octree's k-NN halos, then chunk
+//     after chunk in octree order fill_missing_normals over the chunk and its halo, whose points
+//     of finished chunks carry their estimates (so one orientation spreads over the chunks).
 //  4. Per chunk: its subtree and every node's statistics, by build_pca_octree's own code; its
 //     normals in octree order and its root's moments kept for the top.
 //  5. The top nodes (rank 0): the normals' sums and then their unwrapped second moments in two
@@ -28,8 +31,9 @@
 //
 // Equal to the in-memory build: chunked_pca_octree::assemble() returns build_pca_octree's
 // hierarchy of the same input bit for bit, and a traversal draws the same points (a node's
-// random stream is keyed by its whole-tree number), when the input has normals. Inputs without
-// normals are refused: the in-memory build estimates and orients them over the whole input.
+// random stream is keyed by its whole-tree number), when the input has normals. With missing
+// normals the estimates are the in-memory build's up to orientation, which the in-memory build
+// propagates over the whole input's k-NN graph at once (docs/scale.md).
 //
 // Limits: at most 2³² − 2 input points (as build_pca_octree).
 //
@@ -71,10 +75,11 @@ struct chunked_pca_octree_options {
 /// permutation, the nodes (≈ one per three points at leaf_size 8) with their ranges.
 inline constexpr std::uint64_t chunked_pca_bytes_per_point = 256;
 
-/// Builds the PCA octree of `src` into the directory `dir` (created; files already there with
-/// the names it writes are replaced). In the report, estimation_seconds is 0 (the input's
-/// normals are used) and chunk_build_seconds steps 4 and 6. Throws InvalidArgument on an empty
-/// source, a source without normals, non-finite positions or normals, zero normals, more than
+/// Builds the PCA octree of `src` into the directory `dir`, whole or not at all (built as
+/// `dir.partial` and renamed; an earlier build in `dir` is replaced only then, see
+/// check_chunked_output and docs/scale.md). In the report, estimation_seconds is 0 (the input's
+/// normals are used; else step 3's estimation) and chunk_build_seconds steps 4 and 6. Throws
+/// InvalidArgument on an empty source, non-finite positions, more than
 /// 2³² − 2 points or bad options; IoError when the directory cannot be written; Cancelled
 /// through options.pca.progress.
 chunked_build_report build_pca_octree_chunked(const point_source& src, const std::string& dir,
@@ -138,7 +143,9 @@ class chunked_pca_octree {
   };
   using node = pca_node;
 
-  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file.
+  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
+  /// and a FormatError saying so when `dir` is a folder an unfinished build left
+  /// (check_chunked_folder).
   [[nodiscard]] static chunked_pca_octree open(const std::string& dir);
 
   // ---- the Hierarchy interface

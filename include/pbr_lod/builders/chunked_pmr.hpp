@@ -78,11 +78,12 @@ struct chunked_pmr_options {
 /// the rest is room for denser halos.
 inline constexpr std::uint64_t chunked_pmr_bytes_per_point = 512;
 
-/// Builds PMR of `src` into the directory `dir` (created; files already there with the names it
-/// writes are replaced). In the report, estimation_seconds is step 4 (the parts: the Voronoi
-/// work) and chunk_build_seconds steps 5–6. Throws InvalidArgument on an empty source, non-finite
-/// positions, more than 2³² − 2 points or bad options; IoError when the directory cannot be
-/// written; Cancelled through options.pmr.progress.
+/// Builds PMR of `src` into the directory `dir`, whole or not at all (built as `dir.partial` and
+/// renamed; an earlier build in `dir` is replaced only then, see check_chunked_output and
+/// docs/scale.md). In the report, estimation_seconds is step 4 (the parts: the Voronoi work) and
+/// chunk_build_seconds steps 5–6. Throws InvalidArgument on an empty source, non-finite positions,
+/// more than 2³² − 2 points or bad options; IoError when the directory cannot be written; Cancelled
+/// through options.pmr.progress.
 chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
                                        const chunked_pmr_options& options = {});
 
@@ -124,7 +125,9 @@ class chunked_pmr {
     friend bool operator==(const node_id&, const node_id&) = default;
   };
 
-  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file.
+  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
+  /// and a FormatError saying so when `dir` is a folder an unfinished build left
+  /// (check_chunked_folder).
   [[nodiscard]] static chunked_pmr open(const std::string& dir);
 
   // ---- the Hierarchy interface

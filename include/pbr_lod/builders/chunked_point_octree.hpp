@@ -79,8 +79,9 @@ struct chunked_build_options {
 /// halo, the k-NN graph of the estimation, the builder's working arrays and the nodes.
 inline constexpr std::uint64_t chunk_bytes_per_point = 512;
 
-/// Builds the point-octree of `src` into the directory `dir` (created; files already there with
-/// the names it writes are replaced). Throws InvalidArgument on an empty source or non-finite
+/// Builds the point-octree of `src` into the directory `dir`, whole or not at all (built as
+/// `dir.partial` and renamed; an earlier build in `dir` is replaced only then, see
+/// check_chunked_output and docs/scale.md). Throws InvalidArgument on an empty source or non-finite
 /// positions, IoError when the directory cannot be written, Cancelled through the progress
 /// callback of options.octree.
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
@@ -110,7 +111,9 @@ class chunked_point_octree {
     friend bool operator==(const node_id&, const node_id&) = default;
   };
 
-  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file.
+  /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
+  /// and a FormatError saying so when `dir` is a folder an unfinished build left
+  /// (check_chunked_folder).
   [[nodiscard]] static chunked_point_octree open(const std::string& dir);
 
   // ---- the Hierarchy interface

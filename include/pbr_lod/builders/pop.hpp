@@ -132,8 +132,11 @@ struct pop_build_stats {
   std::size_t isolated_faces = 0;
   std::size_t nonmanifold_edges = 0;  ///< edge_sort: edges of 3+ faces (no link); openmesh: 0
   std::size_t degenerate_faces = 0;   ///< zero-area faces (their spheres are still finite)
-  std::size_t contained_inner = 0;    ///< inner nodes whose sphere is one child's (rule 0, §3.1)
-  std::size_t file_bytes = 0;         ///< size of the file save() writes
+  /// Vertex normals that were zero or not finite ("no normal"), replaced by the area-weighted
+  /// normal of the vertex's faces (area_weighted_normals). A loaded file reports 0.
+  std::size_t normals_filled = 0;
+  std::size_t contained_inner = 0;  ///< inner nodes whose sphere is one child's (rule 0, §3.1)
+  std::size_t file_bytes = 0;       ///< size of the file save() writes
   /// The file's sections: vertex records, face index lists, node records (header + checksum
   /// are the rest).
   std::size_t vertex_file_bytes = 0, face_file_bytes = 0, node_file_bytes = 0;

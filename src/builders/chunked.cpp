@@ -1,0 +1,48 @@
+// What every chunked build's folder shares: the checks of builders/chunked.hpp.
+#include "pbr_lod/builders/chunked.hpp"
+
+#include <filesystem>
+
+#include "pbr_lod/core/atomic_file.hpp"
+#include "pbr_lod/core/error.hpp"
+
+namespace pbr_lod {
+
+namespace fs = std::filesystem;
+
+void check_chunked_folder(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return;
+  if (is_unfinished_directory(dir))
+    throw FormatError(dir +
+                      ": an interrupted chunked build (its staging folder: the build writing it "
+                      "failed or was killed before it finished); build again, and remove this "
+                      "folder");
+  if (fs::exists(fs::path(dir) / chunked_top_file, ec)) return;
+  bool chunks = false;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    chunks = chunks || name.rfind("chunk-", 0) == 0 || name == "tmp-build";
+  }
+  if (chunks)
+    throw FormatError(dir + ": an incomplete chunked build (chunk files but no " +
+                      chunked_top_file +
+                      ", which a build writes last: the build did not finish); build again");
+  throw FormatError(dir + ": a folder, but not a chunked build (no " + chunked_top_file + ")");
+}
+
+void check_chunked_output(const std::string& dir) {
+  std::error_code ec;
+  const fs::file_status st = fs::symlink_status(dir, ec);
+  if (!fs::exists(st)) return;
+  if (!fs::is_directory(st))
+    throw IoError(dir +
+                  ": exists and is not a folder (a file or a link); a chunked build writes a "
+                  "folder: remove it or choose another output");
+  if (fs::exists(fs::path(dir) / chunked_top_file, ec) || fs::is_empty(dir, ec)) return;
+  throw IoError(dir + ": a folder that is not a chunked build (no " + chunked_top_file +
+                "); a chunked build replaces only an empty folder or an earlier build: remove it "
+                "or choose another output");
+}
+
+}  // namespace pbr_lod
