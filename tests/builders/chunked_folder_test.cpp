@@ -23,6 +23,7 @@
 #include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
+#include "support/limited_write.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -87,30 +88,7 @@ std::vector<std::string> names_in(const fs::path& dir) {
   return out;
 }
 
-/// Runs `build` in a child whose files may not exceed `limit` bytes. With `ignore_signal` the
-/// writes get EFBIG and the child exits 7 when it threw IoError naming `target`, 8 on another
-/// exception, 0 when nothing threw; otherwise SIGXFSZ kills it mid-write. Returns the status.
-int run_limited(std::size_t limit, bool ignore_signal, const std::string& target,
-                const std::function<void()>& build) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    if (ignore_signal) std::signal(SIGXFSZ, SIG_IGN);
-    const rlimit r{limit, limit};
-    ::setrlimit(RLIMIT_FSIZE, &r);
-    int code = 0;
-    try {
-      build();
-    } catch (const IoError& e) {
-      code = std::string(e.what()).find(target) != std::string::npos ? 7 : 9;
-    } catch (...) {
-      code = 8;
-    }
-    std::_Exit(code);
-  }
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  return status;
-}
+using test::run_limited;
 
 /// A fresh folder (the output's parent) for one test.
 struct scratch {

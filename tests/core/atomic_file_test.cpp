@@ -21,6 +21,7 @@
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/write.hpp"
 #include "pbr_lod/raster/png.hpp"
+#include "support/limited_write.hpp"
 
 namespace pbr_lod {
 namespace {
@@ -51,31 +52,7 @@ struct scratch {
   }
 };
 
-/// Runs `write` in a child whose files may not exceed `limit` bytes. With `ignore_signal`, the
-/// write gets EFBIG (SIGXFSZ ignored) and the child exits 7 when it threw IoError naming
-/// `target`, 8 on another exception, 0 when nothing threw; otherwise SIGXFSZ kills it mid-write.
-/// Returns the wait status.
-int run_limited(std::size_t limit, bool ignore_signal, const std::string& target,
-                const std::function<void()>& write) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    if (ignore_signal) std::signal(SIGXFSZ, SIG_IGN);
-    const rlimit r{limit, limit};
-    ::setrlimit(RLIMIT_FSIZE, &r);
-    int code = 0;
-    try {
-      write();
-    } catch (const IoError& e) {
-      code = std::string(e.what()).find(target) != std::string::npos ? 7 : 9;
-    } catch (...) {
-      code = 8;
-    }
-    std::_Exit(code);
-  }
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  return status;
-}
+using test::run_limited;
 
 point_octree<point_octree_attributes(with_normals_colours)> small_tree(std::size_t n) {
   const point_cloud c = sample_surface(make_demo_scene(8), n, 3);
