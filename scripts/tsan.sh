@@ -2,9 +2,10 @@
 # The hierarchies' concurrency promises under ThreadSanitizer: several threads traversing one
 # loaded hierarchy of each builder (Ladder's ConcurrentTraversal), a chunked hierarchy loading
 # its chunks lazily from several threads, and the thread-parallel builds and k-NN queries the
-# tests run anyway. Builds the `tsan` preset (build/tsan: the library and three test programs)
-# and runs those tests. Not part of scripts/test.sh: its build would add about as much to CI as
-# the ASan build does (docs/development.md).
+# tests run anyway (the ladder builds every builder on two threads). Builds the `tsan` preset
+# (build/tsan: the library and three test programs) and runs those tests; scripts/test.sh runs it
+# after the ASan pass (docs/development.md). The library's task runner is plain std::threads
+# there (src/core/parallel_threads.cpp): TSan cannot see inside Debian's uninstrumented oneTBB.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"

@@ -1,5 +1,5 @@
 // pbr_lod — deterministic fork-join over index ranges. The work runs on a persistent pool of
-// threads (oneTBB's, reached through src/core/parallel.cpp, so TBB stays out of this header):
+// threads (oneTBB's, reached through src/core/parallel_tbb.cpp, so TBB stays out of this header):
 // no thread is created per call, and what a call computes depends only on its arguments, never
 // on the pool, how many of its threads take part or in which order they pick up the work.
 #pragma once
