@@ -8,6 +8,5 @@ add_library(bench_pca_octree_cgal OBJECT ${CMAKE_CURRENT_LIST_DIR}/pca_octree_cg
 target_link_libraries(bench_pca_octree_cgal PRIVATE CGAL::CGAL pbr_lod::pbr_lod benchmark::benchmark
                       pbr_lod_warnings)
 target_include_directories(bench_pca_octree_cgal PRIVATE ${PROJECT_SOURCE_DIR}/tests)
-target_compile_definitions(bench_pca_octree_cgal PRIVATE PBR_LOD_DATA_DIR="${PBR_LOD_DATA_DIR}")
 target_sources(bench_pca_octree PRIVATE $<TARGET_OBJECTS:bench_pca_octree_cgal>)
 target_link_libraries(bench_pca_octree PRIVATE $<LINK_ONLY:CGAL::CGAL>)

@@ -24,28 +24,21 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <iterator>
 #include <string>
+#include <tuple>
+#include <type_traits>
 #include <vector>
 
-#include "pbr_lod/builders/pca_octree.hpp"
-#include "pbr_lod/builders/pmr.hpp"
-#include "pbr_lod/builders/point_octree.hpp"
-#include "pbr_lod/builders/pop.hpp"
-#include "pbr_lod/builders/rho_grid.hpp"
+#include "all_builder_tests.hpp"  // generated: tests/builders/CMakeLists.txt
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 
 namespace pbr_lod {
 namespace {
 
-using bytes_t = std::vector<unsigned char>;
-
-/// One hierarchy file format: how to make a small valid file, and load(in) + save(out).
-struct format_case {
-  std::string name;
-  std::function<bytes_t(const std::string& scratch)> make;
-  std::function<void(const std::string& in, const std::string& out)> load_and_save;
-};
+using test::bytes_t;
+using test::format_case;
 
 /// In /dev/shm (RAM) when there is one: the test writes ~20 000 small files, and on a busy disk
 /// each costs milliseconds in the file system rather than microseconds in the loader. Named by
@@ -55,34 +48,6 @@ std::string scratch_path(const std::string& name) {
                                         ? std::filesystem::path("/dev/shm")
                                         : std::filesystem::temp_directory_path();
   return (dir / ("pbr_lod_file_damage_" + std::to_string(::getpid()) + "_" + name)).string();
-}
-
-/// A wavy 4×4 grid of 32 triangles with vertex colours, and 60 points sampled on it (with normals
-/// and colours): files of 0.2–9 kB, so that every cut can be tried.
-const triangle_mesh& tiny_mesh() {
-  static const triangle_mesh m = [] {
-    triangle_mesh g;
-    constexpr int n = 4;
-    for (int y = 0; y <= n; ++y)
-      for (int x = 0; x <= n; ++x) {
-        const float fx = static_cast<float>(x) / n, fy = static_cast<float>(y) / n;
-        g.vertices.positions.emplace_back(fx, fy, 0.2f * std::sin(6 * fx) * std::cos(5 * fy));
-        g.vertices.colours.push_back(
-            {static_cast<std::uint8_t>(40 * x), static_cast<std::uint8_t>(40 * y), 128});
-      }
-    const auto id = [](int x, int y) { return static_cast<std::uint32_t>(y * (n + 1) + x); };
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) {
-        g.faces.push_back({id(x, y), id(x + 1, y), id(x + 1, y + 1)});
-        g.faces.push_back({id(x, y), id(x + 1, y + 1), id(x, y + 1)});
-      }
-    return g;
-  }();
-  return m;
-}
-const point_cloud& tiny_cloud() {
-  static const point_cloud c = sample_surface(tiny_mesh(), 60, 3);
-  return c;
 }
 
 /// The bytes a flip test tries: all of the first 256 (every format's head: magic, version,
@@ -99,63 +64,13 @@ std::vector<std::size_t> flip_positions(std::size_t size, bool skip_checksum) {
   return at;
 }
 
-/// Saves the hierarchy h to `path` and returns the file's bytes.
-template <class H, class... SaveArgs>
-bytes_t saved_bytes(const H& h, const std::string& path, SaveArgs... args) {
-  h.save(path, args...);
-  return detail::load_file_bytes(path);
-}
-
-template <class H>
-void load_and_save(const std::string& in, const std::string& out) {
-  H::load(in).save(out);
-}
-
-using octree = point_octree<point_octree_attributes(with_normals_colours)>;
-using pop = pop_tree<with_normals_colours>;
-using pca = pca_octree<with_normals_colours>;
-
-template <int Rho>
-format_case rho_grid_case(rho_grid_layout layout, const std::string& name) {
-  return {name,
-          [layout](const std::string& p) {
-            return saved_bytes(build_rho_grid<Rho>(tiny_mesh(), {.level = 1}), p, layout);
-          },
-          &load_and_save<rho_grid<Rho>>};
-}
-
+/// Every file format of every registered builder (tests/builders/adapters/ID.hpp).
 std::vector<format_case> all_formats() {
-  return {
-      {"point_octree",
-       [](const std::string& p) {
-         return saved_bytes(build_point_octree(point_set<with_normals_colours>::from(tiny_cloud())),
-                            p);
-       },
-       &load_and_save<octree>},
-      {"pop",
-       [](const std::string& p) {
-         return saved_bytes(build_pop<with_normals_colours>(tiny_mesh()), p);
-       },
-       &load_and_save<pop>},
-      {"pca_octree",
-       [](const std::string& p) {
-         return saved_bytes(build_pca_octree(point_set<with_normals_colours>::from(tiny_cloud())),
-                            p);
-       },
-       &load_and_save<pca>},
-      {"pmr",
-       [](const std::string& p) {
-         pmr_options o;
-         o.max_leaf_points = 16;  // several leaves, so the node table is not trivial
-         o.rho = {0.5f, 1.0f};    // two decimated levels: enough for the level table, small file
-         o.threads = 1;
-         return saved_bytes(build_pmr(tiny_cloud(), o), p);
-       },
-       &load_and_save<pmr_hierarchy>},
-      rho_grid_case<3>(rho_grid_layout::nis, "rho_grid_nis"),
-      rho_grid_case<3>(rho_grid_layout::is, "rho_grid_is"),
-      rho_grid_case<2>(rho_grid_layout::compressed, "rho_grid_compressed"),
-  };
+  std::vector<format_case> all;
+  [&all]<class... Tests>(std::type_identity<std::tuple<Tests...>>) {
+    (std::ranges::copy(Tests::formats(), std::back_inserter(all)), ...);
+  }(std::type_identity<test::all_builder_tests>{});
+  return all;
 }
 
 void write(const std::string& path, const bytes_t& b) {
@@ -167,11 +82,6 @@ bytes_t resealed(bytes_t b) {
   const std::uint64_t sum = detail::fnv1a(b.data(), b.size() - 8);
   std::memcpy(b.data() + b.size() - 8, &sum, 8);
   return b;
-}
-
-// gtest prints the case's name, not its bytes.
-void PrintTo(const format_case& c, std::ostream* os) {
-  *os << c.name;
 }
 
 class FileDamage : public ::testing::TestWithParam<format_case> {

@@ -1,9 +1,9 @@
 // The hard-case ladder (issue 21): every builder over the same degenerate and hostile inputs.
 //
-// One test per (builder, case), generated from two tables: `builders()` (one adapter per builder)
-// and `ladder()` (the cases). A builder joins by writing an adapter — build from a mesh, save,
-// load, and hand its Hierarchy and traversal policy to a callback — and adding one line to
-// builders(). For each case that must build, the test checks:
+// One test per (builder, case), generated from two tables: `builders()` (every ladder adapter of
+// every registered builder) and `ladder()` (the cases). A builder joins by writing its adapter
+// header, tests/builders/adapters/ID.hpp — build from a mesh, save, load, and hand its
+// Hierarchy and traversal policy to a callback. For each case that must build, the test checks:
 //   * hierarchy invariants, walking every node from the root: finite bounding spheres; each
 //     child's sphere inside its parent's; everything the node's emit() sends inside its own
 //     sphere (the Hierarchy contract, traverse/hierarchy.hpp); finite unit normal cones;
@@ -36,14 +36,11 @@
 #include <regex>
 #include <string>
 #include <thread>
+#include <tuple>
+#include <type_traits>
 #include <vector>
 
-#include "pbr_lod/builders/pca_octree.hpp"
-#include "pbr_lod/builders/pmr.hpp"
-#include "pbr_lod/builders/point_octree.hpp"
-#include "pbr_lod/builders/pop.hpp"
-#include "pbr_lod/builders/rho_grid.hpp"
-#include "pbr_lod/builders/rho_grid_policy.hpp"
+#include "all_builder_tests.hpp"  // generated: tests/builders/CMakeLists.txt
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 
@@ -243,133 +240,9 @@ const std::vector<ladder_case>& ladder() {
 
 // ---- the builders ---------------------------------------------------------------------------
 //
-// An adapter: `name`; `built` (what build returns and save/load handle); build(mesh, threads);
-// save(b, path); load(path); visit(b, f) calling f(hierarchy, make_policy) with make_policy(view)
-// the builder's traversal policy for a view; rejects(case) for refusals the builder documents
-// beyond the ladder's own (nullopt: must build).
-
-/// Point builders take the mesh's vertices; with normals when the vertices have them.
-template <class F>
-auto with_point_set(const point_cloud& c, F&& f) {
-  constexpr attributes plain{.colour = true}, oriented{.normal = true, .colour = true};
-  if (c.normals.empty()) return f(point_set<plain>::from(c));
-  return f(point_set<oriented>::from(c));
-}
-
-struct point_octree_adapter {
-  static constexpr const char* name = "point_octree";
-  using built = point_octree<point_octree_attributes(attributes{.colour = true})>;
-  static built build(const triangle_mesh& m, unsigned threads) {
-    return with_point_set(m.vertices, [&](const auto& ps) {
-      return build_point_octree(ps, {.leaf_size = 8, .threads = threads});
-    });
-  }
-  static void save(const built& b, const std::string& p) { b.save(p); }
-  static built load(const std::string& p) { return built::load(p); }
-  template <class F>
-  static void visit(const built& b, F&& f) {
-    f(b, [](const view&) { return point_octree_policy{}; });
-  }
-  /// Input normals the build reported as missing and estimated.
-  static std::optional<std::size_t> normals_filled(const built& b) {
-    return b.stats().normals_filled;
-  }
-  static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
-};
-
-struct rho_grid_adapter {
-  static constexpr const char* name = "rho_grid";
-  using built = rho_grid<3>;
-  static built build(const triangle_mesh& m, unsigned threads) {
-    return build_rho_grid<3>(m, {.level = 4, .threads = threads});
-  }
-  static void save(const built& b, const std::string& p) { b.save(p); }
-  static built load(const std::string& p) { return built::load(p); }
-  template <class F>
-  static void visit(const built& g, F&& f) {
-    const auto policy = [&g](const view& v) { return rho_grid_policy<3>(g, v); };
-    if (g.has_normals())
-      f(rho_grid_hierarchy<3, with_normals>(g), policy);
-    else
-      f(rho_grid_hierarchy<3, positions_only>(g), policy);
-  }
-  /// No count: a mesh's missing vertex normal takes its faces' normal where it is used.
-  static std::optional<std::size_t> normals_filled(const built&) { return std::nullopt; }
-  static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
-};
-
-/// The ρ-grid's other entry point: the mesh's vertices as a point cloud (cells hold the input
-/// point nearest their centre; normals only when the vertices have them).
-struct rho_grid_points_adapter : rho_grid_adapter {
-  static constexpr const char* name = "rho_grid_points";
-  static built build(const triangle_mesh& m, unsigned threads) {
-    return build_rho_grid<3>(m.vertices, {.level = 4, .threads = threads});
-  }
-  static std::optional<std::size_t> normals_filled(const built& b) {
-    return b.stats().normals_filled;
-  }
-};
-
-struct pop_adapter {
-  static constexpr const char* name = "pop";
-  /// Leaves draw their triangles: a mesh of zero-area triangles only draws nothing.
-  static constexpr bool draws_faces_only = true;
-  using built = pop_tree<with_normals_colours>;
-  static built build(const triangle_mesh& m, unsigned threads) {
-    return build_pop<with_normals_colours>(m, {.threads = threads});
-  }
-  static void save(const built& b, const std::string& p) { b.save(p); }
-  static built load(const std::string& p) { return built::load(p); }
-  template <class F>
-  static void visit(const built& b, F&& f) {
-    f(b, [](const view&) { return pop_policy{}; });
-  }
-  /// Input normals the build reported as missing and estimated.
-  static std::optional<std::size_t> normals_filled(const built& b) {
-    return b.stats().normals_filled;
-  }
-  static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
-};
-
-struct pca_octree_adapter {
-  static constexpr const char* name = "pca_octree";
-  using built = pca_octree<with_normals_colours>;
-  static built build(const triangle_mesh& m, unsigned threads) {
-    return with_point_set(
-        m.vertices, [&](const auto& ps) { return build_pca_octree(ps, {.threads = threads}); });
-  }
-  static void save(const built& b, const std::string& p) { b.save(p); }
-  static built load(const std::string& p) { return built::load(p); }
-  template <class F>
-  static void visit(const built& b, F&& f) {
-    f(b, [](const view&) { return pca_octree_policy{}; });
-  }
-  /// Documented (build_pca_octree): a zero input normal is an error, named by its index.
-  /// Input normals the build reported as missing and estimated.
-  static std::optional<std::size_t> normals_filled(const built& b) {
-    return b.stats().normals_filled;
-  }
-  static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
-};
-
-struct pmr_adapter {
-  static constexpr const char* name = "pmr";
-  using built = pmr_hierarchy;
-  static built build(const triangle_mesh& m, unsigned threads) {
-    pmr_options o;
-    o.threads = threads;
-    return build_pmr(m.vertices, o);
-  }
-  static void save(const built& b, const std::string& p) { b.save(p); }
-  static built load(const std::string& p) { return built::load(p); }
-  template <class F>
-  static void visit(const built& b, F&& f) {
-    f(b, [](const view&) { return pmr_policy{}; });
-  }
-  /// No count: PMR estimates its own normals and ignores the input's.
-  static std::optional<std::size_t> normals_filled(const built&) { return std::nullopt; }
-  static std::optional<std::string> rejects(const std::string&) { return std::nullopt; }
-};
+// One adapter per ladder entry, in each builder's tests/builders/adapters/ID.hpp
+// (adapter_support.hpp says what an adapter holds); all_builder_tests.hpp lists them from the
+// registry, cmake/builders.cmake.
 
 // ---- the checks -----------------------------------------------------------------------------
 
@@ -746,16 +619,20 @@ builder_entry entry() {
           &run_missing_normals<Adapter>};
 }
 
-/// The builders on the ladder: one line each.
+/// The builders on the ladder, in the registry's order: every ladder adapter of every builder.
 const std::vector<builder_entry>& builders() {
-  static const std::vector<builder_entry> b{
-      entry<point_octree_adapter>(),     // Pajarola 2003
-      entry<rho_grid_adapter>(),         // Duguet & Drettakis 2004, from a mesh
-      entry<rho_grid_points_adapter>(),  // the same, from points
-      entry<pop_adapter>(),              // Chen & Nguyen 2001
-      entry<pca_octree_adapter>(),       // Kalaiah & Varshney 2003
-      entry<pmr_adapter>(),              // Dey & Hudson 2002
-  };
+  static const std::vector<builder_entry> b = [] {
+    std::vector<builder_entry> all;
+    const auto add_builder = [&all]<class Tests>(std::type_identity<Tests>) {
+      [&all]<class... Adapter>(std::type_identity<std::tuple<Adapter...>>) {
+        (all.push_back(entry<Adapter>()), ...);
+      }(std::type_identity<typename Tests::ladder>{});
+    };
+    [&]<class... Tests>(std::type_identity<std::tuple<Tests...>>) {
+      (add_builder(std::type_identity<Tests>{}), ...);
+    }(std::type_identity<test::all_builder_tests>{});
+    return all;
+  }();
   return b;
 }
 

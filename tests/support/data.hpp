@@ -11,9 +11,13 @@
 
 namespace pbr_lod::test {
 
+/// PBR_LOD_DATA_DIR as configured (cmake/test_data.cmake; in a library of its own, so that no
+/// test object depends on where the checkout is).
+const char* configured_data_dir();
+
 inline std::filesystem::path data_dir() {
   if (const char* env = std::getenv("PBR_LOD_DATA")) return env;
-  return PBR_LOD_DATA_DIR;
+  return configured_data_dir();
 }
 
 /// Whether this run must have the data (CI=true): then a missing file fails, never skips.
@@ -28,8 +32,9 @@ inline std::string data_file(const std::string& name) {
   const auto p = data_dir() / name;
   if (!std::filesystem::exists(p))
     throw std::runtime_error(
-        std::string(data_required() ? "shared test data missing (CI=true requires it): "
-                                    : "PBR_LOD_DATA_SKIP: shared test data missing, test skipped: ") +
+        std::string(data_required()
+                        ? "shared test data missing (CI=true requires it): "
+                        : "PBR_LOD_DATA_SKIP: shared test data missing, test skipped: ") +
         p.string() + " (set PBR_LOD_DATA or -DPBR_LOD_DATA_DIR to the shared/data folder)");
   return p.string();
 }
