@@ -24,6 +24,7 @@
 #include <tuple>
 #include <utility>
 
+#include "moment_ellipse.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/parallel.hpp"
@@ -515,23 +516,21 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
       // neighbourhood mean: at a boundary the neighbours lie on one side and must still be
       // covered). No division by the count: only the eigenvalue ratio and f·√λ matter.
       xy.clear();
-      double a = 0, b = 0, c = 0, extent2 = 0, z1 = 0, z2 = 0;
+      detail::moments_2d mom;
+      double extent2 = 0, z1 = 0, z2 = 0;
       vec3d sum = vec3d::Zero();
       for (const auto j : idx) {
         const vec3d d = positions[j].cast<double>() - p;
         const vec2d q(d.dot(t1), d.dot(t2));
         xy.push_back(q);
-        a += q.x() * q.x();
-        b += q.x() * q.y();
-        c += q.y() * q.y();
+        mom.add(q);
         extent2 += d.squaredNorm();
         const double z = d.dot(nrm);
         z1 += z;
         z2 += z * z;
         sum += d;
       }
-      const double h = 0.5 * (a - c), r = std::hypot(h, b);
-      const double l1 = 0.5 * (a + c) + r;
+      const double l1 = mom.major();
       if (!(l1 > 1e-10 * extent2) || !(l1 > 0)) {
         // Degenerate: every neighbour projects onto pᵢ. A disk reaching the nearest sample
         // that is not at pᵢ, searched among more and more neighbours.
@@ -573,17 +572,9 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
           }
         }
       }
-      const double l2 = std::max(0.5 * (a + c) - r, ratio2 * l1);
-      // Major axis at angle ψ = ½·atan2(2b, a − c) in the (t1, t2) frame (r > 0 here unless
-      // the moments are isotropic, where any direction is an eigenvector: ψ = 0).
-      const double psi = r > 0 ? 0.5 * std::atan2(b, h) : 0.0;
-      const vec2d e1(std::cos(psi), std::sin(psi)), e2(-e1.y(), e1.x());
-      double f2 = 0;
-      for (const auto& q : xy) {
-        const double x = q.dot(e1), y = q.dot(e2);
-        f2 = std::max(f2, x * x / l1 + y * y / l2);
-      }
-      const double f = std::sqrt(f2) * cover_margin;
+      const detail::moment_ellipse el = detail::covering_ellipse(mom, xy, ratio2);
+      const vec2d e1 = el.e1, e2 = el.e2;
+      const double l2 = el.l2, f = el.f * cover_margin;
       const vec3d axis1 = e1.x() * t1 + e1.y() * t2, axis2 = e2.x() * t1 + e2.y() * t2;
       auto [major, minor] = std::pair(f * std::sqrt(l1), f * std::sqrt(l2));
       vec3d dir1 = axis1, dir2 = axis2;
@@ -591,7 +582,7 @@ splat_axes ellipses_from(std::span<const vec3f> positions, std::span<const vec3f
       // Clipped at open edges and creases where the neighbours spread in two directions about
       // the sample (second moments λ₂ ≥ 0.25·λ₁): a neighbourhood stretched along a scan line
       // sees the next line on one side only, and clipping it would open gaps between lines.
-      if (bounded && 0.5 * (a + c) - r >= local_spacing_clip_min_ratio * l1) {
+      if (bounded && mom.minor() >= local_spacing_clip_min_ratio * l1) {
         const double margin = local_spacing_edge_margin *
                               (positions[idx[disk_neighbour]] - positions[i]).cast<double>().norm();
         const auto clip = clip_to_neighbourhood(major, minor, e1, xy, margin);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "moment_ellipse.hpp"
 #include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/mesh_normals.hpp"
 
@@ -36,27 +37,14 @@ vec3d tangent_of(const vec3d& n) {
 /// when every offset is zero.
 std::pair<vec3d, vec3d> bounding_ellipse(const std::vector<vec2d>& xy, const vec3d& t1,
                                          const vec3d& t2) {
-  double a = 0, b = 0, c = 0;
-  for (const auto& q : xy) {
-    a += q.x() * q.x();
-    b += q.x() * q.y();
-    c += q.y() * q.y();
-  }
-  const double h = 0.5 * (a - c), r = std::hypot(h, b);
-  const double l1 = 0.5 * (a + c) + r;
-  if (!(l1 > 0)) return {vec3d::Zero(), vec3d::Zero()};
+  detail::moments_2d m;
+  for (const auto& q : xy) m.add(q);
+  if (!(m.major() > 0)) return {vec3d::Zero(), vec3d::Zero()};
   constexpr double ratio2 = splat_min_axis_ratio * splat_min_axis_ratio;
-  const double l2 = std::max(0.5 * (a + c) - r, ratio2 * l1);
-  const double psi = r > 0 ? 0.5 * std::atan2(b, h) : 0.0;
-  const vec2d e1(std::cos(psi), std::sin(psi)), e2(-e1.y(), e1.x());
-  double f2 = 0;
-  for (const auto& q : xy) {
-    const double x = q.dot(e1), y = q.dot(e2);
-    f2 = std::max(f2, x * x / l1 + y * y / l2);
-  }
-  const double f = std::sqrt(f2) * (1 + 1e-5);  // float rounding never leaves a corner outside
-  return {f * std::sqrt(l1) * (e1.x() * t1 + e1.y() * t2),
-          f * std::sqrt(l2) * (e2.x() * t1 + e2.y() * t2)};
+  const auto e = detail::covering_ellipse(m, xy, ratio2);
+  const double f = e.f * (1 + 1e-5);  // float rounding never leaves a corner outside
+  return {f * std::sqrt(e.l1) * (e.e1.x() * t1 + e.e1.y() * t2),
+          f * std::sqrt(e.l2) * (e.e2.x() * t1 + e.e2.y() * t2)};
 }
 
 }  // namespace
