@@ -21,8 +21,19 @@ cmake --build build/tsan -j "$jobs" --target test_ladder test_point_octree test_
 # halt_on_error: the first race fails the run; second_deadlock_stack for readable lock reports.
 export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1"
 export PBR_LOD_DATA="$data"
-build/tsan/tests/builders/test_ladder --gtest_filter='AllBuilders/ConcurrentTraversal.*'
-build/tsan/tests/builders/test_point_octree \
-  --gtest_filter='ChunkedPointOctree.*:ChunkedPointOctreeDistributed.*'
-build/tsan/tests/core/test_core --gtest_filter='Parallel*:*Knn*:*Estimat*'
+# Each filter must select tests: a renamed suite would otherwise pass here by running nothing.
+run() {  # run PROGRAM FILTER
+  local out
+  out="$(mktemp)"
+  "$1" --gtest_filter="$2" 2>&1 | tee "$out"
+  if ! grep -qE '^\[  PASSED  \] [1-9][0-9]* test' "$out"; then
+    echo "tsan.sh: $1 --gtest_filter='$2' ran no test" >&2
+    rm -f "$out"
+    exit 1
+  fi
+  rm -f "$out"
+}
+run build/tsan/tests/builders/test_ladder 'AllBuilders/ConcurrentTraversal.*'
+run build/tsan/tests/builders/test_point_octree 'ChunkedPointOctree.*:ChunkedPointOctreeDistributed.*'
+run build/tsan/tests/core/test_core 'Parallel*:*Knn*:*Estimat*'
 echo "tsan.sh: no data races reported"
