@@ -442,20 +442,33 @@ struct clipped_ellipse {
 clipped_ellipse clip_to_neighbourhood(double major, double minor, const vec2d& e1,
                                       const std::vector<vec2d>& xy, double margin) {
   constexpr int directions = 16;
+  // The directions kπ/16 and how far the neighbourhood reaches along each on its nearer side:
+  // the same for both passes, so computed once (cos and sin once per process).
+  static const std::array<vec2d, directions> dirs = [] {
+    std::array<vec2d, directions> d;
+    for (int k = 0; k < directions; ++k) {
+      const double a = std::numbers::pi * k / directions;
+      d[static_cast<std::size_t>(k)] = vec2d(std::cos(a), std::sin(a));
+    }
+    return d;
+  }();
+  std::array<double, directions> nearer_reach;
+  for (std::size_t k = 0; k < dirs.size(); ++k) {
+    double fwd = 0, back = 0;
+    for (const auto& q : xy) {
+      fwd = std::max(fwd, q.dot(dirs[k]));
+      back = std::max(back, -q.dot(dirs[k]));
+    }
+    nearer_reach[k] = std::min(fwd, back);
+  }
   // M: the ellipse's shape matrix (reach along unit d: √(dᵀ M d)).
   const vec2d e2(-e1.y(), e1.x());
   Eigen::Matrix2d m = major * major * e1 * e1.transpose() + minor * minor * e2 * e2.transpose();
   bool changed = false;
   for (int pass = 0; pass < 2; ++pass)
-    for (int k = 0; k < directions; ++k) {
-      const double a = std::numbers::pi * k / directions;
-      const vec2d d(std::cos(a), std::sin(a));
-      double fwd = 0, back = 0;
-      for (const auto& q : xy) {
-        fwd = std::max(fwd, q.dot(d));
-        back = std::max(back, -q.dot(d));
-      }
-      const double allowed = std::min(fwd, back) + margin, reach = std::sqrt(d.dot(m * d));
+    for (std::size_t k = 0; k < dirs.size(); ++k) {
+      const vec2d& d = dirs[k];
+      const double allowed = nearer_reach[k] + margin, reach = std::sqrt(d.dot(m * d));
       if (!(reach > allowed * (1 + 1e-9))) continue;
       const Eigen::Matrix2d squeeze =
           Eigen::Matrix2d::Identity() - (1 - allowed / reach) * d * d.transpose();
