@@ -33,6 +33,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 
 #include "gaussian_internal.hpp"
 
@@ -285,11 +286,13 @@ void unzstd(const std::string& path, const char* what, std::string_view in, std:
         static_cast<std::size_t>(std::min<std::uint64_t>(want - at, std::uint64_t{1} << 22));
     out.resize(at + piece);
     ZSTD_outBuffer ob{out.data() + at, piece, 0};
+    const std::size_t consumed = ib.pos;
     rc = ZSTD_decompressStream(z.get(), &ob, &ib);
     out.resize(at + ob.pos);
     if (ZSTD_isError(rc))
       format_error(path, what, cat("corrupt zstd stream (", ZSTD_getErrorName(rc), ")"));
-    if (ob.pos == 0 && (rc == 0 || ib.pos == ib.size)) break;  // no progress: it ended
+    if (ob.pos == 0 && (rc == 0 || ib.pos == ib.size || ib.pos == consumed))
+      break;  // no progress: the stream ended
   }
   if (out.size() < want)
     format_error(path, what,
