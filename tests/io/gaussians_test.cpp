@@ -671,5 +671,49 @@ TEST_F(GaussianWrite, TheFileIsTheStandardLayout) {
   EXPECT_THROW(write_gaussians_ply(bad, p), InvalidArgument);
 }
 
+// --- damaged files
+// ----------------------------------------------------------------------------------
+
+using GaussianDamage = scratch_dir;
+
+// Every prefix and random byte flips of a valid file of each format: each must read into a
+// cloud that passes validate() or throw a pbr_lod::Error; never crash or throw anything else
+// (tests/io/mutation_test.cpp does the same for the mesh and point readers).
+TEST_F(GaussianDamage, EveryCutAndFlipReadsOrThrows) {
+  const spz_spec s3{.version = 3, .degree = 2};
+  const spz_spec s4{.version = 4, .degree = 1};
+  const float pos[3] = {1, 2, 3}, scale[3] = {0.5f, 1, 2};
+  const std::uint8_t rgba[4] = {1, 2, 3, 4}, rot[4] = {200, 100, 128, 128};
+  const std::vector<std::pair<std::string, std::string>> files = {
+      {"a.ply", make_gs_ply({sample_row(2), sample_row(2)}, standard_props(2))},
+      {"b.ply", make_gs_ply({sample_row(1)}, standard_props(1), true)},
+      {"c.splat", splat_record(pos, scale, rgba, rot) + splat_record(scale, pos, rgba, rot)},
+      {"d.spz", gzip(spz_header16(s3) + spz_attributes(s3))},
+      {"e.spz", spz_v4(s4)}};
+  std::mt19937 rng(42);  // any flips will do: each file must survive all of them
+  std::size_t read = 0, refused = 0;
+  const auto attempt = [&](const std::string& name, const std::string& bytes) {
+    const std::string p = write(name, bytes);
+    try {
+      read_gaussians(p).validate();
+      ++read;
+    } catch (const InvalidArgument& e) {
+      ADD_FAILURE() << name << ": a cloud that fails validate(): " << e.what();
+    } catch (const Error&) {
+      ++refused;
+    }
+  };
+  for (const auto& [name, bytes] : files) {
+    for (std::size_t n = 0; n < bytes.size(); ++n) attempt(name, bytes.substr(0, n));
+    for (int k = 0; k < 100; ++k) {
+      std::string b = bytes;
+      for (int f = 0; f < 3; ++f) b[rng() % b.size()] = static_cast<char>(rng() & 0xff);
+      attempt(name, b);
+    }
+  }
+  EXPECT_GT(read, 0u);
+  EXPECT_GT(refused, 0u);
+}
+
 }  // namespace
 }  // namespace pbr_lod::test
