@@ -1,11 +1,11 @@
 // Fuzz target for one mesh / point-cloud reader (PLY, OBJ, OFF, PCD or LAS; fuzz/CMakeLists.txt
 // picks it with PBR_LOD_FUZZ_EXT), or, with PBR_LOD_FUZZ_GAUSSIANS, one 3-D Gaussian reader
 // (3DGS PLY, .splat, .spz: io/gaussians.hpp, whose result must pass gaussian_cloud::validate —
-// the bad-value rule lets no NaN through). read.hpp promises: any file gives data that passes validate()
-// or a pbr_lod::Error — never a crash, a hang, an out-of-bounds read or another exception (a
-// std::bad_alloc would mean a count in the file was trusted before it was checked). For PLY, PCD
-// and LAS (PBR_LOD_FUZZ_SOURCE) the block reader of out-of-core builds reads the same bytes and
-// must agree with the reader.
+// the bad-value rule lets no NaN through). read.hpp promises: any file gives data that passes
+// validate() or a pbr_lod::Error — never a crash, a hang, an out-of-bounds read or another
+// exception (a std::bad_alloc would mean a count in the file was trusted before it was checked).
+// For PLY, PCD and LAS (PBR_LOD_FUZZ_SOURCE) the block reader of out-of-core builds reads the same
+// bytes and must agree with the reader.
 #include <cstddef>
 #include <cstdint>
 

@@ -204,9 +204,7 @@ class gs_ply_parser {
  public:
   gs_ply_parser(const std::string& path, const ply_header& h, const gs_plan& pl,
                 gaussian_collector& out)
-      : path_(path),
-        h_(h),
-        pl_(pl),
+      : pl_(pl),
         out_(out),
         rows_(path, h.format),
         sh_(static_cast<std::size_t>(sh_coefficients(pl.degree)) * 3) {}
@@ -255,8 +253,6 @@ class gs_ply_parser {
     out_.add(pos, scale, q, out_.opacity_from_logit(v_[at_opacity]), sh_.data());
   }
 
-  const std::string& path_;
-  const ply_header& h_;
   const gs_plan& pl_;
   gaussian_collector& out_;
   ply_row_reader rows_;
