@@ -11,7 +11,7 @@ set -euo pipefail
 pbrlod="$1" data="$2" out="$3"
 # The builders (one fuzz target each) are those of cmake/builders.cmake.
 builders=$(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/\1/p' "$(dirname "$0")/../cmake/builders.cmake")
-for t in ply obj off pcd las $builders; do mkdir -p "$out/fuzz_$t"; done
+for t in ply obj off pcd las gaussian_ply splat spz $builders; do mkdir -p "$out/fuzz_$t"; done
 
 # --- meshes and point clouds ---------------------------------------------------------------------
 cp --no-preserve=mode "$data/bun_zipper_res4.ply" "$out/fuzz_ply/bunny_res4.ply"
@@ -118,6 +118,65 @@ red='\x00\x00\xff\x00' green='\x00\xff\x00\x00'
   printf '\x21\x00\x00\x00\x20\x00\x00\x00\x1f'
   printf "$f0$f1le$f0$f1le$f0$f1le$red$green"
 } > "$out/fuzz_pcd/binary_compressed.pcd"
+
+# --- 3-D Gaussians (io/gaussians.hpp): 3DGS PLY, .splat, .spz, two Gaussians each ------------
+# Written by python3 (a dependency already): binary records are clearer as struct.pack than as
+# printf escapes. The version-4 .spz seed needs the zstd tool and is left out without it.
+python3 - "$out" <<'PY'
+import gzip, math, struct, sys
+out = sys.argv[1]
+def ply(degree, binary):
+    rest = 3 * ((degree + 1) ** 2 - 1)
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+    names += ["f_rest_%d" % k for k in range(rest)]
+    names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    rows = [[0, 0, 0, 0, 0, 0, 0.5, -0.5, 0.1] + [0.01 * k for k in range(rest)]
+            + [2.0, -3.0, -3.5, -4.0, 1, 0, 0, 0],
+            [1, 2, 3, 0, 0, 0, 0.0, 0.2, 0.4] + [-0.02 * k for k in range(rest)]
+            + [-1.0, -2.0, -2.0, -5.0, 0.5, 0.5, 0.5, 0.5]]
+    head = "ply\nformat %s 1.0\nelement vertex 2\n" % ("binary_little_endian" if binary else "ascii")
+    head += "".join("property float %s\n" % n for n in names) + "end_header\n"
+    if binary:
+        return head.encode() + b"".join(struct.pack("<%df" % len(r), *r) for r in rows)
+    return (head + "".join(" ".join("%g" % v for v in r) + "\n" for r in rows)).encode()
+open(out + "/fuzz_gaussian_ply/degree0.ply", "wb").write(ply(0, True))
+open(out + "/fuzz_gaussian_ply/degree1_ascii.ply", "wb").write(ply(1, False))
+open(out + "/fuzz_gaussian_ply/degree3.ply", "wb").write(ply(3, True))
+splat = b"".join(struct.pack("<6f8B", x, 0, 0, 0.1, 0.2, 0.3, 255, 128, 0, 200, 200, 128, 128, 60)
+                 for x in (0.0, 1.0))
+open(out + "/fuzz_splat/two.splat", "wb").write(splat)
+def spz(version, degree):
+    n, dim = 2, (degree + 1) ** 2 - 1
+    head = struct.pack("<IIIBBBB", 0x5053474e, version, n, degree, 12, 0, 0)
+    pos = bytes([0, 16, 0, 0, 248, 255, 0, 24, 0] + [0] * 9)  # (1, -0.5, 1.5), (0, 0, 0)
+    rot = bytes([0, 0, 0, 192] + [0, 0, 240, 31]) if version >= 3 else bytes([128] * 3 + [255, 128, 128])
+    sh = bytes([192, 128, 64] * dim * n)
+    return head, [pos, bytes([51, 200]), bytes([255, 0, 128] * n), bytes([160, 176, 144] * n), rot, sh]
+for v, d in ((2, 0), (3, 1), (3, 3)):
+    head, parts = spz(v, d)
+    open(out + "/fuzz_spz/v%d_degree%d.spz" % (v, d), "wb").write(
+        gzip.compress(head + b"".join(parts), mtime=0))
+head, parts = spz(4, 1)
+for k, p in enumerate(parts):
+    open(out + "/fuzz_spz/.v4_stream%d" % k, "wb").write(p)
+PY
+if command -v zstd > /dev/null; then
+  # Version 4: a 32-byte header, the table of contents, one zstd frame per attribute.
+
+  for k in 0 1 2 3 4 5; do
+    zstd -q -f --no-check "$out/fuzz_spz/.v4_stream$k" -o "$out/fuzz_spz/.v4_stream$k.zst"
+  done
+  python3 - "$out/fuzz_spz" <<'PY'
+import os, struct, sys
+d = sys.argv[1]
+plain = [open("%s/.v4_stream%d" % (d, k), "rb").read() for k in range(6)]
+packed = [open("%s/.v4_stream%d.zst" % (d, k), "rb").read() for k in range(6)]
+head = struct.pack("<IIIBBBBI", 0x5053474e, 4, 2, 1, 12, 0, 6, 32) + bytes(12)
+toc = b"".join(struct.pack("<QQ", len(p), len(q)) for p, q in zip(packed, plain))
+open(d + "/v4_degree1.spz", "wb").write(head + toc + b"".join(packed))
+PY
+fi
+rm -f "$out"/fuzz_spz/.v4_stream*
 
 # --- hierarchy files, built by the pbrlod tool from the small inputs above -----------------------
 bunny="$out/fuzz_ply/bunny_res4.ply"

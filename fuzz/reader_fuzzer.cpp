@@ -1,9 +1,11 @@
 // Fuzz target for one mesh / point-cloud reader (PLY, OBJ, OFF, PCD or LAS; fuzz/CMakeLists.txt
-// picks it with PBR_LOD_FUZZ_EXT). read.hpp promises: any file gives data that passes validate()
-// or a pbr_lod::Error — never a crash, a hang, an out-of-bounds read or another exception (a
-// std::bad_alloc would mean a count in the file was trusted before it was checked). For PLY, PCD
-// and LAS (PBR_LOD_FUZZ_SOURCE) the block reader of out-of-core builds reads the same bytes and
-// must agree with the reader.
+// picks it with PBR_LOD_FUZZ_EXT), or, with PBR_LOD_FUZZ_GAUSSIANS, one 3-D Gaussian reader
+// (3DGS PLY, .splat, .spz: io/gaussians.hpp, whose result must pass gaussian_cloud::validate —
+// the bad-value rule lets no NaN through). read.hpp promises: any file gives data that passes
+// validate() or a pbr_lod::Error — never a crash, a hang, an out-of-bounds read or another
+// exception (a std::bad_alloc would mean a count in the file was trusted before it was checked).
+// For PLY, PCD and LAS (PBR_LOD_FUZZ_SOURCE) the block reader of out-of-core builds reads the same
+// bytes and must agree with the reader.
 #include <cstddef>
 #include <cstdint>
 
@@ -11,6 +13,7 @@
 #include <optional>
 
 #include "fuzz_util.hpp"
+#include "pbr_lod/io/gaussians.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 #include "pbr_lod/io/read.hpp"
 
@@ -60,6 +63,13 @@ void check_point_source(const std::string& path, const pbr_lod::point_cloud* who
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string& path = input_path();
   pbr_lod::fuzz::write_bytes(path, data, size);
+#if PBR_LOD_FUZZ_GAUSSIANS
+  try {
+    pbr_lod::read_gaussians(path).validate();
+  } catch (const pbr_lod::FormatError&) {
+  } catch (const pbr_lod::IoError&) {
+  }
+#else
   std::optional<pbr_lod::point_cloud> whole;
   try {
 #if PBR_LOD_FUZZ_MESH
@@ -76,6 +86,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
 #if PBR_LOD_FUZZ_SOURCE
   check_point_source(path, whole ? &*whole : nullptr);
+#endif
 #endif
   return 0;
 }

@@ -11,6 +11,8 @@ packages=(
   # examples/strict_json.py holds every `pbrlod --json` output of the tests to strict JSON.
   python3
   libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
+  # .spz Gaussian files: gzip (versions 1–3) and zstd (version 4) streams.
+  zlib1g-dev libzstd-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev libcli11-dev libpng-dev
   # pbrlod build --distributed (the tool only; the library never links MPI).
   libopenmpi-dev openmpi-bin

@@ -1,11 +1,16 @@
-# I/O: OpenMesh-backed OBJ/OFF readers, our PLY/PCD/LAS readers, the PLY writer.
+# I/O: OpenMesh-backed OBJ/OFF readers, our PLY/PCD/LAS readers, the PLY writer, the 3-D Gaussian
+# readers (3DGS PLY, .splat, .spz) and writer.
 # OpenMesh is linked PRIVATE in the top-level CMakeLists (OpenMeshCore); liblzf decodes
-# PCD's binary_compressed data. Neither appears in a public header.
+# PCD's binary_compressed data; zlib and libzstd decompress .spz (gzip: versions 1–3; zstd:
+# version 4). None appears in a public header.
 target_sources(pbr_lod PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/common.cpp
   ${CMAKE_CURRENT_LIST_DIR}/read.cpp
   ${CMAKE_CURRENT_LIST_DIR}/ply_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/ply_writer.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/gaussian_reader.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/gaussian_writer.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/spz_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/openmesh_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/pcd_reader.cpp
   ${CMAKE_CURRENT_LIST_DIR}/las_reader.cpp
@@ -23,3 +28,8 @@ else()
   target_include_directories(pbr_lod PRIVATE ${PBR_LOD_LZF_INCLUDE_DIR})
   target_link_libraries(pbr_lod PRIVATE ${PBR_LOD_LZF_LIBRARY})
 endif()
+
+# .spz: Debian's zlib1g-dev (CMake's FindZLIB) and libzstd-dev (pkg-config libzstd).
+find_package(ZLIB REQUIRED)
+pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
+target_link_libraries(pbr_lod PRIVATE ZLIB::ZLIB PkgConfig::ZSTD)

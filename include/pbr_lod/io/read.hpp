@@ -38,6 +38,11 @@ struct read_report {
   std::size_t faces_dropped = 0;  ///< triangles not returned: using a dropped vertex, or degenerate
                                   ///< (a face repeating a vertex index, or with < 3 vertices)
   std::vector<std::string> warnings;  ///< one line each, starting with the file name
+  // Gaussian files (io/gaussians.hpp) only; points_read and dropped_non_finite count Gaussians.
+  std::size_t dropped_bad_gaussians = 0;  ///< dropped for a non-finite scale or a NaN opacity
+  std::size_t rotations_reset = 0;  ///< zero or non-finite quaternions replaced by the identity
+  std::size_t values_clamped = 0;   ///< ±inf opacity logits (→ 1 / 0), non-finite SH (→ 0),
+                                    ///< negative linear scales (→ |s|)
 };
 
 /// Reads a triangle mesh from a .ply, .obj or .off file. Polygons are fan-triangulated. A file
