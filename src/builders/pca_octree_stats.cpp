@@ -254,8 +254,8 @@ pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov) {
 // ---------------------------------------------------------------------------------------------
 // What a node's points span.
 // ---------------------------------------------------------------------------------------------
-void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
-                      const rgb8* c, std::size_t count, double parent_spacing) {
+double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
+                        const rgb8* c, std::size_t count, double parent_spacing) {
   const mat3d ft = nd.frame.cast<double>().transpose();
   const vec3d mu = nd.mean.cast<double>();
   vec3d e = vec3d::Zero();
@@ -273,8 +273,8 @@ void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const ve
                   0.5 * parent_spacing});
   }
   h = std::min(h, nd.cell_size);
-  // Only along the directions the points spread in: the points of a line (or of a scan line)
-  // stay on it, one point stays a point.
+  // Here only along the directions the points spread in; pca_widen_leaf() widens the others
+  // when the parent's points span a surface (a line of points, one point, stays one otherwise).
   const double flat = 1e-6 * std::max(e.x(), mu.cwiseAbs().maxCoeff());
   if (e.x() > flat) e.x() += h;
   if (e.y() > flat) e.y() += h;
@@ -285,12 +285,43 @@ void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const ve
     theta =
         std::max(theta, std::acos(std::clamp(z.dot(n[i].cast<double>().normalized()), -1.0, 1.0)));
   nd.normal_extent = static_cast<float>(theta);
-  if (colour == nullptr) return;
+  if (colour == nullptr) return h;
   const vec3d cm = colour->mean.cast<double>();
   double r = 0;
   for (std::size_t i = 0; i < count; ++i)
     r = std::max(r, (vec3d(c[i].r, c[i].g, c[i].b) / 255.0 - cm).norm());
   colour->extent = static_cast<float>(r);
+  return h;
+}
+
+void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame) {
+  // A tangential direction pca_leaf_extents() widened is at least its spacing wide; one it left
+  // is at most float rounding of the coordinates.
+  const bool along1 = static_cast<double>(nd.extent.x()) >= h;
+  const bool along2 = static_cast<double>(nd.extent.y()) >= h;
+  if (along1 && along2) return;
+  // The directions the leaf's points do not span are taken in the parent's surface: its plane
+  // for one point (or coincident ones), the line's direction and the parent's normal for a line.
+  const mat3d pf = parent_frame.cast<double>();
+  const vec3d normal = nd.normal_frame.col(2).cast<double>();
+  vec3d f1 = pf.col(0), f3 = pf.col(2);
+  if (along1 || along2) {
+    f1 = nd.frame.col(along1 ? 0 : 1).cast<double>();
+    f3 -= f1 * f1.dot(f3);
+    if (!(f3.norm() > 1e-3)) return;  // a line across the parent's plane: leave it a line
+    f3.normalize();
+  }
+  nd.frame = canonical_frame(f1, f3, normal).cast<float>();
+  if (along1 || along2) {  // the line's direction is f¹ now (σ and extent follow it)
+    if (along2) {
+      std::swap(nd.sigma.x(), nd.sigma.y());
+      std::swap(nd.extent.x(), nd.extent.y());
+    }
+    nd.extent.y() = static_cast<float>(static_cast<double>(nd.extent.y()) + h);
+  } else {
+    nd.extent.x() = static_cast<float>(static_cast<double>(nd.extent.x()) + h);
+    nd.extent.y() = static_cast<float>(static_cast<double>(nd.extent.y()) + h);
+  }
 }
 
 void pca_inner_extents(pca_data& d, std::size_t i) {

@@ -271,7 +271,7 @@ TEST(pca_octree, HysteresisCutIsFinerAndCovers) {
   std::size_t visits[3] = {}, points[3] = {}, merges[2] = {}, splits = 0, finer_frames = 0;
   for (int f = 0; f < 16; ++f) {
     const double dist = f < 8 ? 4.0 - 0.35 * f : 1.2 + 0.35 * (f - 8);
-    const view v(camera::orbit(c, r, 22.5 * f, 10, dist, 1, viewport{96, 72}), t.origin());
+    const view v(camera::orbit(c, r, 22.5 * f, 10, dist, 1, viewport{128, 96}), t.origin());
     const traverse_options o{.backface_cull = true};
     buffer_sink<with_normals_colours> a, b, h;
     std::vector<std::uint32_t> fresh_drawn;
