@@ -48,8 +48,8 @@ double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const 
                         const rgb8* c, std::size_t count, double parent_spacing);
 /// A leaf whose parent's points span a surface (not a line or a point): the tangential
 /// directions its own points do not spread in (one point, two, a line of them — a scan line)
-/// are widened by h too, so that it covers the patch its points stand for; they are taken in
-/// the parent's plane (parent_frame), so the leaf's frame turns about its points.
+/// are widened by h too, so that it covers the patch its points stand for — when its frame's
+/// f³ (its normal where its points span no plane) is within 30° of the parent's (parent_frame).
 void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame);
 /// The same for inner node i of d from its children's (set before): the box of their boxes'
 /// corners in its frame, the cone of their cones, the ball of their colour balls.

@@ -295,33 +295,19 @@ double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const 
 }
 
 void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame) {
+  // The leaf's frame follows its points' normal where they do not span a plane (§3's degenerate
+  // rules): one point with its normal is a surface element, the input's own render draws it as
+  // a disk across that normal. Trusted only where it agrees with the parent's surface: a normal
+  // more than 30° off tilts the widened box by more than h/2 out of the parent's plane, and the
+  // leaf stays what its points span.
+  const double agree =
+      std::abs(nd.frame.col(2).cast<double>().dot(parent_frame.col(2).cast<double>()));
+  if (!(agree >= std::cos(std::numbers::pi / 6))) return;
   // A tangential direction pca_leaf_extents() widened is at least its spacing wide; one it left
   // is at most float rounding of the coordinates.
-  const bool along1 = static_cast<double>(nd.extent.x()) >= h;
-  const bool along2 = static_cast<double>(nd.extent.y()) >= h;
-  if (along1 && along2) return;
-  // The directions the leaf's points do not span are taken in the parent's surface: its plane
-  // for one point (or coincident ones), the line's direction and the parent's normal for a line.
-  const mat3d pf = parent_frame.cast<double>();
-  const vec3d normal = nd.normal_frame.col(2).cast<double>();
-  vec3d f1 = pf.col(0), f3 = pf.col(2);
-  if (along1 || along2) {
-    f1 = nd.frame.col(along1 ? 0 : 1).cast<double>();
-    f3 -= f1 * f1.dot(f3);
-    if (!(f3.norm() > 1e-3)) return;  // a line across the parent's plane: leave it a line
-    f3.normalize();
-  }
-  nd.frame = canonical_frame(f1, f3, normal).cast<float>();
-  if (along1 || along2) {  // the line's direction is f¹ now (σ and extent follow it)
-    if (along2) {
-      std::swap(nd.sigma.x(), nd.sigma.y());
-      std::swap(nd.extent.x(), nd.extent.y());
-    }
-    nd.extent.y() = static_cast<float>(static_cast<double>(nd.extent.y()) + h);
-  } else {
-    nd.extent.x() = static_cast<float>(static_cast<double>(nd.extent.x()) + h);
-    nd.extent.y() = static_cast<float>(static_cast<double>(nd.extent.y()) + h);
-  }
+  for (int k = 0; k < 2; ++k)
+    if (static_cast<double>(nd.extent[k]) < h)
+      nd.extent[k] = static_cast<float>(static_cast<double>(nd.extent[k]) + h);
 }
 
 void pca_inner_extents(pca_data& d, std::size_t i) {
