@@ -1,6 +1,7 @@
-// What every chunked build's folder shares: the checks of builders/chunked.hpp.
+// What every chunked build shares: the budget rule and the folder checks of builders/chunked.hpp.
 #include "pbr_lod/builders/chunked.hpp"
 
+#include <algorithm>
 #include <filesystem>
 
 #include "pbr_lod/core/atomic_file.hpp"
@@ -9,6 +10,15 @@
 namespace pbr_lod {
 
 namespace fs = std::filesystem;
+
+std::uint64_t chunk_points_for(std::uint64_t memory_bytes, std::uint64_t chunk_points,
+                               const chunk_cost& cost) {
+  const std::uint64_t per_chunk =
+      std::max<std::uint64_t>(1, cost.bytes_per_point * std::max(1u, cost.chunks_at_once));
+  const std::uint64_t n =
+      chunk_points ? chunk_points : std::max<std::uint64_t>(1, memory_bytes / per_chunk);
+  return std::clamp<std::uint64_t>(n, cost.least, (1u << 31) - 1);
+}
 
 void check_chunked_folder(const std::string& dir) {
   std::error_code ec;

@@ -152,7 +152,7 @@ struct chunked_pca_builder : chunked_pass_base {
                       const chunked_pca_octree_options& o)
       : chunked_pass_base(s, d, o.block_points, o.distributed, "build_pca_octree_chunked"),
         opt(o),
-        po(o.pca),
+        po(o.builder),
         n(s.size()),
         in(s.attrs()) {
     po.progress = {};
@@ -160,15 +160,13 @@ struct chunked_pca_builder : chunked_pass_base {
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pca_octree_chunked: more than 2^32 - 2 points");
     workers = pca_threads(po.threads);
-    chunk_points = opt.chunk_points
-                       ? opt.chunk_points
-                       : std::max<std::uint64_t>(
-                             1, opt.memory_bytes / (chunked_pca_bytes_per_point * workers));
-    chunk_points = std::clamp<std::uint64_t>(chunk_points, po.leaf_size, (1u << 31) - 1);
+    // Chunks are built `workers` at a time (over_my_chunks).
+    chunk_points = chunk_points_for(opt.memory_bytes, opt.chunk_points,
+                                    {chunked_pca_bytes_per_point, workers, po.leaf_size});
   }
 
   void progress(double f) const {
-    if (opt.pca.progress && !opt.pca.progress(f))
+    if (opt.builder.progress && !opt.builder.progress(f))
       throw Cancelled("build_pca_octree_chunked: cancelled");
   }
   [[nodiscard]] vec3d local(const vec3f& p) const { return p.cast<double>() - centre_rel; }

@@ -65,19 +65,16 @@ struct chunked_pmr_builder : chunked_pass_base {
   chunked_pmr_builder(const point_source& s, const std::string& d, const chunked_pmr_options& o)
       : chunked_pass_base(s, d, o.block_points, o.distributed, "build_pmr_chunked"),
         opt(o),
-        po(o.pmr),
+        po(o.builder),
         n(s.size()) {
     validate_pmr_options(po);
     po.progress = {};
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pmr_chunked: more than 2^32 - 2 points");
     workers = resolve_threads(po.threads);
-    // Chunks are built `workers` at a time: the budget is theirs together.
-    chunk_points = opt.chunk_points
-                       ? opt.chunk_points
-                       : std::max<std::uint64_t>(
-                             1, opt.memory_bytes / (chunked_pmr_bytes_per_point * workers));
-    chunk_points = std::clamp<std::uint64_t>(chunk_points, po.max_leaf_points, (1u << 31) - 1);
+    // Chunks are built `workers` at a time (build_parts).
+    chunk_points = chunk_points_for(opt.memory_bytes, opt.chunk_points,
+                                    {chunked_pmr_bytes_per_point, workers, po.max_leaf_points});
     // A triangulation never spans chunks (nor its neighbours beyond a chunk's halo): equal to
     // build_pmr with triangulation_points at most chunk_points.
     po.triangulation_points =
@@ -87,7 +84,8 @@ struct chunked_pmr_builder : chunked_pass_base {
   }
 
   void progress(double f) const {
-    if (opt.pmr.progress && !opt.pmr.progress(f)) throw Cancelled("build_pmr_chunked: cancelled");
+    if (opt.builder.progress && !opt.builder.progress(f))
+      throw Cancelled("build_pmr_chunked: cancelled");
   }
 
   [[nodiscard]] vec3d local(const vec3f& p) const {

@@ -108,7 +108,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
     vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
   };
 
-  const chunked_build_options& opt;
+  const chunked_point_octree_options& opt;
   point_octree_options oo;  // the octree options without the progress callback
   unsigned threads;
   std::uint64_t n;
@@ -123,22 +123,20 @@ struct chunked_point_octree_builder : chunked_pass_base {
   std::uint64_t missing = 0;  // input normals zero or not finite (the structure pass counts)
 
   chunked_point_octree_builder(const point_source& s, const std::string& d,
-                               const chunked_build_options& o)
+                               const chunked_point_octree_options& o)
       : chunked_pass_base(s, d, o.block_points, o.distributed, "build_point_octree_chunked"),
         opt(o),
-        oo(o.octree),
+        oo(o.builder),
         n(s.size()) {
     oo.progress = {};
     threads = resolve_threads(oo.threads);
-    chunk_points = opt.chunk_points
-                       ? opt.chunk_points
-                       : std::max<std::uint64_t>(1, opt.memory_bytes / chunk_bytes_per_point);
-    chunk_points = std::clamp<std::uint64_t>(chunk_points, oo.leaf_size, (1u << 31) - 1);
+    chunk_points = chunk_points_for(opt.memory_bytes, opt.chunk_points,
+                                    {chunk_bytes_per_point, 1, oo.leaf_size});
     if (oo.normal_bits > 0) quant = normal_quantizer::shared(oo.normal_bits);
   }
 
   void progress(double f) const {
-    if (opt.octree.progress && !opt.octree.progress(f))
+    if (opt.builder.progress && !opt.builder.progress(f))
       throw Cancelled("build_point_octree_chunked: cancelled");
   }
 
@@ -668,7 +666,7 @@ std::string chunk_file_name(std::uint32_t c) {
 }
 
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
-                                                const chunked_build_options& options) {
+                                                const chunked_point_octree_options& options) {
   const attributes a = src.attrs();
   return detail::build_or_keep(dir, "build_point_octree_chunked", [&] {
     if (a.normal && a.colour)

@@ -66,11 +66,11 @@ class ChunkedPca : public ::testing::Test {
     cloud_ = new point_cloud(surface_with_duplicates(14000));
     dir_ = new std::string(temp_dir("equal"));
     chunked_pca_octree_options o;
-    o.pca = small_codebooks();
+    o.builder = small_codebooks();
     o.chunk_points = 600;
     report_ =
         new chunked_build_report(build_pca_octree_chunked(cloud_point_source(*cloud_), *dir_, o));
-    memory_ = new pca_octree<NC>(in_memory(*cloud_, o.pca));
+    memory_ = new pca_octree<NC>(in_memory(*cloud_, o.builder));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -166,7 +166,7 @@ TEST(ChunkedPcaOptions, UnquantisedAndOneChunkEqualTheInMemoryBuild) {
   q.quantise = false;
   for (const std::uint64_t chunk : {std::uint64_t{400}, std::uint64_t{0}}) {
     chunked_pca_octree_options o;
-    o.pca = q;
+    o.builder = q;
     o.chunk_points = chunk;
     const std::string dir = temp_dir("float" + std::to_string(chunk));
     const auto r = build_pca_octree_chunked(cloud_point_source(c), dir, o);
@@ -181,8 +181,8 @@ void expect_three_ranks_write_the_one_process_folder(const point_cloud& c,
                                                      const std::string& name) {
   const cloud_point_source src(c);
   chunked_pca_octree_options o;
-  o.pca = small_codebooks();
-  o.pca.threads = 1;
+  o.builder = small_codebooks();
+  o.builder.threads = 1;
   o.chunk_points = 500;
   const std::string one = temp_dir(name + "_one"), many = temp_dir(name + "_many");
   const chunked_build_report r1 = build_pca_octree_chunked(src, one, o);
@@ -219,12 +219,12 @@ TEST(ChunkedPcaFiles, BadInputAndDamagedDirectoriesAreErrors) {
                InvalidArgument);
   point_cloud c = make_wavy_surface(4000, 4);
   chunked_pca_octree_options bad;
-  bad.pca.gamma = 0;
+  bad.builder.gamma = 0;
   EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(c), temp_dir("b"), bad),
                InvalidArgument);
   const std::string dir = temp_dir("damage");
   chunked_pca_octree_options o;
-  o.pca = small_codebooks();
+  o.builder = small_codebooks();
   o.chunk_points = 600;
   (void)build_pca_octree_chunked(cloud_point_source(c), dir, o);
   EXPECT_TRUE(is_chunked_pca_octree(dir));
@@ -267,7 +267,7 @@ TEST(ChunkedPcaFiles, MissingNormalsAreEstimatedAcrossChunks) {
   ++zeroed;
   bare.normals.clear();
   chunked_pca_octree_options o;
-  o.pca.quantise = false;  // compare the statistics, not codebooks trained on them
+  o.builder.quantise = false;  // compare the statistics, not codebooks trained on them
   o.chunk_points = 800;
   const std::string truth = temp_dir("mn_truth"), dsome = temp_dir("mn_some"),
                     dbare = temp_dir("mn_bare");
@@ -281,9 +281,9 @@ TEST(ChunkedPcaFiles, MissingNormalsAreEstimatedAcrossChunks) {
   EXPECT_TRUE(rb.estimated_normals);
   EXPECT_GT(rb.halo_points, 0u);
   const auto t = node_means(truth), a = node_means(dsome), b = node_means(dbare);
-  const auto memory_some = build_pca_octree(point_set<NC>::from(some), o.pca);
+  const auto memory_some = build_pca_octree(point_set<NC>::from(some), o.builder);
   const auto memory_bare =
-      build_pca_octree(point_set<attributes{.colour = true}>::from(bare), o.pca);
+      build_pca_octree(point_set<attributes{.colour = true}>::from(bare), o.builder);
   const auto& ms = memory_some.nodes();
   const auto& mb = memory_bare.nodes();
   ASSERT_EQ(a.size(), ms.size());

@@ -83,10 +83,10 @@ class ChunkedPmr : public ::testing::Test {
     cloud_ = new point_cloud(surface_with_duplicates(14000));
     dir_ = new std::string(temp_dir("equal"));
     chunked_pmr_options o;
-    o.pmr = small_leaves();
+    o.builder = small_leaves();
     o.chunk_points = 1500;
     report_ = new chunked_build_report(build_pmr_chunked(cloud_point_source(*cloud_), *dir_, o));
-    memory_ = new pmr_hierarchy(build_pmr(*cloud_, o.pmr));
+    memory_ = new pmr_hierarchy(build_pmr(*cloud_, o.builder));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -175,13 +175,13 @@ TEST(ChunkedPmrEstimated, WithoutInputNormalsOnlySignsDiffer) {
   point_cloud c = make_wavy_surface(9000, 3);
   c.normals.clear();
   chunked_pmr_options o;
-  o.pmr = small_leaves();
+  o.builder = small_leaves();
   o.chunk_points = 1200;
   const std::string dir = temp_dir("signs");
   const auto r = build_pmr_chunked(cloud_point_source(c), dir, o);
   EXPECT_GE(r.chunks, 6u);
   const pmr_hierarchy whole = H::open(dir).assemble();
-  const pmr_hierarchy memory = build_pmr(c, o.pmr);
+  const pmr_hierarchy memory = build_pmr(c, o.builder);
   EXPECT_EQ(whole.positions(), memory.positions());
   EXPECT_EQ(whole.source(), memory.source());
   EXPECT_TRUE(whole.nodes() == memory.nodes());
@@ -209,15 +209,15 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
   // scan's open base — stay under 1 %.
   const point_cloud c = read_points(test::data_file("bun_zipper_res2.ply"));
   chunked_pmr_options o;
-  o.pmr.max_leaf_points = 1000;
-  o.pmr.triangulation_points = 1000;  // as the chunks: the same Voronoi work
-  o.pmr.neighbour_leaves = false;
+  o.builder.max_leaf_points = 1000;
+  o.builder.triangulation_points = 1000;  // as the chunks: the same Voronoi work
+  o.builder.neighbour_leaves = false;
   o.chunk_points = 1000;
   const std::string dir = temp_dir("bunny");
   const auto r = build_pmr_chunked(cloud_point_source(c), dir, o);
   EXPECT_GE(r.chunks, 30u);
   const pmr_hierarchy whole = chunked_pmr<with_normals>::open(dir).assemble();
-  const pmr_hierarchy memory = build_pmr(c, o.pmr);
+  const pmr_hierarchy memory = build_pmr(c, o.builder);
   ASSERT_EQ(whole.positions(), memory.positions());
   std::size_t flipped = 0;
   for (std::uint32_t l = 0; l < whole.leaf_count(); ++l) {
@@ -241,8 +241,8 @@ TEST(ChunkedPmrDistributed, ThreeRanksWriteTheOneProcessFolder) {
   c.normals.clear();
   const cloud_point_source src(c);
   chunked_pmr_options o;
-  o.pmr = small_leaves();
-  o.pmr.threads = 1;
+  o.builder = small_leaves();
+  o.builder.threads = 1;
   o.chunk_points = 1000;
   const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
   const chunked_build_report r1 = build_pmr_chunked(src, one, o);
@@ -279,12 +279,12 @@ TEST(ChunkedPmrFiles, BadInputAndDamagedDirectoriesAreErrors) {
   EXPECT_THROW((void)build_pmr_chunked(cloud_point_source(empty), temp_dir("e"), {}),
                InvalidArgument);
   chunked_pmr_options bad;
-  bad.pmr.rho = {0.5f, 0.2f};
+  bad.builder.rho = {0.5f, 0.2f};
   const point_cloud c = make_wavy_surface(5000, 4);
   EXPECT_THROW((void)build_pmr_chunked(cloud_point_source(c), temp_dir("b"), bad), InvalidArgument);
   const std::string dir = temp_dir("damage");
   chunked_pmr_options o;
-  o.pmr = small_leaves();
+  o.builder = small_leaves();
   o.chunk_points = 800;
   (void)build_pmr_chunked(cloud_point_source(c), dir, o);
   EXPECT_THROW((void)chunked_pmr<with_normals>::open(dir), FormatError)

@@ -103,7 +103,7 @@ class ChunkedPointOctree : public ::testing::Test {
   static void SetUpTestSuite() {
     cloud_ = new point_cloud(surface_with_strays(60000));
     dir_ = new std::string(temp_dir("equal"));
-    chunked_build_options o;
+    chunked_point_octree_options o;
     o.chunk_points = 2500;  // ~50 chunks over 3-4 levels of top nodes
     report_ =
         new chunked_build_report(build_point_octree_chunked(cloud_point_source(*cloud_), *dir_, o));
@@ -232,16 +232,16 @@ TEST(ChunkedPointOctreeEstimated, PositionsOnlyWithViewpointEqualsInMemory) {
   // chunk point the neighbours it has in the whole input.
   const generated_point_source src(40000, 3, /*normals=*/false, /*colours=*/false);
   const point_cloud all = read_all(src);
-  chunked_build_options o;
+  chunked_point_octree_options o;
   o.chunk_points = 3000;
-  o.octree.viewpoint = vec3d(0.3, 5.0, 0.2);
+  o.builder.viewpoint = vec3d(0.3, 5.0, 0.2);
   const std::string dir = temp_dir("estimated");
   const chunked_build_report r = build_point_octree_chunked(src, dir, o);
   EXPECT_GE(r.chunks, 10u);
   EXPECT_TRUE(r.estimated_normals);
   using H = chunked_point_octree<point_octree_attributes(attributes{})>;
   const auto whole = H::open(dir).assemble();
-  const auto memory = build_point_octree(point_set<attributes{}>::from(all), o.octree);
+  const auto memory = build_point_octree(point_set<attributes{}>::from(all), o.builder);
   EXPECT_TRUE(whole == memory);
   fs::remove_all(dir);
 }
@@ -256,7 +256,7 @@ TEST(ChunkedPointOctreeEstimated, ZeroNormalsAreEstimatedAndCounted) {
   for (std::size_t i = 0; i < c.size(); i += 6, ++zeroed) c.normals[i].setZero();
   c.normals[1].z() = std::numeric_limits<float>::infinity();
   ++zeroed;
-  chunked_build_options o;
+  chunked_point_octree_options o;
   o.chunk_points = 3000;
   const std::string dir = temp_dir("zero_normals");
   const chunked_build_report r = build_point_octree_chunked(cloud_point_source(c), dir, o);
@@ -266,7 +266,7 @@ TEST(ChunkedPointOctreeEstimated, ZeroNormalsAreEstimatedAndCounted) {
   using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
   const auto whole = H::open(dir).assemble();
   const auto memory =
-      build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(c), o.octree);
+      build_point_octree(point_set<attributes{.normal = true, .colour = true}>::from(c), o.builder);
   EXPECT_EQ(memory.stats().normals_filled, zeroed);
   ASSERT_EQ(whole.samples().size(), memory.samples().size());
   ASSERT_EQ(whole.nodes().size(), memory.nodes().size());
@@ -289,7 +289,7 @@ TEST(ChunkedPointOctreeEstimated, AllZeroNormalsTakeOneOrientationOverTheChunks)
   const point_cloud truth = make_wavy_surface(20000, 6);
   point_cloud c = truth;
   for (auto& n : c.normals) n.setZero();
-  chunked_build_options o;
+  chunked_point_octree_options o;
   o.chunk_points = 2500;
   const std::string dir = temp_dir("all_zero_normals");
   const chunked_build_report r = build_point_octree_chunked(cloud_point_source(c), dir, o);
@@ -327,13 +327,13 @@ TEST(ChunkedPointOctreeEstimated, GraphOrientationDiffersOnlyInSign) {
   // Without a viewpoint the signs are propagated over the k-NN graph, which a chunk and its
   // halo see only part of: the normals agree up to sign, the tree's structure exactly.
   const generated_point_source src(30000, 5, false, false);
-  chunked_build_options o;
+  chunked_point_octree_options o;
   o.chunk_points = 3000;
   const std::string dir = temp_dir("mst");
   (void)build_point_octree_chunked(src, dir, o);
   using H = chunked_point_octree<point_octree_attributes(attributes{})>;
   const auto whole = H::open(dir).assemble();
-  const auto memory = build_point_octree(point_set<attributes{}>::from(read_all(src)), o.octree);
+  const auto memory = build_point_octree(point_set<attributes{}>::from(read_all(src)), o.builder);
   ASSERT_EQ(whole.samples().size(), memory.samples().size());
   ASSERT_EQ(whole.nodes().size(), memory.nodes().size());
   std::size_t off = 0;
@@ -349,15 +349,15 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
   // Three "ranks" as threads with a barrier: the halo radii, estimation and chunk builds are
   // shared round robin, rank 0 writes the chunk files and the top — the same bytes as one process.
   const generated_point_source src(30000, 9, false, true);
-  chunked_build_options o;
+  chunked_point_octree_options o;
   o.chunk_points = 2000;
-  o.octree.threads = 1;
+  o.builder.threads = 1;
   const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
   const chunked_build_report r1 = build_point_octree_chunked(src, one, o);
   ASSERT_GE(r1.chunks, 8u);
   // An earlier build in `many` with more chunks: the ranks' folder replaces it whole (a chunk
   // file of the earlier build left behind would be one file too many below).
-  chunked_build_options finer = o;
+  chunked_point_octree_options finer = o;
   finer.chunk_points = 400;
   ASSERT_GT(build_point_octree_chunked(src, many, finer).chunks, r1.chunks);
   std::barrier sync(3);
@@ -365,7 +365,7 @@ TEST(ChunkedPointOctreeDistributed, ThreeRanksWriteTheOneProcessFolder) {
   std::vector<std::thread> ranks;
   for (int rank = 0; rank < 3; ++rank)
     ranks.emplace_back([&, rank] {
-      chunked_build_options mine = o;
+      chunked_point_octree_options mine = o;
       mine.distributed.rank = rank;
       mine.distributed.ranks = 3;
       mine.distributed.barrier = [&] { sync.arrive_and_wait(); };
@@ -397,7 +397,7 @@ TEST(ChunkedPointOctreeFiles, OneChunkWhenTheInputFits) {
   std::vector<std::thread> ranks;
   for (int rank = 0; rank < 2; ++rank)
     ranks.emplace_back([&, rank] {
-      chunked_build_options o;
+      chunked_point_octree_options o;
       o.distributed = {rank, 2, [&] { sync.arrive_and_wait(); }};
       (void)build_point_octree_chunked(cloud_point_source(c), ranks_dir, o);
     });
@@ -413,7 +413,7 @@ TEST(ChunkedPointOctreeFiles, BadInputAndDamagedDirectoriesAreErrors) {
                InvalidArgument);
   point_cloud c = make_wavy_surface(20000, 4);
   const std::string dir = temp_dir("damage");
-  chunked_build_options o;
+  chunked_point_octree_options o;
   o.chunk_points = 4000;
   (void)build_point_octree_chunked(cloud_point_source(c), dir, o);
   using H = chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;

@@ -1,13 +1,61 @@
-// pbr_lod — what every chunked (out-of-core) build shares: its report and its top file's name.
-// The builds: builders/chunked_point_octree.hpp, chunked_pca_octree.hpp, chunked_pmr.hpp
-// (docs/scale.md).
+// pbr_lod — the out-of-core layer every chunked build shares: its options and memory budget, its
+// report, its folder's checks, and the lazy reader of a chunked folder.
+//
+// A chunked build streams a point_source too large for memory into chunks, builds each chunk in
+// memory on its own (from the chunk's points and a halo of its neighbours'), and writes a folder:
+// a top file with the nodes above the chunks, and one file per chunk. A builder plugs in by
+// supplying its own per-chunk build, the merge of the chunks' roots into the top, and its records
+// (docs/adding-a-builder.md, "Out of core"). The builds: builders/chunked_point_octree.hpp,
+// chunked_pca_octree.hpp, chunked_pmr.hpp (docs/scale.md).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
+#include "pbr_lod/core/point_source.hpp"
+
 namespace pbr_lod {
+
+/// The options of a chunked build of the builder whose in-memory options are `BuilderOptions`:
+/// the same four knobs for every builder.
+template <class BuilderOptions>
+struct chunked_options {
+  /// The in-memory builder's options, which every chunk is built with (its progress callback
+  /// reports the whole build).
+  BuilderOptions builder{};
+  /// The memory the whole build may use (one process: each rank of a distributed build is given
+  /// the same budget). Unless chunk_points is given, chunks are made small enough that every
+  /// chunk the process builds at once fits it together: chunk_points = memory_bytes /
+  /// (bytes per point × chunks built at once), see chunk_points_for.
+  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
+  /// Most samples in one chunk (0: from memory_bytes). At least the builder's leaf size.
+  std::uint64_t chunk_points = 0;
+  /// Points per block read from the source in the streaming passes.
+  std::size_t block_points = std::size_t{1} << 20;
+  /// A build shared by `ranks` processes (MPI ranks, say) that see the output on a shared file
+  /// system: each calls the build with its rank and a barrier over all of them. Every rank reads
+  /// the source in the structure passes; rank 0 writes the chunk and halo files and the top;
+  /// chunk c is built by rank c mod ranks. The folder is byte-identical to a one-process build. A
+  /// rank that throws leaves the others waiting at the barrier: the caller aborts the job.
+  distributed_build distributed{};
+};
+
+/// What a builder's chunks cost, for the budget rule.
+struct chunk_cost {
+  /// Peak bytes of one chunk's build per sample (each builder measures its own).
+  std::uint64_t bytes_per_point = 512;
+  /// Chunks the builder has in memory at once: 1 when it builds them one after another on all
+  /// threads, the thread count when it builds them side by side (one thread each).
+  unsigned chunks_at_once = 1;
+  /// The fewest samples a chunk may be given (the builder's leaf size).
+  std::uint64_t least = 1;
+};
+
+/// The budget rule, the one place it is written: `chunk_points` when given, else memory_bytes /
+/// (bytes_per_point × chunks_at_once); at least cost.least, at most 2³¹ − 1.
+[[nodiscard]] std::uint64_t chunk_points_for(std::uint64_t memory_bytes, std::uint64_t chunk_points,
+                                             const chunk_cost& cost);
 
 /// What a chunked build did (the steps are each build's; its header numbers them).
 struct chunked_build_report {

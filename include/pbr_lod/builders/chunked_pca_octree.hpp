@@ -54,22 +54,10 @@
 
 namespace pbr_lod {
 
-struct chunked_pca_octree_options {
-  pca_octree_options pca{};
-  /// The memory the chunk builds may use together: chunks are built pca.threads at a time (one
-  /// thread each) when there are at least that many, so chunk_points = memory_bytes /
-  /// (chunked_pca_bytes_per_point × threads) unless chunk_points is given.
-  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
-  /// Most points in one chunk (0: from memory_bytes). At least pca.leaf_size.
-  std::uint64_t chunk_points = 0;
-  /// Points per block read from the source in the streaming passes.
-  std::size_t block_points = std::size_t{1} << 20;
-  /// Shared among ranks (as the point-octree's chunked_build_options::distributed): every rank
-  /// reads the source in the bounds and structure passes; rank 0 distributes, computes the top and
-  /// the codebooks and writes the top file; chunk c is built by rank c mod ranks. The folder is
-  /// byte-identical to a one-process build.
-  distributed_build distributed{};
-};
+/// The chunked PCA octree's options (builders/chunked.hpp): `builder` the in-memory build's.
+/// Its chunks are built builder.threads at a time (one thread each), so the budget is theirs
+/// together.
+using chunked_pca_octree_options = chunked_options<pca_octree_options>;
 
 /// Peak bytes of a chunk's build per point: positions (twice), normals (twice), colours, the
 /// permutation, the nodes (≈ one per three points at leaf_size 8) with their ranges.
@@ -81,7 +69,7 @@ inline constexpr std::uint64_t chunked_pca_bytes_per_point = 256;
 /// normals are used; else step 3's estimation) and chunk_build_seconds steps 4 and 6. Throws
 /// InvalidArgument on an empty source, non-finite positions, more than
 /// 2³² − 2 points or bad options; IoError when the directory cannot be written; Cancelled
-/// through options.pca.progress.
+/// through options.builder.progress.
 chunked_build_report build_pca_octree_chunked(const point_source& src, const std::string& dir,
                                               const chunked_pca_octree_options& options = {});
 

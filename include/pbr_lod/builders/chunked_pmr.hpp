@@ -56,22 +56,9 @@
 
 namespace pbr_lod {
 
-struct chunked_pmr_options {
-  pmr_options pmr{};
-  /// The memory the chunk builds may use together: chunks are built pmr.threads at a time (one
-  /// thread each) when there are at least that many, so chunk_points = memory_bytes /
-  /// (chunked_pmr_bytes_per_point × threads) unless chunk_points is given.
-  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
-  /// Most samples in one chunk (0: from memory_bytes). At least pmr.max_leaf_points.
-  std::uint64_t chunk_points = 0;
-  /// Points per block read from the source in the streaming passes.
-  std::size_t block_points = std::size_t{1} << 20;
-  /// Shared among ranks (as the point-octree's chunked_build_options::distributed): every rank
-  /// reads the source in the bounds and structure passes; rank 0 distributes, gathers the normals
-  /// and writes the top; chunk c is built by rank c mod ranks. The folder is byte-identical to a
-  /// one-process build.
-  distributed_build distributed{};
-};
+/// The chunked PMR's options (builders/chunked.hpp): `builder` the in-memory build's. Its
+/// chunks are built builder.threads at a time (one thread each), so the budget is theirs together.
+using chunked_pmr_options = chunked_options<pmr_options>;
 
 /// Peak bytes of a chunk's build per own sample: its records and halo, one leaf's triangulation
 /// at a time, the part's records. Measured ≈ 340 with halos of half the chunk (docs/scale.md);
@@ -83,7 +70,7 @@ inline constexpr std::uint64_t chunked_pmr_bytes_per_point = 512;
 /// docs/scale.md). In the report, estimation_seconds is step 4 (the parts: the Voronoi work) and
 /// chunk_build_seconds steps 5–6. Throws InvalidArgument on an empty source, non-finite positions,
 /// more than 2³² − 2 points or bad options; IoError when the directory cannot be written; Cancelled
-/// through options.pmr.progress.
+/// through options.builder.progress.
 chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
                                        const chunked_pmr_options& options = {});
 

@@ -32,7 +32,7 @@
 //
 // Equal to the in-memory build: every chunk's subtree, its samples and every top node equal
 // build_point_octree's (chunked_point_octree::assemble() returns that tree), given
-//  * normals in the input, or normals oriented towards a viewpoint (options.octree.viewpoint):
+//  * normals in the input, or normals oriented towards a viewpoint (options.builder.viewpoint):
 //    the default orientation propagates signs over the k-NN graph of the whole input, which a
 //    chunk and its halo only see part of — a chunk's normals may then come out flipped as a
 //    whole relative to the in-memory build;
@@ -57,35 +57,21 @@
 
 namespace pbr_lod {
 
-struct chunked_build_options {
-  point_octree_options octree{};
-  /// The memory a chunk's build may use; chunk_points = memory_bytes / chunk_bytes_per_point
-  /// unless chunk_points is given.
-  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
-  /// Most samples in one chunk (0: from memory_bytes). At least leaf_size.
-  std::uint64_t chunk_points = 0;
-  /// Points per block read from the source in the streaming passes.
-  std::size_t block_points = std::size_t{1} << 20;
-  /// A build shared by `ranks` processes (MPI ranks, say) that see `dir` on a shared file
-  /// system: each calls build_point_octree_chunked with its rank and a barrier over all of them.
-  /// Every rank reads the source in the structure and attribute passes; rank 0 writes the
-  /// chunk and halo files and the top; halo radii, estimation and chunk builds go round robin
-  /// (chunk c to rank c mod ranks). The folder is byte-identical to a one-process build. A rank
-  /// that throws leaves the others waiting at the barrier: the caller aborts the job.
-  distributed_build distributed{};
-};
+/// The chunked point-octree's options (builders/chunked.hpp): `builder` the in-memory build's.
+using chunked_point_octree_options = chunked_options<point_octree_options>;
 
 /// Peak bytes of a chunk's build per sample, measured (docs/scale.md): the chunk's records and
-/// halo, the k-NN graph of the estimation, the builder's working arrays and the nodes.
+/// halo, the k-NN graph of the estimation, the builder's working arrays and the nodes. The chunks
+/// are estimated and built one after another, each on every thread: one chunk at a time.
 inline constexpr std::uint64_t chunk_bytes_per_point = 512;
 
 /// Builds the point-octree of `src` into the directory `dir`, whole or not at all (built as
 /// `dir.partial` and renamed; an earlier build in `dir` is replaced only then, see
 /// check_chunked_output and docs/scale.md). Throws InvalidArgument on an empty source or non-finite
 /// positions, IoError when the directory cannot be written, Cancelled through the progress
-/// callback of options.octree.
+/// callback of options.builder.
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
-                                                const chunked_build_options& options = {});
+                                                const chunked_point_octree_options& options = {});
 
 /// Whether `dir` holds a chunked point-octree (its top file).
 [[nodiscard]] bool is_chunked_point_octree(const std::string& dir);
