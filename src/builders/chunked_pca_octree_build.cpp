@@ -679,9 +679,4 @@ chunked_build_report build_pca_octree_chunked(const point_source& src, const std
   });
 }
 
-std::string pca_chunk_file_name(std::uint32_t c) {
-  std::string s = std::to_string(c);
-  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".pca";
-}
-
 }  // namespace pbr_lod

@@ -481,11 +481,6 @@ struct chunked_pmr_builder : chunked_pass_base {
 
 }  // namespace detail
 
-std::string pmr_chunk_file_name(std::uint32_t c) {
-  std::string s = std::to_string(c);
-  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".pmr";
-}
-
 chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
                                        const chunked_pmr_options& options) {
   return detail::build_or_keep(dir, "build_pmr_chunked", [&] {

@@ -608,11 +608,6 @@ struct chunked_point_octree_builder : chunked_pass_base {
 
 }  // namespace detail
 
-std::string chunk_file_name(std::uint32_t c) {
-  std::string s = std::to_string(c);
-  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".po";
-}
-
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
                                                 const chunked_point_octree_options& options) {
   const attributes a = src.attrs();
