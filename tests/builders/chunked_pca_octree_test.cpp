@@ -124,12 +124,7 @@ struct pca_case {
 };
 INSTANTIATE_TYPED_TEST_SUITE_P(ChunkedPca, ChunkedLayer, pca_case);
 
-class ChunkedPca : public ::testing::Test {
- protected:
-  static const test::chunked_build<pca_case>& built() {
-    return test::chunked_build<pca_case>::get();
-  }
-};
+using ChunkedPca = test::chunked_fixture<pca_case>;
 
 TEST_F(ChunkedPca, SplitsIntoChunksAndOpensLazily) {
   EXPECT_GE(built().report.chunks, 20u);

@@ -139,12 +139,7 @@ struct pmr_case {
 };
 INSTANTIATE_TYPED_TEST_SUITE_P(ChunkedPmr, ChunkedLayer, pmr_case);
 
-class ChunkedPmr : public ::testing::Test {
- protected:
-  static const test::chunked_build<pmr_case>& built() {
-    return test::chunked_build<pmr_case>::get();
-  }
-};
+using ChunkedPmr = test::chunked_fixture<pmr_case>;
 
 TEST_F(ChunkedPmr, SplitsIntoChunksWithHalos) {
   EXPECT_GE(built().report.chunks, 10u);

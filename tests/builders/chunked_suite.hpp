@@ -72,6 +72,14 @@ struct chunked_build {
   }
 };
 
+/// A builder's own tests of its case's shared build: TEST_F(ChunkedX, …) with
+/// `using ChunkedX = test::chunked_fixture<x_case>;`.
+template <class C>
+class chunked_fixture : public ::testing::Test {
+ protected:
+  static const chunked_build<C>& built() { return chunked_build<C>::get(); }
+};
+
 }  // namespace pbr_lod::test
 
 namespace pbr_lod {
