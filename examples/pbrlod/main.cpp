@@ -472,7 +472,11 @@ int main(int argc, char** argv) {
   std::string method_names;
   for (const auto& m : methods()) method_names += (method_names.empty() ? "" : ", ") + m.name;
   build->add_option("--method", method, method_names)->required();
-  build->add_option("--param", params, "k=v builder parameter (repeatable)")
+  build
+      ->add_option("--param", params,
+                   "k=v builder parameter (repeatable); memory=SIZE (K/M/G/T) or chunk_points=N "
+                   "build out of core into a folder, memory being the whole build's budget "
+                   "(docs/scale.md)")
       ->allow_extra_args(false)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   build->add_option("input", build_input, "mesh or point cloud file")->required();

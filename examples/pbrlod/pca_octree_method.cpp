@@ -33,11 +33,7 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
   o.kmeans_seed = static_cast<std::uint64_t>(m.integer("kmeans_seed", 1, 0, 1L << 62));
   o.knn = static_cast<int>(m.integer("knn", 16, 3, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
-  if (chunked) {
-    if (const auto b = m.bytes("memory")) chunked->memory_bytes = *b;
-    chunked->chunk_points =
-        static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1ll << 31) - 1));
-  }
+  if (chunked) chunked_params(m, *chunked);
   m.finish("pca-octree",
            "leaf_size, max_depth, gamma, curvature_c, lambda_max, surface_angle, quantise, "
            "codebook_p, "
@@ -153,7 +149,7 @@ std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const 
                                    const std::string& output, bool on_terminal, json& report,
                                    const distributed_rank* part) {
   chunked_pca_octree_options o;
-  o.pca = pca_options(items, on_terminal, &o);
+  o.builder = pca_options(items, on_terminal, &o);
   if (part) o.distributed = {part->rank, part->ranks, part->barrier};
   chunked_report_json(build_pca_octree_chunked(*open_build_source(input), output, o), report);
   return open_chunked(output);

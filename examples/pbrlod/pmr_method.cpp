@@ -173,11 +173,7 @@ pmr_options pmr_params(const std::vector<std::string>& items, bool on_terminal,
   o.edge_spacing = static_cast<float>(m.number("edge_spacing", o.edge_spacing, 0, 1000));
   o.input_normals = m.integer("input_normals", 1, 0, 1) != 0;
   o.neighbour_leaves = m.integer("neighbour_leaves", 1, 0, 1) != 0;
-  if (chunked) {
-    if (const auto b = m.bytes("memory")) chunked->memory_bytes = *b;
-    chunked->chunk_points =
-        static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1ll << 31) - 1));
-  }
+  if (chunked) chunked_params(m, *chunked);
   m.finish("pmr",
            "leaf_points, margin, levels, rho_step, threads, triangulation_points, cocone, "
            "edge_spacing, input_normals, neighbour_leaves, memory, chunk_points");
@@ -198,7 +194,7 @@ std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const 
                                    const std::string& output, bool on_terminal, json& report,
                                    const distributed_rank* part) {
   chunked_pmr_options o;
-  o.pmr = pmr_params(items, on_terminal, &o);
+  o.builder = pmr_params(items, on_terminal, &o);
   if (part) o.distributed = {part->rank, part->ranks, part->barrier};
   chunked_report_json(build_pmr_chunked(*open_build_source(input), output, o), report);
   return open_chunked(output);

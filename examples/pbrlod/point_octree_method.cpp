@@ -10,23 +10,14 @@
 namespace pbrlod_tool {
 namespace {
 
-/// What a chunked (out-of-core) build adds to the options: memory=SIZE (and chunk_points=N).
-struct chunking {
-  std::optional<std::uint64_t> memory;
-  std::uint64_t chunk_points = 0;
-};
-
 /// `from_faces`: where the in-memory build asks, mesh=faces (the default: a mesh's vertices as
 /// splats bounding their dual cells) or mesh=vertices (its vertices as a bare cloud, normals
 /// and ellipses estimated, as a chunked build streams them).
 point_octree_options octree_options(const std::vector<std::string>& items, bool on_terminal,
-                                    chunking* chunked = nullptr, bool* from_faces = nullptr) {
+                                    chunked_point_octree_options* chunked = nullptr,
+                                    bool* from_faces = nullptr) {
   params m(items);
-  if (chunked) {
-    chunked->memory = m.bytes("memory");
-    chunked->chunk_points =
-        static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1L << 31) - 1));
-  }
+  if (chunked) chunked_params(m, *chunked);
   point_octree_options o;
   o.leaf_size = static_cast<std::uint32_t>(m.integer("leaf_size", 8, 1, 1 << 20));
   o.max_depth = static_cast<std::uint32_t>(m.integer("max_depth", 48, 1, 250));
@@ -189,14 +180,11 @@ std::unique_ptr<lod> load(const std::string& path) {
 std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const std::string& input,
                                    const std::string& output, bool on_terminal, json& report,
                                    const distributed_rank* part) {
-  chunking ch;
-  chunked_build_options o;
-  o.octree = octree_options(items, on_terminal, &ch);
-  if (ch.memory) o.memory_bytes = *ch.memory;
-  o.chunk_points = ch.chunk_points;
+  chunked_point_octree_options o;
+  o.builder = octree_options(items, on_terminal, &o);
   if (part) o.distributed = {part->rank, part->ranks, part->barrier};
   const std::unique_ptr<point_source> src = open_build_source(input);
-  if (!o.octree.viewpoint) o.octree.viewpoint = src->sensor();
+  if (!o.builder.viewpoint) o.builder.viewpoint = src->sensor();
   chunked_report_json(build_point_octree_chunked(*src, output, o), report);
   return open_chunked(output);
 }

@@ -20,6 +20,7 @@
 #include <utility>
 #include <vector>
 
+#include "pbr_lod/builders/chunked.hpp"
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/point_set.hpp"
@@ -29,10 +30,6 @@
 #include "pbr_lod/raster/effects.hpp"
 #include "pbr_lod/raster/image.hpp"
 #include "pbr_lod/raster/metrics.hpp"
-
-namespace pbr_lod {
-struct chunked_build_report;
-}
 
 namespace pbrlod_tool {
 using namespace pbr_lod;
@@ -233,6 +230,16 @@ class params {
   std::map<std::string, std::string> m_;
 };
 
+/// `--param memory=SIZE` and `chunk_points=N`, the knobs every chunked (out-of-core) build shares
+/// (builders/chunked.hpp). memory is the whole build's budget: what one process may use with every
+/// chunk it builds at once (each rank of `--distributed` is given the same), and the chunks are
+/// made small enough to fit it; chunk_points sets the largest chunk instead.
+template <class BuilderOptions>
+void chunked_params(params& m, chunked_options<BuilderOptions>& o) {
+  if (const auto b = m.bytes("memory")) o.memory_bytes = *b;
+  o.chunk_points = static_cast<std::uint64_t>(m.integer("chunk_points", 0, 0, (1L << 31) - 1));
+}
+
 /// A "[ 12.3s] building <what> 45%" progress callback, or an empty one off a terminal.
 std::function<bool(double)> progress_callback(const std::string& what, bool on_terminal);
 
@@ -257,7 +264,7 @@ class build_input {
   mutable std::optional<loaded_input> in_;
 };
 
-/// This process's part in a distributed build (chunked_build_options::distributed).
+/// This process's part in a distributed build (chunked_options::distributed, builders/chunked.hpp).
 struct distributed_rank {
   int rank = 0, ranks = 1;
   std::function<void()> barrier;

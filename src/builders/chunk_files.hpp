@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -19,6 +20,7 @@
 #include <functional>
 #include <limits>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "pbr_lod/builders/chunked.hpp"
@@ -27,6 +29,7 @@
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/normal_repair.hpp"
+#include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/core/point_source.hpp"
 
@@ -175,6 +178,118 @@ class box_grid {
   std::vector<std::vector<std::uint32_t>> lists_;
 };
 
+/// The tree above the chunks, which the structure passes find one level per pass over the source:
+/// a node is a chunk until it is split. `Cell` is what the builder keeps per node (its cell or its
+/// split point, the sums a pass gathers for it); a node is a Cell with the tree's bookkeeping.
+template <class Cell>
+struct top_tree {
+  static constexpr std::uint32_t none = 0xffffffffu;
+  enum class state : std::uint8_t { chunk, pending, split };
+  struct node : Cell {
+    using state = top_tree::state;
+    std::uint64_t count = 0;
+    state st = state::chunk;
+    bool whole = false;  // the builder's split left it one cell (its points at one position)
+    std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
+    std::array<std::uint64_t, 8> octant_count{};
+    std::uint32_t first_child = 0, children = 0, chunk = none;
+  };
+  std::vector<node> nodes;
+  std::vector<std::uint32_t> chunk_top;  // per chunk: its node
+
+  /// The node holding p (a chunk, or one pending its split): octant(node, p) picks the child.
+  template <class Octant>
+  [[nodiscard]] std::uint32_t descend(const vec3d& p, Octant&& octant) const {
+    std::uint32_t x = 0;
+    while (nodes[x].st == state::split)
+      x = nodes[x].child[static_cast<std::size_t>(octant(nodes[x], p))];
+    return x;
+  }
+
+  /// The structure passes from a root of n points: while any chunk is to be split, one pass over
+  /// `pass`'s source counts its points by octant and gathers what the split needs; then its
+  /// children in octant order, empty octants skipped. Chunks are numbered in node order. The
+  /// rule (the builder's split):
+  ///   vec3d local(const vec3f&)                a position as the split sees it
+  ///   bool split(const node&)                  a chunk to split (more than a chunk's points)
+  ///   int octant(const node&, const vec3d&)    the child a point goes to
+  ///   void add(node&, int octant, const vec3d&)  what the pass gathers (besides the counts)
+  ///   bool keep_whole(node&)                   after the pass: the node stays one chunk
+  ///   Cell child(const node&, int octant)      a child's cell
+  template <class Pass, class Rule>
+  void grow(Pass& pass, const Cell& root, std::uint64_t n, Rule& rule) {
+    nodes.assign(1, node{});
+    static_cast<Cell&>(nodes[0]) = root;
+    nodes[0].count = n;
+    for (;;) {
+      bool any = false;
+      for (auto& x : nodes)
+        if (x.st == state::chunk && !x.whole && rule.split(x)) {
+          x.st = state::pending;
+          any = true;
+        }
+      if (!any) break;
+      const auto octant = [&](const node& x, const vec3d& p) { return rule.octant(x, p); };
+      pass.stream([&](std::uint64_t, const point_block& b) {
+        for (const vec3f& pf : b.positions) {
+          const vec3d p = rule.local(pf);
+          node& x = nodes[descend(p, octant)];
+          if (x.st != state::pending) continue;
+          const int o = rule.octant(x, p);
+          ++x.octant_count[static_cast<std::size_t>(o)];
+          rule.add(x, o, p);
+        }
+      });
+      split_pending(rule);
+    }
+    for (std::uint32_t i = 0; i < nodes.size(); ++i)
+      if (nodes[i].st == state::chunk) {
+        nodes[i].chunk = static_cast<std::uint32_t>(chunk_top.size());
+        chunk_top.push_back(i);
+      }
+  }
+
+  /// The chunks in octree order (depth first, octants in order): neighbours follow each other.
+  [[nodiscard]] std::vector<std::uint32_t> chunks_in_order() const {
+    std::vector<std::uint32_t> out, stack{0};
+    while (!stack.empty()) {
+      const std::uint32_t x = stack.back();
+      stack.pop_back();
+      if (nodes[x].st != state::split) {
+        out.push_back(nodes[x].chunk);
+        continue;
+      }
+      for (std::uint32_t k = nodes[x].children; k-- > 0;) stack.push_back(nodes[x].first_child + k);
+    }
+    return out;
+  }
+
+ private:
+  template <class Rule>
+  void split_pending(Rule& rule) {
+    const std::size_t end = nodes.size();
+    for (std::size_t i = 0; i < end; ++i) {
+      if (nodes[i].st != state::pending) continue;
+      if (rule.keep_whole(nodes[i])) {
+        nodes[i].st = state::chunk;
+        nodes[i].whole = true;
+        continue;
+      }
+      nodes[i].st = state::split;
+      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
+      for (std::size_t o = 0; o < 8; ++o) {
+        if (nodes[i].octant_count[o] == 0) continue;
+        node c;
+        static_cast<Cell&>(c) = rule.child(nodes[i], static_cast<int>(o));
+        c.count = nodes[i].octant_count[o];
+        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
+        nodes.push_back(c);
+      }
+      nodes[i].children = static_cast<std::uint32_t>(nodes.size()) - nodes[i].first_child;
+    }
+  }
+};
+
 /// What every chunked build does with its source, its ranks and its folders. The output is built
 /// in a staging folder beside it (atomic_directory) and renamed onto it by finish(): every rank
 /// writes into the staging folder (`dir`), rank 0 creates it, writes the top file last, and
@@ -268,6 +383,61 @@ struct chunked_pass_base {
     vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
     std::uint64_t count = 0;
   };
+
+  /// The distribution pass: rank 0 appends every point to the temporary file "chunk<c>" of its
+  /// chunk c = chunk_of(block, k), input order kept, and calls also(record, c) for what the
+  /// builder writes in the same pass (its halos), then done() (to flush those); `files` is how
+  /// many files the pass writes at once (for their buffers). Then every rank learns the chunks'
+  /// sizes from the files. Returns every chunk's size and its box (the box: rank 0 only).
+  template <class ChunkOf, class Also, class Done>
+  std::vector<chunk_extent> distribute(std::size_t chunks, std::size_t files, ChunkOf&& chunk_of,
+                                       Also&& also, Done&& done) {
+    std::vector<chunk_extent> ext(chunks);
+    if (rank == 0) {
+      std::vector<append_file> out;
+      out.reserve(chunks);
+      for (std::size_t c = 0; c < chunks; ++c)
+        out.emplace_back(temp_path("chunk", c), buffer_bytes(files));
+      const attributes a = src.attrs();
+      stream([&](std::uint64_t first, const point_block& b) {
+        for (std::size_t k = 0; k < b.size(); ++k) {
+          const std::uint32_t c = chunk_of(b, k);
+          ext[c].lo = ext[c].lo.cwiseMin(b.positions[k]);
+          ext[c].hi = ext[c].hi.cwiseMax(b.positions[k]);
+          const point_record r{first + k, b.positions[k],
+                               a.normal ? b.normals[k] : vec3f(vec3f::Zero()),
+                               a.colour ? b.colours[k] : rgb8{}};
+          out[c].put(r);
+          also(r, c);
+        }
+      });
+      for (auto& f : out) f.flush();
+      done();
+    }
+    barrier();
+    for (std::size_t c = 0; c < chunks; ++c)
+      ext[c].count = std::filesystem::file_size(temp_path("chunk", c)) / record_bytes;
+    return ext;
+  }
+
+  /// The chunk builds of this rank, f(chunk, threads) for each: side by side, one thread each,
+  /// when there are at least `workers` of them, else one at a time on every thread (the output
+  /// does not depend on it). done(fraction of them done) on the calling thread.
+  template <class F, class Done>
+  void over_my_chunks(std::size_t chunks, unsigned workers, F&& f, Done&& done) const {
+    std::vector<std::size_t> list;
+    for (std::size_t c = 0; c < chunks; ++c)
+      if (mine(c)) list.push_back(c);
+    const bool side_by_side = list.size() >= workers;
+    std::atomic<std::size_t> finished{0};
+    const auto caller = std::this_thread::get_id();
+    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
+      f(list[k], side_by_side ? 1u : workers);
+      const std::size_t d = ++finished;
+      if (std::this_thread::get_id() == caller)
+        done(static_cast<double>(d) / static_cast<double>(list.size()));
+    });
+  }
   /// Part of a chunk for its halo: the box of some of its points and how far from that box the
   /// halo must reach for them.
   struct halo_cell {

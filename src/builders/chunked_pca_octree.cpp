@@ -92,36 +92,21 @@ pca_chunk load_pca_chunk(const std::string& path, const pca_data& top, std::uint
   return c;
 }
 
-namespace {
-namespace fs = std::filesystem;
-std::string top_path(const std::string& dir) {
-  return (fs::path(dir) / chunked_top_file).string();
-}
-}  // namespace
 }  // namespace detail
 
 bool is_chunked_pca_octree(const std::string& dir) {
-  std::error_code ec;
-  const std::string path = detail::top_path(dir);
-  if (!std::filesystem::is_directory(dir, ec) || !std::filesystem::is_regular_file(path, ec))
-    return false;
-  const auto head = detail::load_file_prefix(path, 8);
-  return head.size() == 8 && std::equal(head.begin(), head.end(), detail::chunked_pca_format.magic);
+  return is_chunked_folder(dir, detail::chunked_pca_format);
 }
 
 bool chunked_pca_octree_has_colours(const std::string& dir) {
-  check_chunked_folder(dir);
-  const std::string path = detail::top_path(dir);
-  const auto head = detail::load_file_prefix(path, 16);
-  if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
-  return (head[12] & 1u) != 0;
+  return chunked_folder_has_colours(dir);
 }
 
 template <attributes A>
 chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
   check_chunked_folder(dir);
   using namespace detail;
-  const std::string path = top_path(dir);
+  const std::string path = chunked_top_path(dir);
   const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
   read_head(r, chunked_pca_format);
@@ -171,7 +156,7 @@ chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
     t.top_global_[i] = r.get<std::uint32_t>("node number");
   }
   t.chunk_top_.resize(nc);
-  t.chunk_points_.resize(nc);
+  t.chunk_samples_.resize(nc);
   t.chunk_nodes_.resize(nc);
   std::vector<std::uint8_t> root_mask(nc);
   std::vector<std::array<float, 2>> root_bounds(nc);
@@ -179,17 +164,17 @@ chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
   std::uint64_t points = 0, total = 0;
   for (std::uint64_t c = 0; c < nc; ++c) {
     t.chunk_top_[c] = r.get<std::uint32_t>("top node of a chunk");
-    t.chunk_points_[c] = r.get<std::uint64_t>("chunk points");
+    t.chunk_samples_[c] = r.get<std::uint64_t>("chunk points");
     t.chunk_nodes_[c] = r.get<std::uint64_t>("chunk nodes");
     root_mask[c] = r.get<std::uint8_t>("chunk root mask");
     root_bounds[c] = {r.get_finite("chunk root radius", c), r.get_finite("chunk root cone", c)};
     const std::uint32_t x = t.chunk_top_[c];
     if (x >= nt || t.frontier_[x] != c || fixed[x] || d.nodes[x].count != 0 ||
-        t.chunk_points_[c] == 0 || t.chunk_nodes_[c] == 0 ||
+        t.chunk_samples_[c] == 0 || t.chunk_nodes_[c] == 0 ||
         (root_mask[c] == 0) != (t.chunk_nodes_[c] == 1))
       bad("chunk " + std::to_string(c) + " and its top node disagree");
     fixed[x] = 1;
-    points += t.chunk_points_[c];
+    points += t.chunk_samples_[c];
     total += t.chunk_nodes_[c];
   }
   for (std::uint64_t i = 0; i < nt; ++i) {
@@ -218,54 +203,31 @@ chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
     nd.first = nd.count ? 1 : 0;
   }
   d.stats.nodes = total;
-  for (std::uint64_t c = 0; c < nc; ++c) t.slots_.push_back(std::make_unique<slot>());
+  t.make_slots();
   return t;
 }
 
 template <attributes A>
 const detail::pca_chunk& chunked_pca_octree<A>::chunk(std::uint32_t c) const {
-  slot& s = *slots_.at(c);
-  std::call_once(s.once, [&] {
-    const std::string path = (std::filesystem::path(dir_) / pca_chunk_file_name(c)).string();
-    auto k = std::make_unique<detail::pca_chunk>(detail::load_pca_chunk(path, top_, c, A.colour));
+  return load_chunk(c, [&](const std::string& path) {
+    detail::pca_chunk k = detail::load_pca_chunk(path, top_, c, A.colour);
     // The chunk's root is the top's copy of it (statistics, cell, bounds, children).
     const pca_node& root = top_.nodes[chunk_top_[c]];
-    const bool same = k->points == chunk_points_[c] && k->d.nodes.size() == chunk_nodes_[c] &&
-                      k->d.nodes[0] == root &&
-                      (!A.colour || k->d.colours[0] == top_.colours[chunk_top_[c]]) &&
-                      k->global_id(0) == top_global_[chunk_top_[c]];
+    const bool same = k.points == chunk_samples_[c] && k.d.nodes.size() == chunk_nodes_[c] &&
+                      k.d.nodes[0] == root &&
+                      (!A.colour || k.d.colours[0] == top_.colours[chunk_top_[c]]) &&
+                      k.global_id(0) == top_global_[chunk_top_[c]];
     if (!same) throw FormatError(path + ": does not match its record in the top file");
     // Every node's whole-tree number lies in the tree (assemble() places the node there).
-    for (std::size_t l = 0; l < k->level_first.size(); ++l) {
+    for (std::size_t l = 0; l < k.level_first.size(); ++l) {
       const std::uint64_t end =
-          l + 1 < k->level_first.size() ? k->level_first[l + 1] : k->d.nodes.size();
-      if (std::uint64_t{k->level_global[l]} + (end - k->level_first[l]) > node_count())
+          l + 1 < k.level_first.size() ? k.level_first[l + 1] : k.d.nodes.size();
+      if (std::uint64_t{k.level_global[l]} + (end - k.level_first[l]) > node_count())
         throw FormatError(path + ": level " + std::to_string(l) +
                           " numbers nodes beyond the tree's " + std::to_string(node_count()));
     }
-    s.c = std::move(k);
+    return k;
   });
-  return *s.c;
-}
-
-template <attributes A>
-std::size_t chunked_pca_octree<A>::chunks_loaded() const {
-  std::size_t k = 0;
-  for (const auto& s : slots_) k += s->c != nullptr;
-  return k;
-}
-
-template <attributes A>
-std::uint64_t chunked_pca_octree<A>::node_count() const {
-  return top_.stats.nodes;
-}
-
-template <attributes A>
-std::uint64_t chunked_pca_octree<A>::file_bytes() const {
-  std::uint64_t b = std::filesystem::file_size(detail::top_path(dir_));
-  for (std::uint32_t c = 0; c < chunk_top_.size(); ++c)
-    b += std::filesystem::file_size(std::filesystem::path(dir_) / pca_chunk_file_name(c));
-  return b;
 }
 
 /// build_pca_octree's layout: every node at its whole-tree number, its first child's number as

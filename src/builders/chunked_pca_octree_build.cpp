@@ -25,18 +25,14 @@ namespace {
 namespace fs = std::filesystem;
 constexpr std::uint32_t none = 0xffffffffu;
 
-/// A cell of the octree above the chunks.
-struct top_cell {
+/// A cell of the octree above the chunks, and the box of its points (a pass gathers it: a cell
+/// whose points are all at one position is never split).
+struct pca_cell {
   vec3d cell_min = vec3d::Zero();
   std::uint8_t depth = 0;
-  std::uint64_t count = 0;
-  enum class state : std::uint8_t { chunk, pending, split } st = state::chunk;
-  std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
-  std::array<std::uint64_t, 8> octant_count{};
   vec3d lo = vec3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  std::uint32_t first_child = 0, children = 0, chunk = none;
-  bool one_position = false;  // every point of the cell at one position: never split
 };
+using top_cell = top_tree<pca_cell>::node;
 
 inline std::size_t octant_of(const vec3d& q, const vec3d& mid) {
   return (q.x() >= mid.x() ? 1u : 0u) | (q.y() >= mid.y() ? 2u : 0u) | (q.z() >= mid.z() ? 4u : 0u);
@@ -136,8 +132,9 @@ struct chunked_pca_builder : chunked_pass_base {
   attributes in;
   vec3d centre_rel = vec3d::Zero();  // the origin relative to the source's
   double size = 0, input_radius = 0;
-  std::vector<top_cell> nodes;
-  std::vector<std::uint32_t> chunk_top;  // per chunk: its top cell
+  top_tree<pca_cell> upper;  // the tree above the chunks
+  std::vector<top_cell>& nodes = upper.nodes;
+  std::vector<std::uint32_t>& chunk_top = upper.chunk_top;  // per chunk: its top cell
   std::vector<std::uint64_t> chunk_count;
   std::vector<std::vector<std::uint32_t>> chunk_levels;  // per chunk: nodes per local level
   // per chunk whose root is a leaf below a surface: widened by its spacing in its parent's plane
@@ -157,7 +154,7 @@ struct chunked_pca_builder : chunked_pass_base {
                       const chunked_pca_octree_options& o)
       : chunked_pass_base(s, d, o.block_points, o.distributed, "build_pca_octree_chunked"),
         opt(o),
-        po(o.pca),
+        po(o.builder),
         n(s.size()),
         in(s.attrs()) {
     po.progress = {};
@@ -165,15 +162,13 @@ struct chunked_pca_builder : chunked_pass_base {
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pca_octree_chunked: more than 2^32 - 2 points");
     workers = pca_threads(po.threads);
-    chunk_points = opt.chunk_points
-                       ? opt.chunk_points
-                       : std::max<std::uint64_t>(
-                             1, opt.memory_bytes / (chunked_pca_bytes_per_point * workers));
-    chunk_points = std::clamp<std::uint64_t>(chunk_points, po.leaf_size, (1u << 31) - 1);
+    // Chunks are built `workers` at a time (over_my_chunks).
+    chunk_points = chunk_points_for(opt.memory_bytes, opt.chunk_points,
+                                    {chunked_pca_bytes_per_point, workers, po.leaf_size});
   }
 
   void progress(double f) const {
-    if (opt.pca.progress && !opt.pca.progress(f))
+    if (opt.builder.progress && !opt.builder.progress(f))
       throw Cancelled("build_pca_octree_chunked: cancelled");
   }
   [[nodiscard]] vec3d local(const vec3f& p) const { return p.cast<double>() - centre_rel; }
@@ -181,12 +176,28 @@ struct chunked_pca_builder : chunked_pass_base {
     return size / std::ldexp(1.0, x.depth + 1);
   }
   [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
-    std::uint32_t x = 0;
-    while (nodes[x].st == top_cell::state::split) {
-      const top_cell& c = nodes[x];
-      x = c.child[octant_of(p, c.cell_min + vec3d::Constant(half_of(c)))];
-    }
-    return x;
+    return upper.descend(p, [&](const top_cell& x, const vec3d& q) { return octant(x, q); });
+  }
+
+  // ---- build_pca_data's split, as top_tree's rule: a cell splits at its centre while it holds
+  // more than a chunk and its points are not all at one position.
+  [[nodiscard]] bool split(const top_cell& x) const {
+    return x.count > chunk_points && x.depth < po.max_depth;
+  }
+  [[nodiscard]] int octant(const top_cell& x, const vec3d& p) const {
+    return static_cast<int>(octant_of(p, x.cell_min + vec3d::Constant(half_of(x))));
+  }
+  static void add(top_cell& x, int, const vec3d& p) {
+    x.lo = x.lo.cwiseMin(p);
+    x.hi = x.hi.cwiseMax(p);
+  }
+  static bool keep_whole(const top_cell& x) { return x.lo == x.hi; }
+  [[nodiscard]] pca_cell child(const top_cell& x, int o) const {
+    const double half = half_of(x);
+    pca_cell c;
+    c.cell_min = x.cell_min + vec3d((o & 1) ? half : 0, (o & 2) ? half : 0, (o & 4) ? half : 0);
+    c.depth = static_cast<std::uint8_t>(x.depth + 1);
+    return c;
   }
 
   /// Steps 1–2: the box (build_pca_data's origin and root cube) and the checks of every point,
@@ -206,94 +217,27 @@ struct chunked_pca_builder : chunked_pass_base {
     centre_rel = 0.5 * (lo + hi);
     size = (hi - lo).maxCoeff();
     size = size > 0 ? size * (1 + 1e-9) : 1e-9 * std::max(1.0, src.origin().cwiseAbs().maxCoeff());
-    nodes.assign(1, top_cell{});
-    nodes[0].cell_min = vec3d::Constant(-0.5 * size);
-    nodes[0].count = n;
-    for (;;) {
-      bool any = false;
-      for (auto& x : nodes)
-        if (x.st == top_cell::state::chunk && !x.one_position && x.count > chunk_points &&
-            x.depth < po.max_depth) {
-          x.st = top_cell::state::pending;
-          any = true;
-        }
-      if (!any) break;
-      stream([&](std::uint64_t, const point_block& b) {
-        for (const vec3f& pf : b.positions) {
-          const vec3d p = local(pf);
-          top_cell& x = nodes[descend(p)];
-          if (x.st != top_cell::state::pending) continue;
-          ++x.octant_count[octant_of(p, x.cell_min + vec3d::Constant(half_of(x)))];
-          x.lo = x.lo.cwiseMin(p);
-          x.hi = x.hi.cwiseMax(p);
-        }
-      });
-      split_pending();
-    }
-    for (std::uint32_t i = 0; i < nodes.size(); ++i)
-      if (nodes[i].st == top_cell::state::chunk) {
-        nodes[i].chunk = static_cast<std::uint32_t>(chunk_top.size());
-        chunk_top.push_back(i);
-      }
+    pca_cell root;
+    root.cell_min = vec3d::Constant(-0.5 * size);
+    upper.grow(*this, root, n, *this);
     rep.chunks = chunk_top.size();
     rep.top_nodes = nodes.size();
-  }
-
-  /// Children in octant order, empty octants skipped; a cell of one repeated position stays
-  /// whole (as build_pca_data's split).
-  void split_pending() {
-    const std::size_t end = nodes.size();
-    for (std::size_t i = 0; i < end; ++i) {
-      if (nodes[i].st != top_cell::state::pending) continue;
-      if (nodes[i].lo == nodes[i].hi) {
-        nodes[i].st = top_cell::state::chunk;
-        nodes[i].one_position = true;
-        continue;
-      }
-      nodes[i].st = top_cell::state::split;
-      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
-      const double half = half_of(nodes[i]);
-      for (std::size_t o = 0; o < 8; ++o) {
-        if (nodes[i].octant_count[o] == 0) continue;
-        top_cell c;
-        c.cell_min =
-            nodes[i].cell_min + vec3d((o & 1) ? half : 0, (o & 2) ? half : 0, (o & 4) ? half : 0);
-        c.depth = static_cast<std::uint8_t>(nodes[i].depth + 1);
-        c.count = nodes[i].octant_count[o];
-        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
-        nodes.push_back(c);
-      }
-      nodes[i].children = static_cast<std::uint32_t>(nodes.size()) - nodes[i].first_child;
-    }
   }
 
   /// Step 3 (rank 0): every point into its chunk's file, input order kept.
   void distribute() {
     const std::size_t m = chunk_top.size();
-    extents.assign(m, {});
-    if (rank == 0) {
-      std::vector<append_file> files;
-      files.reserve(m);
-      for (std::size_t c = 0; c < m; ++c)
-        files.emplace_back(temp_path("chunk", c), buffer_bytes(m));
-      stream([&](std::uint64_t first, const point_block& b) {
-        for (std::size_t k = 0; k < b.size(); ++k) {
+    extents = chunked_pass_base::distribute(
+        m, m,
+        [&](const point_block& b, std::size_t k) {
           const vec3d p = local(b.positions[k]);
           input_radius = std::max(input_radius, p.norm());
-          const std::uint32_t c = nodes[descend(p)].chunk;
-          extents[c].lo = extents[c].lo.cwiseMin(b.positions[k]);
-          extents[c].hi = extents[c].hi.cwiseMax(b.positions[k]);
-          files[c].put({first + k, b.positions[k], in.normal ? b.normals[k] : vec3f(vec3f::Zero()),
-                        in.colour ? b.colours[k] : rgb8{}});
-        }
-      });
-      for (auto& f : files) f.flush();
-    }
-    barrier();
+          return nodes[descend(p)].chunk;
+        },
+        [](const point_record&, std::uint32_t) {}, [] {});
     chunk_count.resize(m);
     for (std::size_t c = 0; c < m; ++c) {
-      chunk_count[c] = fs::file_size(temp_path("chunk", c)) / record_bytes;
-      extents[c].count = chunk_count[c];
+      chunk_count[c] = extents[c].count;
       rep.largest_chunk = std::max(rep.largest_chunk, chunk_count[c]);
     }
   }
@@ -314,22 +258,12 @@ struct chunked_pca_builder : chunked_pass_base {
     barrier();
   }
 
-  /// f(chunk, threads) over this rank's chunks: side by side, one thread each, when there are
-  /// enough of them, else one at a time on every thread (the output does not depend on it).
+  /// f(chunk, threads) over this rank's chunks (chunked_pass_base::over_my_chunks), progress
+  /// from p0 to p1.
   template <class F>
   void over_my_chunks(double p0, double p1, F&& f) {
-    std::vector<std::size_t> list;
-    for (std::size_t c = 0; c < chunk_top.size(); ++c)
-      if (mine(c)) list.push_back(c);
-    const bool side_by_side = list.size() >= workers;
-    std::atomic<std::size_t> done{0};
-    const auto caller = std::this_thread::get_id();
-    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
-      f(list[k], side_by_side ? 1u : workers);
-      const std::size_t d = ++done;
-      if (std::this_thread::get_id() == caller)
-        progress(p0 + (p1 - p0) * static_cast<double>(d) / static_cast<double>(list.size()));
-    });
+    chunked_pass_base::over_my_chunks(chunk_top.size(), workers, f,
+                                      [&](double done) { progress(p0 + (p1 - p0) * done); });
   }
 
   /// Step 4 for chunk c: its subtree and statistics (build_pca_data's code) kept in "raw", its
@@ -387,17 +321,7 @@ struct chunked_pca_builder : chunked_pass_base {
 
   /// The chunks from left to right (the in-memory order of their points).
   [[nodiscard]] std::vector<std::uint32_t> chunks_in_order() const {
-    std::vector<std::uint32_t> out, stack{0};
-    while (!stack.empty()) {
-      const std::uint32_t x = stack.back();
-      stack.pop_back();
-      if (nodes[x].st != top_cell::state::split) {
-        out.push_back(nodes[x].chunk);
-        continue;
-      }
-      for (std::uint32_t k = nodes[x].children; k-- > 0;) stack.push_back(nodes[x].first_child + k);
-    }
-    return out;
+    return upper.chunks_in_order();
   }
 
   /// Step 5 (rank 0): the top cells' statistics.
@@ -789,11 +713,6 @@ chunked_build_report build_pca_octree_chunked(const point_source& src, const std
     detail::chunked_pca_builder b(src, dir, options);
     return b.run();
   });
-}
-
-std::string pca_chunk_file_name(std::uint32_t c) {
-  std::string s = std::to_string(c);
-  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".pca";
 }
 
 }  // namespace pbr_lod

@@ -25,10 +25,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string top_path(const std::string& dir) {
-  return (fs::path(dir) / chunked_top_file).string();
-}
-
 /// Origin, bounds, options and build counts: the head of the top file after its flags.
 void read_settings(detail::byte_reader& r, vec3d& origin, vec3d& lo, vec3d& hi,
                    std::uint32_t& leaf_points, float& margin, std::vector<float>& rho,
@@ -53,24 +49,17 @@ void read_settings(detail::byte_reader& r, vec3d& origin, vec3d& lo, vec3d& hi,
 }  // namespace
 
 bool is_chunked_pmr(const std::string& dir) {
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec) || !fs::is_regular_file(top_path(dir), ec)) return false;
-  const auto head = detail::load_file_prefix(top_path(dir), 8);
-  return head.size() == 8 && std::equal(head.begin(), head.end(), detail::chunked_pmr_format.magic);
+  return is_chunked_folder(dir, detail::chunked_pmr_format);
 }
 
 bool chunked_pmr_has_colours(const std::string& dir) {
-  check_chunked_folder(dir);
-  const std::string path = top_path(dir);
-  const auto head = detail::load_file_prefix(path, 16);
-  if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
-  return (head[12] & 1u) != 0;
+  return chunked_folder_has_colours(dir);
 }
 
 template <attributes A>
 chunked_pmr<A> chunked_pmr<A>::open(const std::string& dir) {
   check_chunked_folder(dir);
-  const std::string path = top_path(dir);
+  const std::string path = chunked_top_path(dir);
   const std::vector<unsigned char> bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};
   detail::read_head(r, detail::chunked_pmr_format);
@@ -114,55 +103,29 @@ chunked_pmr<A> chunked_pmr<A>::open(const std::string& dir) {
   }
   detail::validate_chunked_top(path, t.top_nodes_, t.frontier_, t.chunk_top_, t.chunk_samples_,
                                t.chunk_nodes_, t.stats_.input_points);
-  for (std::size_t c = 0; c < n_chunks; ++c) t.slots_.push_back(std::make_unique<slot>());
+  t.make_slots();
   return t;
 }
 
 template <attributes A>
 const pmr_hierarchy& chunked_pmr<A>::chunk(std::uint32_t c) const {
-  slot& s = *slots_.at(c);
-  std::call_once(s.once, [&] {
-    const std::string path = (fs::path(dir_) / pmr_chunk_file_name(c)).string();
-    auto h = std::make_unique<pmr_hierarchy>(pmr_hierarchy::load(path));
-    const bool same = h->origin() == origin_ && h->rho() == rho_ &&
-                      h->input_total() == stats_.input_points &&
-                      h->positions().size() - h->foreign() == chunk_samples_[c] &&
-                      h->nodes().size() == chunk_nodes_[c] &&
-                      h->leaf_count() == leaf_offset_[c + 1] - leaf_offset_[c] &&
-                      h->nodes()[0] == top_nodes_[chunk_top_[c]] && h->has_colours() == A.colour;
+  return load_chunk(c, [&](const std::string& path) {
+    pmr_hierarchy h = pmr_hierarchy::load(path);
+    const bool same = h.origin() == origin_ && h.rho() == rho_ &&
+                      h.input_total() == stats_.input_points &&
+                      h.positions().size() - h.foreign() == chunk_samples_[c] &&
+                      h.nodes().size() == chunk_nodes_[c] &&
+                      h.leaf_count() == leaf_offset_[c + 1] - leaf_offset_[c] &&
+                      h.nodes()[0] == top_nodes_[chunk_top_[c]] && h.has_colours() == A.colour;
     if (!same) throw FormatError(path + ": does not match its record in the top file");
-    s.h = std::move(h);
+    return h;
   });
-  return *s.h;
 }
 
 template <attributes A>
 std::uint32_t chunked_pmr<A>::chunk_of_leaf(std::uint32_t leaf) const {
   const auto it = std::upper_bound(leaf_offset_.begin(), leaf_offset_.end(), leaf);
   return static_cast<std::uint32_t>(it - leaf_offset_.begin() - 1);
-}
-
-template <attributes A>
-std::size_t chunked_pmr<A>::chunks_loaded() const {
-  std::size_t k = 0;
-  for (const auto& s : slots_) k += s->h != nullptr;
-  return k;
-}
-
-template <attributes A>
-std::uint64_t chunked_pmr<A>::node_count() const {
-  std::uint64_t k = 0;
-  for (std::size_t i = 0; i < top_nodes_.size(); ++i) k += frontier_[i] == top ? 1 : 0;
-  for (const auto c : chunk_nodes_) k += c;
-  return k;
-}
-
-template <attributes A>
-std::uint64_t chunked_pmr<A>::file_bytes() const {
-  std::uint64_t b = fs::file_size(top_path(dir_));
-  for (std::uint32_t c = 0; c < chunk_top_.size(); ++c)
-    b += fs::file_size(fs::path(dir_) / pmr_chunk_file_name(c));
-  return b;
 }
 
 /// build_pmr's layout: nodes breadth first (children together, in octant order), leaves and

@@ -28,14 +28,10 @@ namespace fs = std::filesystem;
 constexpr std::uint32_t none = 0xffffffffu;
 
 /// A cell of the octree above the chunks.
-struct top_cell {
+struct pmr_top_cell {
   pmr_cell cell;
-  std::uint64_t count = 0;
-  enum class state : std::uint8_t { chunk, pending, split } st = state::chunk;
-  std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
-  std::array<std::uint64_t, 8> octant_count{};
-  std::uint32_t first_child = 0, children = 0, chunk = none;
 };
+using top_cell = top_tree<pmr_top_cell>::node;
 
 /// What step 5 keeps of a chunk for the top: its root's record and counts.
 struct chunk_root {
@@ -51,8 +47,9 @@ struct chunked_pmr_builder : chunked_pass_base {
   std::uint64_t chunk_points;
   unsigned workers = 1;
   vec3d origin = vec3d::Zero(), wlo = vec3d::Zero(), whi = vec3d::Zero();
-  std::vector<top_cell> nodes;
-  std::vector<std::uint32_t> chunk_top;  // per chunk: its top cell
+  top_tree<pmr_top_cell> upper;  // the tree above the chunks
+  std::vector<top_cell>& nodes = upper.nodes;
+  std::vector<std::uint32_t>& chunk_top = upper.chunk_top;  // per chunk: its top cell
   std::vector<std::uint64_t> chunk_count;
   chunked_build_report rep;
   vec3f sphere_centre = vec3f::Zero();  // of the input's float positions' box (rank 0)
@@ -65,19 +62,16 @@ struct chunked_pmr_builder : chunked_pass_base {
   chunked_pmr_builder(const point_source& s, const std::string& d, const chunked_pmr_options& o)
       : chunked_pass_base(s, d, o.block_points, o.distributed, "build_pmr_chunked"),
         opt(o),
-        po(o.pmr),
+        po(o.builder),
         n(s.size()) {
     validate_pmr_options(po);
     po.progress = {};
     if (n >= std::numeric_limits<std::uint32_t>::max() - 1)
       throw InvalidArgument("build_pmr_chunked: more than 2^32 - 2 points");
     workers = resolve_threads(po.threads);
-    // Chunks are built `workers` at a time: the budget is theirs together.
-    chunk_points = opt.chunk_points
-                       ? opt.chunk_points
-                       : std::max<std::uint64_t>(
-                             1, opt.memory_bytes / (chunked_pmr_bytes_per_point * workers));
-    chunk_points = std::clamp<std::uint64_t>(chunk_points, po.max_leaf_points, (1u << 31) - 1);
+    // Chunks are built `workers` at a time (build_parts).
+    chunk_points = chunk_points_for(opt.memory_bytes, opt.chunk_points,
+                                    {chunked_pmr_bytes_per_point, workers, po.max_leaf_points});
     // A triangulation never spans chunks (nor its neighbours beyond a chunk's halo): equal to
     // build_pmr with triangulation_points at most chunk_points.
     po.triangulation_points =
@@ -87,7 +81,8 @@ struct chunked_pmr_builder : chunked_pass_base {
   }
 
   void progress(double f) const {
-    if (opt.pmr.progress && !opt.pmr.progress(f)) throw Cancelled("build_pmr_chunked: cancelled");
+    if (opt.builder.progress && !opt.builder.progress(f))
+      throw Cancelled("build_pmr_chunked: cancelled");
   }
 
   [[nodiscard]] vec3d local(const vec3f& p) const {
@@ -95,13 +90,20 @@ struct chunked_pmr_builder : chunked_pass_base {
   }
 
   [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
-    std::uint32_t x = 0;
-    while (nodes[x].st == top_cell::state::split) {
-      const pmr_cell& c = nodes[x].cell;
-      x = nodes[x].child[static_cast<std::size_t>(pmr_octant(p, pmr_cell_mid(c.lo, c.size)))];
-    }
-    return x;
+    return upper.descend(p, [&](const top_cell& x, const vec3d& q) { return octant(x, q); });
   }
+
+  // ---- build_pmr's octree, as top_tree's rule: a cell splits at its midpoint while it holds
+  // more than a chunk, down to max_depth (where build_pmr's octree stops too).
+  [[nodiscard]] bool split(const top_cell& x) const {
+    return x.count > chunk_points && x.cell.depth < po.max_depth;
+  }
+  static int octant(const top_cell& x, const vec3d& p) {
+    return pmr_octant(p, pmr_cell_mid(x.cell.lo, x.cell.size));
+  }
+  static void add(top_cell&, int, const vec3d&) {}
+  static bool keep_whole(const top_cell&) { return false; }
+  static pmr_top_cell child(const top_cell& x, int o) { return {pmr_child_cell(x.cell, o)}; }
 
   /// Steps 1–2: the input's box and origin, then one pass per level splitting every cell above
   /// chunk size that is not at max_depth (where build_pmr's octree stops too).
@@ -119,53 +121,7 @@ struct chunked_pmr_builder : chunked_pass_base {
       }
     });
     origin = 0.5 * (wlo + whi);
-    nodes.assign(1, top_cell{});
-    nodes[0].cell = pmr_root_cell(wlo - origin, whi - origin);
-    nodes[0].count = n;
-    for (;;) {
-      bool any = false;
-      for (auto& x : nodes)
-        if (x.st == top_cell::state::chunk && x.count > chunk_points &&
-            x.cell.depth < po.max_depth) {
-          x.st = top_cell::state::pending;
-          any = true;
-        }
-      if (!any) break;
-      stream([&](std::uint64_t, const point_block& b) {
-        for (const vec3f& pf : b.positions) {
-          const vec3d p = local(pf);
-          top_cell& x = nodes[descend(p)];
-          if (x.st != top_cell::state::pending) continue;
-          ++x.octant_count[static_cast<std::size_t>(
-              pmr_octant(p, pmr_cell_mid(x.cell.lo, x.cell.size)))];
-        }
-      });
-      split_pending();
-    }
-    for (std::uint32_t i = 0; i < nodes.size(); ++i)
-      if (nodes[i].st == top_cell::state::chunk) {
-        nodes[i].chunk = static_cast<std::uint32_t>(chunk_top.size());
-        chunk_top.push_back(i);
-      }
-  }
-
-  /// Children in octant order, empty octants skipped (as build_pmr's octree).
-  void split_pending() {
-    const std::size_t end = nodes.size();
-    for (std::size_t i = 0; i < end; ++i) {
-      if (nodes[i].st != top_cell::state::pending) continue;
-      nodes[i].st = top_cell::state::split;
-      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
-      for (std::size_t o = 0; o < 8; ++o) {
-        if (nodes[i].octant_count[o] == 0) continue;
-        top_cell c;
-        c.cell = pmr_child_cell(nodes[i].cell, static_cast<int>(o));
-        c.count = nodes[i].octant_count[o];
-        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
-        nodes.push_back(c);
-      }
-      nodes[i].children = static_cast<std::uint32_t>(nodes.size()) - nodes[i].first_child;
-    }
+    upper.grow(*this, {pmr_root_cell(wlo - origin, whi - origin)}, n, *this);
   }
 
   /// The box a chunk's leaves gather neighbours from: its cell widened by the margin of a leaf
@@ -181,57 +137,51 @@ struct chunked_pmr_builder : chunked_pass_base {
   /// whose halo box holds it (a coarse grid over the root cell lists the boxes).
   void distribute() {
     const std::size_t m = chunk_top.size();
+    std::vector<append_file> halos;
+    box_grid grid(nodes[0].cell.lo, vec3d::Constant(nodes[0].cell.size));
     if (rank == 0) {
-      std::vector<append_file> files, halos;
-      files.reserve(m);
       halos.reserve(m);
       for (std::size_t c = 0; c < m; ++c) {
-        files.emplace_back(temp_path("chunk", c), buffer_bytes(2 * m));
         halos.emplace_back(temp_path("halo", c), buffer_bytes(2 * m));
+        const auto box = halo_box(static_cast<std::uint32_t>(c));
+        grid.add(static_cast<std::uint32_t>(c), box[0], box[1]);
       }
-      box_grid grid(nodes[0].cell.lo, vec3d::Constant(nodes[0].cell.size));
-      for (std::uint32_t c = 0; c < m; ++c) {
+    }
+    // The stored positions are the local ones in float; their box is the local box in float
+    // (rounding is monotonic), so its centre is known before the pass.
+    sphere_centre =
+        box3::of(std::vector<vec3f>{(wlo - origin).cast<float>(), (whi - origin).cast<float>()})
+            .centre();
+    const auto chunk_of = [&](const point_block& b, std::size_t k) {
+      const vec3d p = local(b.positions[k]);
+      const std::uint32_t own = nodes[descend(p)].chunk;
+      const vec3f pf = p.cast<float>();
+      sphere_r2 = std::max(sphere_r2, (pf - sphere_centre).cast<double>().squaredNorm());
+      if (pf.squaredNorm() > far_d2) {
+        far_d2 = pf.squaredNorm();
+        far_chunk = own;
+      }
+      return own;
+    };
+    const auto halo = [&](const point_record& r, std::uint32_t own) {
+      const vec3d p = local(r.position);
+      for (const std::uint32_t c : grid.at(p)) {
         const auto box = halo_box(c);
-        grid.add(c, box[0], box[1]);
+        if (c != own && (p.array() >= box[0].array()).all() && (p.array() <= box[1].array()).all())
+          halos[c].put(r);
       }
-      const attributes a = src.attrs();
-      // The stored positions are the local ones in float; their box is the local box in float
-      // (rounding is monotonic), so its centre is known before the pass.
-      sphere_centre =
-          box3::of(std::vector<vec3f>{(wlo - origin).cast<float>(), (whi - origin).cast<float>()})
-              .centre();
-      stream([&](std::uint64_t first, const point_block& b) {
-        for (std::size_t k = 0; k < b.size(); ++k) {
-          const vec3d p = local(b.positions[k]);
-          const std::uint32_t own = nodes[descend(p)].chunk;
-          const vec3f pf = p.cast<float>();
-          sphere_r2 = std::max(sphere_r2, (pf - sphere_centre).cast<double>().squaredNorm());
-          if (pf.squaredNorm() > far_d2) {
-            far_d2 = pf.squaredNorm();
-            far_chunk = own;
-          }
-          const point_record r{first + k, b.positions[k],
-                               a.normal ? b.normals[k] : vec3f(vec3f::Zero()),
-                               a.colour ? b.colours[k] : rgb8{}};
-          files[own].put(r);
-          for (const std::uint32_t c : grid.at(p)) {
-            const auto box = halo_box(c);
-            if (c != own && (p.array() >= box[0].array()).all() &&
-                (p.array() <= box[1].array()).all())
-              halos[c].put(r);
-          }
-        }
-      });
-      for (auto& f : files) f.flush();
+    };
+    const auto flush = [&] {
       for (auto& f : halos) {
         f.flush();
         rep.halo_points += f.count();
       }
-    }
-    barrier();
+    };
+    const std::vector<chunk_extent> ext =
+        chunked_pass_base::distribute(m, 2 * m, chunk_of, halo, flush);
     chunk_count.resize(m);
     for (std::size_t c = 0; c < m; ++c) {
-      chunk_count[c] = fs::file_size(temp_path("chunk", c)) / record_bytes;
+      chunk_count[c] = ext[c].count;
       rep.largest_chunk = std::max(rep.largest_chunk, chunk_count[c]);
     }
     if (rank != 0)
@@ -243,20 +193,14 @@ struct chunked_pmr_builder : chunked_pass_base {
   /// chunks are built side by side, one thread each, when there are enough of them; else one at a
   /// time on every thread. (The output does not depend on the threads.)
   void build_parts() {
-    std::vector<std::size_t> list;
-    for (std::size_t c = 0; c < chunk_top.size(); ++c)
-      if (mine(c)) list.push_back(c);
-    const bool side_by_side = list.size() >= workers;
-    pmr_options part = po;
-    part.threads = side_by_side ? 1 : workers;
-    std::atomic<std::size_t> done{0};
-    const auto caller = std::this_thread::get_id();
-    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
-      build_part(list[k], part);
-      const std::size_t d = ++done;
-      if (std::this_thread::get_id() == caller)
-        progress(0.05 + 0.85 * static_cast<double>(d) / static_cast<double>(list.size()));
-    });
+    chunked_pass_base::over_my_chunks(
+        chunk_top.size(), workers,
+        [&](std::size_t c, unsigned threads) {
+          pmr_options part = po;
+          part.threads = threads;
+          build_part(c, part);
+        },
+        [&](double done) { progress(0.05 + 0.85 * done); });
   }
 
   /// Step 4 for chunk c: the part over chunk + halo, saved; its own normals in input order.
@@ -536,11 +480,6 @@ struct chunked_pmr_builder : chunked_pass_base {
 }  // namespace
 
 }  // namespace detail
-
-std::string pmr_chunk_file_name(std::uint32_t c) {
-  std::string s = std::to_string(c);
-  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".pmr";
-}
 
 chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
                                        const chunked_pmr_options& options) {

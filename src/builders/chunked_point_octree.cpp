@@ -8,36 +8,19 @@
 #include "pbr_lod/core/binary.hpp"
 
 namespace pbr_lod {
-namespace {
-
-namespace fs = std::filesystem;
-
-std::string top_path(const std::string& dir) {
-  return (fs::path(dir) / chunked_top_file).string();
-}
-
-}  // namespace
-
 bool is_chunked_point_octree(const std::string& dir) {
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec) || !fs::is_regular_file(top_path(dir), ec)) return false;
-  const auto head = detail::load_file_prefix(top_path(dir), 8);
-  return head.size() == 8 && std::equal(head.begin(), head.end(), detail::chunked_top_format.magic);
+  return is_chunked_folder(dir, detail::chunked_top_format);
 }
 
 bool chunked_point_octree_has_colours(const std::string& dir) {
-  check_chunked_folder(dir);
-  const std::string path = top_path(dir);
-  const auto head = detail::load_file_prefix(path, 16);
-  if (head.size() < 16) throw FormatError(path + ": truncated while reading flags");
-  return (head[12] & 1u) != 0;
+  return chunked_folder_has_colours(dir);
 }
 
 template <attributes A>
 chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
   check_chunked_folder(dir);
   using io = detail::point_octree_io<A>;
-  const std::string path = top_path(dir);
+  const std::string path = chunked_top_path(dir);
   const std::vector<unsigned char> bytes = detail::load_file_bytes(path);
   detail::byte_reader r{bytes, 0, path};
   detail::read_head(r, detail::chunked_top_format);
@@ -88,7 +71,7 @@ chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
   t.top_selection_.resize(n_nodes);
   for (std::size_t i = 0; i < n_nodes; ++i)
     t.top_selection_[i] = tree::make_selection(t.top_nodes_[i]);
-  for (std::size_t c = 0; c < n_chunks; ++c) t.slots_.push_back(std::make_unique<slot>());
+  t.make_slots();
   return t;
 }
 
@@ -101,42 +84,15 @@ void chunked_point_octree<A>::validate(const std::string& path) const {
 template <attributes A>
 const typename chunked_point_octree<A>::tree& chunked_point_octree<A>::chunk(
     std::uint32_t c) const {
-  slot& s = *slots_.at(c);
-  std::call_once(s.once, [&] {
-    const std::string path = (fs::path(dir_) / chunk_file_name(c)).string();
-    auto t = std::make_unique<tree>(tree::load(path));
-    const node& root = top_nodes_[chunk_top_[c]];
-    bool same = t->origin() == origin_ && t->normal_bits() == normal_bits_ &&
-                t->samples().size() == chunk_samples_[c] && t->nodes().size() == chunk_nodes_[c] &&
-                t->at(0) == root;
-    if constexpr (A.colour) same = same && t->node_colour(0) == top_colours_[chunk_top_[c]];
+  return this->load_chunk(c, [&](const std::string& path) {
+    tree t = tree::load(path);
+    bool same = t.origin() == origin_ && t.normal_bits() == normal_bits_ &&
+                t.samples().size() == chunk_samples_[c] && t.nodes().size() == chunk_nodes_[c] &&
+                t.at(0) == top_nodes_[chunk_top_[c]];
+    if constexpr (A.colour) same = same && t.node_colour(0) == top_colours_[chunk_top_[c]];
     if (!same) throw FormatError(path + ": does not match its record in the top file");
-    s.t = std::move(t);
+    return t;
   });
-  return *s.t;
-}
-
-template <attributes A>
-std::size_t chunked_point_octree<A>::chunks_loaded() const {
-  std::size_t k = 0;
-  for (const auto& s : slots_) k += s->t != nullptr;
-  return k;
-}
-
-template <attributes A>
-std::uint64_t chunked_point_octree<A>::node_count() const {
-  std::uint64_t k = 0;
-  for (std::size_t i = 0; i < top_nodes_.size(); ++i) k += frontier_[i] == top ? 1 : 0;
-  for (const auto c : chunk_nodes_) k += c;
-  return k;
-}
-
-template <attributes A>
-std::uint64_t chunked_point_octree<A>::file_bytes() const {
-  std::uint64_t b = fs::file_size(top_path(dir_));
-  for (std::uint32_t c = 0; c < chunk_top_.size(); ++c)
-    b += fs::file_size(fs::path(dir_) / chunk_file_name(c));
-  return b;
 }
 
 /// build_point_octree's layout: a node's children are allocated together when it is built,
@@ -148,9 +104,8 @@ typename chunked_point_octree<A>::tree chunked_point_octree<A>::assemble() const
   out.normal_bits_ = normal_bits_;
   out.stats_.input_points = input_points_;
   const auto code_of = [&](node_id n) {
-    if (n.chunk == top) return top_codes_[n.index];
-    if (n.index == 0) return top_codes_[chunk_top_[n.chunk]];
-    return chunk(n.chunk).node_codes_[n.index];
+    const std::uint32_t i = in_top(n);
+    return i != top ? top_codes_[i] : chunk(n.chunk).node_codes_[n.index];
   };
   const std::function<void(node_id, std::uint32_t)> place = [&](node_id n, std::uint32_t dst) {
     node nd = at(n);

@@ -90,17 +90,15 @@ struct chunked_point_octree_builder : chunked_pass_base {
   static constexpr std::uint32_t none = 0xffffffffu;
   static constexpr std::uint64_t block = B::block;
 
-  struct top_node {
-    std::uint64_t count = 0;
+  /// A node above the chunks: its split point (the mean, §3) and what the passes sum for it.
+  struct mean_cell {
     vec3d mean = vec3d::Zero(), normal_sum = vec3d::Zero(), colour_sum = vec3d::Zero();
     std::uint32_t depth = 0;
-    enum class state : std::uint8_t { chunk, pending, split } st = state::chunk;
-    std::array<std::uint32_t, 8> child{none, none, none, none, none, none, none, none};
-    std::uint32_t first_child = 0, children = 0, chunk = none;
     double r2 = 0;
     float min_dot = 1;
     stream_acc acc;
   };
+  using top_node = typename top_tree<mean_cell>::node;
   struct chunk_info {
     std::uint32_t top;
     std::uint64_t count = 0;
@@ -108,13 +106,14 @@ struct chunked_point_octree_builder : chunked_pass_base {
     vec3f hi = vec3f::Constant(-std::numeric_limits<float>::infinity());
   };
 
-  const chunked_build_options& opt;
+  const chunked_point_octree_options& opt;
   point_octree_options oo;  // the octree options without the progress callback
   unsigned threads;
   std::uint64_t n;
   std::uint64_t chunk_points;
   std::shared_ptr<const normal_quantizer> quant;
-  std::vector<top_node> nodes;
+  top_tree<mean_cell> upper;  // the tree above the chunks
+  std::vector<top_node>& nodes = upper.nodes;
   std::vector<chunk_info> chunks;
   chunked_build_report rep;
   box3 box;              // of the input's positions (the root pass)
@@ -123,30 +122,53 @@ struct chunked_point_octree_builder : chunked_pass_base {
   std::uint64_t missing = 0;  // input normals zero or not finite (the structure pass counts)
 
   chunked_point_octree_builder(const point_source& s, const std::string& d,
-                               const chunked_build_options& o)
+                               const chunked_point_octree_options& o)
       : chunked_pass_base(s, d, o.block_points, o.distributed, "build_point_octree_chunked"),
         opt(o),
-        oo(o.octree),
+        oo(o.builder),
         n(s.size()) {
     oo.progress = {};
     threads = resolve_threads(oo.threads);
-    chunk_points = opt.chunk_points
-                       ? opt.chunk_points
-                       : std::max<std::uint64_t>(1, opt.memory_bytes / chunk_bytes_per_point);
-    chunk_points = std::clamp<std::uint64_t>(chunk_points, oo.leaf_size, (1u << 31) - 1);
+    chunk_points = chunk_points_for(opt.memory_bytes, opt.chunk_points,
+                                    {chunk_bytes_per_point, 1, oo.leaf_size});
     if (oo.normal_bits > 0) quant = normal_quantizer::shared(oo.normal_bits);
   }
 
   void progress(double f) const {
-    if (opt.octree.progress && !opt.octree.progress(f))
+    if (opt.builder.progress && !opt.builder.progress(f))
       throw Cancelled("build_point_octree_chunked: cancelled");
   }
 
   [[nodiscard]] std::uint32_t descend(const vec3d& p) const {
-    std::uint32_t x = 0;
-    while (nodes[x].st == top_node::state::split)
-      x = nodes[x].child[static_cast<std::size_t>(octant_of(p, nodes[x].mean))];
-    return x;
+    return upper.descend(p, [](const top_node& x, const vec3d& q) { return octant(x, q); });
+  }
+
+  // ---- Pajarola's split (§3), as top_tree's rule: a node splits at the mean of its samples
+  // while it holds more than a chunk, the octants' sums summed block by block exactly as the
+  // in-memory octant pass sums them (same order, same doubles).
+  static vec3d local(const vec3f& p) { return p.cast<double>(); }
+  [[nodiscard]] bool split(const top_node& x) const {
+    return x.count > chunk_points && x.depth < oo.max_depth;
+  }
+  static int octant(const top_node& x, const vec3d& p) { return octant_of(p, x.mean); }
+  static void add(top_node& x, int o, const vec3d& p) {
+    x.r2 = std::max(x.r2, (p - x.mean).squaredNorm());
+    x.acc.add(o, p, nullptr, nullptr, block);
+  }
+  /// Samples all at one position (one octant about their mean): the chunk's build makes it a
+  /// leaf, as build() does.
+  static bool keep_whole(top_node& x) {
+    x.acc.finish(block);
+    int nonempty = 0;
+    for (auto c : x.acc.total.cnt) nonempty += c > 0;
+    return nonempty < 2;
+  }
+  static mean_cell child(const top_node& x, int o) {
+    const auto u = static_cast<std::size_t>(o);
+    mean_cell c;
+    c.mean = x.acc.total.psum[u] / static_cast<double>(x.acc.total.cnt[u]);
+    c.depth = x.depth + 1;
+    return c;
   }
 
   /// Step 1: the root's mean, then one pass per level splitting every node above chunk size.
@@ -163,94 +185,29 @@ struct chunked_point_octree_builder : chunked_pass_base {
       }
     });
     root.finish(block);
-    nodes.assign(1, top_node{});
-    nodes[0].count = n;
-    nodes[0].mean = root.total.psum[0] / static_cast<double>(n);
-    for (;;) {
-      bool any = false;
-      for (auto& x : nodes)
-        if (x.st == top_node::state::chunk && x.count > chunk_points && x.depth < oo.max_depth) {
-          x.st = top_node::state::pending;
-          x.acc = {};
-          any = true;
-        }
-      if (!any) break;
-      stream([&](std::uint64_t, const point_block& b) {
-        for (const vec3f& pf : b.positions) {
-          const vec3d p = pf.cast<double>();
-          top_node& x = nodes[descend(p)];
-          if (x.st != top_node::state::pending) continue;
-          x.r2 = std::max(x.r2, (p - x.mean).squaredNorm());
-          x.acc.add(octant_of(p, x.mean), p, nullptr, nullptr, block);
-        }
-      });
-      split_pending();
-    }
-  }
-
-  void split_pending() {
-    const std::size_t end = nodes.size();
-    for (std::size_t i = 0; i < end; ++i) {
-      if (nodes[i].st != top_node::state::pending) continue;
-      nodes[i].acc.finish(block);
-      const stream_sums s = nodes[i].acc.total;
-      int nonempty = 0;
-      for (auto c : s.cnt) nonempty += c > 0;
-      if (nonempty < 2) {  // duplicates: the chunk's build makes it a leaf, as build() does
-        nodes[i].st = top_node::state::chunk;
-        continue;
-      }
-      nodes[i].st = top_node::state::split;
-      nodes[i].first_child = static_cast<std::uint32_t>(nodes.size());
-      nodes[i].children = static_cast<std::uint32_t>(nonempty);
-      for (std::size_t o = 0; o < 8; ++o) {
-        if (s.cnt[o] == 0) continue;
-        top_node c;
-        c.count = s.cnt[o];
-        c.mean = s.psum[o] / static_cast<double>(s.cnt[o]);
-        c.depth = nodes[i].depth + 1;
-        nodes[i].child[o] = static_cast<std::uint32_t>(nodes.size());
-        nodes.push_back(c);
-      }
-    }
+    mean_cell top;
+    top.mean = root.total.psum[0] / static_cast<double>(n);
+    upper.grow(*this, top, n, *this);
   }
 
   /// Step 2: every point into its chunk's file (rank 0; the others learn the chunks' sizes from
   /// the files once it is done).
   void distribute() {
-    for (std::uint32_t i = 0; i < nodes.size(); ++i)
-      if (nodes[i].st == top_node::state::chunk) {
-        nodes[i].chunk = static_cast<std::uint32_t>(chunks.size());
-        chunks.push_back({.top = i});
-      }
-    if (rank == 0) {
-      std::vector<append_file> files;
-      files.reserve(chunks.size());
-      for (std::size_t c = 0; c < chunks.size(); ++c)
-        files.emplace_back(temp_path("chunk", c), buffer_bytes());
-      stream([&](std::uint64_t first, const point_block& b) {
-        for (std::size_t k = 0; k < b.size(); ++k) {
-          const std::uint32_t c = nodes[descend(b.positions[k].cast<double>())].chunk;
+    for (const std::uint32_t i : upper.chunk_top) chunks.push_back({.top = i});
+    const std::vector<chunk_extent> ext = chunked_pass_base::distribute(
+        chunks.size(), chunks.size(),
+        [&](const point_block& b, std::size_t k) {
           sphere_r2 =
               std::max(sphere_r2, (b.positions[k] - box.centre()).cast<double>().squaredNorm());
-          chunk_info& ci = chunks[c];
-          ci.lo = ci.lo.cwiseMin(b.positions[k]);
-          ci.hi = ci.hi.cwiseMax(b.positions[k]);
-          files[c].put({first + k, b.positions[k], In.normal ? b.normals[k] : vec3f(vec3f::Zero()),
-                        In.colour ? b.colours[k] : rgb8{}});
-        }
-      });
-      for (auto& f : files) f.flush();
-    }
-    barrier();
+          return nodes[descend(b.positions[k].cast<double>())].chunk;
+        },
+        [](const point_record&, std::uint32_t) {}, [] {});
     for (std::size_t c = 0; c < chunks.size(); ++c) {
-      chunks[c].count = fs::file_size(temp_path("chunk", c)) / record_bytes;
+      chunks[c].lo = ext[c].lo;
+      chunks[c].hi = ext[c].hi;
+      chunks[c].count = ext[c].count;
       rep.largest_chunk = std::max(rep.largest_chunk, chunks[c].count);
     }
-  }
-
-  [[nodiscard]] std::size_t buffer_bytes() const {
-    return chunked_pass_base::buffer_bytes(chunks.size());
   }
 
   /// Neighbours the estimation reads: the ellipses', and the normals' where any is missing
@@ -261,18 +218,7 @@ struct chunked_point_octree_builder : chunked_pass_base {
 
   /// The chunks in octree order (depth first, octants in order): neighbours follow each other.
   [[nodiscard]] std::vector<std::uint32_t> chunks_in_order() const {
-    std::vector<std::uint32_t> out, stack{0};
-    while (!stack.empty()) {
-      const std::uint32_t x = stack.back();
-      stack.pop_back();
-      if (nodes[x].st != top_node::state::split) {
-        out.push_back(nodes[x].chunk);
-        continue;
-      }
-      for (std::size_t o = 8; o-- > 0;)
-        if (nodes[x].child[o] != none) stack.push_back(nodes[x].child[o]);
-    }
-    return out;
+    return upper.chunks_in_order();
   }
 
   /// Step 3: the halos (chunked_pass_base::halos); when input normals are missing, those
@@ -662,13 +608,8 @@ struct chunked_point_octree_builder : chunked_pass_base {
 
 }  // namespace detail
 
-std::string chunk_file_name(std::uint32_t c) {
-  std::string s = std::to_string(c);
-  return "chunk-" + std::string(s.size() < 6 ? 6 - s.size() : 0, '0') + s + ".po";
-}
-
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
-                                                const chunked_build_options& options) {
+                                                const chunked_point_octree_options& options) {
   const attributes a = src.attrs();
   return detail::build_or_keep(dir, "build_point_octree_chunked", [&] {
     if (a.normal && a.colour)

@@ -41,9 +41,9 @@ std::vector<chunked_kind> kinds() {
   return {
       {"point_octree",
        [](const point_cloud& c, const std::string& dir) {
-         chunked_build_options o;
+         chunked_point_octree_options o;
          o.chunk_points = 2000;
-         o.octree.threads = 1;
+         o.builder.threads = 1;
          (void)build_point_octree_chunked(cloud_point_source(c), dir, o);
        },
        [](const std::string& dir) {
@@ -53,8 +53,8 @@ std::vector<chunked_kind> kinds() {
        [](const point_cloud& c, const std::string& dir) {
          chunked_pmr_options o;
          o.chunk_points = 2000;
-         o.pmr.max_leaf_points = 500;
-         o.pmr.threads = 1;
+         o.builder.max_leaf_points = 500;
+         o.builder.threads = 1;
          (void)build_pmr_chunked(cloud_point_source(c), dir, o);
        },
        [](const std::string& dir) { (void)chunked_pmr<with_normals_colours>::open(dir); }},
@@ -62,9 +62,9 @@ std::vector<chunked_kind> kinds() {
        [](const point_cloud& c, const std::string& dir) {
          chunked_pca_octree_options o;
          o.chunk_points = 2000;
-         o.pca.threads = 1;
-         o.pca.position_codebook = 64;
-         o.pca.normal_codebook = 64;
+         o.builder.threads = 1;
+         o.builder.position_codebook = 64;
+         o.builder.normal_codebook = 64;
          (void)build_pca_octree_chunked(cloud_point_source(c), dir, o);
        },
        [](const std::string& dir) { (void)chunked_pca_octree<with_normals_colours>::open(dir); }},

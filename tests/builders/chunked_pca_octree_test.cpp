@@ -1,5 +1,5 @@
-// The chunked (out-of-core) PCA octree: equal to the in-memory build node for node and bit for
-// bit, the same points drawn, lazy opening, ranks, damaged directories.
+// The chunked (out-of-core) PCA octree: the chunked layer's suite (chunked_suite.hpp), and what is
+// the PCA octree's own: node numbers, the same points drawn, unquantised builds, estimated normals.
 #include <gtest/gtest.h>
 
 #include <barrier>
@@ -10,7 +10,7 @@
 #include <numbers>
 #include <thread>
 
-#include "chunked_test_util.hpp"
+#include "chunked_suite.hpp"
 #include "pbr_lod/builders/chunked_pca_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/synthetic.hpp"
@@ -60,44 +60,78 @@ pca_octree<NC> in_memory(const point_cloud& c, const pca_octree_options& o) {
   return build_pca_octree(point_set<NC>::from(c), o);
 }
 
-class ChunkedPca : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    cloud_ = new point_cloud(surface_with_duplicates(14000));
-    dir_ = new std::string(temp_dir("equal"));
-    chunked_pca_octree_options o;
-    o.pca = small_codebooks();
+/// The PCA octree's case of the chunked layer's suite (chunked_suite.hpp).
+struct pca_case {
+  using options = chunked_pca_octree_options;
+  using hierarchy = H;
+  using uncoloured = chunked_pca_octree<with_normals>;
+  using tree = pca_octree<NC>;
+  static constexpr const char* name = "cpca";
+  static point_cloud cloud() { return surface_with_duplicates(14000); }
+  static options options_for_many() {
+    options o;
+    o.builder = small_codebooks();
     o.chunk_points = 600;
-    report_ =
-        new chunked_build_report(build_pca_octree_chunked(cloud_point_source(*cloud_), *dir_, o));
-    memory_ = new pca_octree<NC>(in_memory(*cloud_, o.pca));
+    return o;
   }
-  static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
-    delete cloud_;
-    delete dir_;
-    delete report_;
-    delete memory_;
+  static chunked_build_report build(const point_source& src, const std::string& dir,
+                                    const options& o) {
+    return build_pca_octree_chunked(src, dir, o);
   }
-  static point_cloud* cloud_;
-  static std::string* dir_;
-  static chunked_build_report* report_;
-  static pca_octree<NC>* memory_;
+  static tree in_memory(const point_cloud& c, const options& o) {
+    return pbr_lod::in_memory(c, o.builder);
+  }
+  static void expect_equal(const tree& whole, const tree& memory) {
+    EXPECT_EQ(whole.data().codebook_p, memory.data().codebook_p);
+    EXPECT_TRUE(whole.data().records == memory.data().records);
+    EXPECT_TRUE(whole.nodes() == memory.nodes());
+    EXPECT_TRUE(whole == memory);
+  }
+  static std::string chunk_file(std::uint32_t c) { return pca_chunk_file_name(c); }
+  static bool is_chunked(const std::string& dir) { return is_chunked_pca_octree(dir); }
+  static bool has_colours(const std::string& dir) { return chunked_pca_octree_has_colours(dir); }
+  /// With normals, and without: then the halo cells come from every rank, the estimation from
+  /// rank 0, and the chunks are built round robin from the files it rewrote.
+  static std::vector<std::unique_ptr<point_source>> ranks_sources() {
+    std::vector<std::unique_ptr<point_source>> out;
+    point_cloud c = make_wavy_surface(8000, 9);
+    out.push_back(std::make_unique<test::owned_cloud_source>(c));
+    c.normals.clear();
+    out.push_back(std::make_unique<test::owned_cloud_source>(std::move(c)));
+    return out;
+  }
+  static options ranks_options() {
+    options o;
+    o.builder = small_codebooks();
+    o.builder.threads = 1;
+    o.chunk_points = 500;
+    return o;
+  }
+  static point_cloud one_chunk_cloud() { return make_wavy_surface(6000, 5); }
+  static constexpr int one_chunk_passes = 0;
+  static bool make_bad(options& o) {
+    o.builder.gamma = 0;
+    return true;
+  }
+  static point_cloud damage_cloud() { return make_wavy_surface(4000, 4); }
+  static options damage_options() {
+    options o;
+    o.builder = small_codebooks();
+    o.chunk_points = 600;
+    return o;
+  }
+  static constexpr std::size_t top_cut = 7, top_flip = 0;  // flips: every size / 300-th byte
 };
-point_cloud* ChunkedPca::cloud_ = nullptr;
-std::string* ChunkedPca::dir_ = nullptr;
-chunked_build_report* ChunkedPca::report_ = nullptr;
-pca_octree<NC>* ChunkedPca::memory_ = nullptr;
+INSTANTIATE_TYPED_TEST_SUITE_P(ChunkedPca, ChunkedLayer, pca_case);
+
+using ChunkedPca = test::chunked_fixture<pca_case>;
 
 TEST_F(ChunkedPca, SplitsIntoChunksAndOpensLazily) {
-  EXPECT_GE(report_->chunks, 20u);
-  EXPECT_EQ(report_->largest_chunk, 701u) << "the repeated point (and its 700 copies) is one chunk";
-  EXPECT_FALSE(fs::exists(fs::path(*dir_) / "tmp-build")) << "temporary files left behind";
-  const H h = H::open(*dir_);
-  EXPECT_EQ(h.chunk_count(), report_->chunks);
-  EXPECT_EQ(h.node_count(), memory_->nodes().size());
-  EXPECT_EQ(h.input_points(), cloud_->size());
-  EXPECT_EQ(h.chunks_loaded(), 0u) << "opening read a chunk";
+  EXPECT_GE(built().report.chunks, 20u);
+  EXPECT_EQ(built().report.largest_chunk, 701u)
+      << "the repeated point (and its 700 copies) is one chunk";
+  const H h = H::open(built().dir);
+  EXPECT_EQ(h.input_points(), built().cloud.size());
   EXPECT_GT(h.top_node_count(), h.chunk_count());
   // Every node reached through the hierarchy is the in-memory node of its number.
   std::vector<H::node_id> stack{h.root()};
@@ -106,42 +140,28 @@ TEST_F(ChunkedPca, SplitsIntoChunksAndOpensLazily) {
     const H::node_id x = stack.back();
     stack.pop_back();
     const std::uint64_t g = h.global_id(x);
-    ASSERT_LT(g, memory_->nodes().size());
-    const pca_node& want = memory_->at(static_cast<std::uint32_t>(g));
+    ASSERT_LT(g, built().memory.nodes().size());
+    const pca_node& want = built().memory.at(static_cast<std::uint32_t>(g));
     EXPECT_EQ(h.at(x).mean, want.mean) << "node " << g;
     EXPECT_EQ(h.at(x).radius, want.radius) << "node " << g;
     EXPECT_EQ(h.at(x).count, want.count) << "node " << g;
     ++visited;
     for (const H::node_id c : h.children(x)) stack.push_back(c);
   }
-  EXPECT_EQ(visited, memory_->nodes().size());
-}
-
-TEST_F(ChunkedPca, AssemblesToTheInMemoryBuildByteForByte) {
-  const pca_octree<NC> whole = H::open(*dir_).assemble();
-  ASSERT_EQ(whole.nodes().size(), memory_->nodes().size());
-  EXPECT_EQ(whole.data().codebook_p, memory_->data().codebook_p);
-  EXPECT_TRUE(whole.data().records == memory_->data().records);
-  EXPECT_TRUE(whole.nodes() == memory_->nodes());
-  EXPECT_TRUE(whole == *memory_);
-  const std::string a = *dir_ + "/assembled.pca", b = *dir_ + "/memory.pca";
-  whole.save(a);
-  memory_->save(b);
-  EXPECT_EQ(bytes_of(a), bytes_of(b));
-  fs::remove(a);
-  fs::remove(b);
+  EXPECT_EQ(visited, built().memory.nodes().size());
 }
 
 TEST_F(ChunkedPca, DrawsThePointsOfTheInMemoryBuildAndLoadsOnlyWhatItNeeds) {
-  const sphere s = memory_->bounding_sphere(memory_->root());
-  const vec3d centre = memory_->origin() + s.centre.cast<double>();
+  const sphere s = built().memory.bounding_sphere(built().memory.root());
+  const vec3d centre = built().memory.origin() + s.centre.cast<double>();
   for (const double dist : {3.0, 0.4}) {
-    const H h = H::open(*dir_);
+    const H h = H::open(built().dir);
     const camera cam = camera::orbit(centre, s.radius, 30, 25, dist, 1, {160, 160});
     buffer_sink<NC> got, want;
     const pca_octree_policy policy;
     const traverse_stats sg = traverse(h, view(cam, h.origin()), {}, got, policy);
-    const traverse_stats sw = traverse(*memory_, view(cam, memory_->origin()), {}, want, policy);
+    const traverse_stats sw =
+        traverse(built().memory, view(cam, built().memory.origin()), {}, want, policy);
     EXPECT_EQ(sg.visited, sw.visited);
     ASSERT_EQ(got.points.size(), want.points.size());
     EXPECT_GT(got.points.size(), 1000u);
@@ -166,7 +186,7 @@ TEST(ChunkedPcaOptions, UnquantisedAndOneChunkEqualTheInMemoryBuild) {
   q.quantise = false;
   for (const std::uint64_t chunk : {std::uint64_t{400}, std::uint64_t{0}}) {
     chunked_pca_octree_options o;
-    o.pca = q;
+    o.builder = q;
     o.chunk_points = chunk;
     const std::string dir = temp_dir("float" + std::to_string(chunk));
     const auto r = build_pca_octree_chunked(cloud_point_source(c), dir, o);
@@ -174,72 +194,6 @@ TEST(ChunkedPcaOptions, UnquantisedAndOneChunkEqualTheInMemoryBuild) {
     EXPECT_TRUE(H::open(dir).assemble() == in_memory(c, q)) << "chunk points " << chunk;
     fs::remove_all(dir);
   }
-}
-
-/// Three "ranks" as threads with a barrier write the one-process folder of `c`.
-void expect_three_ranks_write_the_one_process_folder(const point_cloud& c,
-                                                     const std::string& name) {
-  const cloud_point_source src(c);
-  chunked_pca_octree_options o;
-  o.pca = small_codebooks();
-  o.pca.threads = 1;
-  o.chunk_points = 500;
-  const std::string one = temp_dir(name + "_one"), many = temp_dir(name + "_many");
-  const chunked_build_report r1 = build_pca_octree_chunked(src, one, o);
-  ASSERT_GE(r1.chunks, 6u);
-  std::barrier sync(3);
-  std::vector<std::thread> ranks;
-  for (int rank = 0; rank < 3; ++rank)
-    ranks.emplace_back([&, rank] {
-      chunked_pca_octree_options mine = o;
-      mine.distributed = {rank, 3, [&] { sync.arrive_and_wait(); }};
-      (void)build_pca_octree_chunked(src, many, mine);
-    });
-  for (auto& t : ranks) t.join();
-  expect_same_folders(one, many);
-  fs::remove_all(one);
-  fs::remove_all(many);
-}
-
-TEST(ChunkedPcaDistributed, ThreeRanksWriteTheOneProcessFolder) {
-  expect_three_ranks_write_the_one_process_folder(make_wavy_surface(8000, 9), "dist");
-}
-
-// Without normals: the halo cells come from every rank, the estimation from rank 0, and the
-// chunks are built round robin from the files it rewrote.
-TEST(ChunkedPcaDistributed, ThreeRanksEstimateMissingNormalsAsOneProcess) {
-  point_cloud c = make_wavy_surface(8000, 9);
-  c.normals.clear();
-  expect_three_ranks_write_the_one_process_folder(c, "dist_bare");
-}
-
-TEST(ChunkedPcaFiles, BadInputAndDamagedDirectoriesAreErrors) {
-  point_cloud empty;
-  EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(empty), temp_dir("e"), {}),
-               InvalidArgument);
-  point_cloud c = make_wavy_surface(4000, 4);
-  chunked_pca_octree_options bad;
-  bad.pca.gamma = 0;
-  EXPECT_THROW((void)build_pca_octree_chunked(cloud_point_source(c), temp_dir("b"), bad),
-               InvalidArgument);
-  const std::string dir = temp_dir("damage");
-  chunked_pca_octree_options o;
-  o.pca = small_codebooks();
-  o.chunk_points = 600;
-  (void)build_pca_octree_chunked(cloud_point_source(c), dir, o);
-  EXPECT_TRUE(is_chunked_pca_octree(dir));
-  EXPECT_TRUE(chunked_pca_octree_has_colours(dir));
-  EXPECT_THROW((void)chunked_pca_octree<with_normals>::open(dir), FormatError)
-      << "a coloured hierarchy opened as uncoloured";
-  const std::string top = dir + "/" + chunked_top_file;
-  test::expect_damage_is_error(top, 7, fs::file_size(top) / 300 + 1, [&] { (void)H::open(dir); });
-  // A chunk's file cut or flipped: an error when it is read.
-  const std::string chunk0 = dir + "/" + pca_chunk_file_name(0);
-  const std::size_t size0 = fs::file_size(chunk0);
-  test::expect_damage_is_error(chunk0, size0 / 97 + 1, size0 / 97 + 1,
-                               [&] { (void)H::open(dir).chunk(0); });
-  test::expect_swapped_chunks_are_errors(H::open(dir), dir, pca_chunk_file_name);
-  fs::remove_all(dir);
 }
 
 /// Per node (by whole-tree number) of the chunked build in `dir`: its mean position and mean
@@ -267,7 +221,7 @@ TEST(ChunkedPcaFiles, MissingNormalsAreEstimatedAcrossChunks) {
   ++zeroed;
   bare.normals.clear();
   chunked_pca_octree_options o;
-  o.pca.quantise = false;  // compare the statistics, not codebooks trained on them
+  o.builder.quantise = false;  // compare the statistics, not codebooks trained on them
   o.chunk_points = 800;
   const std::string truth = temp_dir("mn_truth"), dsome = temp_dir("mn_some"),
                     dbare = temp_dir("mn_bare");
@@ -281,9 +235,9 @@ TEST(ChunkedPcaFiles, MissingNormalsAreEstimatedAcrossChunks) {
   EXPECT_TRUE(rb.estimated_normals);
   EXPECT_GT(rb.halo_points, 0u);
   const auto t = node_means(truth), a = node_means(dsome), b = node_means(dbare);
-  const auto memory_some = build_pca_octree(point_set<NC>::from(some), o.pca);
+  const auto memory_some = build_pca_octree(point_set<NC>::from(some), o.builder);
   const auto memory_bare =
-      build_pca_octree(point_set<attributes{.colour = true}>::from(bare), o.pca);
+      build_pca_octree(point_set<attributes{.colour = true}>::from(bare), o.builder);
   const auto& ms = memory_some.nodes();
   const auto& mb = memory_bare.nodes();
   ASSERT_EQ(a.size(), ms.size());

@@ -1,5 +1,6 @@
-// The chunked (out-of-core) PMR: equal to the in-memory build (sample for sample with input
-// normals, up to each chunk's sign without), lazy opening, ranks, damaged directories.
+// The chunked (out-of-core) PMR: the chunked layer's suite (chunked_suite.hpp), and what is PMR's
+// own: its halos and foreign samples, its cuts, and normals up to each chunk's sign without input
+// normals.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -9,7 +10,7 @@
 #include <iterator>
 #include <thread>
 
-#include "chunked_test_util.hpp"
+#include "chunked_suite.hpp"
 #include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
@@ -77,86 +78,100 @@ std::size_t differing(const sink_t& a, const sink_t& b) {
   return k;
 }
 
-class ChunkedPmr : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    cloud_ = new point_cloud(surface_with_duplicates(14000));
-    dir_ = new std::string(temp_dir("equal"));
-    chunked_pmr_options o;
-    o.pmr = small_leaves();
+/// PMR's case of the chunked layer's suite (chunked_suite.hpp).
+struct pmr_case {
+  using options = chunked_pmr_options;
+  using hierarchy = H;
+  using uncoloured = chunked_pmr<with_normals>;
+  using tree = pmr_hierarchy;
+  static constexpr const char* name = "cpmr";
+  static point_cloud cloud() { return surface_with_duplicates(14000); }
+  static options options_for_many() {
+    options o;
+    o.builder = small_leaves();
     o.chunk_points = 1500;
-    report_ = new chunked_build_report(build_pmr_chunked(cloud_point_source(*cloud_), *dir_, o));
-    memory_ = new pmr_hierarchy(build_pmr(*cloud_, o.pmr));
+    return o;
   }
-  static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
-    delete cloud_;
-    delete dir_;
-    delete report_;
-    delete memory_;
+  static chunked_build_report build(const point_source& src, const std::string& dir,
+                                    const options& o) {
+    return build_pmr_chunked(src, dir, o);
   }
-  static point_cloud* cloud_;
-  static std::string* dir_;
-  static chunked_build_report* report_;
-  static pmr_hierarchy* memory_;
+  static tree in_memory(const point_cloud& c, const options& o) { return build_pmr(c, o.builder); }
+  static void expect_equal(const tree& whole, const tree& memory) {
+    EXPECT_EQ(whole.source(), memory.source());
+    EXPECT_EQ(whole.normals(), memory.normals());
+    EXPECT_EQ(whole.triangles(), memory.triangles());
+    EXPECT_TRUE(whole.nodes() == memory.nodes());
+    EXPECT_TRUE(whole == memory);
+  }
+  static std::string chunk_file(std::uint32_t c) { return pmr_chunk_file_name(c); }
+  static bool is_chunked(const std::string& dir) { return is_chunked_pmr(dir); }
+  static bool has_colours(const std::string& dir) { return chunked_pmr_has_colours(dir); }
+  /// Positions only: the chunks' orientation (rank 0) reaches the other ranks through a file.
+  static std::vector<std::unique_ptr<point_source>> ranks_sources() {
+    point_cloud c = make_wavy_surface(8000, 9);
+    c.normals.clear();
+    std::vector<std::unique_ptr<point_source>> out;
+    out.push_back(std::make_unique<test::owned_cloud_source>(std::move(c)));
+    return out;
+  }
+  static options ranks_options() {
+    options o;
+    o.builder = small_leaves();
+    o.builder.threads = 1;
+    o.chunk_points = 1000;
+    return o;
+  }
+  static point_cloud one_chunk_cloud() { return make_wavy_surface(2500, 2); }
+  static constexpr int one_chunk_passes = 0;
+  static bool make_bad(options& o) {
+    o.builder.rho = {0.5f, 0.2f};
+    return true;
+  }
+  static point_cloud damage_cloud() { return make_wavy_surface(5000, 4); }
+  static options damage_options() {
+    options o;
+    o.builder = small_leaves();
+    o.chunk_points = 800;
+    return o;
+  }
+  static constexpr std::size_t top_cut = 5, top_flip = 3;
 };
-point_cloud* ChunkedPmr::cloud_ = nullptr;
-std::string* ChunkedPmr::dir_ = nullptr;
-chunked_build_report* ChunkedPmr::report_ = nullptr;
-pmr_hierarchy* ChunkedPmr::memory_ = nullptr;
+INSTANTIATE_TYPED_TEST_SUITE_P(ChunkedPmr, ChunkedLayer, pmr_case);
+
+using ChunkedPmr = test::chunked_fixture<pmr_case>;
 
 TEST_F(ChunkedPmr, SplitsIntoChunksWithHalos) {
-  EXPECT_GE(report_->chunks, 10u);
-  EXPECT_LE(report_->largest_chunk, 1500u);
-  EXPECT_GT(report_->halo_points, 0u);
-  EXPECT_FALSE(fs::exists(fs::path(*dir_) / "tmp-build")) << "temporary files left behind";
-  const H h = H::open(*dir_);
-  EXPECT_EQ(h.chunk_count(), report_->chunks);
-  EXPECT_EQ(h.node_count(), memory_->nodes().size());
-  EXPECT_EQ(h.leaf_count(), memory_->leaf_count());
-  pmr_build_stats counts = memory_->stats();
+  EXPECT_GE(built().report.chunks, 10u);
+  EXPECT_LE(built().report.largest_chunk, 1500u);
+  EXPECT_GT(built().report.halo_points, 0u);
+  const H h = H::open(built().dir);
+  EXPECT_EQ(h.leaf_count(), built().memory.leaf_count());
+  pmr_build_stats counts = built().memory.stats();
   counts.build_seconds = 0;  // not in files
   EXPECT_TRUE(h.stats() == counts);
-  const sphere s = bounding_sphere_about_box_centre(memory_->positions());
+  const sphere s = bounding_sphere_about_box_centre(built().memory.positions());
   EXPECT_EQ(h.input_sphere().centre, s.centre);
   EXPECT_EQ(h.input_sphere().radius, s.radius);
-  EXPECT_EQ(h.chunks_loaded(), 0u) << "opening read a chunk";
   std::size_t foreign = 0;  // (reads every chunk)
   for (std::uint32_t c = 0; c < h.chunk_count(); ++c) foreign += h.chunk(c).foreign();
   EXPECT_GT(foreign, 0u) << "no umbrella reached into another chunk";
 }
 
-TEST_F(ChunkedPmr, AssemblesToTheInMemoryBuildByteForByte) {
-  const H h = H::open(*dir_);
-  const pmr_hierarchy whole = h.assemble();
-  ASSERT_EQ(whole.positions().size(), memory_->positions().size());
-  EXPECT_EQ(whole.source(), memory_->source());
-  EXPECT_EQ(whole.normals(), memory_->normals());
-  EXPECT_EQ(whole.triangles(), memory_->triangles());
-  EXPECT_TRUE(whole.nodes() == memory_->nodes());
-  EXPECT_TRUE(whole == *memory_);
-  const std::string a = *dir_ + "/assembled.pmr", b = *dir_ + "/memory.pmr";
-  whole.save(a);
-  memory_->save(b);
-  EXPECT_EQ(bytes_of(a), bytes_of(b));
-  fs::remove(a);
-  fs::remove(b);
-}
-
 TEST_F(ChunkedPmr, TraversalMatchesTheInMemoryCutAndLoadsOnlyWhatItNeeds) {
-  const sphere s = memory_->bounding_sphere(memory_->root());
-  const vec3d centre = memory_->origin() + s.centre.cast<double>();
+  const sphere s = built().memory.bounding_sphere(built().memory.root());
+  const vec3d centre = built().memory.origin() + s.centre.cast<double>();
   for (const double dist : {3.0, 0.6}) {
-    const H h = H::open(*dir_);
+    const H h = H::open(built().dir);
     camera cam = camera::orbit(centre, s.radius, 30, 25, dist, 1, {200, 200});
     traverse_options o;
     o.tolerance_px = 2;
     sink_t got, want;
-    std::vector<std::uint32_t> lv_got(h.leaf_count()), lv_want(memory_->leaf_count());
+    std::vector<std::uint32_t> lv_got(h.leaf_count()), lv_want(built().memory.leaf_count());
     pmr_policy pg, pw;
     pg.levels_used = &lv_got;
     pw.levels_used = &lv_want;
-    const pmr_colour_view cv(*memory_);
+    const pmr_colour_view cv(built().memory);
     (void)traverse(h, view(cam, h.origin()), o, got, pg);
     (void)traverse(cv, view(cam, cv.origin()), o, want, pw);
     EXPECT_GT(got.points.size() + got.triangles.size(), 100u);
@@ -175,13 +190,13 @@ TEST(ChunkedPmrEstimated, WithoutInputNormalsOnlySignsDiffer) {
   point_cloud c = make_wavy_surface(9000, 3);
   c.normals.clear();
   chunked_pmr_options o;
-  o.pmr = small_leaves();
+  o.builder = small_leaves();
   o.chunk_points = 1200;
   const std::string dir = temp_dir("signs");
   const auto r = build_pmr_chunked(cloud_point_source(c), dir, o);
   EXPECT_GE(r.chunks, 6u);
   const pmr_hierarchy whole = H::open(dir).assemble();
-  const pmr_hierarchy memory = build_pmr(c, o.pmr);
+  const pmr_hierarchy memory = build_pmr(c, o.builder);
   EXPECT_EQ(whole.positions(), memory.positions());
   EXPECT_EQ(whole.source(), memory.source());
   EXPECT_TRUE(whole.nodes() == memory.nodes());
@@ -209,15 +224,15 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
   // scan's open base — stay under 1 %.
   const point_cloud c = read_points(test::data_file("bun_zipper_res2.ply"));
   chunked_pmr_options o;
-  o.pmr.max_leaf_points = 1000;
-  o.pmr.triangulation_points = 1000;  // as the chunks: the same Voronoi work
-  o.pmr.neighbour_leaves = false;
+  o.builder.max_leaf_points = 1000;
+  o.builder.triangulation_points = 1000;  // as the chunks: the same Voronoi work
+  o.builder.neighbour_leaves = false;
   o.chunk_points = 1000;
   const std::string dir = temp_dir("bunny");
   const auto r = build_pmr_chunked(cloud_point_source(c), dir, o);
   EXPECT_GE(r.chunks, 30u);
   const pmr_hierarchy whole = chunked_pmr<with_normals>::open(dir).assemble();
-  const pmr_hierarchy memory = build_pmr(c, o.pmr);
+  const pmr_hierarchy memory = build_pmr(c, o.builder);
   ASSERT_EQ(whole.positions(), memory.positions());
   std::size_t flipped = 0;
   for (std::uint32_t l = 0; l < whole.leaf_count(); ++l) {
@@ -232,71 +247,6 @@ TEST(ChunkedPmrEstimated, ChunksAgreeWithTheirNeighboursOnTheBunny) {
     flipped += in_leaf;
   }
   EXPECT_LT(flipped * 100, whole.normals().size()) << flipped << " normals flipped";
-  fs::remove_all(dir);
-}
-
-TEST(ChunkedPmrDistributed, ThreeRanksWriteTheOneProcessFolder) {
-  // Positions only: the chunks' orientation (rank 0) reaches the other ranks through a file.
-  point_cloud c = make_wavy_surface(8000, 9);
-  c.normals.clear();
-  const cloud_point_source src(c);
-  chunked_pmr_options o;
-  o.pmr = small_leaves();
-  o.pmr.threads = 1;
-  o.chunk_points = 1000;
-  const std::string one = temp_dir("dist_one"), many = temp_dir("dist_many");
-  const chunked_build_report r1 = build_pmr_chunked(src, one, o);
-  ASSERT_GE(r1.chunks, 6u);
-  std::barrier sync(3);
-  std::vector<chunked_build_report> reports(3);
-  std::vector<std::thread> ranks;
-  for (int rank = 0; rank < 3; ++rank)
-    ranks.emplace_back([&, rank] {
-      chunked_pmr_options mine = o;
-      mine.distributed = {rank, 3, [&] { sync.arrive_and_wait(); }};
-      reports[static_cast<std::size_t>(rank)] = build_pmr_chunked(src, many, mine);
-    });
-  for (auto& t : ranks) t.join();
-  EXPECT_EQ(reports[2].chunks, r1.chunks);
-  EXPECT_EQ(reports[2].halo_points, r1.halo_points);
-  expect_same_folders(one, many);
-  fs::remove_all(one);
-  fs::remove_all(many);
-}
-
-TEST(ChunkedPmrFiles, OneChunkWhenTheInputFits) {
-  const point_cloud c = make_wavy_surface(2500, 2);
-  const std::string dir = temp_dir("one");
-  const auto r = build_pmr_chunked(cloud_point_source(c), dir, {});
-  EXPECT_EQ(r.chunks, 1u);
-  EXPECT_EQ(r.halo_points, 0u);
-  EXPECT_TRUE(H::open(dir).assemble() == build_pmr(c));
-  fs::remove_all(dir);
-}
-
-TEST(ChunkedPmrFiles, BadInputAndDamagedDirectoriesAreErrors) {
-  point_cloud empty;
-  EXPECT_THROW((void)build_pmr_chunked(cloud_point_source(empty), temp_dir("e"), {}),
-               InvalidArgument);
-  chunked_pmr_options bad;
-  bad.pmr.rho = {0.5f, 0.2f};
-  const point_cloud c = make_wavy_surface(5000, 4);
-  EXPECT_THROW((void)build_pmr_chunked(cloud_point_source(c), temp_dir("b"), bad), InvalidArgument);
-  const std::string dir = temp_dir("damage");
-  chunked_pmr_options o;
-  o.pmr = small_leaves();
-  o.chunk_points = 800;
-  (void)build_pmr_chunked(cloud_point_source(c), dir, o);
-  EXPECT_THROW((void)chunked_pmr<with_normals>::open(dir), FormatError)
-      << "a coloured hierarchy opened as uncoloured";
-  const std::string top = dir + "/" + chunked_top_file;
-  test::expect_damage_is_error(top, 5, 3, [&] { (void)H::open(dir); });
-  // A chunk's file cut or flipped: an error when it is read.
-  const std::string chunk0 = dir + "/" + pmr_chunk_file_name(0);
-  const std::size_t size0 = fs::file_size(chunk0);
-  test::expect_damage_is_error(chunk0, size0 / 97 + 1, size0 / 97 + 1,
-                               [&] { (void)H::open(dir).chunk(0); });
-  test::expect_swapped_chunks_are_errors(H::open(dir), dir, pmr_chunk_file_name);
   fs::remove_all(dir);
 }
 

@@ -54,22 +54,10 @@
 
 namespace pbr_lod {
 
-struct chunked_pca_octree_options {
-  pca_octree_options pca{};
-  /// The memory the chunk builds may use together: chunks are built pca.threads at a time (one
-  /// thread each) when there are at least that many, so chunk_points = memory_bytes /
-  /// (chunked_pca_bytes_per_point × threads) unless chunk_points is given.
-  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
-  /// Most points in one chunk (0: from memory_bytes). At least pca.leaf_size.
-  std::uint64_t chunk_points = 0;
-  /// Points per block read from the source in the streaming passes.
-  std::size_t block_points = std::size_t{1} << 20;
-  /// Shared among ranks (as the point-octree's chunked_build_options::distributed): every rank
-  /// reads the source in the bounds and structure passes; rank 0 distributes, computes the top and
-  /// the codebooks and writes the top file; chunk c is built by rank c mod ranks. The folder is
-  /// byte-identical to a one-process build.
-  distributed_build distributed{};
-};
+/// The chunked PCA octree's options (builders/chunked.hpp): `builder` the in-memory build's.
+/// Its chunks are built builder.threads at a time (one thread each), so the budget is theirs
+/// together.
+using chunked_pca_octree_options = chunked_options<pca_octree_options>;
 
 /// Peak bytes of a chunk's build per point: positions (twice), normals (twice), colours, the
 /// permutation, the nodes (≈ one per three points at leaf_size 8) with their ranges.
@@ -81,7 +69,7 @@ inline constexpr std::uint64_t chunked_pca_bytes_per_point = 256;
 /// normals are used; else step 3's estimation) and chunk_build_seconds steps 4 and 6. Throws
 /// InvalidArgument on an empty source, non-finite positions, more than
 /// 2³² − 2 points or bad options; IoError when the directory cannot be written; Cancelled
-/// through options.pca.progress.
+/// through options.builder.progress.
 chunked_build_report build_pca_octree_chunked(const point_source& src, const std::string& dir,
                                               const chunked_pca_octree_options& options = {});
 
@@ -89,8 +77,6 @@ chunked_build_report build_pca_octree_chunked(const point_source& src, const std
 [[nodiscard]] bool is_chunked_pca_octree(const std::string& dir);
 /// Whether the chunked PCA octree in `dir` has colours.
 [[nodiscard]] bool chunked_pca_octree_has_colours(const std::string& dir);
-/// File name of chunk c of a chunked PCA octree.
-[[nodiscard]] std::string pca_chunk_file_name(std::uint32_t c);
 
 namespace detail {
 /// The top file "top.pbrlod": head "PBRLODSC" | u32 version | u32 flags (1: colours, 2:
@@ -128,20 +114,16 @@ struct pca_chunk {
 /// pca_octree<A>. A: pca_octree_attributes of the input's (colours need a directory built from an
 /// input with colours).
 template <attributes A = with_normals>
-class chunked_pca_octree {
+class chunked_pca_octree : public chunked_reader<detail::pca_chunk> {
   static_assert(A.normal && !A.material && !A.ellipse,
                 "use chunked_pca_octree<pca_octree_attributes(input attributes)>");
+  using base = chunked_reader<detail::pca_chunk>;
 
  public:
   static constexpr attributes attrs = A;
-  static constexpr std::uint32_t top = 0xffffffffu;
-  /// A node: (top, i) for node i of the top file, (c, i) for node i of chunk c.
-  struct node_id {
-    std::uint32_t chunk = top;
-    std::uint32_t index = 0;
-    friend bool operator==(const node_id&, const node_id&) = default;
-  };
   using node = pca_node;
+  /// The extension of its chunk files ("PBRLODSK", below).
+  static constexpr const char* chunk_extension = "pca";
 
   /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
   /// and a FormatError saying so when `dir` is a folder an unfinished build left
@@ -151,7 +133,6 @@ class chunked_pca_octree {
   // ---- the Hierarchy interface
   [[nodiscard]] vec3d origin() const { return top_.origin; }
   [[nodiscard]] bool empty() const { return top_.nodes.empty(); }
-  [[nodiscard]] node_id root() const { return canonical(top, 0); }
   [[nodiscard]] bool is_leaf(node_id n) const { return at(n).count == 0; }
   [[nodiscard]] auto children(node_id n) const {
     const pca_node& nd = at(n);
@@ -203,9 +184,8 @@ class chunked_pca_octree {
   }
   /// The node's number in build_pca_octree's breadth-first layout.
   [[nodiscard]] std::uint64_t global_id(node_id n) const {
-    if (n.chunk == top) return top_global_[n.index];
-    if (n.index == 0) return top_global_[chunk_top_[n.chunk]];
-    return chunk(n.chunk).global_id(n.index);
+    const std::uint32_t i = in_top(n);
+    return i != top ? top_global_[i] : chunk(n.chunk).global_id(n.index);
   }
   [[nodiscard]] bool quantised() const { return top_.quantised; }
   [[nodiscard]] float gamma() const { return top_.gamma; }
@@ -213,46 +193,32 @@ class chunked_pca_octree {
   [[nodiscard]] double cube_size() const { return top_.cube_size; }
   [[nodiscard]] double input_radius() const { return top_.input_radius; }
   [[nodiscard]] std::uint64_t input_points() const { return top_.stats.input_points; }
-  [[nodiscard]] std::size_t top_node_count() const { return top_.nodes.size(); }
-  [[nodiscard]] std::size_t chunk_count() const { return chunk_top_.size(); }
-  [[nodiscard]] std::size_t chunks_loaded() const;
-  /// Nodes over the whole hierarchy, from the top file.
-  [[nodiscard]] std::uint64_t node_count() const;
   /// The top: its nodes (a chunk's root among them), codebooks and options.
   [[nodiscard]] const detail::pca_data& top_data() const { return top_; }
   /// Chunk c (read from its file on first use; throws FormatError if it is damaged or does not
   /// match the top file).
   [[nodiscard]] const detail::pca_chunk& chunk(std::uint32_t c) const;
-  /// Bytes of the directory's files (top file and chunks).
-  [[nodiscard]] std::uint64_t file_bytes() const;
   /// The whole hierarchy in memory, laid out as build_pca_octree lays it out (reads every chunk):
   /// equal to build_pca_octree of the same input (see the top of this header).
   [[nodiscard]] pca_octree<A> assemble() const;
 
  private:
-  [[nodiscard]] node_id canonical(std::uint32_t c, std::uint32_t i) const {
-    if (c == top && frontier_[i] != top) return {frontier_[i], 0};
-    return {c, i};
-  }
+  chunked_pca_octree() : base(chunk_extension) {}
   /// The pca_data holding node n and its index there (a chunk's root: the top's copy).
   [[nodiscard]] std::pair<const detail::pca_data*, std::uint32_t> where(node_id n) const {
-    if (n.chunk == top) return {&top_, n.index};
-    if (n.index == 0) return {&top_, chunk_top_[n.chunk]};
+    const std::uint32_t i = in_top(n);
+    if (i != top) return {&top_, i};
     return {&chunk(n.chunk).d, n.index};
   }
-  struct slot {
-    std::once_flag once;
-    std::unique_ptr<const detail::pca_chunk> c;
-  };
 
-  std::string dir_;
   detail::pca_data top_;
-  std::vector<std::uint32_t> frontier_;    // per top node: its chunk, or `top`
   std::vector<std::uint32_t> top_global_;  // per top node: its whole-tree number
-  std::vector<std::uint32_t> chunk_top_;   // per chunk: its root's top node
-  std::vector<std::uint64_t> chunk_points_, chunk_nodes_;
-  std::vector<std::unique_ptr<slot>> slots_;
 };
+
+/// File name of chunk c of a chunked PCA octree.
+[[nodiscard]] inline std::string pca_chunk_file_name(std::uint32_t c) {
+  return chunk_file(c, chunked_pca_octree<>::chunk_extension);
+}
 
 extern template class chunked_pca_octree<with_normals>;
 extern template class chunked_pca_octree<with_normals_colours>;

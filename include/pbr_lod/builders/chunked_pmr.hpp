@@ -56,22 +56,9 @@
 
 namespace pbr_lod {
 
-struct chunked_pmr_options {
-  pmr_options pmr{};
-  /// The memory the chunk builds may use together: chunks are built pmr.threads at a time (one
-  /// thread each) when there are at least that many, so chunk_points = memory_bytes /
-  /// (chunked_pmr_bytes_per_point × threads) unless chunk_points is given.
-  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
-  /// Most samples in one chunk (0: from memory_bytes). At least pmr.max_leaf_points.
-  std::uint64_t chunk_points = 0;
-  /// Points per block read from the source in the streaming passes.
-  std::size_t block_points = std::size_t{1} << 20;
-  /// Shared among ranks (as the point-octree's chunked_build_options::distributed): every rank
-  /// reads the source in the bounds and structure passes; rank 0 distributes, gathers the normals
-  /// and writes the top; chunk c is built by rank c mod ranks. The folder is byte-identical to a
-  /// one-process build.
-  distributed_build distributed{};
-};
+/// The chunked PMR's options (builders/chunked.hpp): `builder` the in-memory build's. Its
+/// chunks are built builder.threads at a time (one thread each), so the budget is theirs together.
+using chunked_pmr_options = chunked_options<pmr_options>;
 
 /// Peak bytes of a chunk's build per own sample: its records and halo, one leaf's triangulation
 /// at a time, the part's records. Measured ≈ 340 with halos of half the chunk (docs/scale.md);
@@ -83,7 +70,7 @@ inline constexpr std::uint64_t chunked_pmr_bytes_per_point = 512;
 /// docs/scale.md). In the report, estimation_seconds is step 4 (the parts: the Voronoi work) and
 /// chunk_build_seconds steps 5–6. Throws InvalidArgument on an empty source, non-finite positions,
 /// more than 2³² − 2 points or bad options; IoError when the directory cannot be written; Cancelled
-/// through options.pmr.progress.
+/// through options.builder.progress.
 chunked_build_report build_pmr_chunked(const point_source& src, const std::string& dir,
                                        const chunked_pmr_options& options = {});
 
@@ -105,25 +92,19 @@ inline constexpr file_format chunked_pmr_format{
 struct chunked_pmr_access;
 }  // namespace detail
 
-/// File name of chunk c of a chunked PMR.
-[[nodiscard]] std::string pmr_chunk_file_name(std::uint32_t c);
-
 /// A PMR hierarchy stored as a directory by build_pmr_chunked, opened lazily: the top file at
 /// open(), a chunk's file when a traversal first needs a node below the chunk's root (whose
 /// record is in the top file). Models Hierarchy; draw it with pmr_policy like a pmr_hierarchy.
 /// A (with_normals or with_normals_colours): the primitives' attributes; colours need a
 /// directory built from an input with colours.
 template <attributes A = with_normals>
-class chunked_pmr {
+class chunked_pmr : public chunked_reader<pmr_hierarchy> {
+  using base = chunked_reader<pmr_hierarchy>;
+
  public:
   static constexpr attributes attrs = A;
-  static constexpr std::uint32_t top = 0xffffffffu;
-  /// A node: (top, i) for node i of the top file, (c, i) for node i of chunk c.
-  struct node_id {
-    std::uint32_t chunk = top;
-    std::uint32_t index = 0;
-    friend bool operator==(const node_id&, const node_id&) = default;
-  };
+  /// The extension of its chunk files: each a PMR file of one subtree.
+  static constexpr const char* chunk_extension = "pmr";
 
   /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
   /// and a FormatError saying so when `dir` is a folder an unfinished build left
@@ -133,7 +114,6 @@ class chunked_pmr {
   // ---- the Hierarchy interface
   [[nodiscard]] vec3d origin() const { return origin_; }
   [[nodiscard]] bool empty() const { return top_nodes_.empty(); }
-  [[nodiscard]] node_id root() const { return canonical(top, 0); }
   [[nodiscard]] bool is_leaf(node_id n) const { return at(n).leaf != 0; }
   [[nodiscard]] auto children(node_id n) const {
     const detail::pmr_node& nd = at(n);
@@ -176,14 +156,10 @@ class chunked_pmr {
 
   // ---- inspection
   [[nodiscard]] const detail::pmr_node& at(node_id n) const {
-    if (n.chunk == top) return top_nodes_[n.index];
-    if (n.index == 0) return top_nodes_[chunk_top_[n.chunk]];
-    return chunk(n.chunk).nodes()[n.index];
+    const std::uint32_t i = in_top(n);
+    return i != top ? top_nodes_[i] : chunk(n.chunk).nodes()[n.index];
   }
   [[nodiscard]] std::uint32_t levels() const { return static_cast<std::uint32_t>(rho_.size() + 1); }
-  [[nodiscard]] std::size_t top_node_count() const { return top_nodes_.size(); }
-  [[nodiscard]] std::size_t chunk_count() const { return chunk_top_.size(); }
-  [[nodiscard]] std::size_t chunks_loaded() const;
   [[nodiscard]] std::uint64_t input_points() const { return stats_.input_points; }
   [[nodiscard]] std::uint64_t leaf_count() const { return leaf_offset_.back(); }
   [[nodiscard]] vec3d input_min() const { return input_min_; }
@@ -191,45 +167,34 @@ class chunked_pmr {
   /// bounding_sphere_about_box_centre gives it for the hierarchy's positions.
   [[nodiscard]] sphere input_sphere() const { return input_sphere_; }
   [[nodiscard]] vec3d input_max() const { return input_max_; }
-  /// Nodes over the whole hierarchy, from the top file.
-  [[nodiscard]] std::uint64_t node_count() const;
   /// Build counts summed over the chunks (duplicates, triangulated points, removals, ...).
   [[nodiscard]] const pmr_build_stats& stats() const { return stats_; }
   /// Chunk c's subtree (read from its file on first use; throws FormatError if it is damaged or
   /// does not match the top file). Its last foreign() samples are other chunks' vertices.
   [[nodiscard]] const pmr_hierarchy& chunk(std::uint32_t c) const;
-  /// Bytes of the directory's files (top file and chunks).
-  [[nodiscard]] std::uint64_t file_bytes() const;
   /// The whole hierarchy in memory, laid out as build_pmr lays it out (reads every chunk): equal
   /// to build_pmr of the same input when it has normals (see the top of this header).
   [[nodiscard]] pmr_hierarchy assemble() const;
 
  private:
   friend struct detail::chunked_pmr_access;
-  [[nodiscard]] node_id canonical(std::uint32_t c, std::uint32_t i) const {
-    if (c == top && frontier_[i] != top) return {frontier_[i], 0};
-    return {c, i};
-  }
+  chunked_pmr() : base(chunk_extension) {}
   [[nodiscard]] std::uint32_t chunk_of_leaf(std::uint32_t leaf) const;
   void assemble_levels(detail::pmr_data& d, std::pair<std::uint32_t, std::uint32_t> leaf,
                        const std::vector<std::uint32_t>& global) const;
-  struct slot {
-    std::once_flag once;
-    std::unique_ptr<const pmr_hierarchy> h;
-  };
 
-  std::string dir_;
   vec3d origin_ = vec3d::Zero(), input_min_ = vec3d::Zero(), input_max_ = vec3d::Zero();
   std::vector<float> rho_;
   pmr_build_stats stats_;
   sphere input_sphere_;
   std::vector<detail::pmr_node> top_nodes_;
-  std::vector<std::uint32_t> frontier_;     // per top node: its chunk, or `top`
-  std::vector<std::uint32_t> chunk_top_;    // per chunk: its root's top node
   std::vector<std::uint32_t> leaf_offset_;  // per chunk: its first leaf's number; then the total
-  std::vector<std::uint64_t> chunk_samples_, chunk_nodes_;
-  std::vector<std::unique_ptr<slot>> slots_;
 };
+
+/// File name of chunk c of a chunked PMR.
+[[nodiscard]] inline std::string pmr_chunk_file_name(std::uint32_t c) {
+  return chunk_file(c, chunked_pmr<>::chunk_extension);
+}
 
 extern template class chunked_pmr<with_normals>;
 extern template class chunked_pmr<with_normals_colours>;

@@ -32,7 +32,7 @@
 //
 // Equal to the in-memory build: every chunk's subtree, its samples and every top node equal
 // build_point_octree's (chunked_point_octree::assemble() returns that tree), given
-//  * normals in the input, or normals oriented towards a viewpoint (options.octree.viewpoint):
+//  * normals in the input, or normals oriented towards a viewpoint (options.builder.viewpoint):
 //    the default orientation propagates signs over the k-NN graph of the whole input, which a
 //    chunk and its halo only see part of — a chunk's normals may then come out flipped as a
 //    whole relative to the in-memory build;
@@ -57,35 +57,21 @@
 
 namespace pbr_lod {
 
-struct chunked_build_options {
-  point_octree_options octree{};
-  /// The memory a chunk's build may use; chunk_points = memory_bytes / chunk_bytes_per_point
-  /// unless chunk_points is given.
-  std::uint64_t memory_bytes = std::uint64_t{4} << 30;
-  /// Most samples in one chunk (0: from memory_bytes). At least leaf_size.
-  std::uint64_t chunk_points = 0;
-  /// Points per block read from the source in the streaming passes.
-  std::size_t block_points = std::size_t{1} << 20;
-  /// A build shared by `ranks` processes (MPI ranks, say) that see `dir` on a shared file
-  /// system: each calls build_point_octree_chunked with its rank and a barrier over all of them.
-  /// Every rank reads the source in the structure and attribute passes; rank 0 writes the
-  /// chunk and halo files and the top; halo radii, estimation and chunk builds go round robin
-  /// (chunk c to rank c mod ranks). The folder is byte-identical to a one-process build. A rank
-  /// that throws leaves the others waiting at the barrier: the caller aborts the job.
-  distributed_build distributed{};
-};
+/// The chunked point-octree's options (builders/chunked.hpp): `builder` the in-memory build's.
+using chunked_point_octree_options = chunked_options<point_octree_options>;
 
 /// Peak bytes of a chunk's build per sample, measured (docs/scale.md): the chunk's records and
-/// halo, the k-NN graph of the estimation, the builder's working arrays and the nodes.
+/// halo, the k-NN graph of the estimation, the builder's working arrays and the nodes. The chunks
+/// are estimated and built one after another, each on every thread: one chunk at a time.
 inline constexpr std::uint64_t chunk_bytes_per_point = 512;
 
 /// Builds the point-octree of `src` into the directory `dir`, whole or not at all (built as
 /// `dir.partial` and renamed; an earlier build in `dir` is replaced only then, see
 /// check_chunked_output and docs/scale.md). Throws InvalidArgument on an empty source or non-finite
 /// positions, IoError when the directory cannot be written, Cancelled through the progress
-/// callback of options.octree.
+/// callback of options.builder.
 chunked_build_report build_point_octree_chunked(const point_source& src, const std::string& dir,
-                                                const chunked_build_options& options = {});
+                                                const chunked_point_octree_options& options = {});
 
 /// Whether `dir` holds a chunked point-octree (its top file).
 [[nodiscard]] bool is_chunked_point_octree(const std::string& dir);
@@ -97,19 +83,20 @@ chunked_build_report build_point_octree_chunked(const point_source& src, const s
 /// chunk's root (the root's record is in the top file). Models Hierarchy; draw it with
 /// point_octree_policy like a point_octree.
 template <attributes A>
-class chunked_point_octree {
+class chunked_point_octree : public chunked_reader<point_octree<A>> {
+  using base = chunked_reader<point_octree<A>>;
+  using base::canonical, base::in_top, base::chunk_top_, base::frontier_, base::dir_;
+  using base::chunk_samples_, base::chunk_nodes_;
+
  public:
   using tree = point_octree<A>;
   using node = typename tree::node;
   using selection_record = typename tree::selection_record;
+  using base::top, base::root, base::chunk_count;
+  using typename base::node_id;
   static constexpr attributes attrs = tree::attrs;
-  static constexpr std::uint32_t top = 0xffffffffu;
-  /// A node: (top, i) for node i of the top file, (c, i) for node i of chunk c.
-  struct node_id {
-    std::uint32_t chunk = top;
-    std::uint32_t index = 0;
-    friend bool operator==(const node_id&, const node_id&) = default;
-  };
+  /// The extension of its chunk files: each an ordinary point-octree file.
+  static constexpr const char* chunk_extension = "po";
 
   /// Reads and validates the top file of `dir`; throws FormatError / IoError naming the file,
   /// and a FormatError saying so when `dir` is a folder an unfinished build left
@@ -119,7 +106,6 @@ class chunked_point_octree {
   // ---- the Hierarchy interface
   [[nodiscard]] vec3d origin() const { return origin_; }
   [[nodiscard]] bool empty() const { return top_nodes_.empty(); }
-  [[nodiscard]] node_id root() const { return canonical(top, 0); }
   [[nodiscard]] bool is_leaf(node_id n) const { return at(n).leaf != 0; }
   [[nodiscard]] auto children(node_id n) const {
     const node& nd = at(n);
@@ -169,35 +155,25 @@ class chunked_point_octree {
 
   // ---- what point_octree_policy and inspection need
   [[nodiscard]] const node& at(node_id n) const {
-    if (n.chunk == top) return top_nodes_[n.index];
-    if (n.index == 0) return top_nodes_[chunk_top_[n.chunk]];
-    return chunk(n.chunk).at(n.index);
+    const std::uint32_t i = in_top(n);
+    return i != top ? top_nodes_[i] : chunk(n.chunk).at(n.index);
   }
   [[nodiscard]] const selection_record& selection(node_id n) const {
-    if (n.chunk == top) return top_selection_[n.index];
-    if (n.index == 0) return top_selection_[chunk_top_[n.chunk]];
-    return chunk(n.chunk).selection(n.index);
+    const std::uint32_t i = in_top(n);
+    return i != top ? top_selection_[i] : chunk(n.chunk).selection(n.index);
   }
   [[nodiscard]] rgb8 node_colour(node_id n) const requires(A.colour) {
-    if (n.chunk == top) return top_colours_[n.index];
-    if (n.index == 0) return top_colours_[chunk_top_[n.chunk]];
-    return chunk(n.chunk).node_colour(n.index);
+    const std::uint32_t i = in_top(n);
+    return i != top ? top_colours_[i] : chunk(n.chunk).node_colour(n.index);
   }
-  [[nodiscard]] std::size_t top_node_count() const { return top_nodes_.size(); }
-  [[nodiscard]] std::size_t chunk_count() const { return chunk_top_.size(); }
-  [[nodiscard]] std::size_t chunks_loaded() const;
   [[nodiscard]] std::uint64_t input_points() const { return input_points_; }
   /// The input's bounding sphere about the centre of its box (relative to origin()), as
   /// bounding_sphere_about_box_centre gives it for the input's positions.
   [[nodiscard]] sphere input_sphere() const { return input_sphere_; }
-  /// Nodes over the whole hierarchy (the top's inner nodes and every chunk's), from the top file.
-  [[nodiscard]] std::uint64_t node_count() const;
   [[nodiscard]] int normal_bits() const { return normal_bits_; }
   /// Chunk c's subtree (read from its file on first use; throws FormatError if it is damaged or
   /// does not match the top file).
   [[nodiscard]] const tree& chunk(std::uint32_t c) const;
-  /// Bytes of the directory's files (top file and chunks).
-  [[nodiscard]] std::uint64_t file_bytes() const;
   /// The whole hierarchy in memory, laid out as build_point_octree lays it out (reads every
   /// chunk): equal to build_point_octree of the same input, and save() gives its bytes.
   [[nodiscard]] tree assemble() const;
@@ -205,17 +181,9 @@ class chunked_point_octree {
  private:
   template <attributes In>
   friend struct detail::chunked_point_octree_builder;
-  [[nodiscard]] node_id canonical(std::uint32_t c, std::uint32_t i) const {
-    if (c == top && frontier_[i] != top) return {frontier_[i], 0};
-    return {c, i};
-  }
+  chunked_point_octree() : base(chunk_extension) {}
   void validate(const std::string& path) const;
-  struct slot {
-    std::once_flag once;
-    std::unique_ptr<const tree> t;
-  };
 
-  std::string dir_;
   vec3d origin_ = vec3d::Zero();
   int normal_bits_ = 0;
   std::uint64_t input_points_ = 0;
@@ -223,11 +191,7 @@ class chunked_point_octree {
   std::vector<rgb8> top_colours_;
   std::vector<typename tree::orientation_code> top_codes_;
   std::vector<selection_record> top_selection_;
-  std::vector<std::uint32_t> frontier_;   // per top node: its chunk, or `top`
-  std::vector<std::uint32_t> chunk_top_;  // per chunk: its root's top node
-  std::vector<std::uint64_t> chunk_samples_, chunk_nodes_;
   sphere input_sphere_;
-  std::vector<std::unique_ptr<slot>> slots_;
 };
 
 namespace detail {
@@ -241,7 +205,10 @@ inline constexpr file_format chunked_top_format{
 }  // namespace detail
 
 /// File name of chunk c in a chunked point-octree directory.
-[[nodiscard]] std::string chunk_file_name(std::uint32_t c);
+[[nodiscard]] inline std::string chunk_file_name(std::uint32_t c) {
+  return chunk_file(c,
+                    chunked_point_octree<point_octree_attributes(attributes{})>::chunk_extension);
+}
 
 extern template class chunked_point_octree<point_octree_attributes(attributes{})>;
 extern template class chunked_point_octree<point_octree_attributes(attributes{.colour = true})>;
