@@ -177,6 +177,10 @@ open(d + "/v4_degree1.spz", "wb").write(head + toc + b"".join(packed))
 PY
 fi
 rm -f "$out"/fuzz_spz/.v4_stream*
+# Another encoder's files (tests/data/gaussians/PROVENANCE.md: PlayCanvas, @adobe/spz).
+fixtures="$(dirname "$0")/../tests/data/gaussians"
+cp --no-preserve=mode "$fixtures"/minimal-v*.spz "$out/fuzz_spz/"
+cp --no-preserve=mode "$fixtures/minimal.splat" "$out/fuzz_splat/"
 
 # --- hierarchy files, built by the pbrlod tool from the small inputs above -----------------------
 bunny="$out/fuzz_ply/bunny_res4.ply"

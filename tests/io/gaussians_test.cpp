@@ -12,6 +12,7 @@
 #include <numeric>
 #include <random>
 
+#include "gaussian_fixtures.hpp"
 #include "io_test_util.hpp"
 #include "pbr_lod/io/gaussians.hpp"
 
@@ -571,6 +572,75 @@ TEST_F(GaussianSpz, MalformedFilesGiveFormatErrors) {
   poke_le<std::uint64_t>(f4, 32 + 8, 1000);  // positions' uncompressed size
   PBR_LOD_EXPECT_THROW_MSG(read_gaussians(write("u4.spz", f4)), FormatError,
                            "uncompressed size 1000");
+}
+
+// --- files from another encoder
+// -------------------------------------------------------------------
+
+using GaussianFixtures = scratch_dir;
+
+// PlayCanvas splat-transform's fixtures (tests/data/gaussians/PROVENANCE.md): 4 Gaussians on a
+// 2 × 2 grid, i → (gx, gz) = (i % 2, i / 2), made from position (gx − 1, 0, gz − 1), scale 0.1,
+// opacity 0.9, colour ((gx + 1)/3, (gz + 1)/3, 0.5) and the identity rotation.
+TEST_F(GaussianFixtures, ReadWhatTheirSourceValuesSay) {
+  const auto bytes = [](const unsigned char* b, unsigned n) {
+    return std::string(reinterpret_cast<const char*>(b), n);
+  };
+  using namespace fixtures;
+  const struct {
+    const char* name;
+    std::string data;
+    bool stored_rub;  ///< packed from RDF: y and z negated in the file (read as stored)
+  } files[] = {{"v2.spz", bytes(minimal_v2_spz, minimal_v2_spz_len), false},
+               {"v3.spz", bytes(minimal_v3_spz, minimal_v3_spz_len), true},
+               {"v4.spz", bytes(minimal_v4_spz, minimal_v4_spz_len), true},
+               {"m.splat", bytes(minimal_splat, minimal_splat_len), false}};
+  for (const auto& f : files) {
+    SCOPED_TRACE(f.name);
+    read_report r;
+    const gaussian_cloud g = read_gaussians(write(f.name, f.data), &r);
+    ASSERT_EQ(g.size(), 4u);
+    EXPECT_EQ(r.points_read, 4u);
+    EXPECT_TRUE(r.warnings.empty());
+    EXPECT_NO_THROW(g.validate());
+    const bool splat = std::string(f.name) == "m.splat";
+    for (std::size_t i = 0; i < 4; ++i) {
+      const double gx = static_cast<double>(i % 2), gz = static_cast<double>(i / 2);
+      // Positions are exact: 12 (v3, v4) or 8 (v2) fractional bits, or floats.
+      EXPECT_EQ(g.world(i), vec3d(gx - 1, 0, (f.stored_rub ? -1 : 1) * (gz - 1)));
+      // Opacity 0.9 quantised to 230/255.
+      EXPECT_NEAR(g.opacities[i], 230.0 / 255, 1e-6);
+      // Scale 0.1: exact in .splat; SPZ's log byte round((ln 0.1 + 10)·16) = 123.
+      const double s = splat ? 0.1 : std::exp(123.0 / 16 - 10);
+      EXPECT_NEAR(g.scales[i].x(), s, 1e-6);
+      EXPECT_EQ(g.scales[i].x(), g.scales[i].z());
+      // Colour to within the 8-bit quantisation: .splat's step is 1/255; SPZ's 0.15·255 steps of
+      // dc, i.e. C0 / 38.25 = 0.0074 of colour, rounded to half that.
+      const vec3f c = g.base_colour(i);
+      const float tol = splat ? 0.5f / 255 + 1e-6f : 0.0037f + 1e-6f;
+      if (!splat && !f.stored_rub) {
+        // v2 was packed by hand with the colour bytes round(255·(gx + 1)/3): decoded as SPZ
+        // colour bytes, dc = (b/255 − 0.5)/0.15.
+        EXPECT_NEAR(g.sh[g.sh_index(i, 0, 0)], (std::round(255 * (gx + 1) / 3) / 255 - 0.5) / 0.15,
+                    1e-5);
+      } else {
+        EXPECT_NEAR(c.x(), (gx + 1) / 3, tol);
+        EXPECT_NEAR(c.y(), (gz + 1) / 3, tol);
+        EXPECT_NEAR(c.z(), 0.5, tol);
+      }
+      if (splat) {
+        // Rotation bytes (128, 128, 128, 255): w x y z as (b − 128)/128 (antimatter15, also
+        // PlayCanvas's reader: byte 28 is rot_0 = w) give (0, 0, 0, 127/128) → (0, 0, 0, 1), a
+        // half turn about z. (The fixture's comment meant x y z w; the format is w first.)
+        EXPECT_EQ(g.rotations[i], vec4f(0, 0, 0, 1));
+      } else if (f.stored_rub) {
+        EXPECT_EQ(g.rotations[i], vec4f(1, 0, 0, 0));  // smallest three, exact
+      } else {
+        EXPECT_NEAR(g.rotations[i][0], 1.0f, 1e-4f);  // x y z bytes 128: 1/255 each
+        EXPECT_NEAR(g.rotations[i][1], 1.0f / 255, 1e-6f);
+      }
+    }
+  }
 }
 
 // --- write → read

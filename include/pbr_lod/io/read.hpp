@@ -9,6 +9,8 @@
 // (.ply, .pcd and .las can also be read in blocks, for inputs larger than memory:
 // io/point_source_file.hpp.)
 //   .laz  rejected with a FormatError (compressed; convert to LAS first)
+// 3-D Gaussian Splatting scenes (3DGS .ply, .splat, .spz) are read by read_gaussians
+// (io/gaussians.hpp); read_points on a 3DGS .ply gives its positions only.
 //
 // What every reader guarantees:
 //  * positions are float relative to `origin`, the centre of the bounding box computed in double
