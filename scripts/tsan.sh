@@ -34,6 +34,6 @@ run() {  # run PROGRAM FILTER
   rm -f "$out"
 }
 run build/tsan/tests/builders/test_ladder 'AllBuilders/ConcurrentTraversal.*'
-run build/tsan/tests/builders/test_point_octree 'ChunkedPointOctree.*:ChunkedPointOctreeDistributed.*'
+run build/tsan/tests/builders/test_point_octree 'ChunkedPointOctree.*:ChunkedPointOctree/ChunkedLayer/*'
 run build/tsan/tests/core/test_core 'Parallel*:*Knn*:*Estimat*'
 echo "tsan.sh: no data races reported"
