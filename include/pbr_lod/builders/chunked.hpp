@@ -9,6 +9,7 @@
 // chunked_pca_octree.hpp, chunked_pmr.hpp (docs/scale.md).
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -134,7 +135,7 @@ class chunked_reader {
   /// Chunks read so far.
   [[nodiscard]] std::size_t chunks_loaded() const {
     std::size_t k = 0;
-    for (const auto& s : slots_) k += s->loaded != nullptr;
+    for (const auto& s : slots_) k += s->ready.load(std::memory_order_acquire) != nullptr;
     return k;
   }
   /// Nodes over the whole hierarchy (the top's inner nodes and every chunk's), from the top file.
@@ -169,11 +170,20 @@ class chunked_reader {
   [[nodiscard]] std::string chunk_path(std::uint32_t c) const {
     return (std::filesystem::path(dir_) / chunk_file(c, extension_)).string();
   }
-  /// Chunk c, loaded by load(path) → Chunk on first use (once, whichever thread asks first).
+  /// Chunk c, loaded by load(path) → Chunk on first use (once, whichever thread asks first). A
+  /// load that throws (a damaged chunk) leaves the slot empty and the next call tries again. Not
+  /// std::call_once: libstdc++'s, on pthread_once, does not reset its flag when the function
+  /// throws on every platform (GCC bug 66146; under ThreadSanitizer the next call waited
+  /// forever).
   template <class Load>
   const Chunk& load_chunk(std::uint32_t c, Load&& load) const {
     slot& s = *slots_.at(c);
-    std::call_once(s.once, [&] { s.loaded = std::make_unique<const Chunk>(load(chunk_path(c))); });
+    if (const Chunk* ready = s.ready.load(std::memory_order_acquire)) return *ready;
+    const std::lock_guard lock(s.mutex);
+    if (!s.loaded) {
+      s.loaded = std::make_unique<const Chunk>(load(chunk_path(c)));
+      s.ready.store(s.loaded.get(), std::memory_order_release);
+    }
     return *s.loaded;
   }
   /// After open() has read the index: one empty slot per chunk.
@@ -189,8 +199,9 @@ class chunked_reader {
 
  private:
   struct slot {
-    std::once_flag once;
-    std::unique_ptr<const Chunk> loaded;
+    std::mutex mutex;
+    std::unique_ptr<const Chunk> loaded;       // under mutex
+    std::atomic<const Chunk*> ready{nullptr};  // loaded.get() once set
   };
   const char* extension_;
   std::vector<std::unique_ptr<slot>> slots_;
