@@ -25,7 +25,6 @@ namespace detail {
 namespace {
 
 namespace fs = std::filesystem;
-constexpr std::uint32_t none = 0xffffffffu;
 
 /// A cell of the octree above the chunks.
 struct pmr_top_cell {
