@@ -137,6 +137,11 @@ struct chunked_pca_builder : chunked_pass_base {
   std::vector<std::uint32_t>& chunk_top = upper.chunk_top;  // per chunk: its top cell
   std::vector<std::uint64_t> chunk_count;
   std::vector<std::vector<std::uint32_t>> chunk_levels;  // per chunk: nodes per local level
+  // per chunk whose root is a leaf below a surface: widened by its spacing in its parent's plane
+  // (pca_widen_leaf, as node_statistics does for every other leaf)
+  std::vector<double> root_leaf_h;
+  std::vector<std::uint8_t> root_widen;
+  std::vector<mat3f> root_parent_frame;
   std::vector<std::vector<std::uint32_t>> chunk_global;  // per chunk: whole-tree number per level
   std::vector<std::uint32_t> top_global;                 // per top cell
   std::uint64_t total_nodes = 0;
@@ -295,6 +300,7 @@ struct chunked_pca_builder : chunked_pass_base {
     byte_writer sw;
     put_acc(sw, m.positions);
     put_acc(sw, m.colours);
+    sw.put(m.root_leaf_h);
     const std::vector<std::uint32_t> lc = level_counts(d);
     sw.put(static_cast<std::uint32_t>(lc.size()));
     for (const std::uint32_t v : lc) sw.put(v);
@@ -307,6 +313,9 @@ struct chunked_pca_builder : chunked_pass_base {
     byte_reader r{bytes, 0, path};
     pca_data d;
     get_raw(r, d);
+    // Once the top's pass has widened the root (top_statistics), every later reader sees it so.
+    if (c < root_widen.size() && root_widen[c] != 0)
+      pca_widen_leaf(d.nodes[0], root_leaf_h[c], root_parent_frame[c]);
     return d;
   }
 
@@ -324,6 +333,9 @@ struct chunked_pca_builder : chunked_pass_base {
     pos_acc.assign(t, {});
     col_acc.assign(t, {});
     chunk_levels.resize(chunk_top.size());
+    root_leaf_h.assign(chunk_top.size(), 0);
+    root_widen.assign(chunk_top.size(), 0);
+    root_parent_frame.assign(chunk_top.size(), mat3f::Identity());
     std::vector<std::vector<std::uint32_t>> above(chunk_top.size());  // split ancestors
     std::vector<std::uint32_t> parent(t, none);
     for (std::uint32_t x = 0; x < t; ++x)
@@ -342,6 +354,7 @@ struct chunked_pca_builder : chunked_pass_base {
       byte_reader r{bytes, 0, path};
       pos_acc[chunk_top[c]] = get_acc(r);
       col_acc[chunk_top[c]] = get_acc(r);
+      root_leaf_h[c] = r.get<double>("leaf spacing");
       chunk_levels[c].resize(r.get<std::uint32_t>("levels"));
       for (auto& v : chunk_levels[c]) v = r.get<std::uint32_t>("level");
     }
@@ -388,6 +401,16 @@ struct chunked_pca_builder : chunked_pass_base {
       }
       pca_node& nd = top.nodes[x];
       pca_set_statistics(nd, pos_acc[x], pca_normal_finish(frame[x], m[x], cell.count));
+      // A chunk root that is a leaf is widened as its parent's pass in build_pca_data does
+      // (node_statistics); finish_chunk repeats it in the chunk's own copy.
+      if (nd.sigma.y() > 2e-15)
+        for (std::uint32_t k = 0; k < cell.children; ++k) {
+          const top_cell& ch = nodes[cell.first_child + k];
+          if (ch.st == top_cell::state::split || !(root_leaf_h[ch.chunk] > 0)) continue;
+          pca_widen_leaf(top.nodes[cell.first_child + k], root_leaf_h[ch.chunk], nd.frame);
+          root_widen[ch.chunk] = 1;
+          root_parent_frame[ch.chunk] = nd.frame;
+        }
       if (in.colour) top.colours[x] = pca_colours_from(col_acc[x].mean, col_acc[x].covariance());
       nd.first = cell.first_child;
       nd.count = static_cast<std::uint8_t>(cell.children);
@@ -518,6 +541,11 @@ struct chunked_pca_builder : chunked_pass_base {
         w.put(static_cast<std::uint32_t>(chunk_global[c].size()));
         for (const std::uint32_t v : chunk_global[c]) w.put(v);
       }
+      for (std::uint32_t c = 0; c < chunk_top.size(); ++c) {
+        w.put(root_widen[c]);
+        w.put(root_leaf_h[c]);
+        put_m(w, root_parent_frame[c]);
+      }
       save_file_bytes(temp_path("quant", 0), w.bytes);
     }
     barrier();
@@ -535,6 +563,14 @@ struct chunked_pca_builder : chunked_pass_base {
       for (auto& g : chunk_global) {
         g.resize(r.get<std::uint32_t>("levels"));
         for (auto& v : g) v = r.get<std::uint32_t>("level");
+      }
+      root_widen.assign(chunk_top.size(), 0);
+      root_leaf_h.assign(chunk_top.size(), 0);
+      root_parent_frame.assign(chunk_top.size(), mat3f::Identity());
+      for (std::uint32_t c = 0; c < chunk_top.size(); ++c) {
+        root_widen[c] = r.get<std::uint8_t>("widen");
+        root_leaf_h[c] = r.get<double>("leaf spacing");
+        get_m(r, root_parent_frame[c]);
       }
       set_options(top);
     }

@@ -352,6 +352,7 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
           d.nodes[i].cell_size / std::sqrt(static_cast<double>(ranges[i].end - ranges[i].begin));
   const bool colour = !cols.empty();
   if (colour) d.colours.resize(n);
+  std::vector<double> leaf_h(n, 0);  // the spacing each leaf's extents were widened by
   // The normals first: their mean is what the degenerate position rules align z with. If they
   // cancel out, the first sample's normal stands in (deterministic).
   std::vector<pca_normal_result> normal(n);
@@ -391,18 +392,25 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
         pca_set_statistics(nd, mp, normal[i]);
         if (colour)
           d.colours[i] = pca_colours_from(colour_here[i - b].mean, colour_here[i - b].covariance());
-        if (nd.count == 0)
-          pca_leaf_extents(nd, colour ? &d.colours[i] : nullptr, pos.data() + r.begin,
-                           normals.data() + r.begin, colour ? cols.data() + r.begin : nullptr,
-                           r.end - r.begin, parent_spacing[i]);
-        else
-          pca_inner_extents(d, i);
+        if (nd.count == 0) {
+          leaf_h[i] = pca_leaf_extents(
+              nd, colour ? &d.colours[i] : nullptr, pos.data() + r.begin, normals.data() + r.begin,
+              colour ? cols.data() + r.begin : nullptr, r.end - r.begin, parent_spacing[i]);
+          continue;
+        }
+        // The leaves below a node of a surface cover their points' patches in every tangential
+        // direction; below a line of points (or one point) they stay on it.
+        if (nd.sigma.y() > 2 * sigma_floor)
+          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
+            if (d.nodes[c].count == 0) pca_widen_leaf(d.nodes[c], leaf_h[c], nd.frame);
+        pca_inner_extents(d, i);
       }
     });
     std::swap(below, here);
     std::swap(colour_below, colour_here);
   }
-  return {below[0], colour ? colour_below[0] : scatter_accumulator{}};
+  return {below[0], colour ? colour_below[0] : scatter_accumulator{},
+          d.nodes[0].count == 0 ? leaf_h[0] : 0.0};
 }
 
 }  // namespace

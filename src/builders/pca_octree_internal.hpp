@@ -42,8 +42,15 @@ void pca_set_statistics(pca_node& nd, const scatter_accumulator& positions,
 /// What a leaf's points span (pca_node::extent, normal_extent, pca_colour::extent; colour may be
 /// null): from its count points p (relative to the origin), unit normals n and colours c (null
 /// without colour), about its statistics, which must be set, and its cell (for one point).
-void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
-                      const rgb8* c, std::size_t count, double parent_spacing);
+/// Tangentially only along the directions the points spread in, widened by their spacing, which
+/// it returns (for pca_widen_leaf).
+double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
+                        const rgb8* c, std::size_t count, double parent_spacing);
+/// A leaf whose parent's points span a surface (not a line or a point): the tangential
+/// directions its own points do not spread in (one point, two, a line of them — a scan line)
+/// are widened by h too, so that it covers the patch its points stand for — when its frame's
+/// f³ (its normal where its points span no plane) is within 30° of the parent's (parent_frame).
+void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame);
 /// The same for inner node i of d from its children's (set before): the box of their boxes'
 /// corners in its frame, the cone of their cones, the ball of their colour balls.
 void pca_inner_extents(pca_data& d, std::size_t i);
@@ -58,6 +65,9 @@ struct pca_points {
 /// The root's moments of a subtree (merged into its parent's by the chunked build).
 struct pca_subtree_moments {
   scatter_accumulator positions, colours;
+  /// The root a leaf: the spacing its extents were widened by (pca_widen_leaf, which its parent
+  /// outside the subtree applies); else 0.
+  double root_leaf_h = 0;
 };
 /// §3 below one cell: the octree of `pts` under the cell at (cell_min, depth) of a root cube of
 /// edge `root_size` (build_pca_data's rules, so a subtree equals the whole build's subtree at

@@ -16,7 +16,9 @@
 // draw outside is drawn again, and after four misses moved onto the boundary. The default
 // generator (pca_generator::span) places the tangential coordinates on a low-discrepancy
 // sequence, uniform over the span, so a node covers its pixels with ≈ density points a pixel
-// instead of a·ln a; the paper's generator is pca_generator::paper.
+// instead of a·ln a; the paper's generator is pca_generator::paper. By default a point carries
+// its node's mean normal and colour (pca_attribute_draw::mean, the least-squares estimate
+// without its position to condition on); pca_attribute_draw::sampled draws them as §4 does.
 
 #include <array>
 #include <cmath>
@@ -93,6 +95,14 @@ bool projected_axes(const pca_node& nd, const view& v, std::array<vec2f, 3>& ax)
   return true;
 }
 
+/// A colour in [0, 1]³ (clamped) as 8-bit RGB.
+rgb8 to_rgb8(const vec3f& c) {
+  const vec3f rgb = c.cwiseMax(0.0f).cwiseMin(1.0f);
+  return {static_cast<std::uint8_t>(std::lround(rgb.x() * 255)),
+          static_cast<std::uint8_t>(std::lround(rgb.y() * 255)),
+          static_cast<std::uint8_t>(std::lround(rgb.z() * 255))};
+}
+
 float cross2(const vec2f& a, const vec2f& b) {
   return std::abs(a.x() * b.y() - a.y() * b.x());
 }
@@ -128,12 +138,13 @@ float pca_required_points(const pca_data& d, std::uint32_t n, const view& v,
 }
 
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
-                  std::uint32_t count, pca_sample* out, pca_generator g) {
-  pca_generate(d, n, n, seed, first, count, out, g);
+                  std::uint32_t count, pca_sample* out, pca_generator g, pca_attribute_draw draw) {
+  pca_generate(d, n, n, seed, first, count, out, g, draw);
 }
 
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
-                  std::uint32_t first, std::uint32_t count, pca_sample* out, pca_generator g) {
+                  std::uint32_t first, std::uint32_t count, pca_sample* out, pca_generator g,
+                  pca_attribute_draw draw) {
   const pca_node& nd = d.nodes[n];
   const bool colour = !d.colours.empty();
   const float tmin = std::exp(-0.5f * d.gamma * d.gamma);
@@ -150,6 +161,9 @@ void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, s
   const auto o3 = static_cast<std::uint32_t>(mix(off));
   const int m = tiles_of(e.x(), e.y());
   const bool long1 = e.x() >= e.y();
+  // pca_attribute_draw::mean: the node's expected normal and colour for every point.
+  const vec3f mean_normal = nd.normal_frame.col(2).normalized();
+  const rgb8 mean_colour = colour ? to_rgb8(d.colours[n].mean) : rgb8{};
   for (std::uint32_t k = 0; k < count; ++k) {
     const std::uint32_t idx = first + k;
     stream s{mix(key ^ (static_cast<std::uint64_t>(idx) * 0x9E3779B97F4A7C15ull))};
@@ -174,6 +188,11 @@ void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, s
       u = u.cwiseMax(-e).cwiseMin(e);
     }
     o.position = nd.mean + nd.frame * u;
+    if (draw == pca_attribute_draw::mean) {
+      o.normal = mean_normal;
+      o.colour = mean_colour;
+      continue;
+    }
     // Normal: a Gaussian point of the normal ellipse, inside the normals' cone, wrapped back
     // onto the sphere.
     const auto draw_normal = [&](float& alpha, float& beta) {
@@ -208,10 +227,7 @@ void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, s
       vec3f dc = draw_colour();
       for (int t = 1; t < tries && dc.norm() > c.extent; ++t) dc = draw_colour();
       if (dc.norm() > c.extent) dc *= c.extent / dc.norm();
-      const vec3f rgb = (c.mean + dc).cwiseMax(0.0f).cwiseMin(1.0f);
-      o.colour = {static_cast<std::uint8_t>(std::lround(rgb.x() * 255)),
-                  static_cast<std::uint8_t>(std::lround(rgb.y() * 255)),
-                  static_cast<std::uint8_t>(std::lround(rgb.z() * 255))};
+      o.colour = to_rgb8(c.mean + dc);
     } else {
       o.colour = {};
     }

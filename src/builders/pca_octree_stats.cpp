@@ -254,8 +254,8 @@ pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov) {
 // ---------------------------------------------------------------------------------------------
 // What a node's points span.
 // ---------------------------------------------------------------------------------------------
-void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
-                      const rgb8* c, std::size_t count, double parent_spacing) {
+double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
+                        const rgb8* c, std::size_t count, double parent_spacing) {
   const mat3d ft = nd.frame.cast<double>().transpose();
   const vec3d mu = nd.mean.cast<double>();
   vec3d e = vec3d::Zero();
@@ -273,8 +273,8 @@ void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const ve
                   0.5 * parent_spacing});
   }
   h = std::min(h, nd.cell_size);
-  // Only along the directions the points spread in: the points of a line (or of a scan line)
-  // stay on it, one point stays a point.
+  // Here only along the directions the points spread in; pca_widen_leaf() widens the others
+  // when the parent's points span a surface (a line of points, one point, stays one otherwise).
   const double flat = 1e-6 * std::max(e.x(), mu.cwiseAbs().maxCoeff());
   if (e.x() > flat) e.x() += h;
   if (e.y() > flat) e.y() += h;
@@ -285,12 +285,29 @@ void pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const ve
     theta =
         std::max(theta, std::acos(std::clamp(z.dot(n[i].cast<double>().normalized()), -1.0, 1.0)));
   nd.normal_extent = static_cast<float>(theta);
-  if (colour == nullptr) return;
+  if (colour == nullptr) return h;
   const vec3d cm = colour->mean.cast<double>();
   double r = 0;
   for (std::size_t i = 0; i < count; ++i)
     r = std::max(r, (vec3d(c[i].r, c[i].g, c[i].b) / 255.0 - cm).norm());
   colour->extent = static_cast<float>(r);
+  return h;
+}
+
+void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame) {
+  // The leaf's frame follows its points' normal where they do not span a plane (§3's degenerate
+  // rules): one point with its normal is a surface element, the input's own render draws it as
+  // a disk across that normal. Trusted only where it agrees with the parent's surface: a normal
+  // more than 30° off tilts the widened box by more than h/2 out of the parent's plane, and the
+  // leaf stays what its points span.
+  const double agree =
+      std::abs(nd.frame.col(2).cast<double>().dot(parent_frame.col(2).cast<double>()));
+  if (!(agree >= std::cos(std::numbers::pi / 6))) return;
+  // A tangential direction pca_leaf_extents() widened is at least its spacing wide; one it left
+  // is at most float rounding of the coordinates.
+  for (int k = 0; k < 2; ++k)
+    if (static_cast<double>(nd.extent[k]) < h)
+      nd.extent[k] = static_cast<float>(static_cast<double>(nd.extent[k]) + h);
 }
 
 void pca_inner_extents(pca_data& d, std::size_t i) {

@@ -24,8 +24,9 @@
 //               at the span; a·ln a + c·a points for the span's projected area a, c = 0.2. The
 //               default (pca_generator::span) spreads tangential positions uniformly over the
 //               span on a low-discrepancy sequence, at most node_points points a node, grown to
-//               cover. Seeded per (seed, node, point), so the same seed gives the same points in
-//               any traversal order.
+//               cover, each with the node's mean normal and colour (pca_attribute_draw::mean;
+//               sampled as printed with pca_attribute_draw::sampled). Seeded per (seed, node,
+//               point), so the same seed gives the same points in any traversal order.
 //               pca_octree_render.cpp (generation) and emit() below (to the Sink).
 //   Fig. 6      view-dependent cut kept across frames: pca_octree_cut (split, merge with merge
 //               counters and time stamps, normal-cone culling).
@@ -292,9 +293,22 @@ enum class pca_generator : std::uint8_t {
   paper,
 };
 
+/// What normal and colour a generated point carries (§4; docs/pca-octree.md, "Deviations").
+enum class pca_attribute_draw : std::uint8_t {
+  /// The node's expected values: its mean normal and mean colour. Without the position of a
+  /// point to condition on, the mean is the estimate of least expected squared error; a draw
+  /// independent of the input's value there has twice the error (E‖X − Y‖² = 2σ² for X, Y
+  /// independent of one distribution, σ² for the mean).
+  mean,
+  /// §4 as printed: each point's normal from the node's normal ellipse, its colour from the
+  /// colour ellipsoid (Box–Muller), truncated at γ and at the node's cone and ball.
+  sampled,
+};
+
 /// How a PCA octree is drawn (§4).
 struct pca_render_options {
   pca_generator generator = pca_generator::span;
+  pca_attribute_draw attribute_draw = pca_attribute_draw::mean;
   /// pca_generator::span: points per point-sized cell of a node's projected span (its tiles
   /// take (longer side in points + 1)² cells each, so a slanted view does not open gaps). Below
   /// 1 the hard-cases scene opens holes (0.6: IoU 0.93 instead of 0.98).
@@ -333,12 +347,14 @@ namespace detail {
 /// Points [first, first + count) of node n's stream for `seed` (§4, generator g): point k
 /// depends only on (seed, n, k), so any first k points are the same whatever the total.
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t seed, std::uint32_t first,
-                  std::uint32_t count, pca_sample* out, pca_generator g = pca_generator::span);
+                  std::uint32_t count, pca_sample* out, pca_generator g = pca_generator::span,
+                  pca_attribute_draw a = pca_attribute_draw::mean);
 /// The same for node n of d drawing the stream of node `stream_id` of the whole hierarchy (a
 /// chunk of a chunked PCA octree holds a subtree; its nodes draw their whole-tree numbers).
 void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, std::uint64_t seed,
                   std::uint32_t first, std::uint32_t count, pca_sample* out,
-                  pca_generator g = pca_generator::span);
+                  pca_generator g = pca_generator::span,
+                  pca_attribute_draw a = pca_attribute_draw::mean);
 
 /// What pca_octree and chunked_pca_octree draw for node n of d (see pca_octree's members of the
 /// same names); stream_id is the node's number in the whole hierarchy.
@@ -373,7 +389,7 @@ void pca_emit_points(const pca_data& d, std::uint32_t n, std::uint64_t stream_id
   std::array<pca_sample, 64> buf;
   for (std::uint32_t first = 0; first < count; first += buf.size()) {
     const auto k = std::min<std::uint32_t>(buf.size(), count - first);
-    pca_generate(d, n, stream_id, o.seed, first, k, buf.data(), o.generator);
+    pca_generate(d, n, stream_id, o.seed, first, k, buf.data(), o.generator, o.attribute_draw);
     for (std::uint32_t i = 0; i < k; ++i) {
       point_prim<A> p{buf[i].position, size};
       p.normal = buf[i].normal;
@@ -744,7 +760,7 @@ class pca_octree_cut {
         const std::uint32_t k = std::min(block_points - first % block_points, count - first);
         detail::pca_generate(t_->data(), n, r.seed, first, k,
                              &bank_[bl[first / block_points] * block_points + first % block_points],
-                             r.generator);
+                             r.generator, r.attribute_draw);
         first += k;
       }
       fs_.points_generated += count - filled_[n];
