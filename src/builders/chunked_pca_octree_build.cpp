@@ -401,16 +401,6 @@ struct chunked_pca_builder : chunked_pass_base {
       }
       pca_node& nd = top.nodes[x];
       pca_set_statistics(nd, pos_acc[x], pca_normal_finish(frame[x], m[x], cell.count));
-      // A chunk root that is a leaf is widened as its parent's pass in build_pca_data does
-      // (node_statistics); finish_chunk repeats it in the chunk's own copy.
-      if (nd.sigma.y() > 2e-15)
-        for (std::uint32_t k = 0; k < cell.children; ++k) {
-          const top_cell& ch = nodes[cell.first_child + k];
-          if (ch.st == top_cell::state::split || !(root_leaf_h[ch.chunk] > 0)) continue;
-          pca_widen_leaf(top.nodes[cell.first_child + k], root_leaf_h[ch.chunk], nd.frame);
-          root_widen[ch.chunk] = 1;
-          root_parent_frame[ch.chunk] = nd.frame;
-        }
       if (in.colour) top.colours[x] = pca_colours_from(col_acc[x].mean, col_acc[x].covariance());
       nd.first = cell.first_child;
       nd.count = static_cast<std::uint8_t>(cell.children);
@@ -420,6 +410,16 @@ struct chunked_pca_builder : chunked_pass_base {
       nd.cell_min = cell.cell_min;
       nd.cell_size = size / std::ldexp(1.0, cell.depth);
       pca_inner_extents(top, x);  // its children (chunk roots or top cells) are done
+      // A chunk root that is a leaf is widened after its parent's span, as build_pca_data
+      // does (node_statistics); finish_chunk repeats it in the chunk's own copy.
+      if (nd.sigma.y() > 2e-15)
+        for (std::uint32_t k = 0; k < cell.children; ++k) {
+          const top_cell& ch = nodes[cell.first_child + k];
+          if (ch.st == top_cell::state::split || !(root_leaf_h[ch.chunk] > 0)) continue;
+          pca_widen_leaf(top.nodes[cell.first_child + k], root_leaf_h[ch.chunk], nd.frame);
+          root_widen[ch.chunk] = 1;
+          root_parent_frame[ch.chunk] = nd.frame;
+        }
     }
   }
 

@@ -398,12 +398,15 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
               colour ? cols.data() + r.begin : nullptr, r.end - r.begin, parent_spacing[i]);
           continue;
         }
+        // The node's span first, from its children as their points left them: a widened leaf
+        // overhangs its points by up to a spacing, and that overhang must not grow every
+        // ancestor's span (the points generated there would leave the surface).
+        pca_inner_extents(d, i);
         // The leaves below a node of a surface cover their points' patches in every tangential
         // direction; below a line of points (or one point) they stay on it.
         if (nd.sigma.y() > 2 * sigma_floor)
           for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
             if (d.nodes[c].count == 0) pca_widen_leaf(d.nodes[c], leaf_h[c], nd.frame);
-        pca_inner_extents(d, i);
       }
     });
     std::swap(below, here);
