@@ -192,14 +192,21 @@ int cmd_compare(const std::string& a, const std::string& b, bool as_json) {
                           std::to_string(ia.height) + " but " + b + " is " +
                           std::to_string(ib.width) + "x" + std::to_string(ib.height));
   const image_error e = compare_images(ia, ib);
+  // With A the input's own render: what the user sees (its interior, its silhouette).
+  const input_likeness l = compare_to_input(ia, ib);
   if (as_json) {
     json j = error_json(e);
+    j.num("psnr_interior", l.psnr_interior)
+        .num("silhouette_iou", l.silhouette_iou)
+        .integer("interior_pixels", static_cast<long long>(l.interior_pixels))
+        .integer("interior_holes", static_cast<long long>(l.interior_holes));
     j.str("reference", a).str("test", b);
     std::cout << j.text() << "\n";
   } else {
     std::cout << "RMSE " << e.rmse << ", PSNR " << e.psnr << " dB, hole fraction "
               << e.hole_fraction << " (" << e.holes << " of " << e.reference_covered
-              << " reference pixels)\n";
+              << " reference pixels); interior PSNR " << l.psnr_interior << " dB, silhouette IoU "
+              << l.silhouette_iou << "\n";
   }
   return 0;
 }

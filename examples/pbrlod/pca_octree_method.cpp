@@ -8,14 +8,17 @@
 #include "lod.hpp"
 #include "pbr_lod/builders/chunked_pca_octree.hpp"
 #include "pbr_lod/builders/pca_octree.hpp"
+#include "pbr_lod/core/mesh_splats.hpp"
 
 namespace pbrlod_tool {
 namespace {
 
 /// The PCA octree options from the --param items; `memory`/`chunk_points` only for a chunked
-/// build.
+/// build. `from_faces`: where the in-memory build asks, mesh=faces (the default: a mesh's
+/// vertices with the patches of their faces, core/mesh_splats.hpp) or mesh=vertices.
 pca_octree_options pca_options(const std::vector<std::string>& items, bool on_terminal,
-                               chunked_pca_octree_options* chunked = nullptr) {
+                               chunked_pca_octree_options* chunked = nullptr,
+                               bool* from_faces = nullptr) {
   params m(items);
   pca_octree_options o;
   o.leaf_size = static_cast<std::uint32_t>(m.integer("leaf_size", 8, 1, 1 << 20));
@@ -23,7 +26,8 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
   o.gamma = static_cast<float>(m.number("gamma", 3.5, 0.5, 10));
   o.curvature_c = static_cast<float>(m.number("curvature_c", 1, 0, 100));
   o.lambda_max = static_cast<float>(m.number("lambda_max", 2, 1, 16));
-  o.surface_angle = static_cast<float>(m.number("surface_angle", 60, 1, 180));
+  o.surface_angle = static_cast<float>(m.number("surface_angle", 20, 1, 180));
+  o.colour_tolerance = static_cast<float>(m.number("colour_tolerance", 2, 0, 2));
   o.quantise = m.flag("quantise", true);
   o.position_codebook = static_cast<std::uint32_t>(m.integer("codebook_p", 1024, 1, 4096));
   o.normal_codebook = static_cast<std::uint32_t>(m.integer("codebook_n", 1024, 1, 4096));
@@ -34,11 +38,12 @@ pca_octree_options pca_options(const std::vector<std::string>& items, bool on_te
   o.knn = static_cast<int>(m.integer("knn", 16, 3, 256));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   if (chunked) chunked_params(m, *chunked);
+  if (from_faces) *from_faces = m.choice("mesh", "faces", {"faces", "vertices"}) == "faces";
   m.finish("pca-octree",
-           "leaf_size, max_depth, gamma, curvature_c, lambda_max, surface_angle, quantise, "
-           "codebook_p, "
-           "codebook_n, codebook_c, kmeans_iterations, kmeans_sample, kmeans_seed, knn, threads, "
-           "memory, chunk_points");
+           "leaf_size, max_depth, gamma, curvature_c, lambda_max, surface_angle, colour_tolerance, "
+           "quantise, "
+           "codebook_p, codebook_n, codebook_c, kmeans_iterations, kmeans_sample, kmeans_seed, "
+           "knn, threads, mesh (in memory), memory, chunk_points");
   o.progress = progress_callback("pca-octree", on_terminal);
   return o;
 }
@@ -94,7 +99,8 @@ struct pca_method {
     pca_octree_policy policy;
     policy.render.seed = r.seed;
     policy.render.point_px = std::max(1.0f, r.tolerance);
-    constexpr effects compiled{.shading = true, .colour = true, .backface_cull = true};
+    constexpr effects compiled{
+        .shading = true, .colour = true, .backface_cull = true, .shadows = false, .blending = true};
     frame f = draw_frame<compiled>(t, v, o, topt, policy, r, t.origin());
     f.extra.integer("seed", static_cast<long long>(r.seed));
     return f;
@@ -157,17 +163,29 @@ std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const 
 
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool on_terminal) {
-  const auto opt = pca_options(items, on_terminal);
-  const point_cloud& cloud = in.get().mesh.vertices;
-  // Only normals and colours matter to this builder: four instantiations of the thin wrapper.
+  bool from_faces = true;
+  const auto opt = pca_options(items, on_terminal, nullptr, &from_faces);
+  // A mesh's vertices carry the patches of their faces (their splats bound their dual cells),
+  // which the leaves span; a cloud's points as they are.
+  const loaded_input& data = in.get();
+  const bool splat_mesh = from_faces && data.is_mesh();
+  const point_cloud splats = splat_mesh ? mesh_splats(data.mesh) : point_cloud{};
+  const point_cloud& cloud = splat_mesh ? splats : data.mesh.vertices;
+  // Only normals, colours and splat ellipses matter to this builder: eight instantiations of
+  // the thin wrapper.
   const attributes have = cloud.present();
   const auto go = [&]<attributes A>() {
     return make_lod(pca_method{}, build_pca_octree(point_set<A>::from(cloud, in.name()), opt));
   };
-  if (have.colour && have.normal) return go.template operator()<with_normals_colours>();
-  if (have.colour) return go.template operator()<attributes{.colour = true}>();
-  if (have.normal) return go.template operator()<with_normals>();
-  return go.template operator()<positions_only>();
+  const auto with_colour = [&]<bool E>() {
+    if (have.colour && have.normal)
+      return go.template operator()<attributes{.normal = true, .colour = true, .ellipse = E}>();
+    if (have.colour) return go.template operator()<attributes{.colour = true, .ellipse = E}>();
+    if (have.normal) return go.template operator()<attributes{.normal = true, .ellipse = E}>();
+    return go.template operator()<attributes{.ellipse = E}>();
+  };
+  return have.ellipse ? with_colour.template operator()<true>()
+                      : with_colour.template operator()<false>();
 }
 
 std::unique_ptr<lod> load(const std::string& path) {
@@ -190,7 +208,8 @@ method_entry pca_octree_method() {
           .demo_tolerances = {4, 2, 1},
           .tolerance_means =
               "pixels: a node is drawn once it projects to at most this, its "
-              "generated points this size (§4)"};
+              "generated points this size (§4)",
+          .splats_from_mesh = true};
 }
 
 }  // namespace pbrlod_tool

@@ -51,6 +51,8 @@ void pca_validate_options(const pca_octree_options& o, bool input_normals) {
        "lambda_max must lie in [1, 16]");
   need(std::isfinite(o.surface_angle) && o.surface_angle > 0 && o.surface_angle <= 180,
        "surface_angle must lie in (0, 180] degrees");
+  need(std::isfinite(o.colour_tolerance) && o.colour_tolerance >= 0,
+       "colour_tolerance must be >= 0");
   need(o.position_codebook >= 1 && o.position_codebook <= 4096,
        "position_codebook must lie in 1..4096 (12-bit indices)");
   need(o.normal_codebook >= 1 && o.normal_codebook <= 4096,
@@ -86,9 +88,18 @@ void validate(const pca_input& in, const pca_octree_options& o) {
   if (!in.colours.empty() && in.colours.size() != in.positions.size())
     throw InvalidArgument("pca-octree: " + std::to_string(in.colours.size()) + " colours for " +
                           std::to_string(in.positions.size()) + " points");
+  if (in.axis_u.size() != in.axis_v.size() ||
+      (!in.axis_u.empty() && in.axis_u.size() != in.positions.size()))
+    throw InvalidArgument("pca-octree: " + std::to_string(in.axis_u.size()) + " and " +
+                          std::to_string(in.axis_v.size()) + " splat axes for " +
+                          std::to_string(in.positions.size()) + " points");
   for (std::size_t i = 0; i < in.positions.size(); ++i)
     if (!all_finite(in.positions[i]))
       throw InvalidArgument("pca-octree: position " + std::to_string(i) + " is not finite");
+  for (std::size_t i = 0; i < in.axis_u.size(); ++i)
+    if (!all_finite(in.axis_u[i]) || !all_finite(in.axis_v[i]))
+      throw InvalidArgument("pca-octree: the splat axes of point " + std::to_string(i) +
+                            " are not finite");
   pca_validate_options(o, !in.normals.empty());
 }
 
@@ -104,6 +115,10 @@ struct octree_points {
   /// pca_octree_options::surface_angle: a small node whose normals differ more is split.
   const std::vector<vec3f>& normals;
   float surface_cos;
+  /// Colours in input order (or empty) and pca_octree_options::colour_tolerance squared, in
+  /// 8-bit units: a small node whose colours differ more is split.
+  const std::vector<rgb8>& colours;
+  float colour_tol2;
   std::vector<std::uint32_t> index = identity(pos.size());
   std::vector<vec3d> pos_tmp = std::vector<vec3d>(pos.size());
   std::vector<std::uint32_t> index_tmp = std::vector<std::uint32_t>(pos.size());
@@ -222,11 +237,20 @@ bool partition_parallel(octree_points& p, build_node r, const vec3d& mid, unsign
 }
 
 /// Whether the normals of a node's points all lie within surface_angle of the first one (§6's
-/// "normal-coherent part"): if not, the node holds two surfaces or a crease and is split on.
+/// "normal-coherent part") and their colours within colour_tolerance of its colour: if not, the
+/// node holds two surfaces, a crease or a colour edge and is split on.
 bool one_surface(const octree_points& p, build_node r) {
   const vec3f& n0 = p.normals[p.index[r.begin]];
   for (std::uint32_t k = r.begin + 1; k < r.end; ++k)
     if (p.normals[p.index[k]].dot(n0) < p.surface_cos) return false;
+  if (p.colours.empty()) return true;
+  const rgb8 c0 = p.colours[p.index[r.begin]];
+  for (std::uint32_t k = r.begin + 1; k < r.end; ++k) {
+    const rgb8 c = p.colours[p.index[k]];
+    const float dr = float(c.r) - float(c0.r), dg = float(c.g) - float(c0.g),
+                db = float(c.b) - float(c0.b);
+    if (dr * dr + dg * dg + db * db > p.colour_tol2) return false;
+  }
   return true;
 }
 
@@ -338,21 +362,29 @@ std::vector<build_node> build_octree(octree_points& p, pca_data& d, std::uint8_t
 /// positions' and colours' moments are summed at the leaves and merged up the tree level by
 /// level (Chan et al.'s update, core/covariance.hpp), so each point is summed once.
 pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& ranges,
-                                    const std::vector<vec3d>& pos,
-                                    const std::vector<vec3f>& normals,
-                                    const std::vector<rgb8>& cols, unsigned threads,
-                                    double root_parent_spacing) {
+                                    const pca_points& pts, std::uint32_t leaf_size,
+                                    unsigned threads, double root_parent_spacing) {
+  const std::vector<vec3d>& pos = pts.pos;
+  const std::vector<vec3f>& normals = pts.normals;
+  const std::vector<rgb8>& cols = pts.colours;
+  const bool splats = !pts.axis_u.empty();
   const std::size_t n = d.nodes.size();
   // A leaf of one or two points takes the spacing of its parent's points: its cell edge over
-  // the square root of their count.
+  // the square root of their count. A parent of at most leaf_size points was split for its
+  // normals or colours (two surfaces, a crease, a colour edge), not for its count, and its few
+  // points say nothing of their spacing: its children take its own parent's.
   std::vector<double> parent_spacing(n, root_parent_spacing);
-  for (std::size_t i = 0; i < n; ++i)
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t k = ranges[i].end - ranges[i].begin;
+    const double s = k > leaf_size ? d.nodes[i].cell_size / std::sqrt(static_cast<double>(k))
+                                    : parent_spacing[i];
     for (std::uint32_t c = d.nodes[i].first; c < d.nodes[i].first + d.nodes[i].count; ++c)
-      parent_spacing[c] =
-          d.nodes[i].cell_size / std::sqrt(static_cast<double>(ranges[i].end - ranges[i].begin));
+      parent_spacing[c] = s;
+  }
   const bool colour = !cols.empty();
   if (colour) d.colours.resize(n);
   std::vector<double> leaf_h(n, 0);  // the spacing each leaf's extents were widened by
+  std::vector<vec3f> for_parent(splats ? n : 0);  // a leaf's extents without its points' patches
   // The normals first: their mean is what the degenerate position rules align z with. If they
   // cancel out, the first sample's normal stands in (deterministic).
   std::vector<pca_normal_result> normal(n);
@@ -395,13 +427,21 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
         if (nd.count == 0) {
           leaf_h[i] = pca_leaf_extents(
               nd, colour ? &d.colours[i] : nullptr, pos.data() + r.begin, normals.data() + r.begin,
-              colour ? cols.data() + r.begin : nullptr, r.end - r.begin, parent_spacing[i]);
+              colour ? cols.data() + r.begin : nullptr, r.end - r.begin, parent_spacing[i],
+              splats ? pts.axis_u.data() + r.begin : nullptr,
+              splats ? pts.axis_v.data() + r.begin : nullptr, splats ? &for_parent[i] : nullptr);
           continue;
         }
         // The node's span first, from its children as their points left them: a widened leaf
         // overhangs its points by up to a spacing, and that overhang must not grow every
         // ancestor's span (the points generated there would leave the surface).
+        if (splats)  // the span of the children's points, not of their patches
+          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
+            if (d.nodes[c].count == 0) std::swap(d.nodes[c].extent, for_parent[c]);
         pca_inner_extents(d, i);
+        if (splats)
+          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
+            if (d.nodes[c].count == 0) std::swap(d.nodes[c].extent, for_parent[c]);
         // The leaves below a node of a surface cover their points' patches in every tangential
         // direction; below a line of points (or one point) they stay on it.
         if (nd.sigma.y() > 2 * sigma_floor)
@@ -437,15 +477,18 @@ pca_subtree_moments pca_build_subtree(pca_data& d, pca_points& pts, const vec3d&
   d.cube_size = root_size / std::ldexp(1.0, depth);
   const auto surface_cos =
       static_cast<float>(std::cos(static_cast<double>(o.surface_angle) * std::numbers::pi / 180));
-  octree_points p{pts.pos, root_size, o.leaf_size, o.max_depth, pts.normals, surface_cos};
+  const float colour_tol = 255 * std::min(o.colour_tolerance, 2.0f);
+  octree_points p{pts.pos,     root_size,   o.leaf_size, o.max_depth,
+                  pts.normals, surface_cos, pts.colours, colour_tol * colour_tol};
   const std::vector<build_node> ranges = build_octree(p, d, depth, threads);
   pts.normals = permute_by(pts.normals, p.index, threads);
   pts.colours = permute_by(pts.colours, p.index, threads);
+  pts.axis_u = permute_by(pts.axis_u, p.index, threads);
+  pts.axis_v = permute_by(pts.axis_v, p.index, threads);
   pca_derive_cells(d, threads);    // a leaf of one point takes its spacing from its cell
   if (!(root_parent_spacing > 0))  // the whole tree's root: its own cell and points
     root_parent_spacing = d.cube_size / std::sqrt(static_cast<double>(pts.pos.size()));
-  return node_statistics(d, ranges, pts.pos, pts.normals, pts.colours, threads,
-                         root_parent_spacing);
+  return node_statistics(d, ranges, pts, o.leaf_size, threads, root_parent_spacing);
 }
 
 pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
@@ -529,7 +572,9 @@ pca_data build_pca_data(const pca_input& in, const pca_octree_options& o) {
   // ---- §3: top-down octree, breadth first, children contiguous in octant order; the
   // independent PCA of each node's positions, normals and colours.
   pca_points pts{std::move(pos), std::move(normals),
-                 std::vector<rgb8>(in.colours.begin(), in.colours.end())};
+                 std::vector<rgb8>(in.colours.begin(), in.colours.end()),
+                 std::vector<vec3f>(in.axis_u.begin(), in.axis_u.end()),
+                 std::vector<vec3f>(in.axis_v.begin(), in.axis_v.end())};
   (void)pca_build_subtree(d, pts, vec3d::Constant(-0.5 * size), 0, size, o, threads);
   for (const auto& nd : d.nodes) st.max_depth = std::max<std::size_t>(st.max_depth, nd.depth);
   st.nodes = d.nodes.size();

@@ -43,9 +43,13 @@ void pca_set_statistics(pca_node& nd, const scatter_accumulator& positions,
 /// null): from its count points p (relative to the origin), unit normals n and colours c (null
 /// without colour), about its statistics, which must be set, and its cell (for one point).
 /// Tangentially only along the directions the points spread in, widened by their spacing, which
-/// it returns (for pca_widen_leaf).
+/// it returns (for pca_widen_leaf). With splat ellipses (u, v: each point's semi-axes, or null)
+/// tangentially the box of the points' ellipses instead, and 0 (they need no widening); the
+/// extents without them go to `for_parent` (what its parent's span is made of).
 double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
-                        const rgb8* c, std::size_t count, double parent_spacing);
+                        const rgb8* c, std::size_t count, double parent_spacing,
+                        const vec3f* u = nullptr, const vec3f* v = nullptr,
+                        vec3f* for_parent = nullptr);
 /// A leaf whose parent's points span a surface (not a line or a point): the tangential
 /// directions its own points do not spread in (one point, two, a line of them — a scan line)
 /// are widened by h too, so that it covers the patch its points stand for — when its frame's
@@ -61,6 +65,7 @@ struct pca_points {
   std::vector<vec3d> pos;
   std::vector<vec3f> normals;
   std::vector<rgb8> colours;
+  std::vector<vec3f> axis_u, axis_v;  ///< splat ellipses (pca_input::axis_u), or empty
 };
 /// The root's moments of a subtree (merged into its parent's by the chunked build).
 struct pca_subtree_moments {

@@ -75,11 +75,15 @@ constexpr std::uint32_t r2_a1 = 3242174889u;   // 2³² / g
 constexpr std::uint32_t r2_a2 = 2447445414u;   // 2³² / g²
 constexpr std::uint32_t golden = 2654435769u;  // 2³² / φ
 
-/// Tiles of a tangential box with half-extents (e1, e2): the longer side is cut into
-/// round(ratio) squares among which the points are spread, so they are even in both directions.
-int tiles_of(float e1, float e2) {
-  const float lo = std::max(std::min(e1, e2), 1e-30f), hi = std::max(e1, e2);
-  return static_cast<int>(std::clamp(std::lround(hi / lo), 1l, 64l));
+/// Tiles of a node's tangential box: the longer side is cut into round(ratio) squares among
+/// which the points are spread, so they are even in both directions. Extents below a millionth
+/// of the node's cell are rounding, not extent (a leaf of one point, a line of them): taken as
+/// that floor, so that their ratio, which the last bits of the coordinates decide, does not
+/// decide the tiles (the same cloud 10⁷ units away drew 1 tile or 64 at the same leaf).
+int tiles_of(const pca_node& nd) {
+  const float floor = std::max(1e-6f * static_cast<float>(nd.cell_size), 1e-30f);
+  const float e1 = std::max(nd.extent.x(), floor), e2 = std::max(nd.extent.y(), floor);
+  return static_cast<int>(std::clamp(std::lround(std::max(e1, e2) / std::min(e1, e2)), 1l, 64l));
 }
 
 /// Node n's span box projected in view v: the screen vectors (pixels) of its three full axes
@@ -130,8 +134,8 @@ float pca_required_points(const pca_data& d, std::uint32_t n, const view& v,
   // box) takes the same number q of points, evenly spread over it; on screen a tile spans the
   // projected lengths (ℓ₁/m, ℓ₂) and needs q ≥ (its longer side in points + 1)² for a point
   // every point size along both sides, whatever the view's slant.
-  const int m = tiles_of(nd.extent.x(), nd.extent.y());
-  const bool long1 = nd.extent.x() >= nd.extent.y();
+  const int m = tiles_of(nd);
+  const bool long1 = m == 1 || nd.extent.x() >= nd.extent.y();
   const float l1 = ax[0].norm() / p, l2 = ax[1].norm() / p;
   const float side = std::max(long1 ? l1 / float(m) : l1, long1 ? l2 : l2 / float(m)) + 1;
   return o.density * float(m) * side * side;
@@ -159,8 +163,9 @@ void pca_generate(const pca_data& d, std::uint32_t n, std::uint64_t stream_id, s
   const std::uint64_t off = mix(key ^ 0x5851F42D4C957F2Dull);
   const auto o1 = static_cast<std::uint32_t>(off), o2 = static_cast<std::uint32_t>(off >> 32);
   const auto o3 = static_cast<std::uint32_t>(mix(off));
-  const int m = tiles_of(e.x(), e.y());
-  const bool long1 = e.x() >= e.y();
+  const int m = tiles_of(nd);
+  // One tile: no longer side (which of two equal sides is longer is a last-bit matter).
+  const bool long1 = m == 1 || e.x() >= e.y();
   // pca_attribute_draw::mean: the node's expected normal and colour for every point.
   const vec3f mean_normal = nd.normal_frame.col(2).normalized();
   const rgb8 mean_colour = colour ? to_rgb8(d.colours[n].mean) : rgb8{};

@@ -254,8 +254,28 @@ pca_colour pca_colours_from(const vec3d& mean, const mat3d& cov) {
 // ---------------------------------------------------------------------------------------------
 // What a node's points span.
 // ---------------------------------------------------------------------------------------------
+namespace {
+/// A leaf's cone of normals about its mean normal and ball of colours about its mean colour.
+void leaf_attribute_extents(pca_node& nd, pca_colour* colour, const vec3f* n, const rgb8* c,
+                            std::size_t count) {
+  const vec3d z = nd.normal_frame.col(2).cast<double>();
+  double theta = 0;
+  for (std::size_t i = 0; i < count; ++i)
+    theta =
+        std::max(theta, std::acos(std::clamp(z.dot(n[i].cast<double>().normalized()), -1.0, 1.0)));
+  nd.normal_extent = static_cast<float>(theta);
+  if (colour == nullptr) return;
+  const vec3d cm = colour->mean.cast<double>();
+  double r = 0;
+  for (std::size_t i = 0; i < count; ++i)
+    r = std::max(r, (vec3d(c[i].r, c[i].g, c[i].b) / 255.0 - cm).norm());
+  colour->extent = static_cast<float>(r);
+}
+}  // namespace
+
 double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const vec3f* n,
-                        const rgb8* c, std::size_t count, double parent_spacing) {
+                        const rgb8* c, std::size_t count, double parent_spacing, const vec3f* u,
+                        const vec3f* v, vec3f* for_parent) {
   const mat3d ft = nd.frame.cast<double>().transpose();
   const vec3d mu = nd.mean.cast<double>();
   vec3d e = vec3d::Zero();
@@ -279,19 +299,25 @@ double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const 
   if (e.x() > flat) e.x() += h;
   if (e.y() > flat) e.y() += h;
   nd.extent = e.cwiseMax(sigma_floor).cast<float>();
-  const vec3d z = nd.normal_frame.col(2).cast<double>();
-  double theta = 0;
-  for (std::size_t i = 0; i < count; ++i)
-    theta =
-        std::max(theta, std::acos(std::clamp(z.dot(n[i].cast<double>().normalized()), -1.0, 1.0)));
-  nd.normal_extent = static_cast<float>(theta);
-  if (colour == nullptr) return h;
-  const vec3d cm = colour->mean.cast<double>();
-  double r = 0;
-  for (std::size_t i = 0; i < count; ++i)
-    r = std::max(r, (vec3d(c[i].r, c[i].g, c[i].b) / 255.0 - cm).norm());
-  colour->extent = static_cast<float>(r);
-  return h;
+  leaf_attribute_extents(nd, colour, n, c, count);
+  if (u == nullptr || v == nullptr) return h;
+  // The points' own patches: an ellipse c + u·cos t + v·sin t reaches sqrt((f·u)² + (f·v)²)
+  // along a direction f, so tangentially the leaf spans exactly its points' splats (across,
+  // their centres: the generated points stay on the surface). Its parent still takes the box
+  // above: patches tilted against the parent's plane would raise its span off the surface.
+  if (for_parent != nullptr) *for_parent = nd.extent;
+  // A mesh's splat bounds its vertex's dual cell: scaled to the cell's area (a regular hexagon's
+  // circumscribed disk, √(3√3 / 2π) = 0.909), so that the box does not overhang a crease or an
+  // open edge by the ellipse's corners (the small scene: cut → input 0.020 → 0.018).
+  const double area = std::sqrt(3 * std::sqrt(3.0) / (2 * std::numbers::pi));
+  vec3d s = e;
+  s.x() = s.y() = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const vec3d q = ft * (p[i] - mu), a = ft * u[i].cast<double>(), b = ft * v[i].cast<double>();
+    for (int k = 0; k < 2; ++k) s[k] = std::max(s[k], std::abs(q[k]) + area * std::hypot(a[k], b[k]));
+  }
+  nd.extent = s.cwiseMax(sigma_floor).cast<float>();
+  return 0;
 }
 
 void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame) {

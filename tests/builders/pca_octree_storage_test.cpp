@@ -2,6 +2,8 @@
 // DESIGN's numerics and errors). Each case says why its expectation holds.
 #include <Eigen/Eigenvalues>
 #include <bit>
+#include <cmath>
+#include <numbers>
 
 #include "builders/pca_octree_test_util.hpp"
 
@@ -59,17 +61,26 @@ TEST(pca_octree, FileBytesDoNotDependOnThreads) {
 }
 
 // The octree against a brute-force one: §3's rule (split a cell at its centre while it holds
-// more than leaf_size points, or normals more than surface_angle = 60° from its first one, that
-// are not all equal) applied breadth first, one node at a time.
+// more than leaf_size points, or normals more than surface_angle from its first one, or colours
+// farther than colour_tolerance from its first one, that are not all equal) applied breadth
+// first, one node at a time.
 // The builder partitions large nodes (≥ 65 536 points) in parallel chunks, splits the levels
 // below 256 nodes' worth in parallel and merges the parts back;
 // the result must be this tree node for node: same order, children, octant masks and depths,
 // and each node's position statistics those of its own points (the builder merges moments
 // bottom-up instead of summing every node's points).
 TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
-  const auto cloud = make_wavy_surface(80000, 5);
-  const auto pts = point_set<with_normals>::from(cloud);
-  const auto t = build_pca_octree(pts, {.leaf_size = 4, .quantise = false, .threads = 3});
+  // The demo scene's vertices (92 k): creases, a thin fin, stripes, so that both coherence
+  // rules split small nodes.
+  const auto cloud = make_demo_scene(80).vertices;
+  const auto pts = point_set<with_normals_colours>::from(cloud);
+  const pca_octree_options opt{
+      .leaf_size = 4, .colour_tolerance = 0.05f, .quantise = false, .threads = 3};
+  const auto t = build_pca_octree(pts, opt);
+  const double cos_surface = std::cos(opt.surface_angle * std::numbers::pi / 180);
+  const double colour_tol = 255.0 * opt.colour_tolerance;
+  // Small nodes split by each of the two coherence rules alone (the rules are exercised).
+  std::size_t split_for_normals = 0, split_for_colours = 0;
   struct cell {
     std::vector<std::uint32_t> points;
     vec3d min;
@@ -97,13 +108,20 @@ TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
     ASSERT_LT((nd.mean.cast<double>() - ref.mean).norm(), 1e-6 * t.cube_size()) << i;
     for (int k = 0; k < 3; ++k)
       ASSERT_NEAR(nd.sigma[k], ref.sigma[k], 1e-5 * ref.sigma[0] + 1e-14) << i << " σ" << k;
-    bool same = true, one_surface = true;
+    bool same = true, one_normal = true, one_colour = true;
     for (const auto k : c.points) {
       same = same && rel(k) == rel(c.points[0]);
-      one_surface = one_surface &&
-                    pts.normals[k].normalized().dot(pts.normals[c.points[0]].normalized()) >= 0.5f;
+      const rgb8 a = pts.colours[k], b = pts.colours[c.points[0]];
+      one_normal = one_normal && pts.normals[k].normalized().dot(
+                                     pts.normals[c.points[0]].normalized()) >= cos_surface;
+      one_colour = one_colour && std::hypot(double(a.r) - b.r, double(a.g) - b.g,
+                                            double(a.b) - b.b) <= colour_tol;
     }
-    if ((c.points.size() <= 4 && one_surface) || same) {
+    if (c.points.size() <= 4 && !same) {
+      split_for_normals += one_normal ? 0 : 1;
+      split_for_colours += one_normal && !one_colour ? 1 : 0;
+    }
+    if ((c.points.size() <= 4 && one_normal && one_colour) || same || c.depth >= opt.max_depth) {
       ASSERT_EQ(nd.count, 0u) << i;
       continue;
     }
@@ -131,6 +149,10 @@ TEST(pca_octree, OctreeMatchesTheBreadthFirstDefinition) {
   }
   EXPECT_EQ(q.size(), t.nodes().size());
   EXPECT_GT(q.size(), 2000u) << "deep enough for the parallel parts";
+  std::printf("small nodes split for their normals %zu, for their colours alone %zu\n",
+              split_for_normals, split_for_colours);
+  EXPECT_GE(split_for_normals, 10u);
+  EXPECT_GE(split_for_colours, 10u);
 }
 
 // Corrupt files give a FormatError naming the file and what is wrong, never a crash.

@@ -75,8 +75,8 @@ TEST(pca_octree, RootOfOneLeafHoldsTheStatistics) {
     };
     s.colours[i] = {b(c.x()), b(c.y()), b(c.z())};
   }
-  const auto t =
-      build_pca_octree(s, {.leaf_size = 1u << 20, .surface_angle = 180, .quantise = false});
+  const auto t = build_pca_octree(
+      s, {.leaf_size = 1u << 20, .surface_angle = 180, .colour_tolerance = 2, .quantise = false});
   ASSERT_EQ(t.nodes().size(), 1u);
   const auto& nd = t.at(0);
   const vec3d mean_world = t.origin() + nd.mean.cast<double>();

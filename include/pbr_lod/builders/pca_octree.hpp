@@ -87,7 +87,17 @@ struct pca_octree_options {
   /// normal): such a node holds two surfaces (the sides of a thin sheet, two surfaces close
   /// together, a crease), and one ellipsoid would bridge them. §6 of the paper names the
   /// problem and suggests separating "spatial- and normal-coherent parts"; 180 turns it off.
-  float surface_angle = 60.0f;
+  /// 20 by default: a leaf is one plane and (drawn with its mean attributes) one normal, so a
+  /// leaf that bends further shows as a facet on curved models (docs/pca-octree.md: 60 → 20
+  /// gains 0.5–2 dB against the input's render for a fifth more nodes).
+  float surface_angle = 20.0f;
+  /// The same for colours: a node of at most leaf_size points is still split while one of its
+  /// colours lies farther than this from its first point's (RGB in [0, 1], Euclidean), so a leaf
+  /// does not average across a colour edge (a checkerboard's tiles, a texture's features) into a
+  /// colour none of its points has. 2 (beyond the RGB cube's diagonal, the default) turns it
+  /// off: 0.2 gains the hard-cases scene 0.5 dB but draws 5.4 points a covered pixel instead of
+  /// 4.2 (its smaller leaves), beyond the ~4 the point budget aims at.
+  float colour_tolerance = 2.0f;
   /// Classify and quantise the nodes (§3.1): 13 bytes a node (17 with colour). false keeps the
   /// float statistics (for measuring what quantisation costs; 120 bytes a node, 184 with colour).
   bool quantise = true;
@@ -226,6 +236,10 @@ struct pca_input {
   std::span<const vec3f> positions;
   std::span<const vec3f> normals;
   std::span<const rgb8> colours;
+  /// Each point's splat ellipse (two tangent semi-axis vectors), or empty: the patch of the
+  /// surface the point stands for (a mesh's vertex: its dual cell, core/mesh_splats.hpp). A leaf
+  /// then spans its points' patches instead of their box widened by an estimated spacing.
+  std::span<const vec3f> axis_u, axis_v;
 };
 
 [[nodiscard]] pca_data build_pca_data(const pca_input& in, const pca_octree_options& options);
@@ -518,6 +532,10 @@ pca_octree<pca_octree_attributes(In)> build_pca_octree(const point_set<In>& poin
   in.positions = points.positions;
   if constexpr (In.normal) in.normals = points.normals;
   if constexpr (In.colour) in.colours = points.colours;
+  if constexpr (In.ellipse) {
+    in.axis_u = points.axis_u;
+    in.axis_v = points.axis_v;
+  }
   pca_octree<pca_octree_attributes(In)> t;
   t.d_ = detail::build_pca_data(in, options);
   return t;

@@ -7,8 +7,7 @@
 //    make_policy(view) the builder's traversal policy for a view; normals_filled(b) (the count of
 //    missing input normals the build reports, nullopt when it reports none); rejects(case name)
 //    for refusals it documents beyond the ladder's own (nullopt: must build); optionally
-//    `draws_faces_only` (a mesh of zero-area triangles draws nothing) and `far_cloud_min_psnr`
-//    (the far cloud's image against the near one's, 40 dB when absent; say why);
+//    `draws_faces_only` (a mesh of zero-area triangles draws nothing);
 //  * `static std::vector<format_case> formats()`: a tiny valid file of each of its file formats
 //    and how to load and save one (file_damage_test.cpp cuts and flips every byte of them).
 // The test programs include the generated all_builder_tests.hpp, which includes every adapter

@@ -9,11 +9,6 @@ namespace pbr_lod::test {
 
 struct pca_octree_ladder : ladder_adapter_base<pca_octree<with_normals_colours>> {
   static constexpr const char* name = "pca_octree";
-  /// The far cloud's image against the near one's (ladder FarCloud; 40 dB for the others):
-  /// 31.9 dB measured. Points are generated from statistics that differ in the last bits, and
-  /// its widened leaves of one or two points overlap their neighbours, so such a difference
-  /// flips which leaf is in front at some pixels; a float origin (a real loss) blurs far below.
-  static constexpr double far_cloud_min_psnr = 30.0;
   static built build(const triangle_mesh& m, unsigned threads) {
     return with_point_set(
         m.vertices, [&](const auto& ps) { return build_pca_octree(ps, {.threads = threads}); });
