@@ -67,15 +67,14 @@ void put_node(byte_writer& w, const pmr_node& n) {
 pmr_node get_node(byte_reader& r, std::size_t k) {
   pmr_node n;
   n.cell_min = r.get_vec("node cell", k);
-  n.cell_size = r.get_finite("node cell size", k);
+  n.cell_size = r.get_non_negative("node cell size", k);
   n.centre = r.get_vec("node centre", k);
-  n.radius = r.get_finite("node radius", k);
+  n.radius = r.get_non_negative("node radius", k);
   n.first = r.get<std::uint32_t>("node first");
   n.count = r.get<std::uint32_t>("node count");
   n.leaf = r.get<std::uint32_t>("node leaf flag");
   n.depth = r.get<std::uint32_t>("node depth");
-  if (n.cell_size < 0 || n.radius < 0 || n.leaf > 1)
-    throw FormatError(r.path + ": node " + std::to_string(k) + ": negative size or bad leaf flag");
+  if (n.leaf > 1) r.fail("node " + std::to_string(k) + ": leaf flag is not 0 or 1");
   return n;
 }
 
@@ -138,55 +137,6 @@ std::vector<unsigned char> encode(const pmr_data& d) {
   return std::move(w.bytes);
 }
 
-/// Bounds-checked little-endian reads from the mapped file; every failure names the element.
-class reader {
- public:
-  reader(const unsigned char* p, std::size_t n, const std::string& path)
-      : p_(p), n_(n), path_(path) {}
-  template <class T>
-  T get(const char* what) {
-    if (n_ - pos_ < sizeof(T)) fail(std::string("truncated while reading ") + what);
-    T v;
-    std::memcpy(&v, p_ + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return v;
-  }
-  float finite(const char* what, std::size_t i) {
-    const float f = get<float>(what);
-    if (!std::isfinite(f))
-      fail(std::string(what) + " of element " + std::to_string(i) + " is not finite");
-    return f;
-  }
-  float non_negative(const char* what, std::size_t i) {
-    const float f = finite(what, i);
-    if (!(f >= 0)) fail(std::string(what) + " of element " + std::to_string(i) + " is negative");
-    return f;
-  }
-  vec3f vec(const char* what, std::size_t i) {
-    const float x = finite(what, i), y = finite(what, i), z = finite(what, i);
-    return {x, y, z};
-  }
-  /// The bytes `count` elements of `size` bytes need must still be in the file (checked before
-  /// anything is allocated, so a hostile count cannot exhaust memory).
-  void need(std::uint64_t count, std::size_t size, const char* what) const {
-    if (count > (n_ - pos_) / size)
-      fail(std::string("truncated: ") + std::to_string(count) + " " + what + " need " +
-           std::to_string(count * size) + " bytes, " + std::to_string(n_ - pos_) + " remain");
-  }
-  [[noreturn]] void fail(const std::string& msg) const {
-    throw FormatError(path_ + ": " + msg + " (at byte " + std::to_string(pos_) + ")");
-  }
-  [[nodiscard]] std::size_t pos() const { return pos_; }
-  void skip_head() { pos_ = 12; }
-  [[nodiscard]] std::size_t size() const { return n_; }
-
- private:
-  const unsigned char* p_;
-  std::size_t n_;
-  std::size_t pos_ = 0;
-  const std::string& path_;
-};
-
 /// A read-only private mapping of a whole file, unmapped on destruction.
 class mapping {
  public:
@@ -224,7 +174,7 @@ class mapping {
 
 /// A whole hierarchy's sources are a permutation of its samples; a part's are distinct input
 /// indices.
-void check_sources(const reader& r, const pmr_data& d) {
+void check_sources(const byte_reader& r, const pmr_data& d) {
   const std::size_t n = d.source.size();
   if (d.input_total == 0) {
     std::vector<unsigned char> seen(n, 0);
@@ -245,7 +195,7 @@ struct pmr_counts {
 };
 
 /// Flags, origin and bounds, options, thresholds, build counts and the table sizes.
-pmr_counts decode_header(reader& r, pmr_data& d) {
+pmr_counts decode_header(byte_reader& r, pmr_data& d) {
   const auto flags = r.get<std::uint32_t>("flags");
   if ((flags & ~(flag_colours | flag_part)) != 0) r.fail("unknown flags");
   for (vec3d* v : {&d.origin, &d.input_min, &d.input_max})
@@ -254,11 +204,11 @@ pmr_counts decode_header(reader& r, pmr_data& d) {
       if (!std::isfinite((*v)[k])) r.fail("origin or input bounds not finite");
     }
   d.max_leaf_points = r.get<std::uint32_t>("max_leaf_points");
-  d.neighbour_margin = r.non_negative("neighbour_margin", 0);
+  d.neighbour_margin = r.get_non_negative("neighbour_margin", 0);
   const auto nrho = r.get<std::uint32_t>("threshold count");
   if (nrho > 31) r.fail("threshold count " + std::to_string(nrho) + " exceeds 31");
   for (std::uint32_t i = 0; i < nrho; ++i) {
-    d.rho.push_back(r.finite("rho", i));
+    d.rho.push_back(r.get_finite("rho", i));
     if (!(d.rho[i] > 0) || (i > 0 && !(d.rho[i] > d.rho[i - 1])))
       r.fail("rho[" + std::to_string(i) + "] is not positive and increasing");
   }
@@ -285,14 +235,14 @@ pmr_counts decode_header(reader& r, pmr_data& d) {
 }
 
 /// Positions, normals and source indices (a permutation, or a part's distinct indices), colours.
-void decode_samples(reader& r, pmr_data& d, const pmr_counts& c) {
+void decode_samples(byte_reader& r, pmr_data& d, const pmr_counts& c) {
   const std::uint32_t npts = c.samples;
   r.need(npts, 28, "samples");
   d.positions.resize(npts);
   d.normals.resize(npts);
   d.source.resize(npts);
-  for (std::uint32_t i = 0; i < npts; ++i) d.positions[i] = r.vec("position", i);
-  for (std::uint32_t i = 0; i < npts; ++i) d.normals[i] = r.vec("normal", i);
+  for (std::uint32_t i = 0; i < npts; ++i) d.positions[i] = r.get_vec("position", i);
+  for (std::uint32_t i = 0; i < npts; ++i) d.normals[i] = r.get_vec("normal", i);
   for (std::uint32_t i = 0; i < npts; ++i) d.source[i] = r.get<std::uint32_t>("source index");
   check_sources(r, d);
   if (c.flags & flag_colours) {
@@ -307,21 +257,11 @@ void decode_samples(reader& r, pmr_data& d, const pmr_counts& c) {
 }
 
 /// The octree's nodes, checked to form one tree in breadth-first order with each leaf once.
-void decode_nodes(reader& r, pmr_data& d, const pmr_counts& c) {
+void decode_nodes(byte_reader& r, pmr_data& d, const pmr_counts& c) {
   const std::uint32_t nnodes = c.nodes, nleaves = c.leaves;
   r.need(nnodes, node_bytes, "nodes");
   d.nodes.resize(nnodes);
-  for (std::uint32_t k = 0; k < nnodes; ++k) {
-    auto& n = d.nodes[k];
-    n.cell_min = r.vec("node cell", k);
-    n.cell_size = r.non_negative("node cell size", k);
-    n.centre = r.vec("node centre", k);
-    n.radius = r.non_negative("node radius", k);
-    n.first = r.get<std::uint32_t>("node first");
-    n.count = r.get<std::uint32_t>("node count");
-    n.leaf = r.get<std::uint32_t>("node leaf flag");
-    n.depth = r.get<std::uint32_t>("node depth");
-  }
+  for (std::uint32_t k = 0; k < nnodes; ++k) d.nodes[k] = get_node(r, k);
   // The tree: breadth-first, every inner node's children contiguous right after the previous
   // inner node's, so [1, nodes) is partitioned exactly once (a tree, no cycles).
   std::uint64_t next = 1;
@@ -331,7 +271,6 @@ void decode_nodes(reader& r, pmr_data& d, const pmr_counts& c) {
   std::vector<unsigned char> leaf_used(nleaves, 0);
   for (std::uint32_t k = 0; k < nnodes; ++k) {
     const auto& n = d.nodes[k];
-    if (n.leaf > 1) r.fail("node " + std::to_string(k) + ": leaf flag is not 0 or 1");
     if (n.leaf) {
       if (n.count != 0 || n.first >= nleaves || leaf_used[n.first]++)
         r.fail("node " + std::to_string(k) + ": leaf index out of range or repeated");
@@ -345,7 +284,7 @@ void decode_nodes(reader& r, pmr_data& d, const pmr_counts& c) {
 }
 
 /// The leaf table: contiguous sample ranges covering every own sample, each naming its node.
-void decode_leaves(reader& r, pmr_data& d, const pmr_counts& c) {
+void decode_leaves(byte_reader& r, pmr_data& d, const pmr_counts& c) {
   const std::uint32_t nleaves = c.leaves, npts = c.samples, nnodes = c.nodes;
   d.leaf_list.resize(nleaves);
   std::uint64_t expect = 0;
@@ -365,7 +304,7 @@ void decode_leaves(reader& r, pmr_data& d, const pmr_counts& c) {
 }
 
 /// Per leaf and level: nested sample counts and the triangle and umbrella ranges.
-void decode_levels(reader& r, pmr_data& d, const pmr_counts& c) {
+void decode_levels(byte_reader& r, pmr_data& d, const pmr_counts& c) {
   const std::uint32_t nleaves = c.leaves, levels = c.levels, ntris = c.triangles,
                       numb = c.umbrellas;
   const std::uint64_t nlev = static_cast<std::uint64_t>(nleaves) * levels;
@@ -374,7 +313,7 @@ void decode_levels(reader& r, pmr_data& d, const pmr_counts& c) {
   for (std::uint64_t k = 0; k < nlev; ++k) {
     auto& L = d.levels[k];
     L.points = r.get<std::uint32_t>("level sample count");
-    L.mean_umbrella = r.non_negative("level mean umbrella radius", k);
+    L.mean_umbrella = r.get_non_negative("level mean umbrella radius", k);
     L.first_tri = r.get<std::uint32_t>("level first triangle");
     L.tris = r.get<std::uint32_t>("level triangle count");
     L.first_entry = r.get<std::uint32_t>("level first umbrella");
@@ -389,7 +328,7 @@ void decode_levels(reader& r, pmr_data& d, const pmr_counts& c) {
 }
 
 /// Triangles, umbrellas and their indices, each umbrella naming triangles of its own level.
-void decode_umbrellas(reader& r, pmr_data& d, const pmr_counts& c) {
+void decode_umbrellas(byte_reader& r, pmr_data& d, const pmr_counts& c) {
   const std::uint32_t ntris = c.triangles, npts = c.samples, numb = c.umbrellas,
                       nidx = c.umbrella_indices;
   r.need(ntris, tri_bytes, "triangles");
@@ -405,7 +344,7 @@ void decode_umbrellas(reader& r, pmr_data& d, const pmr_counts& c) {
     auto& U = d.umbrellas[u];
     U.first = r.get<std::uint32_t>("umbrella first");
     U.count = r.get<std::uint32_t>("umbrella count");
-    U.radius = r.non_negative("umbrella radius", u);
+    U.radius = r.get_non_negative("umbrella radius", u);
     if (static_cast<std::uint64_t>(U.first) + U.count > nidx)
       r.fail("umbrella " + std::to_string(u) + ": index range out of range");
   }
@@ -422,19 +361,19 @@ void decode_umbrellas(reader& r, pmr_data& d, const pmr_counts& c) {
     }
 }
 
-pmr_data decode(reader& r, const unsigned char* bytes) {
+/// The file after its head (read_head() has checked it).
+pmr_data decode(byte_reader& r, const unsigned char* bytes) {
   pmr_data d;
-  r.skip_head();  // checked by read_head() in load_pmr_data
   const pmr_counts c = decode_header(r, d);
   decode_samples(r, d, c);
   decode_nodes(r, d, c);
   decode_leaves(r, d, c);
   decode_levels(r, d, c);
   decode_umbrellas(r, d, c);
-  const std::size_t body = r.pos();
+  const std::size_t body = r.pos;
   const auto sum = r.get<std::uint64_t>("checksum");
   if (sum != fnv1a(bytes, body)) r.fail("checksum mismatch (the file is corrupted)");
-  if (r.pos() != r.size()) r.fail("trailing bytes after the checksum");
+  if (r.pos != r.bytes.size()) r.fail("trailing bytes after the checksum");
   return d;
 }
 
@@ -454,9 +393,8 @@ void save_pmr_data(const pmr_data& d, const std::string& path) {
 
 pmr_data load_pmr_data(const std::string& path) {
   const mapping m(path);
-  byte_reader head{std::span(m.data(), m.size()), 0, path};
-  read_head(head, pmr_format);
-  reader r(m.data(), m.size(), path);
+  byte_reader r{std::span(m.data(), m.size()), 0, path};
+  read_head(r, pmr_format);
   return decode(r, m.data());
 }
 

@@ -96,10 +96,27 @@ struct byte_reader {
                         " is not finite");
     return f;
   }
+  float get_non_negative(const char* what, std::size_t element) {
+    const float f = get_finite(what, element);
+    if (!(f >= 0))
+      fail(std::string(what) + " of element " + std::to_string(element) + " is negative");
+    return f;
+  }
   vec3f get_vec(const char* what, std::size_t element) {
     const float x = get_finite(what, element), y = get_finite(what, element),
                 z = get_finite(what, element);
     return {x, y, z};
+  }
+  /// The bytes `count` elements of `size` bytes need must still be there (checked before
+  /// anything is allocated, so that a hostile count cannot exhaust memory).
+  void need(std::uint64_t count, std::size_t size, const char* what) const {
+    if (count > (bytes.size() - pos) / size)
+      fail(std::string("truncated: ") + std::to_string(count) + " " + what + " need " +
+           std::to_string(count * size) + " bytes, " + std::to_string(bytes.size() - pos) +
+           " remain");
+  }
+  [[noreturn]] void fail(const std::string& msg) const {
+    throw FormatError(path + ": " + msg + " (at byte " + std::to_string(pos) + ")");
   }
   std::uint32_t get_code(int bits, const char* what) {
     return bits <= 16 ? get<std::uint16_t>(what) : get<std::uint32_t>(what);
