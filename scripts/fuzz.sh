@@ -14,7 +14,8 @@
 # reach every parser and the large ones are cut short: docs/fuzzing.md), FUZZ_RUNS (stop each
 # target after this many executions instead of after SECONDS; for campaigns with a count to reach),
 # FUZZ_ASAN_OPTIONS (appended to ASAN_OPTIONS; campaigns use detect_stack_use_after_return=0,
-# 1.9x as many executions per second: docs/fuzzing.md).
+# 1.9x as many executions per second: docs/fuzzing.md), FUZZ_TIMEOUT (seconds of wall time one
+# input may take; default 10).
 # The corpus folders keep what the fuzzer adds, so a second run starts where the first stopped.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -47,7 +48,8 @@ bash fuzz/make_corpus.sh "$pbrlod" "$data" "$build/corpus"
 
 # -max_len: by default the largest seed (the PMR file, ~140 kB) fits; larger inputs only slow the
 # run.
-# -timeout: a single input taking longer than 10 s is a hang. -rss_limit_mb: a count in a file
+# -timeout: a single input taking longer than 10 s is a hang (libFuzzer counts wall time, so a
+# campaign at nice 19 beside other work takes more: fuzz_campaign.sh). -rss_limit_mb: a count in a file
 # that makes a reader allocate gigabytes is a finding (read.hpp: counts are checked first).
 failed=()
 for t in "${targets[@]}"; do
@@ -59,7 +61,7 @@ for t in "${targets[@]}"; do
     UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     "$build/fuzz/$t" "$build/corpus/$t" "${limit[@]}" \
     -max_len="${FUZZ_MAX_LEN:-262144}" \
-    -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
+    -timeout="${FUZZ_TIMEOUT:-10}" -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$build/artifacts/$t/" > "$log" 2>&1; then
     runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
     rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log")

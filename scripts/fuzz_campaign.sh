@@ -26,7 +26,10 @@ artifacts=build/fuzz/artifacts
 failed=()
 if [ "$report_only" = 0 ]; then
   for t in "${targets[@]}"; do
-    FUZZ_MAX_LEN=4096 FUZZ_RUNS="${FUZZ_RUNS:-10000000}" \
+    # A timeout is wall time: at nice 19 beside a build the fuzzer can wait seconds for a core
+    # (fuzz_pcd "timed out" at 14 s on an input that runs in 0.23 s alone), so campaigns allow
+    # 60 s; CI's short runs keep 10.
+    FUZZ_MAX_LEN=4096 FUZZ_RUNS="${FUZZ_RUNS:-10000000}" FUZZ_TIMEOUT="${FUZZ_TIMEOUT:-60}" \
       FUZZ_ASAN_OPTIONS=detect_stack_use_after_return=0 \
       nice -n 19 bash scripts/fuzz.sh 0 "$t" || failed+=("$t")
   done
