@@ -2,6 +2,7 @@
 #include "tool.hpp"
 
 #include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/core/mesh_colours.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 
@@ -109,6 +110,9 @@ loaded_input load(const std::string& path) {
     in.mesh = read_mesh(path, &in.report);
   else
     in.mesh.vertices = read_points(path, &in.report);
+  // A textured mesh is seen textured: what draws it from its vertices (the point builders, the
+  // ρ-grid) gets the texture's colour at each vertex (POP keeps the texture itself).
+  if (in.mesh.vertices.colours.empty()) in.mesh.vertices.colours = texture_vertex_colours(in.mesh);
   in.read_seconds = seconds_since(t0);
   if (in.mesh.vertices.empty()) throw InvalidArgument(path + ": the file holds no points");
   for (const auto& w : in.report.warnings) std::cerr << "warning: " << w << "\n";

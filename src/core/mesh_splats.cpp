@@ -6,6 +6,7 @@
 
 #include "moment_ellipse.hpp"
 #include "pbr_lod/core/estimation.hpp"
+#include "pbr_lod/core/mesh_colours.hpp"
 #include "pbr_lod/core/mesh_normals.hpp"
 
 namespace pbr_lod {
@@ -66,6 +67,12 @@ point_cloud mesh_splats(const triangle_mesh& m) {
 
   point_cloud out;
   out.origin = m.vertices.origin;
+  // A textured mesh without vertex colours is seen textured: its splats take the texture's
+  // colour at their vertex.
+  const std::vector<rgb8> texture_colours =
+      m.vertices.colours.empty() ? texture_vertex_colours(m) : std::vector<rgb8>{};
+  const std::vector<rgb8>& colours =
+      m.vertices.colours.empty() ? texture_colours : m.vertices.colours;
   std::vector<vec2d> xy;
   for (std::size_t i = 0; i < n; ++i) {
     const vec3d nrm = vertex_normal(m, sums, i);
@@ -88,7 +95,7 @@ point_cloud mesh_splats(const triangle_mesh& m) {
     out.normals.push_back(nrm.cast<float>());
     out.axis_u.push_back(u.cast<float>());
     out.axis_v.push_back(v.cast<float>());
-    if (!m.vertices.colours.empty()) out.colours.push_back(m.vertices.colours[i]);
+    if (!colours.empty()) out.colours.push_back(colours[i]);
     if (!m.vertices.materials.empty()) out.materials.push_back(m.vertices.materials[i]);
   }
   return out;

@@ -15,18 +15,38 @@ namespace pbr_lod {
 
 namespace {
 
-/// Every triangle of m into sink (the reference render's primitives).
+/// Whether m is drawn texture-mapped: a texture and a coordinate for every face corner.
+bool textured(const triangle_mesh& m) {
+  return m.texture != nullptr && m.texture->width > 0 && m.texture->height > 0 &&
+         m.face_texcoords.size() == m.faces.size();
+}
+
+/// Every triangle of m into sink (the reference render's primitives): texture-mapped where m is
+/// textured and the sink takes such triangles (a textured mesh is seen with its texture).
 template <attributes A, class S>
-void emit_mesh(const triangle_mesh& m, const std::vector<vec3f>& normals, S& sink) {
+void emit_mesh(const triangle_mesh& m, const std::vector<vec3f>& normals, S& sink,
+               bool texture_map = true) {
   const auto& p = m.vertices.positions;
-  triangle_prim<A> t;
-  for (const auto& f : m.faces) {
+  textured_triangle_prim<A> t;
+  t.texture = m.texture.get();
+  const bool tex = texture_map && textured(m);
+  for (std::size_t i = 0; i < m.faces.size(); ++i) {
+    const auto& f = m.faces[i];
     for (std::size_t k = 0; k < 3; ++k) {
-      t.p[k] = p[f[k]];
-      t.normal[k] = normals[f[k]];
-      if constexpr (A.colour) t.colour[k] = m.vertices.colours[f[k]];
+      t.triangle.p[k] = p[f[k]];
+      t.triangle.normal[k] = normals[f[k]];
+      if constexpr (A.colour)
+        t.triangle.colour[k] =
+            m.vertices.colours.empty() ? rgb8{255, 255, 255} : m.vertices.colours[f[k]];
     }
-    sink.triangle(t);
+    if constexpr (A.colour && TexturedTriangleSink<S, A>) {
+      if (tex) {
+        t.uv = m.face_texcoords[i];
+        sink.textured_triangle(t);
+        continue;
+      }
+    }
+    sink.triangle(t.triangle);
   }
 }
 
@@ -121,7 +141,8 @@ image render_reference(const triangle_mesh& m, const camera& cam, const render_o
   const view v(cam, m.vertices.origin);
   std::vector<vec3f> normals = m.vertices.normals;
   if (normals.empty()) normals = area_weighted_normals(m);
-  if (!m.vertices.colours.empty()) return render_mesh<with_normals_colours>(m, v, opt, normals);
+  if (!m.vertices.colours.empty() || textured(m))
+    return render_mesh<with_normals_colours>(m, v, opt, normals);
   return render_mesh<with_normals>(m, v, opt, normals);
 }
 
@@ -142,9 +163,10 @@ attributes reference_primitives(const triangle_mesh& m, const camera& cam,
   (void)view(cam, m.vertices.origin);  // the same camera checks as render_reference
   std::vector<vec3f> normals = m.vertices.normals;
   if (normals.empty()) normals = area_weighted_normals(m);
+  // (A host renderer takes the triangles untextured: gl_viewer draws no texture.)
   const bool colour = !m.vertices.colours.empty();
   if (colour) {
-    emit_mesh<with_normals_colours>(m, normals, out);
+    emit_mesh<with_normals_colours>(m, normals, out, false);
     return with_normals_colours;
   }
   widening_sink<with_normals, with_normals_colours, buffer_sink<with_normals_colours>> w{out};

@@ -23,7 +23,8 @@ namespace pbr_lod {
 ///    splat_min_axis_ratio (core/estimation.hpp).
 ///  * A vertex with no face of non-zero area covers no surface and is left out (unreferenced
 ///    vertices: the mesh's render does not draw them either); colours and materials of the
-///    others are kept, the origin too.
+///    others are kept, the origin too. A textured mesh without vertex colours gives its splats
+///    the texture's colours at their vertices (texture_vertex_colours, core/mesh_colours.hpp).
 /// Throws InvalidArgument when the mesh does not validate. A mesh without faces gives an empty
 /// cloud.
 [[nodiscard]] point_cloud mesh_splats(const triangle_mesh& m);
