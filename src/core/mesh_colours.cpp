@@ -7,6 +7,7 @@
 namespace pbr_lod {
 
 std::vector<rgb8> texture_vertex_colours(const triangle_mesh& m) {
+  m.validate("texture_vertex_colours: mesh");  // every face's indices name a vertex
   const texture_image* tex = m.texture.get();
   if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
       tex->texels.size() !=
