@@ -58,10 +58,9 @@ struct pop_method_traits {
   frame draw(const Tree& t, const frame_request& r) const {
     const view v(r.cam, t.origin());
     render_options o = lod_render_options(r.view, Tree::attrs.colour);
-    const traverse_options topt{
-        .tolerance_px = r.tolerance,
-        .metric = projection_metric::eye_z,
-        .backface_cull = o.fx.backface_cull};
+    const traverse_options topt{.tolerance_px = r.tolerance,
+                                .metric = projection_metric::eye_z,
+                                .backface_cull = o.fx.backface_cull};
     pop_policy policy;
     if (o.fx.hole_filling) {
       policy.points = pop_point_mode::visibility_two_pass;

@@ -377,13 +377,13 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint32_t k = ranges[i].end - ranges[i].begin;
     const double s = k > leaf_size ? d.nodes[i].cell_size / std::sqrt(static_cast<double>(k))
-                                    : parent_spacing[i];
+                                   : parent_spacing[i];
     for (std::uint32_t c = d.nodes[i].first; c < d.nodes[i].first + d.nodes[i].count; ++c)
       parent_spacing[c] = s;
   }
   const bool colour = !cols.empty();
   if (colour) d.colours.resize(n);
-  std::vector<double> leaf_h(n, 0);  // the spacing each leaf's extents were widened by
+  std::vector<double> leaf_h(n, 0);               // the spacing each leaf's extents were widened by
   std::vector<vec3f> for_parent(splats ? n : 0);  // a leaf's extents without its points' patches
   // The normals first: their mean is what the degenerate position rules align z with. If they
   // cancel out, the first sample's normal stands in (deterministic).

@@ -314,7 +314,8 @@ double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const 
   s.x() = s.y() = 0;
   for (std::size_t i = 0; i < count; ++i) {
     const vec3d q = ft * (p[i] - mu), a = ft * u[i].cast<double>(), b = ft * v[i].cast<double>();
-    for (int k = 0; k < 2; ++k) s[k] = std::max(s[k], std::abs(q[k]) + area * std::hypot(a[k], b[k]));
+    for (int k = 0; k < 2; ++k)
+      s[k] = std::max(s[k], std::abs(q[k]) + area * std::hypot(a[k], b[k]));
   }
   nd.extent = s.cwiseMax(sigma_floor).cast<float>();
   return 0;
