@@ -177,15 +177,15 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   const auto go = [&]<attributes A>() {
     return make_lod(pca_method{}, build_pca_octree(point_set<A>::from(cloud, in.name()), opt));
   };
-  const auto with_colour = [&]<bool E>() {
+  const auto by_attributes = [&]<bool E>() {
     if (have.colour && have.normal)
       return go.template operator()<attributes{.normal = true, .colour = true, .ellipse = E}>();
     if (have.colour) return go.template operator()<attributes{.colour = true, .ellipse = E}>();
     if (have.normal) return go.template operator()<attributes{.normal = true, .ellipse = E}>();
     return go.template operator()<attributes{.ellipse = E}>();
   };
-  return have.ellipse ? with_colour.template operator()<true>()
-                      : with_colour.template operator()<false>();
+  return have.ellipse ? by_attributes.template operator()<true>()
+                      : by_attributes.template operator()<false>();
 }
 
 std::unique_ptr<lod> load(const std::string& path) {

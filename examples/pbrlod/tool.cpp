@@ -112,7 +112,7 @@ loaded_input load(const std::string& path) {
     in.mesh.vertices = read_points(path, &in.report);
   // A textured mesh is seen textured: what draws it from its vertices (the point builders, the
   // ρ-grid) gets the texture's colour at each vertex (POP keeps the texture itself).
-  if (in.mesh.vertices.colours.empty() && in.mesh.texture)
+  if (in.mesh.vertices.colours.empty() && in.mesh.textured())
     in.mesh.vertices.colours = texture_vertex_colours(in.mesh);
   in.read_seconds = seconds_since(t0);
   if (in.mesh.vertices.empty()) throw InvalidArgument(path + ": the file holds no points");

@@ -435,13 +435,8 @@ pca_subtree_moments node_statistics(pca_data& d, const std::vector<build_node>& 
         // The node's span first, from its children as their points left them: a widened leaf
         // overhangs its points by up to a spacing, and that overhang must not grow every
         // ancestor's span (the points generated there would leave the surface).
-        if (splats)  // the span of the children's points, not of their patches
-          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
-            if (d.nodes[c].count == 0) std::swap(d.nodes[c].extent, for_parent[c]);
-        pca_inner_extents(d, i);
-        if (splats)
-          for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c)
-            if (d.nodes[c].count == 0) std::swap(d.nodes[c].extent, for_parent[c]);
+        // With patches, the span of the leaves' points, not of their patches.
+        pca_inner_extents(d, i, for_parent);
         // The leaves below a node of a surface cover their points' patches in every tangential
         // direction; below a line of points (or one point) they stay on it.
         if (nd.sigma.y() > 2 * sigma_floor)

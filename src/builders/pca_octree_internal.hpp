@@ -56,8 +56,10 @@ double pca_leaf_extents(pca_node& nd, pca_colour* colour, const vec3d* p, const 
 /// f³ (its normal where its points span no plane) is within 30° of the parent's (parent_frame).
 void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame);
 /// The same for inner node i of d from its children's (set before): the box of their boxes'
-/// corners in its frame, the cone of their cones, the ball of their colour balls.
-void pca_inner_extents(pca_data& d, std::size_t i);
+/// corners in its frame, the cone of their cones, the ball of their colour balls. A leaf child c
+/// contributes leaf_boxes[c] instead of its own extents when leaf_boxes is not empty
+/// (pca_leaf_extents' for_parent).
+void pca_inner_extents(pca_data& d, std::size_t i, std::span<const vec3f> leaf_boxes = {});
 
 /// The points of a subtree being built: positions relative to the origin (double), unit normals,
 /// colours (or empty). pca_build_subtree() reorders them into octree order.

@@ -337,7 +337,7 @@ void pca_widen_leaf(pca_node& nd, double h, const mat3f& parent_frame) {
       nd.extent[k] = static_cast<float>(static_cast<double>(nd.extent[k]) + h);
 }
 
-void pca_inner_extents(pca_data& d, std::size_t i) {
+void pca_inner_extents(pca_data& d, std::size_t i, std::span<const vec3f> leaf_boxes) {
   pca_node& nd = d.nodes[i];
   const mat3d ft = nd.frame.cast<double>().transpose();
   const vec3d mu = nd.mean.cast<double>();
@@ -348,7 +348,8 @@ void pca_inner_extents(pca_data& d, std::size_t i) {
   for (std::uint32_t c = nd.first; c < nd.first + nd.count; ++c) {
     const pca_node& ch = d.nodes[c];
     const mat3d f = ch.frame.cast<double>();
-    const vec3d ce = ch.extent.cast<double>(), cm = ch.mean.cast<double>();
+    const vec3f& box = !leaf_boxes.empty() && ch.count == 0 ? leaf_boxes[c] : ch.extent;
+    const vec3d ce = box.cast<double>(), cm = ch.mean.cast<double>();
     for (int corner = 0; corner < 8; ++corner) {
       const vec3d s((corner & 1) ? 1 : -1, (corner & 2) ? 1 : -1, (corner & 4) ? 1 : -1);
       e = e.cwiseMax((ft * (cm + f * s.cwiseProduct(ce) - mu)).cwiseAbs());

@@ -8,12 +8,8 @@ namespace pbr_lod {
 
 std::vector<rgb8> texture_vertex_colours(const triangle_mesh& m) {
   m.validate("texture_vertex_colours: mesh");  // every face's indices name a vertex
+  if (!m.textured()) return {};
   const texture_image* tex = m.texture.get();
-  if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
-      tex->texels.size() !=
-          static_cast<std::size_t>(tex->width) * static_cast<std::size_t>(tex->height) ||
-      m.face_texcoords.size() != m.faces.size())
-    return {};
   const std::size_t n = m.vertices.size();
   std::vector<std::array<double, 3>> sum(n, {0, 0, 0});
   std::vector<std::uint32_t> count(n, 0);

@@ -15,12 +15,6 @@ namespace pbr_lod {
 
 namespace {
 
-/// Whether m is drawn texture-mapped: a texture and a coordinate for every face corner.
-bool textured(const triangle_mesh& m) {
-  return m.texture != nullptr && m.texture->width > 0 && m.texture->height > 0 &&
-         m.face_texcoords.size() == m.faces.size();
-}
-
 /// Every triangle of m into sink (the reference render's primitives): texture-mapped where m is
 /// textured and the sink takes such triangles (a textured mesh is seen with its texture).
 template <attributes A, class S>
@@ -29,7 +23,7 @@ void emit_mesh(const triangle_mesh& m, const std::vector<vec3f>& normals, S& sin
   const auto& p = m.vertices.positions;
   textured_triangle_prim<A> t;
   t.texture = m.texture.get();
-  const bool tex = texture_map && textured(m);
+  const bool tex = texture_map && m.textured();
   for (std::size_t i = 0; i < m.faces.size(); ++i) {
     const auto& f = m.faces[i];
     for (std::size_t k = 0; k < 3; ++k) {
@@ -141,7 +135,7 @@ image render_reference(const triangle_mesh& m, const camera& cam, const render_o
   const view v(cam, m.vertices.origin);
   std::vector<vec3f> normals = m.vertices.normals;
   if (normals.empty()) normals = area_weighted_normals(m);
-  if (!m.vertices.colours.empty() || textured(m))
+  if (!m.vertices.colours.empty() || m.textured())
     return render_mesh<with_normals_colours>(m, v, opt, normals);
   return render_mesh<with_normals>(m, v, opt, normals);
 }

@@ -11,7 +11,7 @@ namespace pbr_lod {
 /// Per vertex of m: the mean of its texture's bilinear samples (sample_texture) at the texture
 /// coordinates of the face corners at that vertex — a seam vertex, with other coordinates in
 /// each face, averages them. A vertex no textured corner uses takes the texture's mean colour.
-/// Empty when m has no texture or no texture coordinates (face_texcoords sized as faces).
+/// Empty when m is not textured (triangle_mesh::textured).
 /// Throws InvalidArgument when the mesh does not validate (triangle_mesh::validate).
 [[nodiscard]] std::vector<rgb8> texture_vertex_colours(const triangle_mesh& m);
 

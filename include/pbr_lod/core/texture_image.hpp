@@ -18,7 +18,19 @@ struct texture_image {
   std::vector<std::uint8_t> alpha;  ///< width × height, or empty when the file has no alpha
 
   [[nodiscard]] bool operator==(const texture_image&) const = default;
+  /// Whether it can be sampled: a positive size and that many texels.
+  [[nodiscard]] bool valid() const {
+    return width > 0 && height > 0 &&
+           texels.size() == static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  }
 };
+
+/// Texel space of texture coordinates uv (OpenGL's: (0, 0) the bottom-left corner of the image,
+/// (1, 1) the top-right), minus the half texel that puts texel centres on integers.
+[[nodiscard]] inline vec2f texel_position(const texture_image& tex, const vec2f& uv) {
+  return {uv.x() * static_cast<float>(tex.width) - 0.5f,
+          (1 - uv.y()) * static_cast<float>(tex.height) - 0.5f};
+}
 
 /// Bilinear sample of `tex` at texel-space (x, y) with texel centres on integers, wrapping
 /// (GL_REPEAT): the four texels around (x, y) weighted by their distances. Non-finite
@@ -50,11 +62,11 @@ struct texture_image {
   return {mix(c00.r, c10.r, c01.r, c11.r), mix(c00.g, c10.g, c01.g, c11.g),
           mix(c00.b, c10.b, c01.b, c11.b)};
 }
-/// The texture's colour at texture coordinates uv (OpenGL's: (0, 0) the bottom-left corner of
-/// the image, (1, 1) the top-right), as the rasteriser samples a textured triangle.
+/// The texture's colour at texture coordinates uv, as the rasteriser samples a textured
+/// triangle.
 [[nodiscard]] inline rgb8 sample_texture(const texture_image& tex, const vec2f& uv) {
-  return sample_bilinear_repeat(tex, uv.x() * static_cast<float>(tex.width) - 0.5f,
-                                (1 - uv.y()) * static_cast<float>(tex.height) - 0.5f);
+  const vec2f t = texel_position(tex, uv);
+  return sample_bilinear_repeat(tex, t.x(), t.y());
 }
 
 }  // namespace pbr_lod

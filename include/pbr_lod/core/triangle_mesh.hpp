@@ -28,6 +28,11 @@ struct triangle_mesh {
 
   [[nodiscard]] std::size_t num_vertices() const { return vertices.size(); }
   [[nodiscard]] std::size_t num_faces() const { return faces.size(); }
+  /// Whether it is drawn texture-mapped: a texture that can be sampled and a coordinate for
+  /// every face corner.
+  [[nodiscard]] bool textured() const {
+    return texture != nullptr && texture->valid() && face_texcoords.size() == faces.size();
+  }
 
   /// Throws InvalidArgument when an index is out of range or lengths disagree.
   void validate(const std::string& what = "mesh") const {

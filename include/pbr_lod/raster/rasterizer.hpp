@@ -298,16 +298,13 @@ class rasterizer {
       if constexpr (fx.blending)
         if (blend_.accumulating) return;  // recorded by the visibility pass
       const texture_image* const tex = t.texture;
-      if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
-          tex->texels.size() !=
-              static_cast<std::size_t>(tex->width) * static_cast<std::size_t>(tex->height)) {
+      if (tex == nullptr || !tex->valid()) {
         triangle(t.triangle);
         return;
       }
       constexpr int NT = kNP + 2;
       constexpr std::size_t kUvAt = static_cast<std::size_t>(kNP);
       std::array<detail::tri_vertex<NT>, 3> v;
-      const float w = static_cast<float>(tex->width), h = static_cast<float>(tex->height);
       for (std::size_t k = 0; k < 3; ++k) {
         v[k].h = proj_.point(t.triangle.p[k]);
         if constexpr (fx.shading)
@@ -315,9 +312,9 @@ class rasterizer {
         v[k].a[kColourAt + 0] = t.triangle.colour[k].r;
         v[k].a[kColourAt + 1] = t.triangle.colour[k].g;
         v[k].a[kColourAt + 2] = t.triangle.colour[k].b;
-        // Texel space, minus the half texel that puts texel centres on integers.
-        v[k].a[kUvAt] = t.uv[k].x() * w - 0.5f;
-        v[k].a[kUvAt + 1] = (1 - t.uv[k].y()) * h - 0.5f;
+        const vec2f texel = texel_position(*tex, t.uv[k]);  // interpolated in texel space
+        v[k].a[kUvAt] = texel.x();
+        v[k].a[kUvAt + 1] = texel.y();
       }
       float* const kb = kb_;
       detail::raster_triangle<fx.backface_cull>(
