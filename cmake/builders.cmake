@@ -5,7 +5,7 @@
 #   pbr_lod_builder(ID METHOD NAME [TESTS FILE...])
 #
 # ID names the builder's slots, each a file of its own:
-#   src/builders/ID.cmake            its compiled sources, added to the pbr_lod target
+#   src/builders/ID/sources.cmake    its compiled sources (src/builders/ID/ holds them), added to the pbr_lod target
 #   examples/pbrlod/ID_method.cpp    `method_entry ID_method()`: the tool's build/load/render
 #   tests/builders/ID_test.cpp       its tests, with the TESTS files (tests/builders/): test_ID
 #   benchmarks/ID_benchmark.cpp      its Google Benchmarks: bench_ID (benchmarks/builders.cmake

@@ -1,6 +1,6 @@
 # LOD peers (peers/cgal_simplify.hpp): CGAL's grid and hierarchy point-set simplification, the
 # levels `pbrlod sweep` measures beside the builders. An object library of its own so CGAL's
-# compile options (-frounding-math) stay on this file (as builders/pmr.cmake).
+# compile options (-frounding-math) stay on this file (as builders/pmr/sources.cmake).
 add_library(pbr_lod_peers_cgal OBJECT ${CMAKE_CURRENT_LIST_DIR}/cgal_simplify.cpp)
 set_target_properties(pbr_lod_peers_cgal PROPERTIES POSITION_INDEPENDENT_CODE ON
                       CXX_EXTENSIONS OFF)

@@ -178,7 +178,7 @@ TEST(PopSpheres, DegenerateTrianglesGiveFiniteSpheres) {
   }
 }
 
-// Leaves of four triangles take their circles four at a time, in lanes (src/builders/lanes.hpp):
+// Leaves of four triangles take their circles four at a time, in lanes (src/builders/pop/lanes.hpp):
 // the same operations per lane as the one-triangle code, so the same bits, in every branch of
 // the rule (acute, right, obtuse, each edge the longest, degenerate, far off, tiny, huge).
 TEST(PopSpheres, FourLaneCirclesAreBitIdentical) {

@@ -10,8 +10,8 @@
 //               Delaunay triangulation (CGAL) per octree node of at most `triangulation_points`
 //               samples (its leaves together) plus every sample of the leaves neighbouring it
 //               (the paper's rule); only the node's own samples are written —
-//               src/builders/pmr_build.cpp (octree, gathering, assembly) and
-//               src/builders/pmr_voronoi.cpp (everything CGAL).
+//               src/builders/pmr/pmr_build.cpp (octree, gathering, assembly) and
+//               src/builders/pmr/pmr_voronoi.cpp (everything CGAL).
 //   §2 Point hierarchy  pole (farthest Voronoi vertex; hull cells: direction from the outward
 //               hull facet normals), height h, normal estimate, tangent polygon, radius r, and
 //               the iterative deletion of samples with r/h < ρ for ρ in `rho`, the Delaunay
@@ -23,7 +23,7 @@
 //               longer than `edge_spacing` × the local sample spacing — pmr_voronoi.cpp.
 //   §2 Records  umbrella radius per sample and level, average umbrella radius per level per
 //               leaf, triangles shared by umbrellas stored once per leaf and level; the file
-//               (save()/load(), "PBRLODPM" v1) — src/builders/pmr_io.cpp. Beyond the paper: the
+//               (save()/load(), "PBRLODPM" v1) — src/builders/pmr/pmr_io.cpp. Beyond the paper: the
 //               input's colours, kept per sample when it has them (pmr_colour_view draws them).
 //   §3 Viewing  pixel size at the leaf's corner nearest the eye, the level whose average
 //               umbrella radius is closest to factor × pixel size (with the paper's ramp of the

@@ -7,7 +7,7 @@
 // What each part implements:
 //   §3.1, §3.5  leaves: the input triangles grouped into leaves of at most four edge-adjacent
 //               triangles (sorted-edge adjacency, or OpenMesh's — pop_adjacency; in
-//               src/builders/pop_build.cpp), so that leaves ≈
+//               src/builders/pop/pop_build.cpp), so that leaves ≈
 //               vertices; leaf normal = average of its vertices' normals, colour = average of
 //               its triangles' colours (with a texture: the average of the texels inside each
 //               triangle).
@@ -37,7 +37,7 @@
 //               QSplat), normals to a q-bit table, face index lists, leaf → face range; node
 //               records QSplat-quantised relative to the parent (13 levels per centre axis and
 //               radius, rounded outwards; 2-bit cones; RGB 565); save()/load() of a versioned,
-//               validated file ("PBRLODPP" v3; src/builders/pop_io.cpp).
+//               validated file ("PBRLODPP" v3; src/builders/pop/pop_io.cpp).
 //
 // Layout: a flat node array in breadth-first order. An inner node's children are contiguous
 // [first, first + count), 2..4 of them, all after it; a leaf's triangles are faces()[first,
@@ -190,7 +190,7 @@ struct pop_data {
   friend bool operator==(const pop_data& a, const pop_data& b);
 };
 
-// Compiled in src/builders/pop_build.cpp (OpenMesh stays there).
+// Compiled in src/builders/pop/pop_build.cpp (OpenMesh stays there).
 [[nodiscard]] pop_data build_pop_data(const triangle_mesh& mesh, const pop_options& options,
                                       bool colour);
 void save_pop_data(const pop_data& d, const std::string& path);
@@ -198,7 +198,7 @@ void save_pop_data(const pop_data& d, const std::string& path);
 [[nodiscard]] std::size_t pop_file_bytes(const pop_data& d);
 
 /// Smallest sphere enclosing the n spheres (centres c, radii r), via CGAL
-/// Min_sphere_of_spheres_d (src/builders/pop_min_sphere.cpp). Returns false when n == 0.
+/// Min_sphere_of_spheres_d (src/builders/pop/pop_min_sphere.cpp). Returns false when n == 0.
 bool min_sphere_of_spheres(const vec3d* c, const double* r, std::size_t n, vec3d& centre,
                            double& radius);
 /// The paper's inner-node sphere (§3.1) of n ≤ 4 spheres, in double. Exposed for the tests.

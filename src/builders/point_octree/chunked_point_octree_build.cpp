@@ -16,7 +16,7 @@
 #include <limits>
 #include <optional>
 
-#include "chunk_files.hpp"
+#include "builders/chunked/chunk_files.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"

@@ -3,7 +3,7 @@
 #include <filesystem>
 #include <functional>
 
-#include "chunk_files.hpp"
+#include "builders/chunked/chunk_files.hpp"
 #include "pbr_lod/builders/chunked_point_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
 

@@ -11,7 +11,7 @@
 #include <thread>
 #include <unordered_map>
 
-#include "chunk_files.hpp"
+#include "builders/chunked/chunk_files.hpp"
 #include "pbr_lod/builders/chunked_pca_octree.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/normal_repair.hpp"

@@ -2,8 +2,6 @@
 # attribute set (extern templates in builders/point_octree.hpp).
 target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/point_octree_instances_1.cpp
                ${CMAKE_CURRENT_LIST_DIR}/point_octree_instances_2.cpp)
-# The chunked (out-of-core) build and the lazily opened directory it writes; what the three
-# chunked builds' folders share (chunked.cpp).
-target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/chunked.cpp
-               ${CMAKE_CURRENT_LIST_DIR}/chunked_point_octree_build.cpp
+# The chunked (out-of-core) build and the lazily opened directory it writes.
+target_sources(pbr_lod PRIVATE ${CMAKE_CURRENT_LIST_DIR}/chunked_point_octree_build.cpp
                ${CMAKE_CURRENT_LIST_DIR}/chunked_point_octree.cpp)

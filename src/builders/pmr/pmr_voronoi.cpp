@@ -2,7 +2,7 @@
 // poles, heights, tangent polygons and radii of the Voronoi cells (Amenta & Bern 1999), the
 // iterative deletion of samples with r/h < ρ (Point hierarchy), and the umbrellas (Triangle
 // hierarchy). The only translation unit of the builder that includes CGAL (its own object
-// library, src/builders/pmr.cmake).
+// library, src/builders/pmr/sources.cmake).
 //
 // Robustness. The triangulation and every removal use CGAL's exact predicates (Epick), so the
 // combinatorics are exact whatever the input's degeneracies (cospherical, coplanar samples). The

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 
-#include "chunk_files.hpp"
+#include "builders/chunked/chunk_files.hpp"
 #include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pmr_internal.hpp"

@@ -13,7 +13,7 @@
 #include <queue>
 #include <thread>
 
-#include "chunk_files.hpp"
+#include "builders/chunked/chunk_files.hpp"
 #include "pbr_lod/builders/chunked_pmr.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/bounds.hpp"
