@@ -5,7 +5,8 @@
 //   scales     standard deviations along the Gaussian's local axes (exp of a 3DGS file's
 //              log scales), ≥ 0;
 //   rotations  unit quaternions (w, x, y, z) rotating the local axes into the world;
-//   opacities  in [0, 1] (sigmoid of a 3DGS file's logit);
+//   opacities  in [0, 1] (sigmoid of a 3DGS file's logit); a Gaussian hierarchy's merged Gaussians
+//              may exceed 1 (Kerbl et al. 2024 §4.1; the rasteriser's α ≤ 0.99 bounds them);
 //   sh         spherical-harmonic colour coefficients (not activated: colour = 0.5 + SH · basis,
 //              as in 3DGS), see sh_index for the layout.
 // The covariance of Gaussian i is R diag(s²) Rᵀ with R the rotation matrix of rotations[i].
@@ -14,6 +15,7 @@
 // world position = origin + positions[i], computed in double.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <string>
@@ -35,6 +37,55 @@ inline constexpr int max_sh_degree = 3;
   return (degree + 1) * (degree + 1);
 }
 
+/// The colour of a Gaussian seen along unit direction `dir` (from the eye towards its mean), as
+/// 3DGS evaluates it (Kerbl et al. 2023, its CUDA rasteriser's computeColorFromSH): the real
+/// spherical-harmonic basis of degree ≤ `degree` with 3DGS's constants and signs, colour =
+/// 0.5 + Σ_k sh_k · Y_k(dir), clamped below at 0 (not above: 3DGS does not). `sh` holds
+/// sh_coefficients(degree) × 3 floats, coefficient-major with RGB interleaved (gaussian_cloud's
+/// layout).
+[[nodiscard]] inline vec3f sh_colour(const float* sh, int degree, const vec3f& dir) {
+  const auto coef = [sh](int k) { return vec3f(sh[3 * k], sh[3 * k + 1], sh[3 * k + 2]); };
+  vec3f c = static_cast<float>(sh_c0) * coef(0);
+  if (degree >= 1) {
+    constexpr float c1 = 0.4886025119029199f;
+    const float x = dir.x(), y = dir.y(), z = dir.z();
+    c += -c1 * y * coef(1) + c1 * z * coef(2) - c1 * x * coef(3);
+    if (degree >= 2) {
+      constexpr float c2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f,
+                               -1.0925484305920792f, 0.5462742152960396f};
+      const float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+      c += c2[0] * xy * coef(4) + c2[1] * yz * coef(5) + c2[2] * (2 * zz - xx - yy) * coef(6) +
+           c2[3] * xz * coef(7) + c2[4] * (xx - yy) * coef(8);
+      if (degree >= 3) {
+        constexpr float c3[7] = {-0.5900435899266435f, 2.890611442640554f,   -0.4570457994644658f,
+                                 0.3731763325901154f,  -0.4570457994644658f, 1.445305721320277f,
+                                 -0.5900435899266435f};
+        c += c3[0] * y * (3 * xx - yy) * coef(9) + c3[1] * xy * z * coef(10) +
+             c3[2] * y * (4 * zz - xx - yy) * coef(11) +
+             c3[3] * z * (2 * zz - 3 * xx - 3 * yy) * coef(12) +
+             c3[4] * x * (4 * zz - xx - yy) * coef(13) + c3[5] * z * (xx - yy) * coef(14) +
+             c3[6] * x * (xx - 3 * yy) * coef(15);
+      }
+    }
+  }
+  return (c.array() + 0.5f).max(0.0f).matrix();
+}
+
+/// The covariance R diag(s²) Rᵀ of a Gaussian with scales s (standard deviations) and unit
+/// quaternion q = (w, x, y, z), as its upper triangle (xx, xy, xz, yy, yz, zz).
+[[nodiscard]] inline std::array<float, 6> gaussian_covariance(const vec3f& s, const vec4f& q) {
+  const double w = q[0], x = q[1], y = q[2], z = q[3];
+  const double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                          {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                          {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+  const double d[3] = {double(s[0]) * s[0], double(s[1]) * s[1], double(s[2]) * s[2]};
+  const auto e = [&](int i, int j) {
+    return static_cast<float>(r[i][0] * d[0] * r[j][0] + r[i][1] * d[1] * r[j][1] +
+                              r[i][2] * d[2] * r[j][2]);
+  };
+  return {e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)};
+}
+
 /// G  #G Gaussians. Every vector has #G entries, except `sh`, which has
 /// #G × sh_coefficients(sh_degree) × 3.
 struct gaussian_cloud {
@@ -42,7 +93,7 @@ struct gaussian_cloud {
   std::vector<vec3f> positions;  ///< means, relative to `origin`
   std::vector<vec3f> scales;     ///< standard deviations along the local x, y, z axes, ≥ 0
   std::vector<vec4f> rotations;  ///< unit quaternions (w, x, y, z): local axes → world
-  std::vector<float> opacities;  ///< in [0, 1]
+  std::vector<float> opacities;  ///< ≥ 0; in [0, 1] but for a hierarchy's merged Gaussians
   int sh_degree = 0;             ///< 0–3
   /// Per Gaussian, coefficient-major with RGB interleaved, DC first:
   /// sh[sh_index(i, k, c)] is coefficient k (0 = DC, then degree 1's three, …; the order of
@@ -73,9 +124,10 @@ struct gaussian_cloud {
   }
 
   /// Throws InvalidArgument unless: every vector has the right length, sh_degree is 0–3, every
-  /// value is finite, scales are ≥ 0, opacities in [0, 1] and rotations unit length
-  /// (|‖q‖ − 1| ≤ 10⁻³). What the readers return always passes. `what` names the data.
-  void validate(const std::string& what = "gaussian cloud") const {
+  /// value is finite, scales are ≥ 0, opacities in [0, max_opacity] and rotations unit length
+  /// (|‖q‖ − 1| ≤ 10⁻³). What the readers return always passes. `what` names the data;
+  /// max_opacity is +∞ for a hierarchy's store (merged opacities may exceed 1).
+  void validate(const std::string& what = "gaussian cloud", float max_opacity = 1.0f) const {
     const std::size_t n = positions.size();
     const auto fail = [&](const std::string& m) { throw InvalidArgument(what + ": " + m); };
     if (sh_degree < 0 || sh_degree > max_sh_degree)
@@ -97,8 +149,8 @@ struct gaussian_cloud {
         fail("the scale" + at + " is negative or not finite");
       if (!all_finite(rotations[i]) || std::abs(rotations[i].norm() - 1.0f) > 1e-3f)
         fail("the rotation" + at + " is not a unit quaternion");
-      if (!(opacities[i] >= 0.0f && opacities[i] <= 1.0f))
-        fail("the opacity" + at + " is not in [0, 1]");
+      if (!(opacities[i] >= 0.0f && opacities[i] <= max_opacity))
+        fail("the opacity" + at + " is not in [0, " + std::to_string(max_opacity) + "]");
     }
     for (std::size_t j = 0; j < sh.size(); ++j)
       if (!std::isfinite(sh[j])) fail("SH coefficient " + std::to_string(j) + " is not finite");

@@ -248,6 +248,28 @@ class rasterizer {
     detail::raster_ellipse(proj_, s.centre, s.u, s.v, out);
   }
 
+  /// A 3-D Gaussian, as a z-buffer can draw one: the ellipse of its two largest axes at 2σ
+  /// (as_splat_prim), its normal turned to the eye (a Gaussian has no side), or a one-pixel point
+  /// where that ellipse covers less than a pixel (the emitters' rule: gaussian_hierarchy::emit).
+  /// raster/gaussians.hpp draws Gaussians as they are (EWA, sorted, composited).
+  void gaussian(const gaussian_prim& g) {
+    splat_prim<A> s = as_splat_prim<A>(g);
+    const vec3f d = s.centre - proj_.eye;
+    if constexpr (A.normal)
+      if (s.normal.dot(d) > 0) s.normal = -s.normal;
+    const float z = d.dot(proj_.forward);
+    const float k = z > 0 ? proj_.focal / z : 0.0f;
+    const float pixels = 3.14159265f * k * k * std::abs(s.u.cross(s.v).dot(d.normalized()));
+    if (!(pixels >= 1.0f)) {
+      point_prim<A> p{s.centre, 1.0f};
+      if constexpr (A.normal) p.normal = s.normal;
+      if constexpr (A.colour) p.colour = s.colour;
+      point(p);
+    } else {
+      splat(s);
+    }
+  }
+
   /// A triangle with per-vertex normal and colour interpolated perspective-correctly.
   void triangle(const triangle_prim<A>& t) {
     if constexpr (fx.blending)
@@ -811,6 +833,7 @@ class rasterizer {
 
 static_assert(Sink<rasterizer<positions_only>, positions_only>);
 static_assert(OccluderSink<rasterizer<positions_only>>);
+static_assert(GaussianSink<rasterizer<positions_only>>);
 static_assert(ScreenRectSink<rasterizer<positions_only>, positions_only>);
 static_assert(TexturedTriangleSink<rasterizer<all_attributes, all_effects>, all_attributes>);
 static_assert(Sink<rasterizer<all_attributes, all_effects>, all_attributes>);

@@ -7,9 +7,13 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 
+#include <Eigen/Eigenvalues>
+
 #include "pbr_lod/core/attributes.hpp"
+#include "pbr_lod/core/gaussians.hpp"
 #include "pbr_lod/core/math.hpp"
 #include "pbr_lod/core/texture_image.hpp"
 
@@ -108,5 +112,47 @@ struct textured_triangle_prim {
   std::array<vec2f, 3> uv{};
   const texture_image* texture = nullptr;
 };
+
+/// A 3-D Gaussian (3-D Gaussian Splatting, Kerbl et al. 2023): mean, covariance, opacity and
+/// view-dependent colour, drawn by projecting the covariance to the screen (EWA, Zwicker et al.
+/// 2001) and compositing front to back (raster/gaussians.hpp). Sent only to sinks that take it
+/// (GaussianSink in sink.hpp); the others get as_splat_prim() of it.
+///
+/// `covariance` is Σ's upper triangle (xx, xy, xz, yy, yz, zz) in the origin-relative frame;
+/// `sh` points at sh_coefficients(sh_degree) × 3 floats, coefficient-major with RGB interleaved
+/// (gaussian_cloud's layout, core/gaussians.hpp; sh_colour() evaluates it). The coefficients are
+/// not owned: they must outlive the frame (the emitter's hierarchy holds them).
+struct gaussian_prim {
+  vec3f position;
+  std::array<float, 6> covariance{};
+  float opacity = 1;
+  int sh_degree = 0;
+  const float* sh = nullptr;
+};
+
+/// The splat_prim a sink without gaussian() gets for g: the ellipse of Σ's two largest axes at
+/// two standard deviations (86 % of a planar Gaussian's weight inside), its normal along the
+/// smallest axis, its colour the view-independent one (the DC term, clamped to [0, 1]).
+template <attributes A>
+[[nodiscard]] splat_prim<A> as_splat_prim(const gaussian_prim& g) {
+  const auto& c = g.covariance;
+  Eigen::Matrix3f m;
+  m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> eig(m);  // ascending eigenvalues
+  const auto axis = [&](int i) {
+    return vec3f(eig.eigenvectors().col(i) * 2.0f *
+                 std::sqrt(std::max(eig.eigenvalues()[i], 0.0f)));
+  };
+  splat_prim<A> out{g.position, axis(2), axis(1)};
+  if constexpr (A.normal) out.normal = eig.eigenvectors().col(0);
+  if constexpr (A.colour) {
+    const auto q = [&](int ch) {
+      const float v = 0.5f + static_cast<float>(sh_c0) * (g.sh ? g.sh[ch] : 0.0f);
+      return static_cast<std::uint8_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f));
+    };
+    out.colour = rgb8{q(0), q(1), q(2)};
+  }
+  return out;
+}
 
 }  // namespace pbr_lod

@@ -50,10 +50,17 @@ concept TexturedTriangleSink = requires(S& s, const textured_triangle_prim<A>& t
   s.textured_triangle(t);
 };
 
+/// A sink that also takes 3-D Gaussians (gaussian_prim). Optional: an emitter sends them only to
+/// sinks that model this and sends the others as_splat_prim() of each.
+template <class S>
+concept GaussianSink = requires(S& s, const gaussian_prim& g) {
+  s.gaussian(g);
+};
+
 /// Counts primitives by kind; the cheapest sink (for traversal benchmarks and cut statistics).
 template <attributes A>
 struct counting_sink {
-  std::size_t points = 0, splats = 0, triangles = 0;
+  std::size_t points = 0, splats = 0, triangles = 0, gaussians = 0;
   std::size_t occluders = 0;  ///< not primitives of the surface: not in total()
   void point(const point_prim<A>&) { ++points; }
   /// A screen-space rectangle is a point drawn in screen space: counted as a point.
@@ -62,8 +69,9 @@ struct counting_sink {
   void triangle(const triangle_prim<A>&) { ++triangles; }
   /// A textured triangle is a triangle: counted as one.
   void textured_triangle(const textured_triangle_prim<A>&) { ++triangles; }
+  void gaussian(const gaussian_prim&) { ++gaussians; }
   void occluder(const occluder_prim&) { ++occluders; }
-  [[nodiscard]] std::size_t total() const { return points + splats + triangles; }
+  [[nodiscard]] std::size_t total() const { return points + splats + triangles + gaussians; }
 };
 
 /// Collects primitives in arrays a host renderer copies into its vertex buffers, and remembers
@@ -77,6 +85,7 @@ struct buffer_sink {
   std::vector<occluder_prim> occluders;
   std::vector<screen_rect_prim<A>> screen_rects;
   std::vector<textured_triangle_prim<A>> textured_triangles;
+  std::vector<gaussian_prim> gaussians;
 
   void point(const point_prim<A>& p) {
     points.push_back(p);
@@ -98,6 +107,10 @@ struct buffer_sink {
     textured_triangles.push_back(t);
     note(kind::textured_triangle);
   }
+  void gaussian(const gaussian_prim& g) {
+    gaussians.push_back(g);
+    note(kind::gaussian);
+  }
   void occluder(const occluder_prim& o) {
     occluders.push_back(o);
     note(kind::occluder);
@@ -109,16 +122,18 @@ struct buffer_sink {
     occluders.clear();
     screen_rects.clear();
     textured_triangles.clear();
+    gaussians.clear();
     runs_.clear();
   }
   /// Replays the buffered primitives into another sink (e.g. the rasteriser), in the order they
   /// were received; occluders only to a sink that takes them (OccluderSink); screen rectangles
   /// to a sink that takes them (ScreenRectSink), to the others as as_point_prim(); textured
   /// triangles to a sink that takes them (TexturedTriangleSink), to the others as their
-  /// triangle_prim.
+  /// triangle_prim; Gaussians to a sink that takes them (GaussianSink), to the others as
+  /// as_splat_prim().
   template <Sink<A> S>
   void replay(S& s) const {
-    std::size_t ip = 0, is = 0, it = 0, io = 0, ir = 0, itt = 0;
+    std::size_t ip = 0, is = 0, it = 0, io = 0, ir = 0, itt = 0, ig = 0;
     for (const run& r : runs_) {
       switch (r.what) {
         case kind::occluder:
@@ -146,6 +161,10 @@ struct buffer_sink {
                ++itt)
             replay_textured(s, textured_triangles[itt]);
           break;
+        case kind::gaussian:
+          for (const std::size_t e = std::min(ig + r.count, gaussians.size()); ig < e; ++ig)
+            replay_gaussian(s, gaussians[ig]);
+          break;
       }
     }
     // Primitives a caller put into the arrays directly have no recorded order: kind by kind.
@@ -154,6 +173,7 @@ struct buffer_sink {
     for (; it < triangles.size(); ++it) s.triangle(triangles[it]);
     for (; ir < screen_rects.size(); ++ir) replay_rect(s, screen_rects[ir]);
     for (; itt < textured_triangles.size(); ++itt) replay_textured(s, textured_triangles[itt]);
+    for (; ig < gaussians.size(); ++ig) replay_gaussian(s, gaussians[ig]);
     if constexpr (OccluderSink<S>)
       for (; io < occluders.size(); ++io) s.occluder(occluders[io]);
   }
@@ -167,7 +187,8 @@ struct buffer_sink {
     triangle,
     occluder,
     screen_rect,
-    textured_triangle
+    textured_triangle,
+    gaussian
   };
   template <class S>
   static void replay_rect(S& s, const screen_rect_prim<A>& r) {
@@ -182,6 +203,13 @@ struct buffer_sink {
       s.textured_triangle(t);
     else
       s.triangle(t.triangle);
+  }
+  template <class S>
+  static void replay_gaussian(S& s, const gaussian_prim& g) {
+    if constexpr (GaussianSink<S>)
+      s.gaussian(g);
+    else
+      s.splat(as_splat_prim<A>(g));
   }
   struct run {
     kind what;
@@ -200,5 +228,6 @@ static_assert(Sink<counting_sink<positions_only>, positions_only>);
 static_assert(Sink<buffer_sink<all_attributes>, all_attributes>);
 static_assert(ScreenRectSink<buffer_sink<all_attributes>, all_attributes>);
 static_assert(TexturedTriangleSink<buffer_sink<all_attributes>, all_attributes>);
+static_assert(GaussianSink<buffer_sink<all_attributes>>);
 
 }  // namespace pbr_lod

@@ -70,7 +70,8 @@ struct traverse_stats {
   /// Primitives by kind; points counts point_prim and screen_rect_prim alike (the same cell drawn
   /// from its 3-D position or from its screen rectangle), so the stats do not depend on the sink.
   std::size_t points = 0, splats = 0, triangles = 0;
-  [[nodiscard]] std::size_t primitives() const { return points + splats + triangles; }
+  std::size_t gaussians = 0;  ///< gaussian_prim sent to a GaussianSink
+  [[nodiscard]] std::size_t primitives() const { return points + splats + triangles + gaussians; }
 };
 
 /// The default policy: screen size = projected diameter under the chosen metric; refine while it
@@ -134,7 +135,7 @@ concept has_state_emit = requires(const P& p, const H& h, const typename H::node
 template <attributes A, class S>
 struct counting_forwarder {
   S& inner;
-  std::size_t points = 0, splats = 0, triangles = 0;
+  std::size_t points = 0, splats = 0, triangles = 0, gaussians = 0;
   void point(const point_prim<A>& p) {
     ++points;
     inner.point(p);
@@ -156,6 +157,11 @@ struct counting_forwarder {
   void textured_triangle(const textured_triangle_prim<A>& t) requires TexturedTriangleSink<S, A> {
     ++triangles;
     inner.textured_triangle(t);
+  }
+  /// Gaussians to a sink that takes them (the emitter sends the others splats).
+  void gaussian(const gaussian_prim& g) requires GaussianSink<S> {
+    ++gaussians;
+    inner.gaussian(g);
   }
   /// Occluders pass through to a sink that takes them (not counted: they are not primitives).
   void occluder(const occluder_prim& o) requires OccluderSink<S> { inner.occluder(o); }
@@ -249,6 +255,7 @@ traverse_stats traverse(const H& h, const view& v, const traverse_options& o, S&
   st.points = out.points;
   st.splats = out.splats;
   st.triangles = out.triangles;
+  st.gaussians = out.gaussians;
   return st;
 }
 
