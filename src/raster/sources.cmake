@@ -1,6 +1,8 @@
 # Rasteriser support: whole-frame passes (shadow resolve, hole filling), reference renders,
-# metrics (Hausdorff via FLANN k-NN), PNG (libpng). FLANN and libpng stay out of public headers.
+# metrics (Hausdorff via FLANN k-NN), PNG (libpng), the 3-D Gaussian rasteriser. FLANN and libpng
+# stay out of public headers.
 target_sources(pbr_lod PRIVATE
+  ${CMAKE_CURRENT_LIST_DIR}/gaussians.cpp
   ${CMAKE_CURRENT_LIST_DIR}/postprocess.cpp
   ${CMAKE_CURRENT_LIST_DIR}/reference.cpp
   ${CMAKE_CURRENT_LIST_DIR}/render_instances_1.cpp
