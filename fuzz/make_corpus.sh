@@ -198,6 +198,8 @@ build pca_octree octahedron_colour "$octahedron" pca-octree
 build pmr octahedron "$octahedron" pmr
 rm -f "$out/fuzz_pmr/octahedron.lod.build-seconds"
 build rho_grid octahedron_rho2 "$octahedron" rho-grid --param rho=2 --param level=1
+build gaussian_hierarchy octahedron_colour "$octahedron" gaussian-hierarchy
+build gaussian_hierarchy minimal_spz_v2 "$fixtures/minimal-v2.spz" gaussian-hierarchy
 build point_octree bunny "$bunny" point-octree
 build point_octree las_colour "$las" point-octree
 build pop bunny "$bunny" pop

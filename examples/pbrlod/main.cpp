@@ -24,9 +24,12 @@
 #include "distributed.hpp"
 #include "lod.hpp"
 #include "papers.hpp"
+#include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/gaussians.hpp"
 #include "pbr_lod/io/texture.hpp"
+#include "pbr_lod/raster/gaussians.hpp"
 #include "pbr_lod/raster/png.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/raster/reference.hpp"
@@ -59,7 +62,14 @@ void add_view_options(CLI::App* cmd, view_args& a) {
       ->capture_default_str();
 }
 
+/// The input as the user sees it: a mesh's triangles, a cloud's splats, a Gaussian scene's every
+/// Gaussian (raster/gaussians.hpp; the effects do not apply to it but the background).
 image render_input(const loaded_input& in, const camera& cam, const render_options& o) {
+  if (in.is_gaussians()) {
+    gaussian_render_options go;
+    go.background = o.background;
+    return render_gaussians(in.gaussians, cam, go);
+  }
   return in.is_mesh() ? render_reference(in.mesh, cam, o)
                       : render_reference(in.mesh.vertices, cam, o);
 }
@@ -128,17 +138,56 @@ int cmd_render(const std::string& input, const view_args& va, float tolerance,
   for (const float d : img.depth) covered += std::isfinite(d);
   if (as_json) {
     json j;
-    j.str("input", input).str("output", output).str("kind", in.is_mesh() ? "mesh" : "points");
+    j.str("input", input).str("output", output);
+    j.str("kind", in.is_gaussians() ? "gaussians" : in.is_mesh() ? "mesh" : "points");
     j.num("tolerance_px", tolerance).str("effects", o.fx.to_string());
     j.integer("width", img.width).integer("height", img.height);
     j.integer("covered_pixels", static_cast<long long>(covered));
     j.integer("primitives",
               static_cast<long long>(in.is_mesh() ? in.mesh.num_faces() : in.mesh.num_vertices()));
+    if (in.is_gaussians()) j.integer("gaussians", static_cast<long long>(in.gaussians.size()));
     j.num("read_seconds", in.read_seconds).num("render_seconds", render_s);
     std::cout << j.text() << "\n";
   } else {
     std::cout << "wrote " << output << " (" << img.width << "x" << img.height << ", " << covered
               << " pixels covered, " << render_s << " s)\n";
+  }
+  return 0;
+}
+
+/// `export OUT.lod -o cut.ply`: a Gaussian hierarchy's cut for a view and tolerance (framed as
+/// `render` frames it), or its level N, as a standard 3DGS PLY other viewers open.
+int cmd_export(const std::string& input, const view_args& va, float tolerance,
+               std::optional<int> level, const std::string& output, bool as_json) {
+  if (lod_method(input).name != "gaussian-hierarchy")
+    throw InvalidArgument(input +
+                          ": export writes the cuts of Gaussian hierarchies "
+                          "(built with --method gaussian-hierarchy)");
+  const gaussian_hierarchy h = gaussian_hierarchy::load(input);
+  const auto& p = h.store().positions;
+  const auto [centre, radius] =
+      bounds_of(h.origin(), std::span<const vec3f>(p.data(), h.input_gaussians()));
+  const auto t0 = clock_type::now();
+  const gaussian_cloud cut =
+      level ? h.level(static_cast<std::size_t>(*level))
+            : h.cut(view(make_camera(centre, radius, va), h.origin()), {.tolerance_px = tolerance});
+  write_gaussians_ply(cut, output);
+  const double seconds = seconds_since(t0);
+  if (as_json) {
+    json j;
+    j.str("input", input).str("output", output);
+    if (level)
+      j.integer("level", *level);
+    else
+      j.str("view", va.view).num("tolerance_px", tolerance);
+    j.integer("gaussians", static_cast<long long>(cut.size()));
+    j.integer("input_gaussians", static_cast<long long>(h.input_gaussians()));
+    j.num("seconds", seconds);
+    std::cout << j.text() << "\n";
+  } else {
+    std::cout << "wrote " << output << ": " << cut.size() << " of " << h.input_gaussians()
+              << " Gaussians (" << (level ? "level " + std::to_string(*level) : "the view's cut")
+              << ")\n";
   }
   return 0;
 }
@@ -514,6 +563,23 @@ int main(int argc, char** argv) {
   stats->add_option("input", stats_input, "OUT.lod or a mesh/point cloud file")->required();
   stats->add_flag("--json", as_json, "print one JSON object");
 
+  std::string export_input, export_output;
+  int export_level = -1;
+  auto* exporter = app.add_subcommand(
+      "export",
+      "write a Gaussian hierarchy's cut (a view and tolerance, or a level) as a 3DGS PLY");
+  exporter->add_option("input", export_input, "a Gaussian hierarchy (.lod)")->required();
+  exporter->add_option("-o,--output", export_output, "the .ply to write")->required();
+  exporter->add_option("--tolerance", tolerance, "pixels (as render --tolerance)")
+      ->capture_default_str();
+  exporter
+      ->add_option("--level", export_level,
+                   "a view-independent cut: every node at this tree depth (and the leaves "
+                   "above it) instead of the view's cut")
+      ->check(CLI::NonNegativeNumber);
+  add_view_options(exporter, va);
+  exporter->add_flag("--json", as_json, "print one JSON object");
+
   std::string cmp_a, cmp_b;
   auto* compare = app.add_subcommand("compare", "image error of B against reference A");
   compare->add_option("reference", cmp_a, "reference PNG")->required();
@@ -577,6 +643,10 @@ int main(int argc, char** argv) {
     if (*build) return cmd_build(method, build_input, build_output, params, as_json);
     if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json, seed);
     if (*stats) return cmd_stats(stats_input, as_json);
+    if (*exporter)
+      return cmd_export(export_input, va, tolerance,
+                        export_level >= 0 ? std::optional<int>(export_level) : std::nullopt,
+                        export_output, as_json);
     if (*compare) return cmd_compare(cmp_a, cmp_b, as_json);
     if (*demo) return cmd_demo(demo_input, demo_dir, as_json);
     if (*sweep) return cmd_sweep(sweep_inputs, sweep_dir, sweep_size, sweep_check, as_json);

@@ -35,6 +35,7 @@
 #include "pbr_lod/core/mesh_normals.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/peers/cgal_simplify.hpp"
+#include "pbr_lod/raster/gaussians.hpp"
 #ifdef PBR_LOD_HAVE_PCL_PEERS
 #include "pbr_lod/peers/pcl_simplify.hpp"
 #endif
@@ -221,10 +222,16 @@ frame timed_frame(const lod& l, frame_request r, int repeats) {
   return f;
 }
 
-/// The input's own full-detail render: the mesh's triangles, or every point as a splat (shaded
-/// with its normals, estimated when the file has none).
+/// The input's own full-detail render: the mesh's triangles, a Gaussian scene's every Gaussian
+/// (raster/gaussians.hpp), or every point as a splat (shaded with its normals, estimated when
+/// the file has none).
 image input_reference(const sweep_input& in, const camera& cam, const view_args& va) {
   render_options o = lod_render_options(va, !in.shaded_points.colours.empty());
+  if (in.data.is_gaussians()) {
+    gaussian_render_options go;
+    go.background = o.background;
+    return render_gaussians(in.data.gaussians, cam, go);
+  }
   return in.data.is_mesh() ? render_reference(in.data.mesh, cam, o)
                            : render_reference(in.shaded_points, cam, o);
 }

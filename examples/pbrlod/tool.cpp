@@ -2,8 +2,10 @@
 #include "tool.hpp"
 
 #include "pbr_lod/builders/chunked_point_octree.hpp"
+#include "pbr_lod/core/gaussian_splats.hpp"
 #include "pbr_lod/core/mesh_colours.hpp"
 #include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/gaussians.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 
 #include <algorithm>
@@ -93,6 +95,35 @@ int generated_detail(const std::string& spec, const std::string& prefix) {
   throw InvalidArgument(spec + ": expected " + prefix + "N with 1 <= N <= 4096");
 }
 
+/// N of "generated-gaussians:N" (1 ≤ N ≤ 2³¹).
+std::size_t generated_count(const std::string& spec, const std::string& prefix) {
+  const std::string count = spec.substr(prefix.size());
+  try {
+    std::size_t used = 0;
+    const long long n = std::stoll(count, &used);
+    if (used == count.size() && n >= 1 && n <= (1LL << 31)) return static_cast<std::size_t>(n);
+  } catch (const std::exception&) {
+  }
+  throw InvalidArgument(spec + ": expected " + prefix + "N with 1 <= N <= 2^31");
+}
+
+}  // namespace
+
+namespace {
+/// A Gaussian scene's means with their view-independent colours, as a point cloud.
+point_cloud gaussian_means(const gaussian_cloud& g) {
+  point_cloud c;
+  c.origin = g.origin;
+  c.positions = g.positions;
+  c.colours.reserve(g.size());
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    const vec3f rgb = g.base_colour(i).cwiseMax(0.0f).cwiseMin(1.0f) * 255.0f;
+    c.colours.push_back({static_cast<std::uint8_t>(std::lround(rgb.x())),
+                         static_cast<std::uint8_t>(std::lround(rgb.y())),
+                         static_cast<std::uint8_t>(std::lround(rgb.z()))});
+  }
+  return c;
+}
 }  // namespace
 
 loaded_input load(const std::string& path) {
@@ -103,8 +134,13 @@ loaded_input load(const std::string& path) {
     in.mesh = make_demo_scene(generated_detail(path, "generated:"));
   else if (path.rfind("generated-hard:", 0) == 0)
     in.mesh = make_hard_cases_scene(generated_detail(path, "generated-hard:"));
+  else if (path.rfind("generated-gaussians:", 0) == 0)
+    in.mesh.vertices = gaussian_means(
+        in.gaussians = make_gaussian_scene(generated_count(path, "generated-gaussians:")));
   else if (path.rfind("generated-points:", 0) == 0)
     in.mesh.vertices = read_all(*open_build_source(path));  // the in-memory twin of a chunked build
+  else if (is_gaussian_file(path))
+    in.mesh.vertices = gaussian_means(in.gaussians = read_gaussians(path, &in.report));
   else if (ext == ".ply" || ext == ".obj" || ext == ".off" || ext == ".PLY" || ext == ".OBJ" ||
            ext == ".OFF")
     in.mesh = read_mesh(path, &in.report);

@@ -23,6 +23,7 @@
 #include "pbr_lod/builders/chunked.hpp"
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/gaussians.hpp"
 #include "pbr_lod/core/point_set.hpp"
 #include "pbr_lod/core/point_source.hpp"
 #include "pbr_lod/core/triangle_mesh.hpp"
@@ -174,14 +175,20 @@ lod_header peek_lod(const std::string& path);
 
 struct loaded_input {
   triangle_mesh mesh;  // faces empty for a point cloud
+  /// A Gaussian scene (io/gaussians.hpp): its Gaussians, and in `mesh` their means with their
+  /// view-independent colours (what the point builders build from).
+  gaussian_cloud gaussians;
   read_report report;
   double read_seconds = 0;
   [[nodiscard]] bool is_mesh() const { return !mesh.faces.empty(); }
+  [[nodiscard]] bool is_gaussians() const { return !gaussians.empty(); }
 };
-/// Reads a mesh (.ply/.obj/.off) or a point cloud (.pcd/.las, or a PLY without faces); warnings
+/// Reads a mesh (.ply/.obj/.off), a Gaussian scene (a 3DGS .ply, .splat, .spz) or a point cloud
+/// (.pcd/.las, or a PLY without faces); warnings
 /// go to stderr. Throws on a file without points. Also the generated inputs: "generated:N" (the
-/// demo scene, make_demo_scene(N)), "generated-hard:N" (make_hard_cases_scene(N)) and
-/// "generated-points:N[:normals]".
+/// demo scene, make_demo_scene(N)), "generated-hard:N" (make_hard_cases_scene(N)),
+/// "generated-points:N[:normals]" and "generated-gaussians:N" (make_gaussian_scene(N), SH degree
+/// 3).
 loaded_input load(const std::string& path);
 
 /// World-space bounding sphere (centre of the box, radius to the farthest point), in double.

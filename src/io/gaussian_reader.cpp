@@ -368,6 +368,24 @@ gaussian_cloud read_splat_file(const std::string& path, read_report& report) {
 
 namespace pbr_lod {
 
+bool is_gaussian_file(const std::string& path) {
+  const std::string ext = detail::lower_extension(path);
+  if (ext == ".splat" || ext == ".spz") return true;
+  if (ext != ".ply") return false;
+  const detail::posix_file f(path);
+  const detail::ply_header h =
+      detail::parse_ply_header(path, detail::read_header_lines(f, "end_header"));
+  for (const detail::element& e : h.elements) {
+    if (e.name != "vertex") continue;
+    int found = 0;
+    for (const auto& p : e.props)
+      for (const char* name : {"f_dc_0", "opacity", "scale_0", "rot_0"})
+        if (p.name == name) ++found;
+    return found == 4;
+  }
+  return false;
+}
+
 gaussian_cloud read_gaussians(const std::string& path, read_report* report) {
   read_report local;
   read_report& r = report ? *report : local;

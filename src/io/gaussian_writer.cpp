@@ -42,7 +42,7 @@ std::string header(const gaussian_cloud& c) {
 }  // namespace
 
 void write_gaussians_ply(const gaussian_cloud& c, const std::string& path) {
-  c.validate(path);
+  c.validate(path, std::numeric_limits<float>::infinity());  // merged opacities > 1: written as 1
   const std::string h = header(c);
   const int m = sh_coefficients(c.sh_degree) - 1;
   const std::size_t floats = 9 + 3 * static_cast<std::size_t>(m) + 8;

@@ -509,11 +509,12 @@ void run_concurrent(const ladder_case& c) {
     const auto cut = [&](const view& v) {
       buffer_sink<H::attrs> s;
       traverse(h, v, {.tolerance_px = 1}, s, make_policy(v));
-      // Every primitive's position, in order (the points, splat centres, triangle corners).
+      // Every primitive's position, in order (points, splat centres, triangle corners, Gaussians).
       std::vector<vec3f> at;
       for (const auto& p : s.points) at.push_back(p.position);
       for (const auto& q : s.splats) at.push_back(q.centre);
       for (const auto& t : s.triangles) at.insert(at.end(), t.p.begin(), t.p.end());
+      for (const auto& g : s.gaussians) at.push_back(g.position);
       return at;
     };
     std::vector<decltype(cut(views[0]))> alone;
@@ -551,7 +552,15 @@ radial_agreement agreement(const typename Adapter::built& b, const point_cloud& 
     if constexpr (H::attrs.normal) {
       const view v(ladder_camera(pts, 128), h.origin());
       buffer_sink<H::attrs> s;
-      traverse(h, v, {.tolerance_px = 1}, s, make_policy(v));
+      // Without the Gaussian hook: a Gaussian hierarchy sends the splats (with their surface
+      // normals) that every sink without it gets; the other builders send what they always do.
+      struct surface_sink {
+        buffer_sink<H::attrs>& b;
+        void point(const point_prim<H::attrs>& p) { b.point(p); }
+        void splat(const splat_prim<H::attrs>& q) { b.splat(q); }
+        void triangle(const triangle_prim<H::attrs>& t) { b.triangle(t); }
+      } surface{s};
+      traverse(h, v, {.tolerance_px = 1}, surface, make_policy(v));
       const auto add = [&](const vec3f& p, const vec3f& n) {
         ASSERT_TRUE(all_finite(p) && all_finite(n));
         const vec3d r = (h.origin() + p.cast<double>() - centre).normalized();

@@ -736,8 +736,14 @@ TEST_F(GaussianWrite, TheFileIsTheStandardLayout) {
                                    0};  // opacity..rot
   for (int k = 0; k < 26; ++k)
     EXPECT_NEAR(v[static_cast<std::size_t>(k)], want[static_cast<std::size_t>(k)], 1e-6) << k;
+  // A hierarchy's merged opacity above 1 is written as 1 (a logit cannot exceed it); a
+  // negative one is refused.
+  gaussian_cloud merged = g;
+  merged.opacities[0] = 2;
+  write_gaussians_ply(merged, p);
+  EXPECT_NEAR(read_gaussians(p).opacities[0], 1.0f, 1e-6);
   gaussian_cloud bad = g;
-  bad.opacities[0] = 2;
+  bad.opacities[0] = -0.5f;
   EXPECT_THROW(write_gaussians_ply(bad, p), InvalidArgument);
 }
 

@@ -34,12 +34,18 @@
 
 namespace pbr_lod {
 
+/// Whether the file is a Gaussian scene: a .splat or .spz, or a PLY whose vertex element has the
+/// 3DGS properties f_dc_0, opacity, scale_0 and rot_0 (only its header is read). Throws IoError
+/// when it cannot be read and FormatError for a PLY with a malformed header.
+[[nodiscard]] bool is_gaussian_file(const std::string& path);
+
 /// Reads a .ply (3DGS), .splat or .spz file. Throws IoError or FormatError.
 [[nodiscard]] gaussian_cloud read_gaussians(const std::string& path, read_report* report = nullptr);
 
 /// Writes the standard 3DGS binary little-endian PLY: float x y z (world coordinates), nx ny nz
 /// = 0, f_dc_0..2, f_rest_* (channel-major), opacity (logit, opacities clamped to
-/// [10⁻⁷, 1 − 10⁻⁷] first so the logit is finite), scale_0..2 (log, scales clamped to ≥ the
+/// [10⁻⁷, 1 − 10⁻⁷] first so the logit is finite: a hierarchy's merged opacities above 1 are
+/// written as 1, which a logit cannot exceed), scale_0..2 (log, scales clamped to ≥ the
 /// smallest float denormal), rot_0..3; plus "comment pbr_lod_origin" so read_gaussians restores
 /// the origin. Whole or not at all (core/atomic_file.hpp). Throws InvalidArgument when the cloud
 /// is not valid and IoError when the file cannot be written.

@@ -1,0 +1,214 @@
+// pbr_lod — level-of-detail hierarchies of 3-D Gaussians (Kerbl et al. 2024, "A Hierarchical 3D
+// Gaussian Representation for Real-Time Rendering of Very Large Datasets", ACM TOG 43(4)).
+//
+// Input: a gaussian_cloud (core/gaussians.hpp; io/gaussians.hpp reads 3DGS .ply, .splat, .spz).
+// Paper → code (docs/gaussian-hierarchy.md has the full table):
+//   §4.1 hierarchy generation   a binary tree by recursive median splits of the Gaussians' means
+//                               along the longest axis of their 3σ boxes (the authors' k-d tree
+//                               generator); leaves hold `leaf_size` Gaussians (theirs: one).
+//   §4.1 merging (eqs. 2–4)     an inner node is one Gaussian moment-matched from its children's:
+//                               weights w_i ∝ o_i · S(s_i), S the surface proxy s₀s₁ + s₀s₂ + s₁s₂;
+//                               μ = Σ w_i μ_i, Σ = Σ w_i (Σ_i + (μ_i − μ)(μ_i − μ)ᵀ), the SH
+//                               coefficients averaged with the same weights; scales and rotation
+//                               from Σ's eigen-decomposition (right-handed).
+//   opacity                     the weighted opacity-area is conserved: o = Σ o_i S(s_i) / S(s),
+//                               above 1 where children overlap, as the paper keeps it (the
+//                               rasteriser's α ≤ 0.99 makes it a flat-topped footprint; a 3DGS
+//                               file cannot hold o > 1, so an exported cut has it clamped).
+//   §4.2 cut                    the node's projected size (pixels) against the tolerance: size =
+//                               2 · the projected radius of its largest standard deviation, made
+//                               monotone (a node is at least as large as its children), so the
+//                               cut is the one traversal of traverse/traverse.hpp with
+//                               gaussian_policy.
+// Degenerate input stays finite: zero weights (zero scales or opacities) fall back to equal
+// weights; a merged Gaussian of zero size takes its most opaque child's opacity; the eigen-
+// decomposition runs in double on origin-relative positions (scans 10⁷ units away keep their
+// precision).
+//
+// The hierarchy stores every Gaussian once as a gaussian_cloud: the input's, reordered so each
+// leaf's are contiguous, then one per inner node in preorder. Nodes are numbered in preorder
+// (the left child of inner node n is n + 1). File: "PBRLODGH" version 1 (save/load, whole or not
+// at all; every count, index and value validated on load).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "pbr_lod/core/attributes.hpp"
+#include "pbr_lod/core/bounds.hpp"
+#include "pbr_lod/core/camera.hpp"
+#include "pbr_lod/core/gaussians.hpp"
+#include "pbr_lod/traverse/primitives.hpp"
+#include "pbr_lod/traverse/screen_size.hpp"
+#include "pbr_lod/traverse/sink.hpp"
+#include "pbr_lod/traverse/traverse.hpp"
+
+namespace pbr_lod {
+
+struct gaussian_hierarchy_options {
+  /// Gaussians per leaf, 1–64. 1 is the paper's; 2 stores about 0.5 inner Gaussians per input
+  /// Gaussian instead of 1 (docs/gaussian-hierarchy.md measures both).
+  int leaf_size = 1;
+  unsigned threads = 0;  ///< 0 = every core (core/parallel.hpp)
+};
+
+struct gaussian_hierarchy_stats {
+  std::size_t input = 0;  ///< Gaussians in the input
+  std::size_t inner = 0;  ///< merged Gaussians (one per inner node)
+  std::size_t nodes = 0;  ///< inner nodes and leaves
+  std::size_t depth = 0;  ///< edges on the longest root-to-leaf path
+  double seconds = 0;     ///< wall time of the build
+};
+
+class gaussian_hierarchy {
+ public:
+  using node_id = std::uint32_t;
+  /// Sinks without gaussian() get splats with colours (as_splat_prim).
+  static constexpr attributes attrs{.normal = true, .colour = true};
+
+  struct node {
+    std::uint32_t gaussian = 0;  ///< leaf: its first Gaussian; inner: its merged Gaussian
+    std::uint32_t count = 0;     ///< leaf: its Gaussians (≥ 1); inner: 0
+    std::uint32_t right = 0;     ///< inner: the right child (the left is this node + 1)
+    float size = 0;              ///< largest standard deviation in the subtree's cut (world)
+    sphere bounds;               ///< holds every Gaussian of the subtree to 3σ
+  };
+
+  /// The children of a node: none, or n + 1 and right.
+  struct child_range {
+    std::array<node_id, 2> ids{};
+    std::uint32_t n = 0;
+    [[nodiscard]] const node_id* begin() const { return ids.data(); }
+    [[nodiscard]] const node_id* end() const { return ids.data() + n; }
+  };
+
+  [[nodiscard]] vec3d origin() const { return g_.origin; }
+  [[nodiscard]] bool empty() const { return nodes_.empty(); }
+  [[nodiscard]] node_id root() const { return 0; }
+  [[nodiscard]] bool is_leaf(node_id n) const { return nodes_[n].count != 0; }
+  [[nodiscard]] child_range children(node_id n) const {
+    if (is_leaf(n)) return {};
+    return {{n + 1, nodes_[n].right}, 2};
+  }
+  [[nodiscard]] sphere bounding_sphere(node_id n) const { return nodes_[n].bounds; }
+
+  /// An inner node sends its merged Gaussian, a leaf its own: gaussian_prim to a GaussianSink
+  /// (raster/gaussians.hpp; the z-buffer rasteriser, which draws it as below), splat_of() of
+  /// each to any other sink — or, where that ellipse covers less than a pixel on the screen, a
+  /// one-pixel point (a Gaussian rasteriser's low-pass still draws such a Gaussian as a dot; an
+  /// ellipse that small, or seen edge on, would cover no pixel centre).
+  template <class S>
+  void emit(node_id n, const view& v, S& sink) const {
+    const node& d = nodes_[n];
+    const std::uint32_t count = d.count == 0 ? 1 : d.count;
+    for (std::uint32_t i = d.gaussian; i < d.gaussian + count; ++i) {
+      if constexpr (GaussianSink<S>) {
+        sink.gaussian(prim(i));
+      } else {
+        const splat_prim<attrs> s = splat_of(i);
+        const float z = v.to_eye(s.centre).z();
+        const float k = z > 0 ? v.focal_px / z : 0.0f;
+        const vec3f ray = (s.centre - v.eye).normalized();
+        const float pixels = 3.14159265f * k * k * std::abs(s.u.cross(s.v).dot(ray));
+        if (!(pixels >= 1.0f))
+          sink.point(point_prim<attrs>{s.centre, 1.0f, s.normal, s.colour});
+        else
+          sink.splat(s);
+      }
+    }
+  }
+
+  /// Gaussian i as an ellipse splat: its two largest axes at 2σ (as_splat_prim), its normal the
+  /// axis of its smallest scale with the sign its rotation gives it (for a mesh's or a scan's
+  /// Gaussians the surface normal; merged ones keep their children's side), its colour the
+  /// view-independent one.
+  [[nodiscard]] splat_prim<attrs> splat_of(std::size_t i) const {
+    const vec4f& q = g_.rotations[i];
+    const Eigen::Matrix3f r = Eigen::Quaternionf(q[0], q[1], q[2], q[3]).toRotationMatrix();
+    const vec3f& sc = g_.scales[i];
+    int small = 0;
+    for (int a = 1; a < 3; ++a)
+      if (sc[a] < sc[small]) small = a;
+    const int a1 = (small + 1) % 3, a2 = (small + 2) % 3;
+    const int big = sc[a1] >= sc[a2] ? a1 : a2, mid = big == a1 ? a2 : a1;
+    splat_prim<attrs> out = as_splat_prim<attrs>(prim(i));  // the colour
+    out.u = r.col(big) * (2 * sc[big]);
+    out.v = r.col(mid) * (2 * sc[mid]);
+    out.normal = r.col(small);
+    return out;
+  }
+
+  /// Gaussian i of the store as a primitive (its covariance from scale and rotation).
+  [[nodiscard]] gaussian_prim prim(std::size_t i) const {
+    return {g_.positions[i], gaussian_covariance(g_.scales[i], g_.rotations[i]), g_.opacities[i],
+            g_.sh_degree, g_.sh.data() + i * g_.sh_stride()};
+  }
+
+  [[nodiscard]] const std::vector<node>& nodes() const { return nodes_; }
+  /// Every Gaussian stored: the input's (leaf order), then the inner nodes' (preorder).
+  [[nodiscard]] const gaussian_cloud& store() const { return g_; }
+  [[nodiscard]] std::size_t input_gaussians() const { return input_; }
+  [[nodiscard]] std::size_t inner_gaussians() const { return g_.size() - input_; }
+  /// Edges on the longest root-to-leaf path.
+  [[nodiscard]] std::size_t depth() const;
+
+  /// The Gaussians a traversal of v with `o` draws (gaussian_policy), as a cloud in the
+  /// hierarchy's frame: what `pbrlod export` writes as a standard 3DGS file.
+  [[nodiscard]] gaussian_cloud cut(const view& v, const traverse_options& o) const;
+  /// The view-independent cut at tree depth `level`: every node at that depth, and every leaf
+  /// above it (level 0: the root's Gaussian; a level at or beyond depth(): the input).
+  [[nodiscard]] gaussian_cloud level(std::size_t level) const;
+
+  void save(const std::string& path) const;
+  /// Throws IoError or FormatError (naming the element at fault).
+  [[nodiscard]] static gaussian_hierarchy load(const std::string& path);
+  [[nodiscard]] std::vector<unsigned char> serialize() const;
+  [[nodiscard]] static gaussian_hierarchy parse(const std::vector<unsigned char>& bytes,
+                                                const std::string& path);
+  [[nodiscard]] std::size_t file_bytes() const;
+  /// Equal when their files would be.
+  friend bool operator==(const gaussian_hierarchy& a, const gaussian_hierarchy& b) {
+    return a.serialize() == b.serialize();
+  }
+
+ private:
+  friend gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud&,
+                                                     const gaussian_hierarchy_options&,
+                                                     gaussian_hierarchy_stats*);
+  gaussian_cloud g_;
+  std::size_t input_ = 0;
+  std::vector<node> nodes_;
+};
+
+/// Builds the hierarchy (Kerbl et al. 2024 §4.1). The same input and options give the same
+/// hierarchy and file bytes whatever the thread count. Throws InvalidArgument for an empty
+/// input, one that does not validate() or has more than 2³¹ Gaussians, or a leaf_size outside
+/// 1–64.
+[[nodiscard]] gaussian_hierarchy build_gaussian_hierarchy(
+    const gaussian_cloud& input, const gaussian_hierarchy_options& options = {},
+    gaussian_hierarchy_stats* stats = nullptr);
+
+/// The cut of Kerbl et al. 2024 §4.2: a node's screen size is twice the projected radius of a
+/// sphere of its `size` about its Gaussian's mean; refine while that exceeds the tolerance.
+struct gaussian_policy {
+  [[nodiscard]] float screen_size(const gaussian_hierarchy& h, gaussian_hierarchy::node_id n,
+                                  const sphere&, const view& v, const traverse_options& o) const {
+    const auto& d = h.nodes()[n];
+    const sphere s{h.store().positions[d.gaussian], d.size};
+    return 2 * projected_radius(o.metric, v, s);
+  }
+  [[nodiscard]] bool refine(const gaussian_hierarchy& h, gaussian_hierarchy::node_id n,
+                            float size_px, const traverse_options& o) const {
+    return !h.is_leaf(n) && size_px > o.tolerance_px;
+  }
+  template <class S>
+  void emit(const gaussian_hierarchy& h, gaussian_hierarchy::node_id n, const view& v, float,
+            const traverse_options&, S& sink) const {
+    h.emit(n, v, sink);
+  }
+};
+
+}  // namespace pbr_lod
