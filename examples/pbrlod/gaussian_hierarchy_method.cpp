@@ -3,9 +3,7 @@
 
 #include "lod.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
-#include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/gaussian_splats.hpp"
-#include "pbr_lod/core/mesh_splats.hpp"
 #include "pbr_lod/raster/gaussians.hpp"
 
 namespace pbrlod_tool {
@@ -63,32 +61,6 @@ struct gaussian_method_traits {
   std::size_t samples(const gaussian_hierarchy& h) const { return h.input_gaussians(); }
 };
 
-/// The Gaussians a build starts from: the scene's own, or flat Gaussians on a mesh's vertex
-/// splats (mesh_splats) or on a cloud's splats (given, or estimated where a normal or the
-/// ellipses are missing: `estimated` counts the normals estimated).
-gaussian_cloud input_gaussians(const loaded_input& in, float opacity, std::size_t& estimated) {
-  estimated = 0;
-  if (!in.gaussians.empty()) return in.gaussians;
-  if (in.is_mesh()) return gaussians_from_splats(mesh_splats(in.mesh), opacity);
-  point_cloud c = in.mesh.vertices;
-  const bool usable = c.normals.size() == c.size() &&
-                      std::all_of(c.normals.begin(), c.normals.end(), [](const vec3f& n) {
-                        return all_finite(n) && n.squaredNorm() > 0;
-                      });
-  if (!usable) {
-    estimated_splats e = estimate_normals_and_ellipses(c.positions);
-    estimated = c.size();
-    c.normals = std::move(e.normals);
-    c.axis_u = std::move(e.axes.u);
-    c.axis_v = std::move(e.axes.v);
-  } else if (c.axis_u.size() != c.size()) {
-    splat_axes a = estimate_splat_ellipses(c.positions, c.normals);
-    c.axis_u = std::move(a.u);
-    c.axis_v = std::move(a.v);
-  }
-  return gaussians_from_splats(c, opacity);
-}
-
 std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
                            bool /*on_terminal*/) {
   params m(items);
@@ -97,8 +69,10 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   const auto opacity = static_cast<float>(m.number("opacity", 1.0, 0.0, 1.0));
   m.finish("gaussian-hierarchy", "leaf_size, threads, opacity");
-  std::size_t estimated = 0;
-  const gaussian_cloud g = input_gaussians(in.get(), opacity, estimated);
+  // A Gaussian scene as it is; a mesh or a scan as flat Gaussians on its splats.
+  const loaded_input& input = in.get();
+  const gaussian_cloud g =
+      input.is_gaussians() ? input.gaussians : gaussians_of_surface(input.mesh, opacity, o.threads);
   if (g.empty()) throw InvalidArgument(in.name() + ": no Gaussians to build from");
   gaussian_hierarchy_stats st;
   return make_lod(gaussian_method_traits{}, build_gaussian_hierarchy(g, o, &st));

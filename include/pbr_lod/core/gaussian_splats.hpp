@@ -9,8 +9,11 @@
 #include <numbers>
 
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/gaussians.hpp"
+#include "pbr_lod/core/mesh_splats.hpp"
 #include "pbr_lod/core/point_set.hpp"
+#include "pbr_lod/core/triangle_mesh.hpp"
 
 namespace pbr_lod {
 
@@ -64,6 +67,37 @@ namespace pbr_lod {
       g.sh[3 * i + ch] = static_cast<float>((channel[ch] / 255.0 - 0.5) / sh_c0);
   }
   return g;
+}
+
+/// The Gaussians of a mesh or a scan, as the Gaussian hierarchy's tool entry and tests make them:
+/// a mesh's vertex splats (mesh_splats), or — without faces of non-zero area — its vertices'
+/// splats, with normals and ellipses estimated (core/estimation.hpp) where any normal is zero or
+/// not finite (`estimated` gets how many normals were) and ellipses where the cloud has none.
+[[nodiscard]] inline gaussian_cloud gaussians_of_surface(const triangle_mesh& m,
+                                                         float opacity = 1.0f, unsigned threads = 0,
+                                                         std::size_t* estimated = nullptr) {
+  if (estimated) *estimated = 0;
+  if (!m.faces.empty()) {
+    const point_cloud s = mesh_splats(m);
+    if (!s.empty()) return gaussians_from_splats(s, opacity);
+  }
+  point_cloud c = m.vertices;
+  const bool usable = c.normals.size() == c.size() &&
+                      std::all_of(c.normals.begin(), c.normals.end(), [](const vec3f& n) {
+                        return all_finite(n) && n.squaredNorm() > 0;
+                      });
+  if (!usable) {
+    estimated_splats e = estimate_normals_and_ellipses(c.positions, 16, 16, true, threads);
+    if (estimated) *estimated = c.size();
+    c.normals = std::move(e.normals);
+    c.axis_u = std::move(e.axes.u);
+    c.axis_v = std::move(e.axes.v);
+  } else if (c.axis_u.size() != c.size()) {
+    splat_axes a = estimate_splat_ellipses(c.positions, c.normals, 16, threads);
+    c.axis_u = std::move(a.u);
+    c.axis_v = std::move(a.v);
+  }
+  return gaussians_from_splats(c, opacity);
 }
 
 /// A generated Gaussian scene in the form trained scenes take: n flat Gaussians covering a bumpy

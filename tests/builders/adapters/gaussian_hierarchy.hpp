@@ -1,42 +1,16 @@
 // pbr_lod tests — the Gaussian hierarchy (Kerbl et al. 2024) on the ladder and in the file-damage
 // suite (adapter_support.hpp says what an adapter holds). The ladder's meshes and clouds become
-// flat Gaussians as the tool makes them (core/gaussian_splats.hpp): a mesh's vertex splats, a
-// cloud's splats with normals and ellipses estimated where a normal is missing.
+// flat Gaussians as the tool makes them (gaussians_of_surface, core/gaussian_splats.hpp).
 #pragma once
-
-#include <algorithm>
 
 #include "adapter_support.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
-#include "pbr_lod/core/estimation.hpp"
 #include "pbr_lod/core/gaussian_splats.hpp"
-#include "pbr_lod/core/mesh_splats.hpp"
 
 namespace pbr_lod::test {
 
-/// Flat Gaussians on the mesh's vertex splats, or on the cloud's splats (estimated where any
-/// normal is zero or not finite, and without ellipses).
 inline gaussian_cloud ladder_gaussians(const triangle_mesh& m, unsigned threads) {
-  if (!m.faces.empty()) {
-    const point_cloud s = mesh_splats(m);
-    if (!s.empty()) return gaussians_from_splats(s);
-  }
-  point_cloud c = m.vertices;
-  const bool usable = c.normals.size() == c.size() &&
-                      std::all_of(c.normals.begin(), c.normals.end(), [](const vec3f& n) {
-                        return all_finite(n) && n.squaredNorm() > 0;
-                      });
-  if (!usable) {
-    estimated_splats e = estimate_normals_and_ellipses(c.positions, 16, 16, true, threads);
-    c.normals = std::move(e.normals);
-    c.axis_u = std::move(e.axes.u);
-    c.axis_v = std::move(e.axes.v);
-  } else {
-    splat_axes a = estimate_splat_ellipses(c.positions, c.normals, 16, threads);
-    c.axis_u = std::move(a.u);
-    c.axis_v = std::move(a.v);
-  }
-  return gaussians_from_splats(c);
+  return gaussians_of_surface(m, 1.0f, threads);
 }
 
 struct gaussian_hierarchy_ladder : ladder_adapter_base<gaussian_hierarchy> {
