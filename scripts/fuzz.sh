@@ -65,10 +65,10 @@ for t in "${targets[@]}"; do
     -artifact_prefix="$build/artifacts/$t/" > "$log" 2>&1; then
     runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
     rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log")
-    printf 'fuzz.sh: %-18s %10s runs %7s exec/s  ok\n' "$t" "${runs:-?}" "${rate:-?}"
+    printf 'fuzz.sh: %-24s %10s runs %7s exec/s  ok\n' "$t" "${runs:-?}" "${rate:-?}"
   else
     failed+=("$t")
-    printf 'fuzz.sh: %-18s FAILED; input and log in %s\n' "$t" "$build/artifacts/$t/"
+    printf 'fuzz.sh: %-24s FAILED; input and log in %s\n' "$t" "$build/artifacts/$t/"
     grep -E 'ERROR|SUMMARY|terminate|Test unit written' "$log" | head -5 | sed 's/^/    /'
   fi
 done
