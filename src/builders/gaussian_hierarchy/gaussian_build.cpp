@@ -7,11 +7,13 @@
 // split on the calling thread until there are a few subtrees per worker; the subtrees are then
 // built as tasks, each writing only its own slots, and the top is merged last.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <numeric>
+#include <span>
 
 #include <Eigen/Eigenvalues>
 
@@ -207,21 +209,30 @@ Eigen::Matrix3d covariance_of(const gaussian_cloud& g, std::size_t i) {
 
 /// The Gaussians a node merges: its children's representatives (a leaf child's Gaussians, an
 /// inner child's merged one), as store slots.
-void representatives(const builder& b, const subtree& c, std::vector<std::uint32_t>& out) {
+/// Store slots of the Gaussians a node merges: at most two leaves of 64 (leaf_size ≤ 64). A fixed
+/// array, since a merge runs once per inner node (half the nodes) and needs no allocation.
+struct part_list {
+  std::array<std::uint32_t, 128> slot;
+  std::array<double, 128> w;
+  std::size_t n = 0;
+};
+
+void representatives(const builder& b, const subtree& c, part_list& out) {
   if (b.is_leaf(c.hi - c.lo)) {
-    for (std::uint32_t i = c.lo; i < c.hi; ++i) out.push_back(i);
+    for (std::uint32_t i = c.lo; i < c.hi; ++i) out.slot[out.n++] = i;
   } else {
-    out.push_back(b.n + c.inner);
+    out.slot[out.n++] = b.n + c.inner;
   }
 }
 
 void builder::merge(const subtree& t) const {
   const auto [l, r] = children(t);
-  std::vector<std::uint32_t> parts;  // at most 2 × leaf_size
-  representatives(*this, l, parts);
-  representatives(*this, r, parts);
+  part_list list;
+  representatives(*this, l, list);
+  representatives(*this, r, list);
+  const std::span<const std::uint32_t> parts(list.slot.data(), list.n);
+  const std::span<double> w(list.w.data(), list.n);
   // Weights w_i ∝ o_i S(s_i); all zero (zero sizes or opacities): equal weights.
-  std::vector<double> w(parts.size());
   double total = 0;
   for (std::size_t k = 0; k < parts.size(); ++k) {
     w[k] = double(out.opacities[parts[k]]) * surface(out.scales[parts[k]]);
