@@ -146,7 +146,7 @@ struct chunked_pca_method : pca_method, chunked_folder {
 };
 
 std::unique_ptr<lod> open_chunked(const std::string& dir) {
-  if (chunked_pca_octree_has_colours(dir))
+  if (chunked_folder_has_colours(dir))
     return make_lod(chunked_pca_method{}, chunked_pca_octree<with_normals_colours>::open(dir));
   return make_lod(chunked_pca_method{}, chunked_pca_octree<with_normals>::open(dir));
 }

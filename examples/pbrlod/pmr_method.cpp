@@ -149,7 +149,7 @@ struct chunked_pmr_traits : chunked_folder {
 };
 
 std::unique_ptr<lod> open_chunked(const std::string& dir) {
-  if (chunked_pmr_has_colours(dir))
+  if (chunked_folder_has_colours(dir))
     return make_lod(chunked_pmr_traits{}, chunked_pmr<with_normals_colours>::open(dir));
   return make_lod(chunked_pmr_traits{}, chunked_pmr<with_normals>::open(dir));
 }

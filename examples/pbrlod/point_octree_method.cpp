@@ -144,7 +144,7 @@ struct chunked_method : chunked_folder {
 };
 
 std::unique_ptr<lod> open_chunked(const std::string& dir) {
-  if (chunked_point_octree_has_colours(dir))
+  if (chunked_folder_has_colours(dir))
     return make_lod(
         chunked_method{},
         chunked_point_octree<point_octree_attributes(attributes{.colour = true})>::open(dir));

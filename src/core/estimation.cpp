@@ -636,6 +636,23 @@ void check_options(const estimation_options& opt) {
     throw InvalidArgument("estimate_normals: the viewpoint is not finite");
 }
 
+/// The estimators' common start: the points sorted (duplicates collapsed) and indexed, and each
+/// one's `stride` nearest in a table, stride = k clamped to the distinct points; reports
+/// progress 0.1 after the index and `done` after the table.
+struct neighbourhoods {
+  sorted_points s;
+  knn_index index;
+  int stride;
+  std::vector<std::uint32_t> table;
+  neighbourhoods(std::span<const vec3f> positions, int k, unsigned threads,
+                 const estimation_options& opt, double done)
+      : s(sort_points(positions)), index(s.pos), stride(clamp_k(k, s.pos.size())) {
+    report(opt, 0.1);
+    table = knn_table(s.pos, index, stride, threads);
+    report(opt, done);
+  }
+};
+
 }  // namespace
 
 std::vector<vec3f> estimate_normals(std::span<const vec3f> positions,
@@ -644,13 +661,9 @@ std::vector<vec3f> estimate_normals(std::span<const vec3f> positions,
   check_positions(positions, "estimate_normals");
   if (positions.empty()) return {};
   const unsigned threads = resolve_threads(opt.threads);
-  const sorted_points s = sort_points(positions);
-  const knn_index index(s.pos);
-  report(opt, 0.1);
-  const int kk = clamp_k(opt.k_normals, s.pos.size());
-  const auto table = knn_table(s.pos, index, kk, threads);
-  report(opt, 0.7);
-  auto normals = unsort(normals_from(s.pos, table, kk, kk, opt, threads), s);
+  const neighbourhoods nb(positions, opt.k_normals, threads, opt, 0.7);
+  const int kk = nb.stride;
+  auto normals = unsort(normals_from(nb.s.pos, nb.table, kk, kk, opt, threads), nb.s);
   report(opt, 1);
   return normals;
 }
@@ -688,13 +701,13 @@ estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
   check_positions(positions, "estimate_normals");
   if (positions.empty()) return {};
   const unsigned threads = resolve_threads(opt.threads);
-  const sorted_points s = sort_points(positions);
-  const knn_index index(s.pos);
-  report(opt, 0.1);
-  const int kn = clamp_k(opt.k_normals, s.pos.size()), ke = clamp_k(opt.k_ellipses, s.pos.size());
-  const int stride = std::max(kn, ke);
-  const auto table = knn_table(s.pos, index, stride, threads);
-  report(opt, 0.6);
+  const neighbourhoods nb(positions, std::max(opt.k_normals, opt.k_ellipses), threads, opt, 0.6);
+  const int kn = clamp_k(opt.k_normals, nb.s.pos.size());
+  const int ke = clamp_k(opt.k_ellipses, nb.s.pos.size());
+  const int stride = nb.stride;  // = max(kn, ke): clamping is monotone
+  const sorted_points& s = nb.s;
+  const knn_index& index = nb.index;
+  const auto& table = nb.table;
   const std::vector<vec3f> normals = normals_from(s.pos, table, stride, kn, opt, threads);
   report(opt, 0.85);
   splat_axes e = ellipses_from(s.pos, normals, index, table, stride, ke, opt.ellipses, threads);

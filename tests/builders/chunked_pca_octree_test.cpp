@@ -89,7 +89,7 @@ struct pca_case {
   }
   static std::string chunk_file(std::uint32_t c) { return pca_chunk_file_name(c); }
   static bool is_chunked(const std::string& dir) { return is_chunked_pca_octree(dir); }
-  static bool has_colours(const std::string& dir) { return chunked_pca_octree_has_colours(dir); }
+  static bool has_colours(const std::string& dir) { return chunked_folder_has_colours(dir); }
   /// With normals, and without: then the halo cells come from every rank, the estimation from
   /// rank 0, and the chunks are built round robin from the files it rewrote.
   static std::vector<std::unique_ptr<point_source>> ranks_sources() {

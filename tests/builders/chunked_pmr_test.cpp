@@ -106,7 +106,7 @@ struct pmr_case {
   }
   static std::string chunk_file(std::uint32_t c) { return pmr_chunk_file_name(c); }
   static bool is_chunked(const std::string& dir) { return is_chunked_pmr(dir); }
-  static bool has_colours(const std::string& dir) { return chunked_pmr_has_colours(dir); }
+  static bool has_colours(const std::string& dir) { return chunked_folder_has_colours(dir); }
   /// Positions only: the chunks' orientation (rank 0) reaches the other ranks through a file.
   static std::vector<std::unique_ptr<point_source>> ranks_sources() {
     point_cloud c = make_wavy_surface(8000, 9);

@@ -125,7 +125,7 @@ struct point_octree_case {
   }
   static std::string chunk_file(std::uint32_t c) { return chunk_file_name(c); }
   static bool is_chunked(const std::string& dir) { return is_chunked_point_octree(dir); }
-  static bool has_colours(const std::string& dir) { return chunked_point_octree_has_colours(dir); }
+  static bool has_colours(const std::string& dir) { return chunked_folder_has_colours(dir); }
   static std::vector<std::unique_ptr<point_source>> ranks_sources() {
     std::vector<std::unique_ptr<point_source>> out;
     out.push_back(std::make_unique<generated_point_source>(30000, 9, false, true));

@@ -75,8 +75,6 @@ chunked_build_report build_pca_octree_chunked(const point_source& src, const std
 
 /// Whether `dir` holds a chunked PCA octree (its top file).
 [[nodiscard]] bool is_chunked_pca_octree(const std::string& dir);
-/// Whether the chunked PCA octree in `dir` has colours.
-[[nodiscard]] bool chunked_pca_octree_has_colours(const std::string& dir);
 
 namespace detail {
 /// The top file "top.pbrlod": head "PBRLODSC" | u32 version | u32 flags (1: colours, 2:

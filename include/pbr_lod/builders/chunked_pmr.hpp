@@ -76,8 +76,6 @@ chunked_build_report build_pmr_chunked(const point_source& src, const std::strin
 
 /// Whether `dir` holds a chunked PMR (its top file).
 [[nodiscard]] bool is_chunked_pmr(const std::string& dir);
-/// Whether the chunked PMR in `dir` has colours.
-[[nodiscard]] bool chunked_pmr_has_colours(const std::string& dir);
 
 namespace detail {
 /// The top file "top.pbrlod": head "PBRLODMC" | u32 version | u32 flags (1: colours) | f64

@@ -75,8 +75,6 @@ chunked_build_report build_point_octree_chunked(const point_source& src, const s
 
 /// Whether `dir` holds a chunked point-octree (its top file).
 [[nodiscard]] bool is_chunked_point_octree(const std::string& dir);
-/// Whether the chunked point-octree in `dir` has colours (to pick the type to open).
-[[nodiscard]] bool chunked_point_octree_has_colours(const std::string& dir);
 
 /// A point-octree stored as a directory by build_point_octree_chunked, opened lazily: the top
 /// file is read at open(), a chunk's file when a traversal first needs its nodes below the

@@ -139,14 +139,9 @@ class rasterizer {
       blended_point(p);
       return;
     }
-    const vec3f d = p.position - proj_.eye;
-    const float z = d.dot(proj_.forward);
-    if (!(z >= proj_.w_near)) return;  // behind the near plane, or NaN
-    if constexpr (kCullNormals)
-      if (p.normal.dot(d) > 0) return;
-    const float key = 1.0f / z;
-    const float sx = proj_.cx + d.dot(proj_.right_px) * key;
-    const float sy = proj_.cy - d.dot(proj_.up_px) * key;
+    vec3f d;
+    float key, sx, sy;
+    if (!project(p, d, key, sx, sy)) return;
     if (!(p.size_px > 1)) [[likely]] {
       if (!(sx >= 0 && sx < fw_ && sy >= 0 && sy < fh_)) return;
       const std::size_t i = static_cast<std::size_t>(static_cast<int>(sy)) * width() +
@@ -296,10 +291,7 @@ class rasterizer {
             c.albedo = {detail::to_channel(a[kColourAt]), detail::to_channel(a[kColourAt + 1]),
                         detail::to_channel(a[kColourAt + 2])};
           if constexpr (fx.shading) {
-            vec3f n(a[0], a[1], a[2]);
-            const float len = n.norm();
-            n = len > 0 ? vec3f(n / (front ? len : -len)) : vec3f::Zero();
-            c.lit = detail::lambert(n, light_, ambient_);
+            c.lit = fragment_lit(a, front);
           }
           store(i, c);
         });
@@ -353,10 +345,7 @@ class rasterizer {
               record_triangle(i, k, rec, front);
             }
             if constexpr (fx.shading) {
-              vec3f n(a[0], a[1], a[2]);
-              const float len = n.norm();
-              n = len > 0 ? vec3f(n / (front ? len : -len)) : vec3f::Zero();
-              c.lit = detail::lambert(n, light_, ambient_);
+              c.lit = fragment_lit(a, front);
             }
             store(i, c);
           });
@@ -646,15 +635,34 @@ class rasterizer {
     }
   }
 
-  void blended_point(const point_prim<A>& p) {
-    const vec3f d = p.position - proj_.eye;
+  /// Lambert shading of a triangle fragment from its interpolated normal a[0..2], unit length
+  /// and turned to the viewer on a back face.
+  template <std::size_t N>
+  auto fragment_lit(const std::array<float, N>& a, bool front) const {
+    vec3f n(a[0], a[1], a[2]);
+    const float len = n.norm();
+    n = len > 0 ? vec3f(n / (front ? len : -len)) : vec3f::Zero();
+    return detail::lambert(n, light_, ambient_);
+  }
+
+  /// A point's offset d from the eye, depth key 1/z and screen position; false when it is behind
+  /// the near plane (or NaN) or, with normal culling, faces away.
+  bool project(const point_prim<A>& p, vec3f& d, float& key, float& sx, float& sy) const {
+    d = p.position - proj_.eye;
     const float z = d.dot(proj_.forward);
-    if (!(z >= proj_.w_near)) return;  // behind the near plane, or NaN
+    if (!(z >= proj_.w_near)) return false;  // behind the near plane, or NaN
     if constexpr (kCullNormals)
-      if (p.normal.dot(d) > 0) return;
-    const float key = 1.0f / z;
-    const float sx = proj_.cx + d.dot(proj_.right_px) * key;
-    const float sy = proj_.cy - d.dot(proj_.up_px) * key;
+      if (p.normal.dot(d) > 0) return false;
+    key = 1.0f / z;
+    sx = proj_.cx + d.dot(proj_.right_px) * key;
+    sy = proj_.cy - d.dot(proj_.up_px) * key;
+    return true;
+  }
+
+  void blended_point(const point_prim<A>& p) {
+    vec3f d;
+    float key, sx, sy;
+    if (!project(p, d, key, sx, sy)) return;
     const float size = std::max(p.size_px, 1.0f);
     if (!blend_.accumulating) {
       blend_.drew_splats = true;

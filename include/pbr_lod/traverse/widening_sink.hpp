@@ -1,6 +1,8 @@
 // pbr_lod — widening_sink: primitives of one attribute set handed to a sink of a larger one.
 #pragma once
 
+#include <array>
+
 #include "pbr_lod/traverse/sink.hpp"
 
 namespace pbr_lod {
@@ -16,11 +18,7 @@ requires((!From.normal || To.normal) && (!From.colour || To.colour)) struct wide
     point_prim<To> q;
     q.position = p.position;
     q.size_px = p.size_px;
-    if constexpr (From.normal)
-      q.normal = p.normal;
-    else if constexpr (To.normal)
-      q.normal = vec3f::Zero();  // Eigen leaves a default-constructed vector uninitialised
-    if constexpr (From.colour) q.colour = p.colour;
+    widen_attributes(p, q);
     out.point(q);
   }
   void splat(const splat_prim<From>& s) {
@@ -28,11 +26,7 @@ requires((!From.normal || To.normal) && (!From.colour || To.colour)) struct wide
     q.centre = s.centre;
     q.u = s.u;
     q.v = s.v;
-    if constexpr (From.normal)
-      q.normal = s.normal;
-    else if constexpr (To.normal)
-      q.normal = vec3f::Zero();  // Eigen leaves a default-constructed vector uninitialised
-    if constexpr (From.colour) q.colour = s.colour;
+    widen_attributes(s, q);
     out.splat(q);
   }
   void triangle(const triangle_prim<From>& t) {
@@ -57,14 +51,20 @@ requires((!From.normal || To.normal) && (!From.colour || To.colour)) struct wide
  private:
   static void widen_into(const triangle_prim<From>& t, triangle_prim<To>& q) {
     q.p = t.p;
-    if constexpr (To.normal) {
-      if constexpr (From.normal)
-        q.normal = t.normal;
-      else
-        q.normal.fill(vec3f::Zero());
-    }
-    if constexpr (From.colour) q.colour = t.colour;
+    widen_attributes(t, q);
   }
+  /// The normal(s) and colour(s) of a point, splat or triangle; zero normals where From has none.
+  template <class P, class Q>
+  static void widen_attributes(const P& p, Q& q) {
+    if constexpr (From.normal)
+      q.normal = p.normal;
+    else if constexpr (To.normal)
+      set_zero(q.normal);
+    if constexpr (From.colour) q.colour = p.colour;
+  }
+  // Eigen leaves a default-constructed vector uninitialised.
+  static void set_zero(vec3f& n) { n = vec3f::Zero(); }
+  static void set_zero(std::array<vec3f, 3>& n) { n.fill(vec3f::Zero()); }
 };
 
 static_assert(

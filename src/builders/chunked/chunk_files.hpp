@@ -19,6 +19,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -333,6 +334,18 @@ struct chunked_pass_base {
   }
   [[nodiscard]] std::string temp_path(const char* kind, std::size_t c) const {
     return (tmp.path / (std::string(kind) + std::to_string(c))).string();
+  }
+  /// Opens the file of every input point's normal (n of them, in input order) that all ranks
+  /// read: rank 0 creates it and `fill`s it, the others open it behind a barrier.
+  template <class Fill>
+  void share_normals(std::optional<index_file>& normals, std::uint64_t n, Fill&& fill) const {
+    const std::string path = (tmp.path / "normals").string();
+    if (rank == 0) {
+      normals.emplace(path, n, true);
+      fill(*normals);
+    }
+    barrier();
+    if (rank != 0) normals.emplace(path, n, false);
   }
   /// Each file's write buffer when a pass appends to `files` files at once: 64 MiB shared
   /// among them, between 4 KiB and 256 KiB each.

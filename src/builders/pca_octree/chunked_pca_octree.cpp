@@ -98,10 +98,6 @@ bool is_chunked_pca_octree(const std::string& dir) {
   return is_chunked_folder(dir, detail::chunked_pca_format);
 }
 
-bool chunked_pca_octree_has_colours(const std::string& dir) {
-  return chunked_folder_has_colours(dir);
-}
-
 template <attributes A>
 chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
   check_chunked_folder(dir);
@@ -118,15 +114,9 @@ chunked_pca_octree<A> chunked_pca_octree<A>::open(const std::string& dir) {
   t.dir_ = dir;
   pca_data& d = t.top_;
   d.quantised = (flags & 2u) != 0;
-  d.leaf_size = r.get<std::uint32_t>("leaf size");
-  d.max_depth = r.get<std::uint32_t>("max depth");
-  d.gamma = r.get_finite("gamma", 0);
-  d.curvature_c = r.get_finite("curvature c", 0);
-  d.lambda_max = r.get_finite("lambda max", 0);
+  get_pca_options(r, d);
   d.lambda_norm = r.get_finite("lambda unit", 0);
-  if (d.leaf_size < 1 || d.max_depth < 1 || d.max_depth > 30 || !(d.gamma > 0 && d.gamma <= 10) ||
-      !(d.curvature_c >= 0) || !(d.lambda_max >= 1 && d.lambda_max <= 16) || !(d.lambda_norm > 0))
-    bad("options out of range");
+  if (!(d.lambda_norm > 0)) bad("lambda unit not positive");
   d.stats.input_points = r.get<std::uint64_t>("input points");
   for (int k = 0; k < 3; ++k) d.origin[k] = r.get<double>("origin");
   for (int k = 0; k < 3; ++k) d.cube_min[k] = r.get<double>("root cube");

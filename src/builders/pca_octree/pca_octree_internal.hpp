@@ -168,6 +168,9 @@ std::size_t pca_record_bytes(bool quantised, bool colour);
 /// bytes, and the validating read of kp, kn, kc entries into d.
 void put_pca_codebooks(byte_writer& w, const pca_data& d);
 std::uint64_t pca_codebook_bytes(std::uint64_t kp, std::uint64_t kn, std::uint64_t kc);
+/// Reads and checks the build options every PCA file stores after its flags (leaf size, max
+/// depth, γ, curvature c, λ_max); throws FormatError naming the file and the value.
+void get_pca_options(byte_reader& r, pca_data& d);
 void get_pca_codebooks(byte_reader& r, pca_data& d, std::uint32_t kp, std::uint32_t kn,
                        std::uint32_t kc, const std::string& path);
 

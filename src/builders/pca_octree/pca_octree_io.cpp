@@ -249,6 +249,21 @@ void get_pca_nodes(byte_reader& r, pca_data& d, std::uint64_t nn, bool colour,
   }
 }
 
+void get_pca_options(byte_reader& r, pca_data& d) {
+  d.leaf_size = r.get<std::uint32_t>("leaf size");
+  d.max_depth = r.get<std::uint32_t>("max depth");
+  d.gamma = r.get_finite("gamma", 0);
+  d.curvature_c = r.get_finite("curvature c", 0);
+  d.lambda_max = r.get_finite("lambda max", 0);
+  const auto bad = [&](const std::string& what) { throw FormatError(r.path + ": " + what); };
+  if (d.leaf_size < 1) bad("leaf size 0");
+  if (d.max_depth < 1 || d.max_depth > 30)
+    bad("max depth " + std::to_string(d.max_depth) + " outside 1..30");
+  if (!(d.gamma > 0 && d.gamma <= 10)) bad("gamma " + std::to_string(d.gamma) + " outside (0, 10]");
+  if (!(d.curvature_c >= 0)) bad("negative curvature c");
+  if (!(d.lambda_max >= 1 && d.lambda_max <= 16)) bad("lambda max outside [1, 16]");
+}
+
 pca_data load_pca_data(const std::string& path, bool colour) {
   const std::vector<unsigned char> bytes = load_file_bytes(path);
   byte_reader r{bytes, 0, path};
@@ -258,18 +273,8 @@ pca_data load_pca_data(const std::string& path, bool colour) {
   check_colour_flag((flags & 1u) != 0, colour, path, "pca_octree");
   pca_data d;
   d.quantised = (flags & 2u) != 0;
-  d.leaf_size = r.get<std::uint32_t>("leaf size");
-  d.max_depth = r.get<std::uint32_t>("max depth");
-  d.gamma = r.get_finite("gamma", 0);
-  d.curvature_c = r.get_finite("curvature c", 0);
-  d.lambda_max = r.get_finite("lambda max", 0);
+  get_pca_options(r, d);
   const auto bad = [&](const std::string& what) { throw FormatError(path + ": " + what); };
-  if (d.leaf_size < 1) bad("leaf size 0");
-  if (d.max_depth < 1 || d.max_depth > 30)
-    bad("max depth " + std::to_string(d.max_depth) + " outside 1..30");
-  if (!(d.gamma > 0 && d.gamma <= 10)) bad("gamma " + std::to_string(d.gamma) + " outside (0, 10]");
-  if (!(d.curvature_c >= 0)) bad("negative curvature c");
-  if (!(d.lambda_max >= 1 && d.lambda_max <= 16)) bad("lambda max outside [1, 16]");
   const auto input_points = r.get<std::uint64_t>("input point count");
   const auto nn = r.get<std::uint64_t>("node count");
   const auto kp = r.get<std::uint32_t>("position codebook size");

@@ -52,10 +52,6 @@ bool is_chunked_pmr(const std::string& dir) {
   return is_chunked_folder(dir, detail::chunked_pmr_format);
 }
 
-bool chunked_pmr_has_colours(const std::string& dir) {
-  return chunked_folder_has_colours(dir);
-}
-
 template <attributes A>
 chunked_pmr<A> chunked_pmr<A>::open(const std::string& dir) {
   check_chunked_folder(dir);

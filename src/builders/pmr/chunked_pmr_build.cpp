@@ -437,21 +437,17 @@ struct chunked_pmr_builder : chunked_pass_base {
     rep.estimation_seconds = std::chrono::duration<double>(clock::now() - t1).count();
     const auto t2 = clock::now();
     {
-      const std::string path = (tmp.path / "normals").string();
       std::optional<index_file> normals;
       std::vector<std::uint8_t> flip(m, 0);
       const bool orient = !src.attrs().normal && m > 1;
-      if (rank == 0) {
-        normals.emplace(path, n, true);
-        gather_normals(*normals);
+      share_normals(normals, n, [&](index_file& file) {
+        gather_normals(file);
         if (orient) {
-          flip = orient_chunks(*normals);
+          flip = orient_chunks(file);
           save_file_bytes(temp_path("flips", 0), {flip.begin(), flip.end()});
         }
-      }
-      barrier();
+      });
       if (rank != 0) {
-        normals.emplace(path, n, false);
         if (orient) flip = load_file_bytes(temp_path("flips", 0));
         if (flip.size() != m) throw IoError(temp_path("flips", 0) + ": cut short");
       }

@@ -12,10 +12,6 @@ bool is_chunked_point_octree(const std::string& dir) {
   return is_chunked_folder(dir, detail::chunked_top_format);
 }
 
-bool chunked_point_octree_has_colours(const std::string& dir) {
-  return chunked_folder_has_colours(dir);
-}
-
 template <attributes A>
 chunked_point_octree<A> chunked_point_octree<A>::open(const std::string& dir) {
   check_chunked_folder(dir);

@@ -571,14 +571,8 @@ struct chunked_point_octree_builder : chunked_pass_base {
     rep.estimation_seconds = std::chrono::duration<double>(clock::now() - t1).count();
     const auto t2 = clock::now();
     {
-      const std::string path = (tmp.path / "normals").string();
       std::optional<index_file> normals;
-      if (rank == 0) {
-        normals.emplace(path, n, true);
-        gather_normals(*normals);
-      }
-      barrier();
-      if (rank != 0) normals.emplace(path, n, false);
+      share_normals(normals, n, [&](index_file& file) { gather_normals(file); });
       attribute_passes(*normals);  // every rank: each needs its chunks' inputs
     }
     pass_s += std::chrono::duration<double>(clock::now() - t2).count();

@@ -147,6 +147,23 @@ struct level_builder {
   static bool progress(const rho_grid_options& o, double fr) {
     return !o.progress || o.progress(fr);
   }
+
+  /// After level l of k: reports the progress; throws Cancelled when the callback says stop.
+  static void level_done(const rho_grid_options& o, int l, int k) {
+    if (!progress(o, double(l + 1) / double(k + 1))) throw Cancelled("rho-grid: build cancelled");
+  }
+
+  /// Closes the build of g (its cell count checked by finish) and records its peak working set
+  /// and time since t0; returns its statistics for the caller's own fields.
+  static rho_grid_stats& finish(grid& g, std::uint64_t cells, const working_set& ws,
+                                std::chrono::steady_clock::time_point t0) {
+    access::finish(g, cells, "rho-grid build");
+    auto& st = access::stats(g);
+    st.peak_working_bytes = ws.peak;
+    st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    st.has_timings = true;
+    return st;
+  }
 };
 
 // ------------------------------------------------------------------------------------------
@@ -346,14 +363,9 @@ rho_grid<Rho> build_from_points(const point_cloud& c, const rho_grid_options& o)
     }
     if (cells > 0xffffffffull)
       throw InvalidArgument("rho-grid: more cells than 32-bit child indices address");
-    if (!lb::progress(o, double(l + 1) / double(k + 1)))
-      throw Cancelled("rho-grid: build cancelled");
+    lb::level_done(o, l, k);
   }
-  access::finish(g, cells, "rho-grid build");
-  auto& st = access::stats(g);
-  st.peak_working_bytes = ws.peak;
-  st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  st.has_timings = true;
+  auto& st = lb::finish(g, cells, ws, t0);
   st.estimated_normals = !estimated.empty();
   st.normals_filled = filled;
   st.estimation_seconds = st.estimated_normals || filled > 0 ? estimation_seconds : 0.0;
@@ -625,14 +637,9 @@ rho_grid<Rho> build_from_mesh(const triangle_mesh& m, const rho_grid_options& o)
       std::swap(level, next);
       ws.note((level.capacity() + next.capacity()) * sizeof(cell_pos));
     }
-    if (!lb::progress(o, double(l + 1) / double(k + 1)))
-      throw Cancelled("rho-grid: build cancelled");
+    lb::level_done(o, l, k);
   }
-  access::finish(g, cells, "rho-grid build");
-  auto& st = access::stats(g);
-  st.peak_working_bytes = ws.peak;
-  st.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  st.has_timings = true;
+  lb::finish(g, cells, ws, t0);
   return g;
 }
 

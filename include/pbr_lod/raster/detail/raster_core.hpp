@@ -652,92 +652,14 @@ inline void raster_ellipse(const Proj& pr, const vec3f& c, const vec3f& u, const
   raster_ellipse_mapped(pr, m, out);
 }
 
-/// raster_ellipse() of the ellipse map_ellipse() mapped.
-template <class Proj, bool Colour, bool Lit>
-inline void raster_ellipse_mapped(const Proj& pr, const ellipse_map& m,
-                                  const span_target<Colour, Lit>& out) {
+/// Calls f(index, key, e, g₃) for every pixel centre inside the mapped ellipse and behind the
+/// near plane (key ≤ 1/z_near), with g = P⁻¹(x, y, 1) and e = g₁² + g₂² (inside iff e ≤ g₃²).
+/// Scans the bounding box of the projected rectangle c ± u ± v clipped to w ≥ w_near, which
+/// contains the visible part of the ellipse's image: per pixel and in double, for splats that
+/// straddle the near plane and for the blending pass.
+template <class Proj, class F>
+inline void scan_clipped_ellipse(const Proj& pr, const ellipse_map& m, F&& f) {
   const hom4 &hc = m.hc, &hu = m.hu, &hv = m.hv;
-  const double* r1 = m.r1;
-  const double* r2 = m.r2;
-  const double* r3 = m.r3;
-  const double kx = m.kx, ky = m.ky, k0 = m.k0;
-  const int width = pr.width, height = pr.height;
-
-  if (m.in_front) {
-    // Whole ellipse in front of the near plane: its image is a bounded ellipse, scanned four
-    // pixels at a time; a pixel seen by two chunks gets the same value twice, which the strict
-    // depth test makes harmless. Rows narrower than four pixels (tiny viewports) write only
-    // their own lanes.
-    const auto write4 = out.four();
-    (void)scan_ellipse_conic(m, width, height, [&](std::size_t i, f4 key, f4 q, int lanes, int) {
-      write4(i, key, non_positive(q), lanes);
-    });
-    return;
-  }
-
-  // Straddles the near plane (perspective only). Bound the visible part by the bounding
-  // rectangle c ± u ± v clipped to w ≥ w_near, then test every pixel of that box.
-  const hom4 corner[4] = {
-      {hc.x + hu.x + hv.x, hc.y + hu.y + hv.y, hc.w + hu.w + hv.w, 0},
-      {hc.x - hu.x + hv.x, hc.y - hu.y + hv.y, hc.w - hu.w + hv.w, 0},
-      {hc.x - hu.x - hv.x, hc.y - hu.y - hv.y, hc.w - hu.w - hv.w, 0},
-      {hc.x + hu.x - hv.x, hc.y + hu.y - hv.y, hc.w + hu.w - hv.w, 0},
-  };
-  double xlo = std::numeric_limits<double>::infinity(), xhi = -xlo, ylo = xlo, yhi = -xlo;
-  const double wn = pr.w_near;
-  const auto add = [&](double x, double y, double w) {
-    xlo = std::min(xlo, x / w);
-    xhi = std::max(xhi, x / w);
-    ylo = std::min(ylo, y / w);
-    yhi = std::max(yhi, y / w);
-  };
-  for (int i = 0; i < 4; ++i) {
-    const hom4& a = corner[i];
-    const hom4& b = corner[(i + 1) % 4];
-    const bool ain = a.w >= wn, bin = b.w >= wn;
-    if (ain) add(a.x, a.y, a.w);
-    if (ain != bin) {
-      const double t = (wn - a.w) / (b.w - a.w);
-      add(a.x + t * (b.x - a.x), a.y + t * (b.y - a.y), wn);
-    }
-  }
-  const int i0 = first_centre_at_or_after(xlo, width), i1 = last_centre_at_or_before(xhi, width);
-  const int j0 = first_centre_at_or_after(ylo, height), j1 = last_centre_at_or_before(yhi, height);
-  const double key_near = pr.key_near;
-  for (int j = j0; j <= j1; ++j) {
-    const double py = j + 0.5;
-    const std::size_t row = static_cast<std::size_t>(j) * static_cast<std::size_t>(width);
-    for (int i = i0; i <= i1; ++i) {
-      const double px = i + 0.5;
-      const double g1 = r1[0] * px + r1[1] * py + r1[2];
-      const double g2 = r2[0] * px + r2[1] * py + r2[2];
-      const double g3 = r3[0] * px + r3[1] * py + r3[2];
-      if (!(g1 * g1 + g2 * g2 <= g3 * g3)) continue;
-      const double key = kx * px + ky * py + k0;
-      if (!(key <= key_near)) continue;  // in front of the near plane (or behind the eye)
-      out.write1(row + static_cast<std::size_t>(i), static_cast<float>(key), true);
-    }
-  }
-}
-
-/// Calls frag(index, key, r2) for every pixel centre inside the ellipse {c + s·u + t·v :
-/// s² + t² ≤ 1}, with r2 = s² + t² of the plane point the pixel sees: the radial coordinate of
-/// a blending weight. The same projective map as raster_ellipse (g = P⁻¹(x, y, 1), inside iff
-/// g₁² + g₂² ≤ g₃², (s, t) = (g₁, g₂)/g₃), evaluated per pixel in double over the bounding box of
-/// the projected rectangle c ± u ± v clipped at the near plane (which contains the ellipse's
-/// image). Plainer and slower than raster_ellipse's conic scan, and only the blending pass pays
-/// for it. No depth test: frag decides.
-template <class Proj, class Frag>
-inline void raster_ellipse_radial(const Proj& pr, const vec3f& c, const vec3f& u, const vec3f& v,
-                                  Frag&& frag) {
-  ellipse_map m;
-  if (!map_ellipse(pr, c, u, v, m)) return;
-  const hom4 &hc = m.hc, &hu = m.hu, &hv = m.hv;
-  const double* r1 = m.r1;
-  const double* r2 = m.r2;
-  const double* r3 = m.r3;
-  const double kx = m.kx, ky = m.ky, k0 = m.k0;
-
   double xlo = std::numeric_limits<double>::infinity(), xhi = -xlo, ylo = xlo, yhi = -xlo;
   const double wn = pr.w_near;
   const auto add = [&](double x, double y, double w) {
@@ -763,7 +685,7 @@ inline void raster_ellipse_radial(const Proj& pr, const vec3f& c, const vec3f& u
   const int width = pr.width, height = pr.height;
   const int i0 = first_centre_at_or_after(xlo, width), i1 = last_centre_at_or_before(xhi, width);
   const int j0 = first_centre_at_or_after(ylo, height), j1 = last_centre_at_or_before(yhi, height);
-  const double key_near = pr.key_near;
+  const double *r1 = m.r1, *r2 = m.r2, *r3 = m.r3;
   for (int j = j0; j <= j1; ++j) {
     const double py = j + 0.5;
     const std::size_t row = static_cast<std::size_t>(j) * static_cast<std::size_t>(width);
@@ -773,13 +695,54 @@ inline void raster_ellipse_radial(const Proj& pr, const vec3f& c, const vec3f& u
       const double g2 = r2[0] * px + r2[1] * py + r2[2];
       const double g3 = r3[0] * px + r3[1] * py + r3[2];
       const double e = g1 * g1 + g2 * g2;
-      if (!(e <= g3 * g3) || g3 == 0) continue;
-      const double key = kx * px + ky * py + k0;
-      if (!(key <= key_near)) continue;  // in front of the near plane
-      frag(row + static_cast<std::size_t>(i), static_cast<float>(key),
-           static_cast<float>(e / (g3 * g3)));
+      if (!(e <= g3 * g3)) continue;
+      const double key = m.kx * px + m.ky * py + m.k0;
+      if (!(key <= pr.key_near)) continue;  // in front of the near plane (or behind the eye)
+      f(row + static_cast<std::size_t>(i), key, e, g3);
     }
   }
+}
+
+/// raster_ellipse() of the ellipse map_ellipse() mapped.
+template <class Proj, bool Colour, bool Lit>
+inline void raster_ellipse_mapped(const Proj& pr, const ellipse_map& m,
+                                  const span_target<Colour, Lit>& out) {
+  if (m.in_front) {
+    // Whole ellipse in front of the near plane: its image is a bounded ellipse, scanned four
+    // pixels at a time; a pixel seen by two chunks gets the same value twice, which the strict
+    // depth test makes harmless. Rows narrower than four pixels (tiny viewports) write only
+    // their own lanes.
+    const auto write4 = out.four();
+    (void)scan_ellipse_conic(m, pr.width, pr.height,
+                             [&](std::size_t i, f4 key, f4 q, int lanes, int) {
+                               write4(i, key, non_positive(q), lanes);
+                             });
+    return;
+  }
+
+  // Straddles the near plane (perspective only): test every pixel of the box that bounds the
+  // visible part.
+  scan_clipped_ellipse(pr, m, [&](std::size_t index, double key, double, double) {
+    out.write1(index, static_cast<float>(key), true);
+  });
+}
+
+/// Calls frag(index, key, r2) for every pixel centre inside the ellipse {c + s·u + t·v :
+/// s² + t² ≤ 1}, with r2 = s² + t² of the plane point the pixel sees: the radial coordinate of
+/// a blending weight. The same projective map as raster_ellipse (g = P⁻¹(x, y, 1), inside iff
+/// g₁² + g₂² ≤ g₃², (s, t) = (g₁, g₂)/g₃), evaluated per pixel in double over the bounding box of
+/// the projected rectangle c ± u ± v clipped at the near plane (which contains the ellipse's
+/// image). Plainer and slower than raster_ellipse's conic scan, and only the blending pass pays
+/// for it. No depth test: frag decides.
+template <class Proj, class Frag>
+inline void raster_ellipse_radial(const Proj& pr, const vec3f& c, const vec3f& u, const vec3f& v,
+                                  Frag&& frag) {
+  ellipse_map m;
+  if (!map_ellipse(pr, c, u, v, m)) return;
+  scan_clipped_ellipse(pr, m, [&](std::size_t index, double key, double e, double g3) {
+    if (g3 == 0) return;
+    frag(index, static_cast<float>(key), static_cast<float>(e / (g3 * g3)));
+  });
 }
 
 // ---------------------------------------------------------------------------------------------
