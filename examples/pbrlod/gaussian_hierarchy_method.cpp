@@ -68,7 +68,10 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
   o.leaf_size = static_cast<int>(m.integer("leaf_size", 1, 1, 64));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   const auto opacity = static_cast<float>(m.number("opacity", 1.0, 0.0, 1.0));
-  m.finish("gaussian-hierarchy", "leaf_size, threads, opacity");
+  o.opacity = m.choice("merge", "grow", {"grow", "conserve"}) == "conserve"
+                  ? merged_opacity::conserve
+                  : merged_opacity::grow;
+  m.finish("gaussian-hierarchy", "leaf_size, threads, opacity, merge");
   // A Gaussian scene as it is; a mesh or a scan as flat Gaussians on its splats.
   const loaded_input& input = in.get();
   const gaussian_cloud g =

@@ -63,6 +63,7 @@ struct builder {
   gaussian_cloud& out;                // the store: n leaves' Gaussians, then the inner ones
   std::vector<node>& nodes;
   std::uint32_t n;
+  merged_opacity opacity;
 
   [[nodiscard]] std::uint32_t nodes_of(std::uint32_t c) const {
     return 2 * shape.leaves_known(c) - 1;
@@ -254,13 +255,19 @@ void builder::merge(const subtree& t) const {
   const std::uint32_t slot = n + t.inner;
   out.positions[slot] = mean.cast<float>();
   decompose(cov, side, out.scales[slot], out.rotations[slot]);
-  // Opacity: the weighted opacity-area conserved (above 1 where the children overlap, as the
-  // paper keeps it: the rasteriser's α = min(0.99, o·e^…) then draws a flat-topped footprint);
-  // a merged Gaussian of no size takes its most opaque part's.
+  // Opacity: the weighted opacity-area Σ oᵢS(sᵢ) conserved. Where the children overlap it
+  // exceeds the merged Gaussian's surface: the paper keeps o > 1 (conserve); grow keeps o = 1
+  // and scales the Gaussian by √o (S goes as s²), the same product in a valid 3DGS Gaussian (a
+  // file stores opacity as a logit), so a cut exports as drawn. A merged Gaussian of no size
+  // takes its most opaque part's opacity.
   float most = 0;
   for (const std::uint32_t p : parts) most = std::max(most, out.opacities[p]);
   const double area = surface(out.scales[slot]);
-  const double o = area > 0 && total > 0 ? total / area : double(most);
+  double o = area > 0 && total > 0 ? total / area : double(most);
+  if (opacity == merged_opacity::grow && o > 1 && std::isfinite(o)) {
+    out.scales[slot] *= static_cast<float>(std::sqrt(o));
+    o = 1;
+  }
   out.opacities[slot] = static_cast<float>(std::min(o, double(std::numeric_limits<float>::max())));
   // SH: the same weights.
   const std::size_t stride = out.sh_stride();
@@ -343,7 +350,7 @@ gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud& in,
     h.nodes_.resize(2 * std::size_t{leaves} - 1);
     std::vector<std::uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0u);
-    const builder b{in, shape, order, h.g_, h.nodes_, n};
+    const builder b{in, shape, order, h.g_, h.nodes_, n, o.opacity};
     const unsigned threads = resolve_threads(o.threads);
     std::vector<subtree> top;  // split here, merged last (parents before children)
     const std::vector<subtree> parts = top_subtrees(b, subtree{0, n, 0, 0}, threads, top);
