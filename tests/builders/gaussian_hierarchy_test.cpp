@@ -13,6 +13,8 @@
 
 #include <unistd.h>
 
+#include <Eigen/Eigenvalues>
+
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
@@ -199,6 +201,73 @@ TEST(GaussianHierarchy, InvariantsAgainstBruteForce) {
         EXPECT_GE(d.size, h.store().scales[d.gaussian].maxCoeff());
       }
     }
+  }
+}
+
+// Every inner node's Gaussian against the moment match of its children's, recomputed here in
+// double from the stored children (the merge's closed-form 3 × 3 eigen-decomposition checked
+// where it is least accurate: isotropic Gaussians, flat ones, coincident copies). With grow, Σ
+// is the match scaled by max(1, o·) (o· the conserved opacity), and the opacity is min(1, o·).
+TEST(GaussianMerge, EveryNodeIsTheMomentMatchOfItsChildren) {
+  gaussian_cloud in = random_cloud(2000, 0, 21);
+  for (std::size_t i = 0; i < in.size(); i += 3) in.scales[i] = vec3f::Constant(0.01f);
+  for (std::size_t i = 1; i < in.size(); i += 7) in.scales[i].z() = 0;
+  for (std::size_t i = 2; i + 1 < in.size(); i += 11) {
+    in.positions[i + 1] = in.positions[i];
+    in.scales[i + 1] = in.scales[i];
+    in.rotations[i + 1] = in.rotations[i];
+  }
+  const auto sym = [](const std::array<float, 6>& c) {
+    Eigen::Matrix3d m;
+    m << c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5];
+    return m;
+  };
+  const auto surface = [](const vec3f& v) {
+    return double(v[0]) * v[1] + double(v[0]) * v[2] + double(v[1]) * v[2];
+  };
+  for (const merged_opacity rule : {merged_opacity::conserve, merged_opacity::grow}) {
+    const auto h = build_gaussian_hierarchy(in, {.opacity = rule});
+    const gaussian_cloud& g = h.store();
+    std::size_t checked = 0;
+    for (std::uint32_t n = 0; n < h.nodes().size(); ++n) {
+      if (h.is_leaf(n)) continue;
+      std::vector<std::uint32_t> parts;
+      for (const auto c : h.children(n)) {
+        const auto& d = h.nodes()[c];
+        if (d.count == 0) parts.push_back(d.gaussian);
+        for (std::uint32_t k = 0; k < d.count; ++k) parts.push_back(d.gaussian + k);
+      }
+      double total = 0;
+      std::vector<double> w;
+      for (const auto p : parts) total += w.emplace_back(g.opacities[p] * surface(g.scales[p]));
+      if (!(total > 0)) continue;  // the equal-weights fallback: DegenerateInputStaysFinite
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (std::size_t k = 0; k < parts.size(); ++k)
+        mean += w[k] / total * g.positions[parts[k]].cast<double>();
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (std::size_t k = 0; k < parts.size(); ++k) {
+        const Eigen::Vector3d d = g.positions[parts[k]].cast<double>() - mean;
+        cov += w[k] / total *
+               (sym(gaussian_covariance(g.scales[parts[k]], g.rotations[parts[k]])) +
+                d * d.transpose());
+      }
+      const std::uint32_t r = h.nodes()[n].gaussian;
+      // The conserved opacity from the match's own surface (its eigenvalues' square roots).
+      const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
+      const vec3f s(float(std::sqrt(std::max(ev[0], 0.0))), float(std::sqrt(std::max(ev[1], 0.0))),
+                    float(std::sqrt(std::max(ev[2], 0.0))));
+      const double area = surface(s);
+      if (!(area > 1e-12)) continue;
+      const double o = total / area;
+      const bool grown = rule == merged_opacity::grow && o > 1;
+      const Eigen::Matrix3d want = grown ? Eigen::Matrix3d(cov * o) : cov;
+      const Eigen::Matrix3d got = sym(gaussian_covariance(g.scales[r], g.rotations[r]));
+      ASSERT_LE((got - want).norm(), 1e-4 * want.norm() + 1e-12) << "node " << n;
+      ASSERT_NEAR(g.opacities[r], grown ? 1.0 : o, 1e-3 * std::max(1.0, o)) << "node " << n;
+      ASSERT_LE((g.positions[r].cast<double>() - mean).norm(), 1e-6) << "node " << n;
+      ++checked;
+    }
+    EXPECT_GT(checked, h.nodes().size() / 2 - 50);  // every inner node but the degenerate
   }
 }
 
