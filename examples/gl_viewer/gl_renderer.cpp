@@ -10,9 +10,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
+
+#include "pbr_lod/raster/gaussians.hpp"
 
 namespace gl_viewer {
 namespace {
@@ -286,6 +291,61 @@ void main() {
 }
 )";
 
+// Gaussians (raster/gaussians.hpp): each projected on the CPU by the rasteriser's own
+// project_gaussian() (EWA with 3DGS's low-pass; SH colour for the view), drawn as one instanced
+// quad over the pixel box outside which α < 1/255, sorted back to front and blended "over":
+// colour = α·c + (1 − α)·dst, which composites the CPU's front-to-back sum in reverse order;
+// the alpha channel accumulates 1 − T (the pixel's coverage: T ≤ ½). Depth-tested against the
+// frame's opaque primitives, never written.
+constexpr const char* kGaussianVs = R"(
+layout(location = 0) in vec2 g_centre_in;  // image pixels, y down
+layout(location = 1) in vec3 g_conic_in;
+layout(location = 2) in float g_opacity_in;
+layout(location = 3) in vec3 g_rgb_in;
+layout(location = 4) in vec4 g_box;  // x0, y0, x1, y1: image pixels, y down
+layout(location = 5) in float g_depth;
+uniform vec2 viewport;
+flat out vec2 g_centre;
+flat out vec3 g_conic;
+flat out float g_opacity;
+flat out vec3 g_rgb;
+void main() {
+  vec2 corner = vec2((gl_VertexID & 1) != 0 ? g_box.z : g_box.x,
+                     (gl_VertexID & 2) != 0 ? g_box.w : g_box.y);
+  float z = clamp(proj.z + proj.w / g_depth, -1.0, 1.0);
+  gl_Position = vec4(2.0 * corner.x / viewport.x - 1.0, 1.0 - 2.0 * corner.y / viewport.y, z, 1.0);
+  g_centre = g_centre_in;
+  g_conic = g_conic_in;
+  g_opacity = g_opacity_in;
+  g_rgb = g_rgb_in;
+}
+)";
+// gaussian_alpha() and the 1/255 skip, at the pixel centre in image coordinates.
+constexpr const char* kGaussianFs = R"(
+uniform vec2 viewport;
+flat in vec2 g_centre;
+flat in vec3 g_conic;
+flat in float g_opacity;
+flat in vec3 g_rgb;
+void main() {
+  vec2 d = g_centre - vec2(gl_FragCoord.x, viewport.y - gl_FragCoord.y);
+  float power = -0.5 * (g_conic.x * d.x * d.x + g_conic.z * d.y * d.y) - g_conic.y * d.x * d.y;
+  if (power > 0.0) discard;
+  float alpha = min(0.99, g_opacity * exp(power));
+  if (alpha < 1.0 / 255.0) discard;
+  out_colour = vec4(g_rgb, alpha);
+}
+)";
+
+struct gaussian_instance {
+  float centre[2];
+  float conic[3];
+  float opacity;
+  float rgb[3];
+  float box[4];
+  float depth;
+};
+
 struct point_vertex {
   float position[3];
   float size_px;
@@ -363,8 +423,8 @@ void attribute(GLuint index, GLint size, GLenum type, GLsizei stride, std::size_
 }  // namespace
 
 struct gl_renderer::impl {
-  GLuint programs[4] = {};  // points, splats, triangles, blend normalisation
-  GLuint vao[4] = {}, vbo[3] = {};
+  GLuint programs[5] = {};  // points, splats, triangles, blend normalisation, Gaussians
+  GLuint vao[5] = {}, vbo[4] = {};
   /// Blending's offscreen targets, made at the first blended frame and remade when the size
   /// changes: the visibility pass's colour (RGBA8) and depth (32-bit float), and the four
   /// accumulation sums (RGBA32F, summed by additive blending).
@@ -374,6 +434,7 @@ struct gl_renderer::impl {
   std::vector<point_vertex> points;
   std::vector<splat_instance> splats;
   std::vector<triangle_vertex> triangles;
+  std::vector<gaussian_instance> gaussians;  // in arrival order; drawn sorted
   /// The frame's texture (one per frame: a triangle with another is drawn untextured) and the
   /// GL texture holding the image last uploaded.
   const pbr_lod::texture_image* frame_texture = nullptr;
@@ -464,8 +525,9 @@ gl_renderer::gl_renderer() : d_(std::make_unique<impl>()) {
   d_->programs[1] = link(kSplatVs, kSplatFs);
   d_->programs[2] = link(kTriangleVs, kTriangleFs);
   d_->programs[3] = link(kNormaliseVs, kNormaliseFs);
-  glGenVertexArrays(4, d_->vao);
-  glGenBuffers(3, d_->vbo);
+  d_->programs[4] = link(kGaussianVs, kGaussianFs);
+  glGenVertexArrays(5, d_->vao);
+  glGenBuffers(4, d_->vbo);
   constexpr GLenum F = GL_FLOAT, B = GL_UNSIGNED_BYTE;
 
   glBindVertexArray(d_->vao[0]);
@@ -492,6 +554,16 @@ gl_renderer::gl_renderer() : d_(std::make_unique<impl>()) {
   attribute(1, 3, F, ts, offsetof(triangle_vertex, normal));
   attribute(2, 3, B, ts, offsetof(triangle_vertex, colour));
   attribute(3, 3, F, ts, offsetof(triangle_vertex, texcoord));
+
+  glBindVertexArray(d_->vao[4]);
+  glBindBuffer(GL_ARRAY_BUFFER, d_->vbo[3]);
+  constexpr auto gs = static_cast<GLsizei>(sizeof(gaussian_instance));
+  attribute(0, 2, F, gs, offsetof(gaussian_instance, centre), 1);
+  attribute(1, 3, F, gs, offsetof(gaussian_instance, conic), 1);
+  attribute(2, 1, F, gs, offsetof(gaussian_instance, opacity), 1);
+  attribute(3, 3, F, gs, offsetof(gaussian_instance, rgb), 1);
+  attribute(4, 4, F, gs, offsetof(gaussian_instance, box), 1);
+  attribute(5, 1, F, gs, offsetof(gaussian_instance, depth), 1);
   glBindVertexArray(0);
   glGenTextures(1, &d_->gl_texture);
 }
@@ -499,8 +571,8 @@ gl_renderer::gl_renderer() : d_(std::make_unique<impl>()) {
 gl_renderer::~gl_renderer() {
   glDeleteTextures(1, &d_->gl_texture);
   d_->free_targets();
-  glDeleteBuffers(3, d_->vbo);
-  glDeleteVertexArrays(4, d_->vao);
+  glDeleteBuffers(4, d_->vbo);
+  glDeleteVertexArrays(5, d_->vao);
   for (const GLuint p : d_->programs) glDeleteProgram(p);
 }
 
@@ -516,6 +588,7 @@ void gl_renderer::begin(const pbr_lod::view& v, const pbr_lod::render_options& o
   d_->points.clear();
   d_->splats.clear();
   d_->triangles.clear();
+  d_->gaussians.clear();
   d_->frame_texture = nullptr;
   counts_ = {};
 }
@@ -549,6 +622,27 @@ void gl_renderer::triangle(const pbr_lod::triangle_prim<host_attributes>& t) {
   }
 }
 
+void gl_renderer::gaussian(const pbr_lod::gaussian_prim& g) {
+  const pbr_lod::detail::gaussian_2d s = pbr_lod::detail::project_gaussian(d_->v, g);
+  ++counts_.gaussians;
+  if (s.status != pbr_lod::detail::gaussian_2d::fate::drawn) return;
+  gaussian_instance q{};
+  q.centre[0] = s.x;
+  q.centre[1] = s.y;
+  q.conic[0] = s.a;
+  q.conic[1] = s.b;
+  q.conic[2] = s.c;
+  q.opacity = s.opacity;
+  for (int c = 0; c < 3; ++c) q.rgb[c] = s.rgb[static_cast<std::size_t>(c)];
+  // The pixels [px0, px1] × [py0, py1]: the quad from the first one's corner to past the last.
+  q.box[0] = static_cast<float>(s.px0);
+  q.box[1] = static_cast<float>(s.py0);
+  q.box[2] = static_cast<float>(s.px1 + 1);
+  q.box[3] = static_cast<float>(s.py1 + 1);
+  q.depth = s.depth;
+  d_->gaussians.push_back(q);
+}
+
 void gl_renderer::textured_triangle(const pbr_lod::textured_triangle_prim<host_attributes>& t) {
   const pbr_lod::texture_image* tex = t.texture;
   if (tex == nullptr || tex->width <= 0 || tex->height <= 0 ||
@@ -574,7 +668,7 @@ void gl_renderer::textured_triangle(const pbr_lod::textured_triangle_prim<host_a
 double gl_renderer::draw() {
   const auto t0 = std::chrono::steady_clock::now();
   impl& d = *d_;
-  counts_ = {d.points.size(), d.splats.size(), d.triangles.size() / 3};
+  counts_ = {d.points.size(), d.splats.size(), d.triangles.size() / 3, counts_.gaussians};
   // Blending as the CPU rasteriser applies it: with shading or colour to average, and only
   // when there are splats or points (triangles alone draw the unblended image).
   const bool blend = d.o.fx.blending && (d.o.fx.shading || d.o.fx.colour) &&
@@ -691,11 +785,41 @@ double gl_renderer::draw() {
     glActiveTexture(GL_TEXTURE0);
     glDepthFunc(GL_LESS);
   }
+  if (!d.gaussians.empty()) draw_gaussians();
   glBindVertexArray(0);
   glFinish();
   if (const GLenum e = glGetError(); e != GL_NO_ERROR)
     throw std::runtime_error("gl_viewer: OpenGL error " + std::to_string(e) + " while drawing");
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void gl_renderer::draw_gaussians() {
+  impl& d = *d_;
+  // Back to front: the reverse of the CPU's order (view depth, then arrival), whose keys are
+  // the depth's bits (depths are > 0) and the index.
+  std::vector<std::uint64_t> keys(d.gaussians.size());
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &d.gaussians[i].depth, sizeof bits);
+    keys[i] = std::uint64_t{bits} << 32 | i;
+  }
+  std::sort(keys.begin(), keys.end(), std::greater<>());
+  std::vector<gaussian_instance> sorted(keys.size());
+  for (std::size_t i = 0; i < keys.size(); ++i) sorted[i] = d.gaussians[keys[i] & 0xffffffffu];
+  glBindVertexArray(d.vao[4]);
+  glBindBuffer(GL_ARRAY_BUFFER, d.vbo[3]);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(sorted.size() * sizeof(gaussian_instance)),
+               sorted.data(), GL_STREAM_DRAW);
+  d.uniforms(d.programs[4]);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_FALSE);
+  glEnable(GL_BLEND);
+  glBlendEquation(GL_FUNC_ADD);
+  glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+  glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, static_cast<GLsizei>(sorted.size()));
+  glDisable(GL_BLEND);
+  glDepthMask(GL_TRUE);
 }
 
 pbr_lod::image gl_renderer::read_image() const {
@@ -711,7 +835,15 @@ pbr_lod::image gl_renderer::read_image() const {
     for (int x = 0; x < w; ++x) {
       const std::size_t s = row + static_cast<std::size_t>(x), i = img.index(x, y);
       const float dw = depth[s];
-      if (!(dw < 1.0f)) continue;  // cleared: background
+      if (!(dw < 1.0f)) {
+        // No opaque primitive: background, or Gaussians. Their coverage is the CPU's (T ≤ ½:
+        // alpha ≥ ½); the depth of a Gaussian-only pixel is not computed here (the CPU's is the
+        // median's), so it reads as the far plane.
+        if (d_->gaussians.empty() || rgba[4 * s + 3] < 128) continue;
+        img.colour[i] = {rgba[4 * s], rgba[4 * s + 1], rgba[4 * s + 2]};
+        img.depth[i] = d_->v.z_far;
+        continue;
+      }
       img.colour[i] = {rgba[4 * s], rgba[4 * s + 1], rgba[4 * s + 2]};
       // window depth → z_ndc = a + b / z_eye
       const float ndc = 2 * dw - 1;

@@ -11,6 +11,9 @@
 //              raster_ellipse computes it, with the depth of the splat's plane.
 //   triangles  GL_TRIANGLES with per-vertex normal and colour, shaded per fragment; textured
 //              ones (POP leaves) sample their texture (GL_LINEAR, GL_REPEAT) for the colour.
+//   Gaussians  one instanced quad each over the pixels where α ≥ 1/255, projected on the CPU by
+//              raster/gaussians.hpp's project_gaussian (EWA, SH colour), sorted back to front
+//              and blended "over": the CPU's front-to-back compositing in reverse order.
 //
 // Shading as the CPU rasteriser: Lambert with one directional light and ambient, two-sided
 // (the normal turned towards the eye; for triangles, flipped on the back face), per primitive for
@@ -40,8 +43,8 @@ using pbrlod_tool::host_attributes;
 
 /// Primitives of the last frame, by kind.
 struct frame_counts {
-  std::size_t points = 0, splats = 0, triangles = 0;
-  [[nodiscard]] std::size_t total() const { return points + splats + triangles; }
+  std::size_t points = 0, splats = 0, triangles = 0, gaussians = 0;
+  [[nodiscard]] std::size_t total() const { return points + splats + triangles + gaussians; }
 };
 
 class gl_renderer final : public pbrlod_tool::host_sink {
@@ -59,6 +62,7 @@ class gl_renderer final : public pbrlod_tool::host_sink {
   void splat(const pbr_lod::splat_prim<host_attributes>& s) override;
   void triangle(const pbr_lod::triangle_prim<host_attributes>& t) override;
   void textured_triangle(const pbr_lod::textured_triangle_prim<host_attributes>& t) override;
+  void gaussian(const pbr_lod::gaussian_prim& g) override;
 
   /// Uploads the frame's arrays and draws them into the bound framebuffer, whose size must be
   /// the view's. Returns the GPU time (glFinish included) in seconds.
@@ -69,6 +73,7 @@ class gl_renderer final : public pbrlod_tool::host_sink {
   [[nodiscard]] const frame_counts& counts() const { return counts_; }
 
  private:
+  void draw_gaussians();
   struct impl;
   std::unique_ptr<impl> d_;
   frame_counts counts_;

@@ -68,6 +68,7 @@ int run_headless(const options& opt, const scene& sc) {
   j.integer("points", static_cast<long long>(gl.counts().points));
   j.integer("splats", static_cast<long long>(gl.counts().splats));
   j.integer("triangles", static_cast<long long>(gl.counts().triangles));
+  j.integer("gaussians", static_cast<long long>(gl.counts().gaussians));
   j.integer("covered_pixels", static_cast<long long>(img.covered_count()));
   j.num("select_seconds", sel.seconds).num("gl_seconds", gl_seconds);
   if (!opt.cpu_output.empty()) {

@@ -26,10 +26,35 @@ json gaussian_stats_json(const gaussian_hierarchy& h, const std::string& path) {
   return j;
 }
 
+/// The cut sent to a host renderer as Gaussians (gl_viewer draws them as sorted quads; a host
+/// without gaussian() gets their splats). The hierarchy emits nothing else; its attributes are
+/// the host's.
+frame host_gaussians(const gaussian_hierarchy& h, const view& v, const render_options& o,
+                     const traverse_options& t, host_sink& host) {
+  static_assert(gaussian_hierarchy::attrs == host_attributes);
+  struct to_host {
+    host_sink& out;
+    void point(const point_prim<host_attributes>& p) { out.point(p); }
+    void splat(const splat_prim<host_attributes>& s) { out.splat(s); }
+    void triangle(const triangle_prim<host_attributes>& q) { out.triangle(q); }
+    void gaussian(const gaussian_prim& g) { out.gaussian(g); }
+  } sink{host};
+  frame f;
+  render_options ho = o;
+  ho.fx = effects{.colour = true};
+  f.fx = ho.fx;
+  const auto t0 = clock_type::now();
+  host.begin(v, ho, gaussian_hierarchy::attrs);
+  f.st = traverse(h, v, t, sink, gaussian_policy{});
+  f.seconds = seconds_since(t0);
+  f.extra.integer("gaussians", static_cast<long long>(f.st.gaussians));
+  return f;
+}
+
 /// Draws the cut of Kerbl et al. 2024 §4.2 (gaussian_policy) with the Gaussian rasteriser
 /// (raster/gaussians.hpp): EWA splatting, sorted, composited front to back. The effects list's
 /// shading, shadows and hole filling do not apply to Gaussians (their colour is their own);
-/// a host renderer gets each Gaussian as an ellipse splat (as_splat_prim).
+/// a host renderer gets the Gaussians (host_gaussians).
 struct gaussian_method_traits {
   std::pair<vec3d, double> input_bounds(const gaussian_hierarchy& h) const {
     std::size_t n = h.input_gaussians();
@@ -40,7 +65,7 @@ struct gaussian_method_traits {
     const view v(r.cam, h.origin());
     const render_options o = lod_render_options(r.view, true);
     const traverse_options t{.tolerance_px = r.tolerance};
-    if (r.host) return host_frame<all_effects>(h, v, o, t, gaussian_policy{}, *r.host);
+    if (r.host) return host_gaussians(h, v, o, t, *r.host);
     frame f;
     f.fx = effects{.colour = true};
     const auto t0 = clock_type::now();

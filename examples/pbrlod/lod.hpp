@@ -64,6 +64,9 @@ class host_sink {
   virtual void textured_triangle(const textured_triangle_prim<host_attributes>& t) {
     triangle(t.triangle);
   }
+  /// A 3-D Gaussian (a Gaussian hierarchy's cut: the primitives of that frame); a host that does
+  /// not draw Gaussians gets its ellipse splat (as_splat_prim, as the z-buffer rasteriser does).
+  virtual void gaussian(const gaussian_prim& g) { splat(as_splat_prim<host_attributes>(g)); }
 };
 
 /// What one frame is drawn from.
