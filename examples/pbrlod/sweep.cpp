@@ -88,8 +88,8 @@ struct sweep_row {
   std::string builder, input, setting = "default", view;
   float tolerance = 0;
   double build_seconds = 0, frame_seconds = 0, traverse_seconds = 0, raster_seconds = 0;
-  std::size_t points = 0, splats = 0, triangles = 0;
-  double psnr = 0, holes = 0, ssim = 0, psnr_input = 0, holes_input = 0;
+  std::size_t points = 0, splats = 0, triangles = 0, gaussians = 0;
+  double psnr = 0, holes = 0, ssim = 0, psnr_input = 0, holes_input = 0, ssim_input = 0;
   /// What the user sees, against the input's own render: PSNR over the pixels ≥ 2 px inside its
   /// silhouette, and the silhouette IoU (raster/metrics.hpp compare_to_input).
   double psnr_interior = 0, silhouette_iou = 0;
@@ -307,9 +307,11 @@ void sweep_builder(const method_entry& m, const sweep_input& in, const sweep_pla
       row.points = f.st.points;
       row.splats = f.st.splats;
       row.triangles = f.st.triangles;
+      row.gaussians = f.st.gaussians;
       row.psnr = e.psnr;
       row.holes = e.hole_fraction;
       row.ssim = ssim(finest, f.img);
+      row.ssim_input = ssim(input_refs[vi], f.img);
       row.psnr_input = ei.psnr;
       row.holes_input = ei.hole_fraction;
       row.psnr_interior = like.psnr_interior;
@@ -467,6 +469,7 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
       row.psnr = e.psnr;
       row.holes = e.hole_fraction;
       row.ssim = ssim(finest_img[vi], img);
+      row.ssim_input = ssim(input_refs[vi], img);
       row.psnr_input = ei.psnr;
       row.holes_input = ei.hole_fraction;
       row.psnr_interior = like.psnr_interior;
@@ -492,8 +495,10 @@ void sweep_peer(const peer_entry& peer, const sweep_input& in, const sweep_plan&
 
 const char* const csv_header =
     "builder,input,setting,tolerance,view,build_seconds,frame_seconds,traverse_seconds,"
-    "raster_seconds,points,splats,triangles,primitives,psnr,holes,ssim,psnr_input,holes_input,"
-    "psnr_interior,silhouette_iou,file_bytes,bytes_per_input_point,bytes_per_sample,hausdorff,"
+    "raster_seconds,points,splats,triangles,gaussians,primitives,psnr,holes,ssim,psnr_input,holes_"
+    "input,"
+    "ssim_input,psnr_interior,silhouette_iou,file_bytes,bytes_per_input_point,bytes_per_sample,"
+    "hausdorff,"
     "hausdorff_fwd,hausdorff_bwd,"
     "mean_fwd,mean_bwd,rms_fwd,rms_bwd,build_cpu_seconds,peak_build_mib,"
     "build_bytes_per_input_point";
@@ -511,9 +516,10 @@ std::string csv_line(const sweep_row& r) {
   o << r.builder << ',' << r.input << ',' << r.setting << ',' << number(r.tolerance) << ','
     << r.view << ',' << number(r.build_seconds) << ',' << number(r.frame_seconds) << ','
     << number(r.traverse_seconds) << ',' << number(r.raster_seconds) << ',' << r.points << ','
-    << r.splats << ',' << r.triangles << ',' << r.points + r.splats + r.triangles << ','
-    << number(r.psnr) << ',' << number(r.holes) << ',' << number(r.ssim) << ','
-    << number(r.psnr_input) << ',' << number(r.holes_input) << ',' << number(r.psnr_interior) << ','
+    << r.splats << ',' << r.triangles << ',' << r.gaussians << ','
+    << r.points + r.splats + r.triangles + r.gaussians << ',' << number(r.psnr) << ','
+    << number(r.holes) << ',' << number(r.ssim) << ',' << number(r.psnr_input) << ','
+    << number(r.holes_input) << ',' << number(r.ssim_input) << ',' << number(r.psnr_interior) << ','
     << number(r.silhouette_iou) << ',' << r.file_bytes << ',' << number(r.bytes_per_input_point)
     << ',' << number(r.bytes_per_sample);
   for (const double v :
@@ -532,8 +538,10 @@ json row_json(const sweep_row& r) {
   j.integer("points", static_cast<long long>(r.points));
   j.integer("splats", static_cast<long long>(r.splats));
   j.integer("triangles", static_cast<long long>(r.triangles));
+  j.integer("gaussians", static_cast<long long>(r.gaussians));
   j.num("psnr", r.psnr).num("holes", r.holes).num("ssim", r.ssim);
   j.num("psnr_input", r.psnr_input).num("holes_input", r.holes_input);
+  j.num("ssim_input", r.ssim_input);
   j.num("psnr_interior", r.psnr_interior).num("silhouette_iou", r.silhouette_iou);
   j.integer("file_bytes", static_cast<long long>(r.file_bytes));
   j.num("bytes_per_input_point", r.bytes_per_input_point);
