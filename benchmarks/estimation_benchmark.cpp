@@ -23,6 +23,7 @@
 #include "estimation_inputs.hpp"
 #include "pbr_lod/builders/point_octree.hpp"
 #include "pbr_lod/core/estimation.hpp"
+#include "pbr_lod/core/grid_knn.hpp"
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/png.hpp"
@@ -324,6 +325,37 @@ void bm_knn_graph(benchmark::State& state, const std::string& name) {
   rate(state, in.positions.size());
 }
 BENCHMARK_CAPTURE(bm_knn_graph, wavy_1M, std::string("wavy1000000"))
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
+
+// ... the uniform grid's table (core/grid_knn.hpp: the same rows as the k-d tree's) ...
+void bm_knn_grid(benchmark::State& state, const std::string& name) {
+  const estimation_input& in = estimation_inputs::get(name);
+  // In Morton order, as the estimation queries (and as nearest_neighbour_graph sorts them).
+  std::vector<vec3f> sorted;
+  for (const auto i : morton_order(in.positions)) sorted.push_back(in.positions[i]);
+  for (auto _ : state) {
+    auto t = grid_knn_table(sorted, 16, static_cast<unsigned>(state.range(0)));
+    benchmark::DoNotOptimize(t.data());
+  }
+  rate(state, in.positions.size());
+}
+BENCHMARK_CAPTURE(bm_knn_grid, wavy_1M, std::string("wavy1000000"))
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
+BENCHMARK_CAPTURE(bm_knn_grid, lidar_500k, std::string("lidar500000"))
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
+BENCHMARK_CAPTURE(bm_knn_graph, lidar_500k, std::string("lidar500000"))
     ->Arg(1)
     ->Arg(2)
     ->Unit(benchmark::kMillisecond)

@@ -26,6 +26,7 @@
 
 #include "moment_ellipse.hpp"
 #include "pbr_lod/core/error.hpp"
+#include "pbr_lod/core/grid_knn.hpp"
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/parallel.hpp"
 
@@ -636,19 +637,20 @@ void check_options(const estimation_options& opt) {
     throw InvalidArgument("estimate_normals: the viewpoint is not finite");
 }
 
-/// The estimators' common start: the points sorted (duplicates collapsed) and indexed, and each
-/// one's `stride` nearest in a table, stride = k clamped to the distinct points; reports
-/// progress 0.1 after the index and `done` after the table.
+/// The estimators' common start: the points sorted (duplicates collapsed), and each one's
+/// `stride` nearest in a table, stride = k clamped to the distinct points; reports progress 0.1
+/// after sorting and `done` after the table. The table comes from the uniform grid
+/// (core/grid_knn.hpp: FLANN's rows, bit for bit, faster on scans); the FLANN index only where
+/// a caller searches further (the ellipses' wider neighbourhoods: index()).
 struct neighbourhoods {
   sorted_points s;
-  knn_index index;
   int stride;
   std::vector<std::uint32_t> table;
   neighbourhoods(std::span<const vec3f> positions, int k, unsigned threads,
                  const estimation_options& opt, double done)
-      : s(sort_points(positions)), index(s.pos), stride(clamp_k(k, s.pos.size())) {
+      : s(sort_points(positions)), stride(clamp_k(k, s.pos.size())) {
     report(opt, 0.1);
-    table = knn_table(s.pos, index, stride, threads);
+    table = grid_knn_table(s.pos, stride, threads);
     report(opt, done);
   }
 };
@@ -706,7 +708,7 @@ estimated_splats estimate_normals_and_ellipses(std::span<const vec3f> positions,
   const int ke = clamp_k(opt.k_ellipses, nb.s.pos.size());
   const int stride = nb.stride;  // = max(kn, ke): clamping is monotone
   const sorted_points& s = nb.s;
-  const knn_index& index = nb.index;
+  const knn_index index(s.pos);
   const auto& table = nb.table;
   const std::vector<vec3f> normals = normals_from(s.pos, table, stride, kn, opt, threads);
   report(opt, 0.85);
