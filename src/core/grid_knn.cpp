@@ -8,6 +8,7 @@
 
 #include <string>
 
+#include "knn_order.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/knn.hpp"
 #include "pbr_lod/core/parallel.hpp"
@@ -142,38 +143,26 @@ grid make_grid(std::span<const vec3f> pts, int k) {
   return g;
 }
 
-/// The k best (distance, index) of one query, ordered as knn.cpp's sorted_result orders them.
+/// The k best (distance, index) of one query, in the k-d tree's order (knn_order.hpp).
 class best_k {
  public:
-  best_k(std::size_t k, std::uint32_t* idx, const vec3f* pts) : k_(k), idx_(idx), pts_(pts) {
+  best_k(std::size_t k, std::uint32_t* idx, const vec3f* pts)
+      : k_(k), idx_(idx), coords_(reinterpret_cast<const float*>(pts)) {
+    static_assert(sizeof(vec3f) == 3 * sizeof(float));
     dist_.resize(k);
   }
   void reset() { count_ = 0; }
   void offer(float d, std::uint32_t id) {
-    if (count_ == k_ && !less(d, id, dist_[k_ - 1], idx_[k_ - 1])) return;
-    std::size_t i = count_ < k_ ? count_++ : k_ - 1;
-    for (; i > 0 && less(d, id, dist_[i - 1], idx_[i - 1]); --i) {
-      dist_[i] = dist_[i - 1];
-      idx_[i] = idx_[i - 1];
-    }
-    dist_[i] = d;
-    idx_[i] = id;
+    (void)detail::knn_insert(count_, k_, idx_, dist_.data(), d, id, coords_);
   }
   [[nodiscard]] bool full() const { return count_ == k_; }
   [[nodiscard]] float worst() const { return dist_[k_ - 1]; }
   void retarget(std::uint32_t* idx) { idx_ = idx; }
 
  private:
-  [[nodiscard]] bool less(float d, std::uint32_t i, float d2, std::uint32_t i2) const {
-    if (d != d2) return d < d2;
-    const vec3f &a = pts_[i], &b = pts_[i2];
-    for (int c = 0; c < 3; ++c)
-      if (a[c] != b[c]) return a[c] < b[c];
-    return i < i2;
-  }
   std::size_t k_, count_ = 0;
   std::uint32_t* idx_;
-  const vec3f* pts_;
+  const float* coords_;
   std::vector<float> dist_;
 };
 

@@ -12,6 +12,7 @@
 #include <string>
 #include <thread>
 
+#include "knn_order.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/parallel.hpp"
 
@@ -24,11 +25,10 @@ namespace {
 // leaves cost a deeper tree and more index memory for nothing.
 constexpr int leaf_size = 16;
 
-/// Keeps the k best (distance, index) pairs in caller-owned arrays, ordered by distance, then
-/// equal distances by position (x, then y, then z) and by index — so that ties come out the
-/// same whatever order the tree visits them in, and, being decided by where the points are and
-/// not by their numbering, the same in any subset that holds them (the chunked build searches
-/// a chunk and its halo for the neighbours the whole input gives: chunked_point_octree.hpp).
+/// Keeps the k best (distance, index) pairs in caller-owned arrays in knn_less order
+/// (knn_order.hpp): ties decided by where the points are, the same in any subset that holds them
+/// (the chunked build searches a chunk and its halo for the neighbours the whole input gives:
+/// chunked_point_octree.hpp).
 class sorted_result final : public flann::ResultSet<float> {
  public:
   sorted_result(std::size_t capacity, std::uint32_t* idx, float* dist, const float* coords)
@@ -43,28 +43,14 @@ class sorted_result final : public flann::ResultSet<float> {
   // the tree asks for it at every node it visits.
   [[nodiscard]] float worstDist() const override { return worst_; }
   void addPoint(float dist, std::size_t index) override {
-    const auto id = static_cast<std::uint32_t>(index);
-    if (full() && !less(dist, id, dist_[capacity_ - 1], idx_[capacity_ - 1])) return;
-    std::size_t i = count_ < capacity_ ? count_++ : capacity_ - 1;
-    for (; i > 0 && less(dist, id, dist_[i - 1], idx_[i - 1]); --i) {
-      dist_[i] = dist_[i - 1];
-      idx_[i] = idx_[i - 1];
-    }
-    dist_[i] = dist;
-    idx_[i] = id;
-    if (full())
+    if (detail::knn_insert(count_, capacity_, idx_, dist_, dist, static_cast<std::uint32_t>(index),
+                           coords_) &&
+        full())
       worst_ = std::nextafter(dist_[capacity_ - 1], std::numeric_limits<float>::infinity());
   }
   [[nodiscard]] std::size_t size() const { return count_; }
 
  private:
-  [[nodiscard]] bool less(float d, std::uint32_t i, float d2, std::uint32_t i2) const {
-    if (d != d2) return d < d2;
-    const float *a = coords_ + 3 * std::size_t{i}, *b = coords_ + 3 * std::size_t{i2};
-    for (int c = 0; c < 3; ++c)
-      if (a[c] != b[c]) return a[c] < b[c];
-    return i < i2;  // duplicates: the same point to every use of a neighbourhood
-  }
   std::size_t capacity_;
   std::size_t count_ = 0;
   std::uint32_t* idx_;
