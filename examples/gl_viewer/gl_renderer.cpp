@@ -7,10 +7,10 @@
 #include <GL/glcorearb.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
-#include <cstring>
 #include <functional>
 #include <limits>
 #include <stdexcept>
@@ -798,11 +798,8 @@ void gl_renderer::draw_gaussians() {
   // Back to front: the reverse of the CPU's order (view depth, then arrival), whose keys are
   // the depth's bits (depths are > 0) and the index.
   std::vector<std::uint64_t> keys(d.gaussians.size());
-  for (std::size_t i = 0; i < keys.size(); ++i) {
-    std::uint32_t bits = 0;
-    std::memcpy(&bits, &d.gaussians[i].depth, sizeof bits);
-    keys[i] = std::uint64_t{bits} << 32 | i;
-  }
+  for (std::size_t i = 0; i < keys.size(); ++i)
+    keys[i] = std::uint64_t{std::bit_cast<std::uint32_t>(d.gaussians[i].depth)} << 32 | i;
   std::sort(keys.begin(), keys.end(), std::greater<>());
   std::vector<gaussian_instance> sorted(keys.size());
   for (std::size_t i = 0; i < keys.size(); ++i) sorted[i] = d.gaussians[keys[i] & 0xffffffffu];

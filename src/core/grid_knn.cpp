@@ -23,6 +23,12 @@ std::uint64_t cell_key(std::int64_t x, std::int64_t y, std::int64_t z) {
   return std::uint64_t(x) | std::uint64_t(y) << axis_bits | std::uint64_t(z) << (2 * axis_bits);
 }
 
+/// The cell of coordinate v along an axis of `cells` cells of size h from lo.
+std::int64_t cell_index(double v, double lo, double h, std::int64_t cells) {
+  return std::clamp<std::int64_t>(static_cast<std::int64_t>(std::floor((v - lo) / h)), 0,
+                                  cells - 1);
+}
+
 /// The cells: points grouped by cell, and an open-addressing table from a cell's key to its
 /// range of `order`.
 struct grid {
@@ -46,9 +52,7 @@ struct grid {
 
   [[nodiscard]] std::array<std::int64_t, 3> cell_of(const vec3f& p) const {
     std::array<std::int64_t, 3> c{};
-    for (int a = 0; a < 3; ++a)
-      c[a] = std::clamp<std::int64_t>(
-          static_cast<std::int64_t>(std::floor((double(p[a]) - lo[a]) / h)), 0, dims[a] - 1);
+    for (int a = 0; a < 3; ++a) c[a] = cell_index(p[a], lo[a], h, dims[a]);
     return c;
   }
   [[nodiscard]] const slot* find(std::uint64_t key) const {
@@ -66,9 +70,7 @@ std::size_t occupied(std::span<const vec3f> pts, const vec3d& lo, double h, std:
   keys.reserve(pts.size() / step + 1);
   for (std::size_t i = 0; i < pts.size(); i += step) {
     std::int64_t c[3];
-    for (int a = 0; a < 3; ++a)
-      c[a] = std::min<std::int64_t>(
-          static_cast<std::int64_t>(std::floor((double(pts[i][a]) - lo[a]) / h)), axis_cells - 1);
+    for (int a = 0; a < 3; ++a) c[a] = cell_index(pts[i][a], lo[a], h, axis_cells);
     keys.push_back(cell_key(c[0], c[1], c[2]));
   }
   std::sort(keys.begin(), keys.end());
