@@ -34,4 +34,5 @@ pbr_lod_builder(pca_octree METHOD pca-octree  # Kalaiah & Varshney 2003
                       pca_octree_render_test.cpp)
 pbr_lod_builder(pmr METHOD pmr  # Dey & Hudson 2002
                 TESTS chunked_pmr_test.cpp)
-pbr_lod_builder(gaussian_hierarchy METHOD gaussian-hierarchy)  # Kerbl et al. 2024
+pbr_lod_builder(gaussian_hierarchy METHOD gaussian-hierarchy  # Kerbl et al. 2024
+                TESTS chunked_gaussian_hierarchy_test.cpp)

@@ -2,8 +2,11 @@
 #include <chrono>
 
 #include "lod.hpp"
+#include "pbr_lod/builders/chunked_gaussian_hierarchy.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
+#include "pbr_lod/core/gaussian_source.hpp"
 #include "pbr_lod/core/gaussian_splats.hpp"
+#include "pbr_lod/io/gaussians.hpp"
 #include "pbr_lod/raster/gaussians.hpp"
 
 namespace pbrlod_tool {
@@ -29,8 +32,9 @@ json gaussian_stats_json(const gaussian_hierarchy& h, const std::string& path) {
 /// The cut sent to a host renderer as Gaussians (gl_viewer draws them as sorted quads; a host
 /// without gaussian() gets their splats). The hierarchy emits nothing else; its attributes are
 /// the host's.
-frame host_gaussians(const gaussian_hierarchy& h, const view& v, const render_options& o,
-                     const traverse_options& t, host_sink& host) {
+template <class H>
+frame host_gaussians(const H& h, const view& v, const render_options& o, const traverse_options& t,
+                     host_sink& host) {
   static_assert(gaussian_hierarchy::attrs == host_attributes);
   struct to_host {
     host_sink& out;
@@ -61,7 +65,8 @@ struct gaussian_method_traits {
     const auto& p = h.store().positions;
     return bounds_of(h.origin(), std::span<const vec3f>(p.data(), n));
   }
-  frame draw(const gaussian_hierarchy& h, const frame_request& r) const {
+  template <class H>
+  frame draw(const H& h, const frame_request& r) const {
     const view v(r.cam, h.origin());
     const render_options o = lod_render_options(r.view, true);
     const traverse_options t{.tolerance_px = r.tolerance};
@@ -86,16 +91,59 @@ struct gaussian_method_traits {
   std::size_t samples(const gaussian_hierarchy& h) const { return h.input_gaussians(); }
 };
 
-std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
-                           bool /*on_terminal*/) {
-  params m(items);
+/// A chunked Gaussian hierarchy folder (build_gaussian_hierarchy_chunked): framed by the input
+/// sphere its top file records (the in-memory build's frame), drawn like a gaussian_hierarchy,
+/// its chunks read as the views need them.
+struct chunked_gaussian_traits : chunked_folder, gaussian_method_traits {
+  using gaussian_method_traits::draw;
+  std::pair<vec3d, double> input_bounds(const chunked_gaussian_hierarchy& h) const {
+    return {h.origin() + h.input_sphere().centre.cast<double>(),
+            static_cast<double>(h.input_sphere().radius)};
+  }
+  frame draw(const chunked_gaussian_hierarchy& h, const frame_request& r) const {
+    frame f = gaussian_method_traits::draw(h, r);
+    f.extra.integer("chunks_read", static_cast<long long>(h.chunks_loaded()));
+    return f;
+  }
+  json stats(const chunked_gaussian_hierarchy& h, const std::string& path) const {
+    json j;
+    j.str("file", path).str("method", "gaussian-hierarchy").boolean("chunked", true);
+    j.integer("gaussians", static_cast<long long>(h.stored_gaussians()));
+    j.integer("input_gaussians", static_cast<long long>(h.input_gaussians()));
+    j.integer("inner_gaussians",
+              static_cast<long long>(h.stored_gaussians() - h.input_gaussians()));
+    j.integer("nodes", static_cast<long long>(h.node_count()));
+    j.integer("chunks", static_cast<long long>(h.chunk_count()));
+    j.integer("top_nodes", static_cast<long long>(h.top_node_count()));
+    j.integer("sh_degree", h.sh_degree());
+    j.integer("file_bytes", static_cast<long long>(h.file_bytes()));
+    j.num("bytes_per_gaussian",
+          static_cast<double>(h.file_bytes()) / static_cast<double>(h.input_gaussians()));
+    return j;
+  }
+  std::size_t samples(const chunked_gaussian_hierarchy& h) const {
+    return static_cast<std::size_t>(h.input_gaussians());
+  }
+  using chunked_folder::file_bytes;
+  using chunked_folder::save;
+};
+
+/// The in-memory build's parameters (a chunked build's too).
+gaussian_hierarchy_options gaussian_options(params& m) {
   gaussian_hierarchy_options o;
   o.leaf_size = static_cast<int>(m.integer("leaf_size", 1, 1, 64));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
-  const auto opacity = static_cast<float>(m.number("opacity", 1.0, 0.0, 1.0));
   o.opacity = m.choice("merge", "grow", {"grow", "conserve"}) == "conserve"
                   ? merged_opacity::conserve
                   : merged_opacity::grow;
+  return o;
+}
+
+std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_input& in,
+                           bool /*on_terminal*/) {
+  params m(items);
+  const gaussian_hierarchy_options o = gaussian_options(m);
+  const auto opacity = static_cast<float>(m.number("opacity", 1.0, 0.0, 1.0));
   m.finish("gaussian-hierarchy", "leaf_size, threads, opacity, merge");
   // A Gaussian scene as it is; a mesh or a scan as flat Gaussians on its splats.
   const loaded_input& input = in.get();
@@ -107,7 +155,35 @@ std::unique_ptr<lod> build(const std::vector<std::string>& items, const build_in
 }
 
 std::unique_ptr<lod> load(const std::string& path) {
+  if (is_chunked_gaussian_hierarchy(path))
+    return make_lod(chunked_gaussian_traits{}, chunked_gaussian_hierarchy::open(path));
   return make_lod(gaussian_method_traits{}, gaussian_hierarchy::load(path));
+}
+
+/// `--param memory=SIZE` (or chunk_points=N): out of core from a 3DGS .ply / .splat read by rows
+/// (io/gaussians.hpp; a .spz or an ASCII PLY is read whole) or generated-gaussians:N made block
+/// by block; a mesh or a scan is made into Gaussians in memory, so it has no chunked build.
+std::unique_ptr<lod> build_chunked(const std::vector<std::string>& items, const std::string& input,
+                                   const std::string& output, bool /*on_terminal*/, json& report,
+                                   const distributed_rank* part) {
+  params m(items);
+  chunked_gaussian_hierarchy_options o;
+  o.builder = gaussian_options(m);
+  chunked_params(m, o);
+  m.finish("gaussian-hierarchy", "leaf_size, threads, merge, memory, chunk_points");
+  if (part) o.distributed = {part->rank, part->ranks, part->barrier};
+  std::unique_ptr<gaussian_source> src;
+  const std::string gen = "generated-gaussians:";
+  if (input.rfind(gen, 0) == 0)
+    src = std::make_unique<generated_gaussian_source>(generated_count(input, gen));
+  else if (is_gaussian_file(input))
+    src = open_gaussian_source(input);
+  else
+    throw InvalidArgument(input +
+                          ": a chunked gaussian-hierarchy build (memory=, chunk_points=) reads a "
+                          "3DGS .ply, .splat or .spz, or generated-gaussians:N");
+  chunked_report_json(build_gaussian_hierarchy_chunked(*src, output, o), report);
+  return load(output);
 }
 
 }  // namespace
@@ -116,10 +192,11 @@ method_entry gaussian_hierarchy_method() {
   return {.name = "gaussian-hierarchy",
           .paper = "Kerbl et al. 2024",
           .magic = "PBRLODGH",
-          .dir_magic = {},
+          .dir_magic = "PBRLODGC",
           .builds_from_mesh = true,
           .build = &build,
           .load = &load,
+          .build_chunked = &build_chunked,
           .demo_tolerances = {8, 3, 1},
           .tolerance_means =
               "pixels: a node is drawn once twice the projected radius of its "

@@ -24,6 +24,7 @@
 #include "distributed.hpp"
 #include "lod.hpp"
 #include "papers.hpp"
+#include "pbr_lod/builders/chunked_gaussian_hierarchy.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
@@ -163,14 +164,24 @@ int cmd_export(const std::string& input, const view_args& va, float tolerance,
     throw InvalidArgument(input +
                           ": export writes the cuts of Gaussian hierarchies "
                           "(built with --method gaussian-hierarchy)");
-  const gaussian_hierarchy h = gaussian_hierarchy::load(input);
-  const auto& p = h.store().positions;
-  const auto [centre, radius] =
-      bounds_of(h.origin(), std::span<const vec3f>(p.data(), h.input_gaussians()));
+  // Framed by the input's bounds as `render` frames it (a chunked folder records them).
   const auto t0 = clock_type::now();
-  const gaussian_cloud cut =
-      level ? h.level(static_cast<std::size_t>(*level))
-            : h.cut(view(make_camera(centre, radius, va), h.origin()), {.tolerance_px = tolerance});
+  std::size_t input_gaussians = 0;
+  const auto cut_of = [&](const auto& h, std::pair<vec3d, double> bounds) {
+    input_gaussians = h.input_gaussians();
+    if (level) return h.level(static_cast<std::size_t>(*level));
+    const view v(make_camera(bounds.first, bounds.second, va), h.origin());
+    return h.cut(v, {.tolerance_px = tolerance});
+  };
+  gaussian_cloud cut;
+  if (is_chunked_gaussian_hierarchy(input)) {
+    const auto h = chunked_gaussian_hierarchy::open(input);
+    cut = cut_of(h, {h.origin() + h.input_sphere().centre.cast<double>(), h.input_sphere().radius});
+  } else {
+    const auto h = gaussian_hierarchy::load(input);
+    const auto& p = h.store().positions;
+    cut = cut_of(h, bounds_of(h.origin(), std::span<const vec3f>(p.data(), h.input_gaussians())));
+  }
   write_gaussians_ply(cut, output);
   const double seconds = seconds_since(t0);
   if (as_json) {
@@ -181,11 +192,11 @@ int cmd_export(const std::string& input, const view_args& va, float tolerance,
     else
       j.str("view", va.view).num("tolerance_px", tolerance);
     j.integer("gaussians", static_cast<long long>(cut.size()));
-    j.integer("input_gaussians", static_cast<long long>(h.input_gaussians()));
+    j.integer("input_gaussians", static_cast<long long>(input_gaussians));
     j.num("seconds", seconds);
     std::cout << j.text() << "\n";
   } else {
-    std::cout << "wrote " << output << ": " << cut.size() << " of " << h.input_gaussians()
+    std::cout << "wrote " << output << ": " << cut.size() << " of " << input_gaussians
               << " Gaussians (" << (level ? "level " + std::to_string(*level) : "the view's cut")
               << ")\n";
   }
@@ -278,10 +289,13 @@ int cmd_build(const std::string& method, const std::string& input, const std::st
     return 2;
   }
   if (wants_chunked_build(params)) {
-    if (!it->build_chunked)
+    if (!it->build_chunked) {
+      std::string have;
+      for (const auto& m : methods())
+        if (m.build_chunked) have += (have.empty() ? "" : ", ") + m.name;
       throw InvalidArgument("pbrlod build: method '" + method +
-                            "' has no chunked build (memory=, chunk_points=): point-octree, "
-                            "pca-octree and pmr have");
+                            "' has no chunked build (memory=, chunk_points=); these have: " + have);
+    }
     json report;
     const auto l = it->build_chunked(params, input, output, interactive(as_json), report, nullptr);
     std::cout << (as_json ? "" : "wrote " + output + "/: ") << l->stats(output).merge(report).text()

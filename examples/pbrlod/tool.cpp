@@ -95,7 +95,8 @@ int generated_detail(const std::string& spec, const std::string& prefix) {
   throw InvalidArgument(spec + ": expected " + prefix + "N with 1 <= N <= 4096");
 }
 
-/// N of "generated-gaussians:N" (1 ≤ N ≤ 2³¹).
+}  // namespace
+
 std::size_t generated_count(const std::string& spec, const std::string& prefix) {
   const std::string count = spec.substr(prefix.size());
   try {
@@ -106,8 +107,6 @@ std::size_t generated_count(const std::string& spec, const std::string& prefix) 
   }
   throw InvalidArgument(spec + ": expected " + prefix + "N with 1 <= N <= 2^31");
 }
-
-}  // namespace
 
 namespace {
 /// A Gaussian scene's means with their view-independent colours, as a point cloud.

@@ -324,6 +324,8 @@ void chunked_report_json(const chunked_build_report& r, json& report);
 /// colours, made from their indices; `generated-points:N:normals` with its normals too), or a
 /// point file.
 std::unique_ptr<point_source> open_build_source(const std::string& input);
+/// N of "PREFIXN" such as "generated-gaussians:N" (1 ≤ N ≤ 2³¹), else InvalidArgument.
+std::size_t generated_count(const std::string& spec, const std::string& prefix);
 
 /// Calls f(point_set<A>) with A the attributes the cloud actually has (normals, colours,
 /// ellipses: eight instantiations), so a builder is compiled for exactly what the scene has.

@@ -11,6 +11,7 @@
 #include <limits>
 
 #include "gaussian_internal.hpp"
+#include "pbr_lod/core/gaussian_source.hpp"
 #include "pbr_lod/io/gaussians.hpp"
 #include "ply_format.hpp"
 
@@ -69,6 +70,13 @@ void gaussian_collector::add(const vec3d& position, const vec3d& scale, const ve
   } else {
     ++report_.rotations_reset;
   }
+  if (count_only_) {
+    ++kept_;
+    box_.add(position);
+    for (std::size_t j = 0; j < c_.sh_stride(); ++j)
+      report_.values_clamped += !std::isfinite(sh[j]);
+    return;
+  }
   world_.push_back(position);
   c_.scales.push_back(s);
   c_.rotations.push_back(q);
@@ -88,10 +96,30 @@ gaussian_cloud gaussian_collector::finish(const std::optional<vec3d>& hint) {
   finite_box box;
   for (const vec3d& p : world_) box.add(p);
   const vec3d origin = choose_origin(box, hint, path_, report_);
+  gaussian_cloud out = take(origin);
+  report_counts();
+  return out;
+}
+
+vec3d gaussian_collector::finish_counting(const std::optional<vec3d>& hint) {
+  const vec3d origin = choose_origin(box_, hint, path_, report_);
+  report_counts();
+  return origin;
+}
+
+gaussian_cloud gaussian_collector::take(const vec3d& origin) {
   c_.origin = origin;
-  c_.positions.reserve(world_.size());
-  for (const vec3d& p : world_) c_.positions.push_back((p - origin).cast<float>());
+  c_.positions.resize(world_.size());
+  for (std::size_t i = 0; i < world_.size(); ++i)
+    c_.positions[i] = (world_[i] - origin).cast<float>();
   world_ = {};
+  gaussian_cloud out = std::move(c_);
+  c_ = gaussian_cloud{};
+  c_.sh_degree = out.sh_degree;
+  return out;
+}
+
+void gaussian_collector::report_counts() {
   report_.points_read = total_;
   report_.dropped_non_finite = bad_position_;
   report_.dropped_bad_gaussians = bad_shape_;
@@ -104,7 +132,6 @@ gaussian_cloud gaussian_collector::finish(const std::optional<vec3d>& hint) {
   warn(report_.rotations_reset, "zero or non-finite rotations were set to the identity");
   warn(report_.values_clamped,
        "values were clamped (±inf opacity, non-finite SH coefficients, negative scales)");
-  return std::move(c_);
 }
 
 namespace {
@@ -118,11 +145,15 @@ constexpr int row_slots = at_rest + max_rest;                       // 59
 constexpr int at_skip = row_slots;                                  // scratch slot
 constexpr int slots = row_slots + 1;
 
+}  // namespace
+
 struct gs_plan {
   const element* vertex = nullptr;
   std::vector<int> role;  ///< per vertex property: its slot
   int degree = 0;
 };
+
+namespace {
 
 /// "f_rest_17" → 17; nullopt for anything else.
 std::optional<int> rest_index(const std::string& n) {
@@ -279,7 +310,92 @@ std::uint64_t row_bytes(const element& e) {
 
 }  // namespace
 
+// --- files of fixed-size rows -------------------------------------------------------------------
+
+gaussian_rows::gaussian_rows(const std::string& path) : path_(path), file_(path) {}
+gaussian_rows::~gaussian_rows() = default;
+
+std::unique_ptr<gaussian_rows> gaussian_rows::open(const std::string& path) {
+  const std::string ext = lower_extension(path);
+  std::unique_ptr<gaussian_rows> r(new gaussian_rows(path));
+  if (ext == ".splat") {
+    constexpr std::uint64_t record = 32;
+    if (r->file_.size() % record != 0)
+      format_error(path, "data",
+                   cat("size ", r->file_.size(),
+                       " bytes is not a multiple of the 32-byte record "
+                       "(truncated, or not a .splat file)"));
+    r->row_bytes_ = record;
+    r->rows_ = r->file_.size() / record;
+    return r;
+  }
+  if (ext != ".ply") return nullptr;
+  r->header_ = std::make_unique<ply_header>(
+      parse_ply_header(path, read_header_lines(r->file_, "end_header")));
+  const ply_header& h = *r->header_;
+  r->plan_ = std::make_unique<gs_plan>(plan_gaussian_ply(path, h));
+  if (!streamable(h, *r->plan_)) return nullptr;
+  // Every element up to the vertex one has fixed-size rows: the vertex rows start after them.
+  check_binary_size(path, h, r->file_.size() - h.data_begin);
+  r->offset_ = h.data_begin;
+  for (const element& e : h.elements) {
+    if (&e == r->plan_->vertex) break;
+    r->offset_ += e.count * row_bytes(e);  // no overflow: check_binary_size summed these
+  }
+  r->row_bytes_ = row_bytes(*r->plan_->vertex);
+  r->rows_ = r->plan_->vertex->count;
+  r->swap_ = (h.format == encoding::binary_be) != (std::endian::native == std::endian::big);
+  return r;
+}
+
+int gaussian_rows::degree() const {
+  return plan_ ? plan_->degree : 0;
+}
+
+std::optional<vec3d> gaussian_rows::origin_hint() const {
+  return header_ ? header_->origin : std::nullopt;
+}
+
+void gaussian_rows::decode(std::uint64_t first, std::uint64_t n, gaussian_collector& out,
+                           const std::function<bool(std::uint64_t)>& more) const {
+  const std::uint64_t per_block = std::max<std::uint64_t>(1, (std::uint64_t{1} << 20) / row_bytes_);
+  std::vector<unsigned char> buf;
+  std::optional<gs_ply_parser> parser;
+  if (plan_) parser.emplace(path_, *header_, *plan_, out);
+  for (std::uint64_t r = first; r < first + n;) {
+    const std::uint64_t m = std::min(per_block, first + n - r);
+    buf.resize(static_cast<std::size_t>(m * row_bytes_));
+    file_.read_exact(offset_ + r * row_bytes_, buf.size(), buf.data());
+    binary_source src(buf.data(), buf.data() + buf.size(), swap_);
+    for (std::uint64_t k = 0; k < m; ++k, ++r) {
+      if (more && !more(r)) return;
+      if (parser)
+        parser->row(src, *plan_->vertex, r);
+      else
+        splat_row(buf.data() + k * row_bytes_, out);
+    }
+  }
+}
+
+/// One 32-byte .splat record: float x y z, float linear scales, uint8 RGBA (colour = 0.5 +
+/// C0·dc, stored as colour · 255; alpha = opacity), uint8 quaternion w x y z as (b − 128)/128.
+void gaussian_rows::splat_row(const unsigned char* p, gaussian_collector& out) {
+  const auto fl = [&](int j) { return static_cast<double>(load_le<float>(p + 4 * j)); };
+  float sh[3];
+  for (int c = 0; c < 3; ++c) sh[c] = static_cast<float>((p[24 + c] / 255.0 - 0.5) / sh_c0);
+  const auto quat = [&](int j) { return (p[28 + j] - 128.0) / 128.0; };
+  out.add(vec3d(fl(0), fl(1), fl(2)), vec3d(fl(3), fl(4), fl(5)),
+          vec4d(quat(0), quat(1), quat(2), quat(3)), p[27] / 255.0, sh);
+}
+
 gaussian_cloud read_gaussian_ply(const std::string& path, read_report& report) {
+  if (const auto rows = gaussian_rows::open(path)) {
+    // A 1.5 GB scene is streamed in blocks of rows, never held in memory twice.
+    gaussian_collector out(path, report, rows->degree());
+    out.reserve(static_cast<std::size_t>(rows->rows()));
+    rows->decode(0, rows->rows(), out);
+    return out.finish(rows->origin_hint());
+  }
   const posix_file f(path);
   const std::string head = read_header_lines(f, "end_header");
   ply_header h = parse_ply_header(path, head);
@@ -287,30 +403,6 @@ gaussian_cloud read_gaussian_ply(const std::string& path, read_report& report) {
   gaussian_collector out(path, report, pl.degree);
   gs_ply_parser parser(path, h, pl, out);
   const bool swap = (h.format == encoding::binary_be) != (std::endian::native == std::endian::big);
-
-  if (streamable(h, pl)) {
-    // Every element up to the vertex one has fixed-size rows: skip to it, read blocks of rows.
-    check_binary_size(path, h, f.size() - h.data_begin);
-    std::uint64_t offset = h.data_begin;
-    for (const element& e : h.elements) {
-      if (&e == pl.vertex) break;
-      offset += e.count * row_bytes(e);  // no overflow: check_binary_size summed these
-    }
-    const element& e = *pl.vertex;
-    const std::uint64_t rb = row_bytes(e);
-    out.reserve(static_cast<std::size_t>(e.count));
-    const std::uint64_t per_block = std::max<std::uint64_t>(1, (std::uint64_t{1} << 20) / rb);
-    std::vector<unsigned char> buf;
-    for (std::uint64_t r = 0; r < e.count; r += per_block) {
-      const std::uint64_t n = std::min(per_block, e.count - r);
-      buf.resize(static_cast<std::size_t>(n * rb));
-      f.read_exact(offset + r * rb, buf.size(), buf.data());
-      binary_source src(buf.data(), buf.data() + buf.size(), swap);
-      for (std::uint64_t k = 0; k < n; ++k) parser.row(src, e, r + k);
-    }
-    return out.finish(h.origin);
-  }
-
   const std::string bytes = read_file_bytes(path);
   const std::string_view data = std::string_view(bytes).substr(h.data_begin);
   if (h.format == encoding::ascii) {
@@ -334,33 +426,10 @@ gaussian_cloud read_gaussian_ply(const std::string& path, read_report& report) {
 // --- .splat -------------------------------------------------------------------------------------
 
 gaussian_cloud read_splat_file(const std::string& path, read_report& report) {
-  constexpr std::size_t record = 32;
-  const posix_file f(path);
-  if (f.size() % record != 0)
-    format_error(path, "data",
-                 cat("size ", f.size(),
-                     " bytes is not a multiple of the 32-byte record "
-                     "(truncated, or not a .splat file)"));
-  const std::uint64_t count = f.size() / record;
+  const auto rows = gaussian_rows::open(path);
   gaussian_collector out(path, report, 0);
-  out.reserve(static_cast<std::size_t>(count));
-  constexpr std::uint64_t per_block = 1 << 15;
-  std::vector<unsigned char> buf;
-  for (std::uint64_t r = 0; r < count; r += per_block) {
-    const std::uint64_t n = std::min(per_block, count - r);
-    buf.resize(static_cast<std::size_t>(n * record));
-    f.read_exact(r * record, buf.size(), buf.data());
-    for (std::uint64_t k = 0; k < n; ++k) {
-      const unsigned char* p = buf.data() + k * record;
-      const auto fl = [&](int j) { return static_cast<double>(load_le<float>(p + 4 * j)); };
-      float sh[3];
-      for (int c = 0; c < 3; ++c)  // colour = 0.5 + C0·dc, stored as colour · 255
-        sh[c] = static_cast<float>((p[24 + c] / 255.0 - 0.5) / sh_c0);
-      const auto quat = [&](int j) { return (p[28 + j] - 128.0) / 128.0; };
-      out.add(vec3d(fl(0), fl(1), fl(2)), vec3d(fl(3), fl(4), fl(5)),
-              vec4d(quat(0), quat(1), quat(2), quat(3)), p[27] / 255.0, sh);
-    }
-  }
+  out.reserve(static_cast<std::size_t>(rows->rows()));
+  rows->decode(0, rows->rows(), out);
   return out.finish(std::nullopt);
 }
 
@@ -398,6 +467,74 @@ gaussian_cloud read_gaussians(const std::string& path, read_report* report) {
                        ext.empty() ? "no file extension; read_gaussians reads .ply, .splat and .spz"
                                    : detail::cat("unsupported extension '", ext,
                                                  "'; read_gaussians reads .ply, .splat and .spz"));
+}
+
+namespace {
+
+/// A file of fixed-size rows as a gaussian_source: a first pass applies the bad-value rule to
+/// every row (the report, the origin, the rows it drops), then read() decodes just the rows asked
+/// for, as read_gaussians would have decoded them.
+class file_gaussian_source final : public gaussian_source {
+ public:
+  file_gaussian_source(std::unique_ptr<detail::gaussian_rows> rows, std::string path,
+                       read_report& report)
+      : rows_(std::move(rows)), path_(std::move(path)) {
+    detail::gaussian_collector c(path_, report, rows_->degree());
+    c.count_only();
+    std::size_t before = 0;
+    const auto kept_last = [&](std::uint64_t r) {  // before row r: was row r − 1 kept?
+      if (r > 0 && c.kept() == before) dropped_.push_back(r - 1);
+      before = c.kept();
+      return true;
+    };
+    rows_->decode(0, rows_->rows(), c, kept_last);
+    kept_last(rows_->rows());
+    kept_ = c.kept();
+    origin_ = c.finish_counting(rows_->origin_hint());
+  }
+  [[nodiscard]] int sh_degree() const override { return rows_->degree(); }
+  [[nodiscard]] vec3d origin() const override { return origin_; }
+  [[nodiscard]] std::uint64_t size() const override { return kept_; }
+  void read(std::uint64_t first, std::size_t count, gaussian_cloud& out) const override {
+    if (first > kept_ || count > kept_ - first)
+      throw InvalidArgument(path_ + ": Gaussians [" + std::to_string(first) + ", " +
+                            std::to_string(first + count) + ") beyond its " +
+                            std::to_string(kept_));
+    // The row of the first Gaussian wanted: each dropped row at or before it pushes it on.
+    std::uint64_t r = first;
+    for (const std::uint64_t d : dropped_) {
+      if (d > r) break;
+      ++r;
+    }
+    read_report scratch;
+    detail::gaussian_collector c(path_, scratch, rows_->degree());
+    c.reserve(count);
+    rows_->decode(r, rows_->rows() - r, c, [&](std::uint64_t) { return c.kept() < count; });
+    if (c.kept() != count) throw IoError(path_ + ": the file changed since it was opened");
+    out = c.take(origin_);
+  }
+  [[nodiscard]] std::string name() const override { return path_; }
+
+ private:
+  std::unique_ptr<detail::gaussian_rows> rows_;
+  std::string path_;
+  std::vector<std::uint64_t> dropped_;  // rows the bad-value rule drops, ascending
+  std::uint64_t kept_ = 0;
+  vec3d origin_ = vec3d::Zero();
+};
+
+}  // namespace
+
+std::unique_ptr<gaussian_source> open_gaussian_source(const std::string& path,
+                                                      read_report* report) {
+  read_report local;
+  read_report& r = report ? *report : local;
+  r = read_report{};
+  const std::string ext = detail::lower_extension(path);
+  if (ext == ".ply" || ext == ".splat")
+    if (auto rows = detail::gaussian_rows::open(path))
+      return std::make_unique<file_gaussian_source>(std::move(rows), path, r);
+  return std::make_unique<owned_gaussian_source>(read_gaussians(path, &r), path);
 }
 
 }  // namespace pbr_lod

@@ -73,6 +73,70 @@ struct gaussian_hierarchy_stats {
   double seconds = 0;     ///< wall time of the build
 };
 
+namespace detail {
+
+/// Gaussian i of `g` as a primitive (its covariance from scale and rotation).
+[[nodiscard]] inline gaussian_prim gaussian_at(const gaussian_cloud& g, std::size_t i) {
+  return {g.positions[i], gaussian_covariance(g.scales[i], g.rotations[i]), g.opacities[i],
+          g.sh_degree, g.sh.data() + i * g.sh_stride()};
+}
+
+/// Gaussian i of `g` as an ellipse splat: its two largest axes at 2σ (as_splat_prim), its normal
+/// the axis of its smallest scale with the sign its rotation gives it (for a mesh's or a scan's
+/// Gaussians the surface normal; merged ones keep their children's side), its colour the
+/// view-independent one.
+[[nodiscard]] inline splat_prim<attributes{.normal = true, .colour = true}> gaussian_splat(
+    const gaussian_cloud& g, std::size_t i) {
+  constexpr attributes a{.normal = true, .colour = true};
+  const vec4f& q = g.rotations[i];
+  const Eigen::Matrix3f r = Eigen::Quaternionf(q[0], q[1], q[2], q[3]).toRotationMatrix();
+  const vec3f& sc = g.scales[i];
+  int small = 0;
+  for (int k = 1; k < 3; ++k)
+    if (sc[k] < sc[small]) small = k;
+  const int a1 = (small + 1) % 3, a2 = (small + 2) % 3;
+  const int big = sc[a1] >= sc[a2] ? a1 : a2, mid = big == a1 ? a2 : a1;
+  splat_prim<a> out = as_splat_prim<a>(gaussian_at(g, i));  // the colour
+  out.u = r.col(big) * (2 * sc[big]);
+  out.v = r.col(mid) * (2 * sc[mid]);
+  out.normal = r.col(small);
+  return out;
+}
+
+/// Gaussians [first, first + count) of `g` to `sink`: gaussian_prim to a GaussianSink
+/// (raster/gaussians.hpp; the z-buffer rasteriser, which draws it as below), gaussian_splat() of
+/// each to any other sink — or, where that ellipse covers less than a pixel on the screen, a
+/// one-pixel point (a Gaussian rasteriser's low-pass still draws such a Gaussian as a dot; an
+/// ellipse that small, or seen edge on, would cover no pixel centre).
+template <class S>
+void emit_gaussians(const gaussian_cloud& g, std::uint32_t first, std::uint32_t count,
+                    const view& v, S& sink) {
+  constexpr attributes a{.normal = true, .colour = true};
+  for (std::uint32_t i = first; i < first + count; ++i) {
+    if constexpr (GaussianSink<S>) {
+      sink.gaussian(gaussian_at(g, i));
+    } else {
+      const splat_prim<a> s = gaussian_splat(g, i);
+      const float z = v.to_eye(s.centre).z();
+      const float k = z > 0 ? v.focal_px / z : 0.0f;
+      const vec3f ray = (s.centre - v.eye).normalized();
+      const float pixels = 3.14159265f * k * k * std::abs(s.u.cross(s.v).dot(ray));
+      if (!(pixels >= 1.0f))
+        sink.point(point_prim<a>{s.centre, 1.0f, s.normal, s.colour});
+      else
+        sink.splat(s);
+    }
+  }
+}
+
+/// The Gaussians a node draws: [first, first + count) of *cloud.
+struct gaussian_range {
+  const gaussian_cloud* cloud = nullptr;
+  std::uint32_t first = 0, count = 0;
+};
+
+}  // namespace detail
+
 class gaussian_hierarchy {
  public:
   using node_id = std::uint32_t;
@@ -96,6 +160,7 @@ class gaussian_hierarchy {
   };
 
   [[nodiscard]] vec3d origin() const { return g_.origin; }
+  [[nodiscard]] int sh_degree() const { return g_.sh_degree; }
   [[nodiscard]] bool empty() const { return nodes_.empty(); }
   [[nodiscard]] node_id root() const { return 0; }
   [[nodiscard]] bool is_leaf(node_id n) const { return nodes_[n].count != 0; }
@@ -105,56 +170,28 @@ class gaussian_hierarchy {
   }
   [[nodiscard]] sphere bounding_sphere(node_id n) const { return nodes_[n].bounds; }
 
-  /// An inner node sends its merged Gaussian, a leaf its own: gaussian_prim to a GaussianSink
-  /// (raster/gaussians.hpp; the z-buffer rasteriser, which draws it as below), splat_of() of
-  /// each to any other sink — or, where that ellipse covers less than a pixel on the screen, a
-  /// one-pixel point (a Gaussian rasteriser's low-pass still draws such a Gaussian as a dot; an
-  /// ellipse that small, or seen edge on, would cover no pixel centre).
+  /// An inner node sends its merged Gaussian, a leaf its own (detail::emit_gaussians).
   template <class S>
   void emit(node_id n, const view& v, S& sink) const {
     const node& d = nodes_[n];
-    const std::uint32_t count = d.count == 0 ? 1 : d.count;
-    for (std::uint32_t i = d.gaussian; i < d.gaussian + count; ++i) {
-      if constexpr (GaussianSink<S>) {
-        sink.gaussian(prim(i));
-      } else {
-        const splat_prim<attrs> s = splat_of(i);
-        const float z = v.to_eye(s.centre).z();
-        const float k = z > 0 ? v.focal_px / z : 0.0f;
-        const vec3f ray = (s.centre - v.eye).normalized();
-        const float pixels = 3.14159265f * k * k * std::abs(s.u.cross(s.v).dot(ray));
-        if (!(pixels >= 1.0f))
-          sink.point(point_prim<attrs>{s.centre, 1.0f, s.normal, s.colour});
-        else
-          sink.splat(s);
-      }
-    }
+    detail::emit_gaussians(g_, d.gaussian, d.count == 0 ? 1 : d.count, v, sink);
   }
 
-  /// Gaussian i as an ellipse splat: its two largest axes at 2σ (as_splat_prim), its normal the
-  /// axis of its smallest scale with the sign its rotation gives it (for a mesh's or a scan's
-  /// Gaussians the surface normal; merged ones keep their children's side), its colour the
-  /// view-independent one.
+  /// Gaussian i as an ellipse splat (detail::gaussian_splat).
   [[nodiscard]] splat_prim<attrs> splat_of(std::size_t i) const {
-    const vec4f& q = g_.rotations[i];
-    const Eigen::Matrix3f r = Eigen::Quaternionf(q[0], q[1], q[2], q[3]).toRotationMatrix();
-    const vec3f& sc = g_.scales[i];
-    int small = 0;
-    for (int a = 1; a < 3; ++a)
-      if (sc[a] < sc[small]) small = a;
-    const int a1 = (small + 1) % 3, a2 = (small + 2) % 3;
-    const int big = sc[a1] >= sc[a2] ? a1 : a2, mid = big == a1 ? a2 : a1;
-    splat_prim<attrs> out = as_splat_prim<attrs>(prim(i));  // the colour
-    out.u = r.col(big) * (2 * sc[big]);
-    out.v = r.col(mid) * (2 * sc[mid]);
-    out.normal = r.col(small);
-    return out;
+    return detail::gaussian_splat(g_, i);
   }
-
   /// Gaussian i of the store as a primitive (its covariance from scale and rotation).
-  [[nodiscard]] gaussian_prim prim(std::size_t i) const {
-    return {g_.positions[i], gaussian_covariance(g_.scales[i], g_.rotations[i]), g_.opacities[i],
-            g_.sh_degree, g_.sh.data() + i * g_.sh_stride()};
+  [[nodiscard]] gaussian_prim prim(std::size_t i) const { return detail::gaussian_at(g_, i); }
+
+  /// The sphere the cut measures (gaussian_policy): the node's size about its Gaussian's mean.
+  [[nodiscard]] sphere size_sphere(node_id n) const {
+    return {g_.positions[nodes_[n].gaussian], nodes_[n].size};
+  }
+  /// The Gaussians node n draws: a leaf's, or its merged one.
+  [[nodiscard]] detail::gaussian_range gaussians(node_id n) const {
+    const node& d = nodes_[n];
+    return {&g_, d.gaussian, d.count == 0 ? 1 : d.count};
   }
 
   [[nodiscard]] const std::vector<node>& nodes() const { return nodes_; }
@@ -185,6 +222,7 @@ class gaussian_hierarchy {
   }
 
  private:
+  friend class chunked_gaussian_hierarchy;  // assemble()
   friend gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud&,
                                                      const gaussian_hierarchy_options&,
                                                      gaussian_hierarchy_stats*);
@@ -202,21 +240,22 @@ class gaussian_hierarchy {
     gaussian_hierarchy_stats* stats = nullptr);
 
 /// The cut of Kerbl et al. 2024 §4.2: a node's screen size is twice the projected radius of a
-/// sphere of its `size` about its Gaussian's mean; refine while that exceeds the tolerance.
+/// sphere of its `size` about its Gaussian's mean; refine while that exceeds the tolerance. For
+/// gaussian_hierarchy and chunked_gaussian_hierarchy (builders/chunked_gaussian_hierarchy.hpp).
 struct gaussian_policy {
-  [[nodiscard]] float screen_size(const gaussian_hierarchy& h, gaussian_hierarchy::node_id n,
-                                  const sphere&, const view& v, const traverse_options& o) const {
-    const auto& d = h.nodes()[n];
-    const sphere s{h.store().positions[d.gaussian], d.size};
-    return 2 * projected_radius(o.metric, v, s);
+  template <class H>
+  [[nodiscard]] float screen_size(const H& h, typename H::node_id n, const sphere&, const view& v,
+                                  const traverse_options& o) const {
+    return 2 * projected_radius(o.metric, v, h.size_sphere(n));
   }
-  [[nodiscard]] bool refine(const gaussian_hierarchy& h, gaussian_hierarchy::node_id n,
-                            float size_px, const traverse_options& o) const {
+  template <class H>
+  [[nodiscard]] bool refine(const H& h, typename H::node_id n, float size_px,
+                            const traverse_options& o) const {
     return !h.is_leaf(n) && size_px > o.tolerance_px;
   }
-  template <class S>
-  void emit(const gaussian_hierarchy& h, gaussian_hierarchy::node_id n, const view& v, float,
-            const traverse_options&, S& sink) const {
+  template <class H, class S>
+  void emit(const H& h, typename H::node_id n, const view& v, float, const traverse_options&,
+            S& sink) const {
     h.emit(n, v, sink);
   }
 };

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <numbers>
+#include <string>
 
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/estimation.hpp"
@@ -100,37 +101,44 @@ namespace pbr_lod {
   return gaussians_from_splats(c, opacity);
 }
 
-/// A generated Gaussian scene in the form trained scenes take: n flat Gaussians covering a bumpy
-/// unit sphere (a Fibonacci lattice; standard deviations 0.6 × the lattice spacing in the
-/// tangent plane, a tenth of that across, rotated at random about the normal), opacities in
-/// [0.3, 1], a smooth colour field in the DC term and small random higher-degree coefficients up
-/// to `sh_degree`. Deterministic for a seed (tests and benchmarks; 10⁷ take about a second).
-[[nodiscard]] inline gaussian_cloud make_gaussian_scene(std::size_t n, int sh_degree = 3,
-                                                        std::uint32_t seed = 1) {
+/// Gaussians [first, first + count) of make_gaussian_scene(n, sh_degree, seed) into `out`
+/// (replacing its contents): each is made from its index alone, so a scene of 10⁸ is generated
+/// block by block (generated_gaussian_source) and equals the whole one.
+inline void make_gaussian_scene_range(std::size_t n, int sh_degree, std::uint32_t seed,
+                                      std::size_t first, std::size_t count, gaussian_cloud& out) {
   if (sh_degree < 0 || sh_degree > max_sh_degree)
     throw InvalidArgument("make_gaussian_scene: sh_degree must be 0–3");
-  gaussian_cloud g;
+  if (first > n || count > n - first)
+    throw InvalidArgument("make_gaussian_scene_range: Gaussians beyond the scene's " +
+                          std::to_string(n));
+  gaussian_cloud& g = out;
+  g.origin = vec3d::Zero();
   g.sh_degree = sh_degree;
-  g.positions.resize(n);
-  g.scales.resize(n);
-  g.rotations.resize(n);
-  g.opacities.resize(n);
-  g.sh.resize(n * g.sh_stride());
+  g.positions.resize(count);
+  g.scales.resize(count);
+  g.rotations.resize(count);
+  g.opacities.resize(count);
+  g.sh.resize(count * g.sh_stride());
   const double spacing = std::sqrt(4 * std::numbers::pi / std::max<double>(1, double(n)));
   const double golden = std::numbers::pi * (3 - std::sqrt(5.0));
-  std::uint64_t state = seed * 0x9e3779b97f4a7c15ull + 1;
+  constexpr std::uint64_t step = 0x9e3779b97f4a7c15ull;
+  // splitmix64's state advances by `step` per draw and each Gaussian draws sh_stride() + 1
+  // numbers: Gaussian i starts from the state the sequential stream has there.
+  const std::uint64_t draws = g.sh_stride() + 1;
+  std::uint64_t state = seed * step + 1 + std::uint64_t(first) * draws * step;
   const auto uniform = [&state] {  // splitmix64 → [0, 1)
-    std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    std::uint64_t z = (state += step);
     z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
     z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
     return double((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
   };
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t j = 0; j < count; ++j) {
+    const std::size_t i = first + j;
     const double y = 1 - 2 * (double(i) + 0.5) / double(n), r = std::sqrt(1 - y * y);
     const double phi = golden * double(i);
     const Eigen::Vector3d d(r * std::cos(phi), y, r * std::sin(phi));
     const double bump = 1 + 0.08 * std::sin(9 * d.x()) * std::sin(7 * d.y()) * std::sin(8 * d.z());
-    g.positions[i] = (bump * d).cast<float>();
+    g.positions[j] = (bump * d).cast<float>();
     // A frame with the sphere's normal as its third axis, turned about it at random.
     const Eigen::Vector3d t = d.unitOrthogonal();
     const double a = 2 * std::numbers::pi * uniform();
@@ -141,16 +149,27 @@ namespace pbr_lod {
     m.col(2) = d;
     Eigen::Quaterniond q(m);
     q.normalize();
-    g.rotations[i] = vec4f(float(q.w()), float(q.x()), float(q.y()), float(q.z()));
+    g.rotations[j] = vec4f(float(q.w()), float(q.x()), float(q.y()), float(q.z()));
     const double s = 0.6 * spacing * (0.7 + 0.6 * uniform());
-    g.scales[i] = vec3f(float(s), float(s * (0.5 + 0.5 * uniform())), float(0.1 * s));
-    g.opacities[i] = float(0.3 + 0.7 * uniform());
+    g.scales[j] = vec3f(float(s), float(s * (0.5 + 0.5 * uniform())), float(0.1 * s));
+    g.opacities[j] = float(0.3 + 0.7 * uniform());
     const double colour[3] = {0.5 + 0.4 * std::sin(5 * d.x()), 0.5 + 0.4 * std::sin(4 * d.y() + 1),
                               0.5 + 0.4 * std::cos(6 * d.z())};
-    float* sh = g.sh.data() + i * g.sh_stride();
+    float* sh = g.sh.data() + j * g.sh_stride();
     for (int c = 0; c < 3; ++c) sh[c] = float((colour[c] - 0.5) / sh_c0);
     for (std::size_t k = 3; k < g.sh_stride(); ++k) sh[k] = float(0.1 * (2 * uniform() - 1));
   }
+}
+
+/// A generated Gaussian scene in the form trained scenes take: n flat Gaussians covering a bumpy
+/// unit sphere (a Fibonacci lattice; standard deviations 0.6 × the lattice spacing in the
+/// tangent plane, a tenth of that across, rotated at random about the normal), opacities in
+/// [0.3, 1], a smooth colour field in the DC term and small random higher-degree coefficients up
+/// to `sh_degree`. Deterministic for a seed (tests and benchmarks; 10⁷ take about a second).
+[[nodiscard]] inline gaussian_cloud make_gaussian_scene(std::size_t n, int sh_degree = 3,
+                                                        std::uint32_t seed = 1) {
+  gaussian_cloud g;
+  make_gaussian_scene_range(n, sh_degree, seed, 0, n, g);
   return g;
 }
 

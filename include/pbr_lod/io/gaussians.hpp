@@ -27,8 +27,10 @@
 // unreadable ones IoError, naming the file, the element and what was expected.
 #pragma once
 
+#include <memory>
 #include <string>
 
+#include "pbr_lod/core/gaussian_source.hpp"
 #include "pbr_lod/core/gaussians.hpp"
 #include "pbr_lod/io/read.hpp"
 
@@ -41,6 +43,15 @@ namespace pbr_lod {
 
 /// Reads a .ply (3DGS), .splat or .spz file. Throws IoError or FormatError.
 [[nodiscard]] gaussian_cloud read_gaussians(const std::string& path, read_report* report = nullptr);
+
+/// The file as a gaussian_source (the input of build_gaussian_hierarchy_chunked), giving block by
+/// block exactly the Gaussians read_gaussians gives (the same rule, origin and report). A .splat
+/// and a binary PLY without lists up to its vertex element are read by rows (one pass at
+/// opening applies the bad-value rule, then only the rows asked for are decoded: memory does
+/// not grow with the file); any other file (.spz, an ASCII PLY) is read whole. Throws IoError or
+/// FormatError.
+[[nodiscard]] std::unique_ptr<gaussian_source> open_gaussian_source(const std::string& path,
+                                                                    read_report* report = nullptr);
 
 /// Writes the standard 3DGS binary little-endian PLY: float x y z (world coordinates), nx ny nz
 /// = 0, f_dc_0..2, f_rest_* (channel-major), opacity (logit, opacities clamped to

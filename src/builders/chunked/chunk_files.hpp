@@ -53,15 +53,17 @@ class append_file {
     if (!f) throw IoError(path_ + ": cannot open for writing");
   }
   void put(const point_record& r) {
-    const std::size_t at = buf_.size();
-    buf_.resize(at + record_bytes);
-    unsigned char* p = buf_.data() + at;
+    unsigned char* p = grow(record_bytes);
     std::memcpy(p, &r.index, 8);
     std::memcpy(p + 8, r.position.data(), 12);
     std::memcpy(p + 20, r.normal.data(), 12);
     std::memcpy(p + 32, &r.colour, 3);
-    ++count_;
-    if (buf_.size() >= limit_) flush();
+    done();
+  }
+  /// One record of another layout (the Gaussian build's): n bytes at p.
+  void put_bytes(const void* p, std::size_t n) {
+    std::memcpy(grow(n), p, n);
+    done();
   }
   void flush() {
     if (buf_.empty()) return;
@@ -78,6 +80,16 @@ class append_file {
   [[nodiscard]] const std::string& path() const { return path_; }
 
  private:
+  unsigned char* grow(std::size_t n) {
+    const std::size_t at = buf_.size();
+    buf_.resize(at + n);
+    return buf_.data() + at;
+  }
+  void done() {
+    ++count_;
+    if (buf_.size() >= limit_) flush();
+  }
+
   std::string path_;
   std::size_t limit_;
   std::vector<unsigned char> buf_;
@@ -291,12 +303,11 @@ struct top_tree {
   }
 };
 
-/// What every chunked build does with its source, its ranks and its folders. The output is built
-/// in a staging folder beside it (atomic_directory) and renamed onto it by finish(): every rank
-/// writes into the staging folder (`dir`), rank 0 creates it, writes the top file last, and
+/// What every chunked build does with its ranks and its folders, whatever it reads. The output is
+/// built in a staging folder beside it (atomic_directory) and renamed onto it by finish(): every
+/// rank writes into the staging folder (`dir`), rank 0 creates it, writes the top file last, and
 /// commits it; a build that fails or is killed leaves the previous output as it was.
-struct chunked_pass_base {
-  const point_source& src;
+struct chunked_folder_build {
   atomic_directory output;
   std::filesystem::path dir;  // where the build writes: the staging folder
   std::size_t block_points;
@@ -309,10 +320,9 @@ struct chunked_pass_base {
   int passes = 0;
   const char* who;  // the build's name in messages
 
-  chunked_pass_base(const point_source& s, const std::string& d, std::size_t block,
-                    const distributed_build& dist, const char* name)
-      : src(s),
-        output(d, dist.rank == 0),
+  chunked_folder_build(const std::string& d, std::size_t block, const distributed_build& dist,
+                       const char* name)
+      : output(d, dist.rank == 0),
         dir(output.staging_path()),
         block_points(block),
         rank(dist.rank),
@@ -354,13 +364,12 @@ struct chunked_pass_base {
                                    256 * 1024);
   }
 
-  /// Checks the source and the output, and (rank 0) creates the staging folder and the
-  /// temporary folder in it.
-  void start() {
-    if (src.size() == 0)
-      throw InvalidArgument(std::string(who) + ": " + src.name() + " has no points");
-    if (!all_finite(src.origin()))
-      throw InvalidArgument(std::string(who) + ": " + src.name() + ": origin not finite");
+  /// Checks the input (`name`: its size and origin; `what` it holds) and the output, and (rank 0)
+  /// creates the staging folder and the temporary folder in it.
+  void start(const std::string& name, std::uint64_t size, const vec3d& origin, const char* what) {
+    if (size == 0) throw InvalidArgument(std::string(who) + ": " + name + " has no " + what);
+    if (!all_finite(origin))
+      throw InvalidArgument(std::string(who) + ": " + name + ": origin not finite");
     check_chunked_output(output.target());
     tmp.path = dir / "tmp-build";
     if (rank == 0) {
@@ -389,6 +398,39 @@ struct chunked_pass_base {
       throw IoError(output.target() + ": rank 0 did not finish the build (no " + chunked_top_file +
                     ")");
   }
+
+  /// The chunk builds of this rank, f(chunk, threads) for each: side by side, one thread each,
+  /// when there are at least `workers` of them, else one at a time on every thread (the output
+  /// does not depend on it). done(fraction of them done) on the calling thread.
+  template <class F, class Done>
+  void over_my_chunks(std::size_t chunks, unsigned workers, F&& f, Done&& done) const {
+    std::vector<std::size_t> list;
+    for (std::size_t c = 0; c < chunks; ++c)
+      if (mine(c)) list.push_back(c);
+    const bool side_by_side = list.size() >= workers;
+    std::atomic<std::size_t> finished{0};
+    const auto caller = std::this_thread::get_id();
+    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
+      f(list[k], side_by_side ? 1u : workers);
+      const std::size_t d = ++finished;
+      if (std::this_thread::get_id() == caller)
+        done(static_cast<double>(d) / static_cast<double>(list.size()));
+    });
+  }
+};
+
+/// The passes every chunked build of a point_source shares: the streaming, the distribution of
+/// the points to their chunks' files, the halos and the normals they fill.
+struct chunked_pass_base : chunked_folder_build {
+  const point_source& src;
+
+  chunked_pass_base(const point_source& s, const std::string& d, std::size_t block,
+                    const distributed_build& dist, const char* name)
+      : chunked_folder_build(d, block, dist, name), src(s) {}
+
+  /// Checks the source and the output, and (rank 0) creates the staging folder and the
+  /// temporary folder in it.
+  void start() { chunked_folder_build::start(src.name(), src.size(), src.origin(), "points"); }
 
   /// A chunk's box and size, which its halo starts from.
   struct chunk_extent {
@@ -433,24 +475,6 @@ struct chunked_pass_base {
     return ext;
   }
 
-  /// The chunk builds of this rank, f(chunk, threads) for each: side by side, one thread each,
-  /// when there are at least `workers` of them, else one at a time on every thread (the output
-  /// does not depend on it). done(fraction of them done) on the calling thread.
-  template <class F, class Done>
-  void over_my_chunks(std::size_t chunks, unsigned workers, F&& f, Done&& done) const {
-    std::vector<std::size_t> list;
-    for (std::size_t c = 0; c < chunks; ++c)
-      if (mine(c)) list.push_back(c);
-    const bool side_by_side = list.size() >= workers;
-    std::atomic<std::size_t> finished{0};
-    const auto caller = std::this_thread::get_id();
-    parallel_tasks(list.size(), side_by_side ? workers : 1, [&](std::size_t k, unsigned) {
-      f(list[k], side_by_side ? 1u : workers);
-      const std::size_t d = ++finished;
-      if (std::this_thread::get_id() == caller)
-        done(static_cast<double>(d) / static_cast<double>(list.size()));
-    });
-  }
   /// Part of a chunk for its halo: the box of some of its points and how far from that box the
   /// halo must reach for them.
   struct halo_cell {

@@ -17,6 +17,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "gaussian_build.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/memory.hpp"
@@ -27,38 +28,10 @@ namespace {
 
 using node = gaussian_hierarchy::node;
 
-/// Leaves (and so inner nodes, one fewer) of a subtree over c Gaussians: memoised, since the
-/// sizes on one level take at most two values.
-class tree_shape {
- public:
-  explicit tree_shape(std::uint32_t leaf_size) : leaf_size_(leaf_size) {}
-  std::uint32_t leaves(std::uint32_t c) {
-    if (c <= leaf_size_) return 1;
-    const auto it = memo_.find(c);
-    if (it != memo_.end()) return it->second;
-    const std::uint32_t l = leaves(c / 2) + leaves(c - c / 2);
-    memo_.emplace(c, l);
-    return l;
-  }
-  /// Read-only after every size reachable from the root has been memoised (leaves(n) once).
-  [[nodiscard]] std::uint32_t leaves_known(std::uint32_t c) const {
-    return c <= leaf_size_ ? 1 : memo_.at(c);
-  }
-  [[nodiscard]] std::uint32_t leaf_size() const { return leaf_size_; }
-
- private:
-  std::uint32_t leaf_size_;
-  std::map<std::uint32_t, std::uint32_t> memo_;
-};
-
-/// A Gaussian as the median splits see it: its mean, its 3σ reach (3 × its largest scale) and its
-/// input index, side by side so that the splits stream through one array instead of gathering
-/// from the input's.
-struct split_key {
-  vec3f p;
-  float reach;
-  std::uint32_t g;
-};
+using tree_shape = detail::gaussian_tree_shape;
+using split_key = detail::gaussian_split_key;
+using detail::enclose;
+using detail::gaussian_reach;
 
 /// A subtree to build: Gaussians [lo, hi) of the order, its preorder node number and the slot of
 /// its inner Gaussian (counted from the first inner slot).
@@ -80,25 +53,9 @@ struct builder {
   }
   [[nodiscard]] bool is_leaf(std::uint32_t c) const { return c <= shape.leaf_size(); }
 
-  /// Splits [lo, hi) at its median along the longest axis of the Gaussians' 3σ box (ties by
-  /// input index, so the split is a function of the input alone).
+  /// Splits [lo, hi) at its median (split_at_median).
   void split(std::uint32_t lo, std::uint32_t hi) const {
-    vec3f mn = vec3f::Constant(std::numeric_limits<float>::max()), mx = -mn;
-    for (std::uint32_t i = lo; i < hi; ++i) {
-      const split_key& k = keys[i];
-      mn = mn.cwiseMin(k.p - vec3f::Constant(k.reach));
-      mx = mx.cwiseMax(k.p + vec3f::Constant(k.reach));
-    }
-    int axis = 0;
-    const vec3f ext = mx - mn;
-    for (int a = 1; a < 3; ++a)
-      if (ext[a] > ext[axis]) axis = a;
-    const auto less = [axis](const split_key& a, const split_key& b) {
-      const float pa = a.p[axis], pb = b.p[axis];
-      return pa < pb || (pa == pb && a.g < b.g);
-    };
-    const std::uint32_t mid = lo + (hi - lo) / 2;
-    std::nth_element(keys.begin() + lo, keys.begin() + mid, keys.begin() + hi, less);
+    detail::split_at_median(std::span<split_key>(keys).subspan(lo, hi - lo));
   }
 
   [[nodiscard]] std::pair<subtree, subtree> children(const subtree& t) const {
@@ -109,9 +66,15 @@ struct builder {
     return {l, r};
   }
 
-  /// Splits everything below t (sequentially).
+  /// Splits everything below t (sequentially). A leaf's Gaussians go in input order, so that the
+  /// store, and the sums of the merges above, do not depend on how the splits left them (a
+  /// chunked build splits a chunk from another arrangement and must give the same bytes).
   void split_all(const subtree& t) const {
-    if (is_leaf(t.hi - t.lo)) return;
+    if (is_leaf(t.hi - t.lo)) {
+      std::sort(keys.begin() + t.lo, keys.begin() + t.hi,
+                [](const split_key& a, const split_key& b) { return a.g < b.g; });
+      return;
+    }
     split(t.lo, t.hi);
     const auto [l, r] = children(t);
     split_all(l);
@@ -144,32 +107,15 @@ void builder::copy_leaf_gaussians(std::uint32_t lo, std::uint32_t hi) const {
   }
 }
 
-/// The sphere holding a and b.
-sphere enclose(const sphere& a, const sphere& b) {
-  const vec3f d = b.centre - a.centre;
-  const float dist = d.norm();
-  if (dist + b.radius <= a.radius) return a;
-  if (dist + a.radius <= b.radius) return b;
-  const float r = 0.5f * (dist + a.radius + b.radius);
-  const vec3f c = a.centre + d * ((r - a.radius) / dist);
-  // Float rounding may leave a or b a hair outside: grow by a relative epsilon.
-  return {c,
-          r * (1 + 4 * std::numeric_limits<float>::epsilon()) + std::numeric_limits<float>::min()};
-}
-
-sphere reach(const gaussian_cloud& g, std::size_t i) {
-  return {g.positions[i], 3 * g.scales[i].maxCoeff()};
-}
-
 void builder::make_leaf(const subtree& t) const {
   node& d = nodes[t.node];
   d.gaussian = t.lo;
   d.count = t.hi - t.lo;
   d.right = 0;
-  d.bounds = reach(out, t.lo);
+  d.bounds = gaussian_reach(out, t.lo);
   d.size = out.scales[t.lo].maxCoeff();
   for (std::uint32_t i = t.lo + 1; i < t.hi; ++i) {
-    d.bounds = enclose(d.bounds, reach(out, i));
+    d.bounds = enclose(d.bounds, gaussian_reach(out, i));
     d.size = std::max(d.size, out.scales[i].maxCoeff());
   }
 }
@@ -223,12 +169,10 @@ Eigen::Matrix3d covariance_of(const gaussian_cloud& g, std::size_t i) {
 }
 
 /// The Gaussians a node merges: its children's representatives (a leaf child's Gaussians, an
-/// inner child's merged one), as store slots.
-/// Store slots of the Gaussians a node merges: at most two leaves of 64 (leaf_size ≤ 64). A fixed
+/// inner child's merged one), as store slots: at most two leaves of 64 (leaf_size ≤ 64). A fixed
 /// array, since a merge runs once per inner node (half the nodes) and needs no allocation.
 struct part_list {
   std::array<std::uint32_t, 128> slot;
-  std::array<double, 128> w;
   std::size_t n = 0;
 };
 
@@ -245,60 +189,16 @@ void builder::merge(const subtree& t) const {
   part_list list;
   representatives(*this, l, list);
   representatives(*this, r, list);
-  const std::span<const std::uint32_t> parts(list.slot.data(), list.n);
-  const std::span<double> w(list.w.data(), list.n);
-  // Weights w_i ∝ o_i S(s_i); all zero (zero sizes or opacities): equal weights.
-  double total = 0;
-  for (std::size_t k = 0; k < parts.size(); ++k) {
-    w[k] = double(out.opacities[parts[k]]) * surface(out.scales[parts[k]]);
-    total += w[k];
-  }
-  if (!(total > 0) || !std::isfinite(total)) std::fill(w.begin(), w.end(), 1.0);
-  const double sum = std::accumulate(w.begin(), w.end(), 0.0);
-  // Mean, then the covariance about it (both in double, origin-relative).
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (std::size_t k = 0; k < parts.size(); ++k)
-    mean += (w[k] / sum) * out.positions[parts[k]].cast<double>();
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (std::size_t k = 0; k < parts.size(); ++k) {
-    const Eigen::Vector3d d = out.positions[parts[k]].cast<double>() - mean;
-    cov += (w[k] / sum) * (covariance_of(out, parts[k]) + d * d.transpose());
-  }
-  Eigen::Vector3d side = Eigen::Vector3d::Zero();
-  for (std::size_t k = 0; k < parts.size(); ++k) side += w[k] * normal_of(out, parts[k]);
   const std::uint32_t slot = n + t.inner;
-  out.positions[slot] = mean.cast<float>();
-  decompose(cov, side, out.scales[slot], out.rotations[slot]);
-  // Opacity: the weighted opacity-area Σ oᵢS(sᵢ) conserved. Where the children overlap it
-  // exceeds the merged Gaussian's surface: the paper keeps o > 1 (conserve); grow keeps o = 1
-  // and scales the Gaussian by √o (S goes as s²), the same product in a valid 3DGS Gaussian (a
-  // file stores opacity as a logit), so a cut exports as drawn. A merged Gaussian of no size
-  // takes its most opaque part's opacity.
-  float most = 0;
-  for (const std::uint32_t p : parts) most = std::max(most, out.opacities[p]);
-  const double area = surface(out.scales[slot]);
-  double o = area > 0 && total > 0 ? total / area : double(most);
-  if (opacity == merged_opacity::grow && o > 1 && std::isfinite(o)) {
-    out.scales[slot] *= static_cast<float>(std::sqrt(o));
-    o = 1;
-  }
-  out.opacities[slot] = static_cast<float>(std::min(o, double(std::numeric_limits<float>::max())));
-  // SH: the same weights.
-  const std::size_t stride = out.sh_stride();
-  float* sh = out.sh.data() + slot * stride;
-  for (std::size_t j = 0; j < stride; ++j) {
-    double v = 0;
-    for (std::size_t k = 0; k < parts.size(); ++k)
-      v += (w[k] / sum) * out.sh[parts[k] * stride + j];
-    sh[j] = static_cast<float>(v);
-  }
+  detail::merge_gaussians(out, std::span<const std::uint32_t>(list.slot.data(), list.n), slot,
+                          opacity);
   node& d = nodes[t.node];
   d.gaussian = slot;
   d.count = 0;
   d.right = r.node;
   const node &nl = nodes[l.node], &nr = nodes[r.node];
   d.size = std::max({out.scales[slot].maxCoeff(), nl.size, nr.size});
-  d.bounds = enclose(enclose(nl.bounds, nr.bounds), reach(out, slot));
+  d.bounds = enclose(enclose(nl.bounds, nr.bounds), gaussian_reach(out, slot));
 }
 
 void validate_input(const gaussian_cloud& in, const gaussian_hierarchy_options& o) {
@@ -397,17 +297,87 @@ gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud& in,
   return h;
 }
 
-std::size_t gaussian_hierarchy::depth() const {
-  if (nodes_.empty()) return 0;
-  std::size_t deepest = 0;
-  std::vector<std::pair<node_id, std::size_t>> stack{{0, 0}};
-  while (!stack.empty()) {
-    const auto [n, d] = stack.back();
-    stack.pop_back();
-    deepest = std::max(deepest, d);
-    for (const node_id c : children(n)) stack.push_back({c, d + 1});
-  }
-  return deepest;
+namespace detail {
+
+sphere enclose(const sphere& a, const sphere& b) {
+  const vec3f d = b.centre - a.centre;
+  const float dist = d.norm();
+  if (dist + b.radius <= a.radius) return a;
+  if (dist + a.radius <= b.radius) return b;
+  const float r = 0.5f * (dist + a.radius + b.radius);
+  const vec3f c = a.centre + d * ((r - a.radius) / dist);
+  // Float rounding may leave a or b a hair outside: grow by a relative epsilon.
+  return {c,
+          r * (1 + 4 * std::numeric_limits<float>::epsilon()) + std::numeric_limits<float>::min()};
 }
+
+void split_at_median(std::span<gaussian_split_key> keys) {
+  vec3f mn = vec3f::Constant(std::numeric_limits<float>::max()), mx = -mn;
+  for (const gaussian_split_key& k : keys) {
+    mn = mn.cwiseMin(k.p - vec3f::Constant(k.reach));
+    mx = mx.cwiseMax(k.p + vec3f::Constant(k.reach));
+  }
+  int axis = 0;
+  const vec3f ext = mx - mn;
+  for (int a = 1; a < 3; ++a)
+    if (ext[a] > ext[axis]) axis = a;
+  const auto less = [axis](const gaussian_split_key& a, const gaussian_split_key& b) {
+    const float pa = a.p[axis], pb = b.p[axis];
+    return pa < pb || (pa == pb && a.g < b.g);
+  };
+  std::nth_element(keys.begin(), keys.begin() + static_cast<std::ptrdiff_t>(keys.size() / 2),
+                   keys.end(), less);
+}
+
+void merge_gaussians(gaussian_cloud& g, std::span<const std::uint32_t> parts, std::size_t slot,
+                     merged_opacity opacity) {
+  std::array<double, 128> weights;  // parts.size() ≤ 128 (two leaves of ≤ 64)
+  const std::span<double> w(weights.data(), parts.size());
+  // Weights w_i ∝ o_i S(s_i); all zero (zero sizes or opacities): equal weights.
+  double total = 0;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    w[k] = double(g.opacities[parts[k]]) * surface(g.scales[parts[k]]);
+    total += w[k];
+  }
+  if (!(total > 0) || !std::isfinite(total)) std::fill(w.begin(), w.end(), 1.0);
+  const double sum = std::accumulate(w.begin(), w.end(), 0.0);
+  // Mean, then the covariance about it (both in double, origin-relative).
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (std::size_t k = 0; k < parts.size(); ++k)
+    mean += (w[k] / sum) * g.positions[parts[k]].cast<double>();
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    const Eigen::Vector3d d = g.positions[parts[k]].cast<double>() - mean;
+    cov += (w[k] / sum) * (covariance_of(g, parts[k]) + d * d.transpose());
+  }
+  Eigen::Vector3d side = Eigen::Vector3d::Zero();
+  for (std::size_t k = 0; k < parts.size(); ++k) side += w[k] * normal_of(g, parts[k]);
+  g.positions[slot] = mean.cast<float>();
+  decompose(cov, side, g.scales[slot], g.rotations[slot]);
+  // Opacity: the weighted opacity-area Σ oᵢS(sᵢ) conserved. Where the children overlap it
+  // exceeds the merged Gaussian's surface: the paper keeps o > 1 (conserve); grow keeps o = 1
+  // and scales the Gaussian by √o (S goes as s²), the same product in a valid 3DGS Gaussian (a
+  // file stores opacity as a logit), so a cut exports as drawn. A merged Gaussian of no size
+  // takes its most opaque part's opacity.
+  float most = 0;
+  for (const std::uint32_t p : parts) most = std::max(most, g.opacities[p]);
+  const double area = surface(g.scales[slot]);
+  double o = area > 0 && total > 0 ? total / area : double(most);
+  if (opacity == merged_opacity::grow && o > 1 && std::isfinite(o)) {
+    g.scales[slot] *= static_cast<float>(std::sqrt(o));
+    o = 1;
+  }
+  g.opacities[slot] = static_cast<float>(std::min(o, double(std::numeric_limits<float>::max())));
+  // SH: the same weights.
+  const std::size_t stride = g.sh_stride();
+  float* sh = g.sh.data() + slot * stride;
+  for (std::size_t j = 0; j < stride; ++j) {
+    double v = 0;
+    for (std::size_t k = 0; k < parts.size(); ++k) v += (w[k] / sum) * g.sh[parts[k] * stride + j];
+    sh[j] = static_cast<float>(v);
+  }
+}
+
+}  // namespace detail
 
 }  // namespace pbr_lod

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <limits>
 
+#include "gaussian_cuts.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
@@ -164,67 +165,16 @@ gaussian_hierarchy gaussian_hierarchy::load(const std::string& path) {
   return parse(detail::load_file_bytes(path), path);
 }
 
-namespace {
-
-/// The Gaussians of the given nodes (their leaves' or their merged ones), in that order.
-gaussian_cloud gather(const gaussian_hierarchy& h, const std::vector<std::uint32_t>& ids) {
-  const gaussian_cloud& s = h.store();
-  gaussian_cloud out;
-  out.origin = s.origin;
-  out.sh_degree = s.sh_degree;
-  const std::size_t stride = s.sh_stride();
-  for (const std::uint32_t n : ids) {
-    const auto& d = h.nodes()[n];
-    const std::uint32_t count = d.count == 0 ? 1 : d.count;
-    for (std::uint32_t i = d.gaussian; i < d.gaussian + count; ++i) {
-      out.positions.push_back(s.positions[i]);
-      out.scales.push_back(s.scales[i]);
-      out.rotations.push_back(s.rotations[i]);
-      out.opacities.push_back(s.opacities[i]);
-      out.sh.insert(out.sh.end(), s.sh.begin() + static_cast<std::ptrdiff_t>(i * stride),
-                    s.sh.begin() + static_cast<std::ptrdiff_t>((i + 1) * stride));
-    }
-  }
-  return out;
-}
-
-/// gaussian_policy, recording the nodes it emits.
-struct recording_policy : gaussian_policy {
-  std::vector<std::uint32_t>* ids;
-  template <class S>
-  void emit(const gaussian_hierarchy&, gaussian_hierarchy::node_id n, const view&, float,
-            const traverse_options&, S&) const {
-    ids->push_back(n);
-  }
-};
-
-}  // namespace
-
 gaussian_cloud gaussian_hierarchy::cut(const view& v, const traverse_options& o) const {
-  std::vector<std::uint32_t> ids;
-  counting_sink<attrs> none;
-  recording_policy p;
-  p.ids = &ids;
-  (void)traverse(*this, v, o, none, p);
-  return gather(*this, ids);
+  return detail::gaussian_cut(*this, v, o);
 }
 
 gaussian_cloud gaussian_hierarchy::level(std::size_t level) const {
-  std::vector<std::uint32_t> ids;
-  if (!nodes_.empty()) {
-    std::vector<std::pair<node_id, std::size_t>> stack{{0, 0}};
-    while (!stack.empty()) {
-      const auto [n, d] = stack.back();
-      stack.pop_back();
-      if (is_leaf(n) || d == level) {
-        ids.push_back(n);
-        continue;
-      }
-      stack.push_back({nodes_[n].right, d + 1});
-      stack.push_back({n + 1, d + 1});
-    }
-  }
-  return gather(*this, ids);
+  return detail::gaussian_level(*this, level);
+}
+
+std::size_t gaussian_hierarchy::depth() const {
+  return detail::gaussian_depth(*this);
 }
 
 }  // namespace pbr_lod
