@@ -157,21 +157,31 @@ bool is_unfinished_directory(const std::string& dir) {
 }
 
 void write_file_atomically(const std::string& path, const void* data, std::size_t size) {
+  write_file_atomically(path, [&](const auto& write) { write(data, size); });
+}
+
+void write_file_atomically(
+    const std::string& path,
+    const std::function<void(const std::function<void(const void*, std::size_t)>&)>& produce) {
   atomic_output out(path);
   const int fd = ::open(out.temp_path().c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
   if (fd < 0) fail(path, "opening " + out.temp_path() + " for writing", errno);
-  const auto* p = static_cast<const unsigned char*>(data);
-  std::size_t left = size;
-  while (left > 0) {
-    const ssize_t n = ::write(fd, p, left);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const int e = n < 0 ? errno : EIO;
-      ::close(fd);
-      fail(path, "writing", e);
+  const auto write = [&](const void* data, std::size_t size) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    std::size_t left = size;
+    while (left > 0) {
+      const ssize_t n = ::write(fd, p, left);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) fail(path, "writing", n < 0 ? errno : EIO);  // the fd is closed below
+      p += n;
+      left -= static_cast<std::size_t>(n);
     }
-    p += n;
-    left -= static_cast<std::size_t>(n);
+  };
+  try {
+    produce(write);
+  } catch (...) {
+    ::close(fd);
+    throw;
   }
   if (::close(fd) != 0) fail(path, "closing " + out.temp_path(), errno);
   out.commit();

@@ -17,6 +17,7 @@
 
 #include "chunked_test_util.hpp"
 #include "pbr_lod/builders/chunked_gaussian_hierarchy.hpp"
+#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/gaussian_source.hpp"
 #include "pbr_lod/io/gaussians.hpp"
@@ -240,6 +241,19 @@ TEST(ChunkedGaussianHierarchy, DamagedFoldersAreFormatErrors) {
     EXPECT_THROW((void)chunked_gaussian_hierarchy::open(dir), FormatError) << "cut at " << at;
   }
   fs::remove_all(dir);
+}
+
+// save() writes its file in pieces of about 1 MiB, hashing as it goes: the bytes serialize() gives.
+TEST(GaussianHierarchyFile, SaveWritesTheSerializedBytesInPieces) {
+  const gaussian_hierarchy h = build_gaussian_hierarchy(make_gaussian_scene(12000, 3, 2));
+  ASSERT_GT(h.file_bytes(), std::size_t{5} << 20);
+  const std::string path = temp("pieces.lod");
+  h.save(path);
+  const std::vector<unsigned char> bytes = detail::load_file_bytes(path);
+  EXPECT_EQ(bytes.size(), h.file_bytes());
+  EXPECT_TRUE(bytes == h.serialize());
+  EXPECT_TRUE(gaussian_hierarchy::load(path) == h);
+  fs::remove(path);
 }
 
 // --- the sources ---------------------------------------------------------------------------------

@@ -44,11 +44,11 @@ using chunked_gaussian_hierarchy_options = chunked_options<gaussian_hierarchy_op
 
 /// Peak bytes of a chunk's build per Gaussian of SH degree `degree`, from the build's arrays: the
 /// chunk's Gaussians read (one record each), the store (the input's and the inner Gaussians: two
-/// records), its file's bytes when saved (two more), the nodes (two of 32 bytes) and the split
-/// keys (16). Degree 3: 1,324 bytes.
+/// records), the nodes (two of 32 bytes) and the split keys (16); the file is written in pieces.
+/// Degree 3: 852 bytes.
 [[nodiscard]] constexpr std::uint64_t gaussian_chunk_bytes(int degree) {
   const auto record = static_cast<std::uint64_t>(11 + 3 * sh_coefficients(degree)) * 4;
-  return 5 * record + 2 * 32 + 16;
+  return 3 * record + 2 * 32 + 16;
 }
 
 /// Builds the Gaussian hierarchy of `src` into the folder `dir`, whole or not at all (built in a

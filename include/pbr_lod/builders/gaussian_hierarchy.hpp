@@ -36,6 +36,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,9 @@
 #include "pbr_lod/traverse/traverse.hpp"
 
 namespace pbr_lod {
+namespace detail {
+struct byte_writer;  // core/binary.hpp
+}  // namespace detail
 
 /// Where a merged Gaussian's children overlap, its conserved opacity-area Σ oᵢS(sᵢ) exceeds its
 /// own surface S(s) (docs/gaussian-hierarchy.md measures both rules).
@@ -226,6 +230,9 @@ class gaussian_hierarchy {
   friend gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud&,
                                                      const gaussian_hierarchy_options&,
                                                      gaussian_hierarchy_stats*);
+  /// The file's bytes but its checksum into w, calling flush() whenever w holds about 1 MiB.
+  void serialize_into(detail::byte_writer& w, const std::function<void()>& flush) const;
+
   gaussian_cloud g_;
   std::size_t input_ = 0;
   std::vector<node> nodes_;

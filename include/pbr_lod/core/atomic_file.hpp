@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <string>
 
 namespace pbr_lod {
@@ -93,5 +94,10 @@ inline constexpr const char* atomic_directory_marker = ".pbr_lod-in-progress";
 /// Writes `size` bytes at `data` to `path` whole or not at all (atomic_output); throws IoError
 /// naming the file and the reason (e.g. "File too large") when it cannot.
 void write_file_atomically(const std::string& path, const void* data, std::size_t size);
+/// The same for a file made in pieces: produce(write) calls write(data, size) for each piece in
+/// order, so that a large file is never held in memory whole.
+void write_file_atomically(
+    const std::string& path,
+    const std::function<void(const std::function<void(const void*, std::size_t)>&)>& produce);
 
 }  // namespace pbr_lod

@@ -123,8 +123,9 @@ struct byte_reader {
   }
 };
 
-inline std::uint64_t fnv1a(const unsigned char* p, std::size_t n) {
-  std::uint64_t h = 1469598103934665603ull;
+/// FNV-1a of n bytes; `h` the hash of the bytes before them, for a file hashed in pieces.
+inline std::uint64_t fnv1a(const unsigned char* p, std::size_t n,
+                           std::uint64_t h = 1469598103934665603ull) {
   for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
   return h;
 }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 
 #include "builders/chunked/chunk_files.hpp"
@@ -222,19 +223,23 @@ struct gaussian_chunked_build : detail::chunked_folder_build {
   /// Step 4: chunk c built in memory from its file, saved; its root kept for the top.
   void build_chunk(std::uint32_t c) {
     const std::string path = temp_path("chunk", c);
-    const std::vector<unsigned char> bytes = detail::load_file_bytes(path);
-    const std::size_t per = record_floats(src.sh_degree()) * sizeof(float);
     const part& p = parts[chunk_top[c]];
-    if (bytes.size() != std::size_t{p.hi - p.lo} * per) throw IoError(path + ": cut short");
+    const std::size_t per = record_floats(src.sh_degree());
     gaussian_cloud g;
     g.origin = src.origin();
     g.sh_degree = src.sh_degree();
     resize_cloud(g, p.hi - p.lo);
-    std::vector<float> rec(per / sizeof(float));
-    for (std::size_t i = 0; i < g.size(); ++i) {
-      std::memcpy(rec.data(), bytes.data() + i * per, per);
-      get_record(rec.data(), g, i);
+    // Read in pieces straight into the cloud (the chunk's file is as large as the cloud).
+    std::ifstream f(path, std::ios::binary);
+    std::vector<float> rec(per * 4096);
+    for (std::size_t i = 0; i < g.size();) {
+      const std::size_t n = std::min<std::size_t>(4096, g.size() - i);
+      if (!f.read(reinterpret_cast<char*>(rec.data()),
+                  static_cast<std::streamsize>(n * per * sizeof(float))))
+        throw IoError(path + ": cut short");
+      for (std::size_t k = 0; k < n; ++k, ++i) get_record(rec.data() + k * per, g, i);
     }
+    if (f.peek() != std::char_traits<char>::eof()) throw IoError(path + ": longer than its chunk");
     gaussian_hierarchy_options bo = o.builder;
     bo.threads = threads;
     const gaussian_hierarchy h = build_gaussian_hierarchy(g, bo);

@@ -6,10 +6,12 @@
 // SH f32 × (degree+1)²·3; per node (preorder) u32 gaussian, u32 count, u32 right, f32 size,
 // f32×4 bounding sphere; the FNV-1a checksum of everything before it.
 #include <cstring>
+#include <functional>
 #include <limits>
 
 #include "gaussian_cuts.hpp"
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
+#include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/core/error.hpp"
 
@@ -70,21 +72,22 @@ void check_tree(const std::vector<gaussian_hierarchy::node>& nodes, std::size_t 
 
 }  // namespace
 
-std::vector<unsigned char> gaussian_hierarchy::serialize() const {
-  detail::byte_writer w;
+void gaussian_hierarchy::serialize_into(detail::byte_writer& w,
+                                        const std::function<void()>& flush) const {
   detail::write_head(w, gaussian_format);
   w.put(static_cast<std::uint32_t>(g_.sh_degree));
   w.put(static_cast<std::uint64_t>(input_));
   w.put(static_cast<std::uint64_t>(g_.size() - input_));
   w.put(static_cast<std::uint64_t>(nodes_.size()));
   for (int a = 0; a < 3; ++a) w.put(g_.origin[a]);
-  w.bytes.reserve(w.bytes.size() + file_bytes());
+  constexpr std::size_t piece = std::size_t{1} << 20;
   for (std::size_t i = 0; i < g_.size(); ++i) {
     put_floats(w, g_.positions[i].data(), 3);
     put_floats(w, g_.scales[i].data(), 3);
     put_floats(w, g_.rotations[i].data(), 4);
     w.put(g_.opacities[i]);
     put_floats(w, g_.sh.data() + i * g_.sh_stride(), g_.sh_stride());
+    if (w.bytes.size() >= piece) flush();
   }
   for (const node& d : nodes_) {
     w.put(d.gaussian);
@@ -93,7 +96,14 @@ std::vector<unsigned char> gaussian_hierarchy::serialize() const {
     w.put(d.size);
     w.put_vec(d.bounds.centre);
     w.put(d.bounds.radius);
+    if (w.bytes.size() >= piece) flush();
   }
+}
+
+std::vector<unsigned char> gaussian_hierarchy::serialize() const {
+  detail::byte_writer w;
+  w.bytes.reserve(file_bytes());
+  serialize_into(w, [] {});
   detail::append_checksum(w);
   return std::move(w.bytes);
 }
@@ -158,7 +168,22 @@ std::size_t gaussian_hierarchy::file_bytes() const {
 }
 
 void gaussian_hierarchy::save(const std::string& path) const {
-  detail::save_file_bytes(path, serialize());
+  // In pieces of about 1 MiB, hashed as they go: a 10⁷-Gaussian scene's 5 GB file is never in
+  // memory (serialize() gives the same bytes).
+  write_file_atomically(path, [&](const auto& write) {
+    detail::byte_writer w;
+    std::uint64_t hash = detail::fnv1a(nullptr, 0);
+    const auto flush = [&] {
+      hash = detail::fnv1a(w.bytes.data(), w.bytes.size(), hash);
+      write(w.bytes.data(), w.bytes.size());
+      w.bytes.clear();
+    };
+    serialize_into(w, flush);
+    flush();
+    unsigned char tail[8];  // as byte_writer::put writes it
+    std::memcpy(tail, &hash, 8);
+    write(tail, 8);
+  });
 }
 
 gaussian_hierarchy gaussian_hierarchy::load(const std::string& path) {
