@@ -15,6 +15,14 @@ namespace pbr_lod::test {
 /// test object depends on where the checkout is).
 const char* configured_data_dir();
 
+/// The checkout's tests/data folder (files committed with the project, with their PROVENANCE.md).
+const char* repository_test_data_dir();
+
+/// Full path of a file committed under tests/data (always present: no skipping).
+inline std::string repository_file(const std::string& relative) {
+  return (std::filesystem::path(repository_test_data_dir()) / relative).string();
+}
+
 inline std::filesystem::path data_dir() {
   if (const char* env = std::getenv("PBR_LOD_DATA")) return env;
   return configured_data_dir();
