@@ -1,0 +1,395 @@
+// LAZ decoding against real files written by other tools: twins holding the same points as LAS
+// and as LAZ (tests/data/laz/PROVENANCE.md). Every decoded record must equal the LAS record byte
+// for byte — intensity, return bits, classification, GPS time, colour and extra bytes, not only
+// the positions read_points keeps — and read_points and the streaming point source must give
+// for the LAZ exactly what they give for the LAS. Files of several chunks are made from a real
+// one-chunk file by repeating its chunk under a chunk table we encode (the twins are small, so
+// each is one chunk); damaged chunks and tables must give a FormatError naming what is wrong.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <tuple>
+
+#include "io/laz_codec.hpp"
+#include "io/laz_decoder.hpp"
+#include "io_test_util.hpp"
+#include "pbr_lod/io/point_source_file.hpp"
+#include "pbr_lod/io/read.hpp"
+
+namespace {
+
+using pbr_lod::FormatError;
+using pbr_lod::read_points;
+using pbr_lod::detail::cat;
+using pbr_lod::test::poke_le;
+using pbr_lod::test::put_le;
+using pbr_lod::test::slurp;
+namespace detail = pbr_lod::detail;
+
+using Laz = pbr_lod::test::scratch_dir;
+
+std::string twin(const std::string& name) {
+  return std::string(PBR_LOD_LAZ_TEST_DIR "/") + name;
+}
+
+template <class T>
+T peek_le(const std::string& b, std::size_t at) {
+  T v;
+  std::memcpy(&v, b.data() + at, sizeof(T));
+  return v;
+}
+
+detail::las_header header_of(const std::string& path, const std::string& bytes) {
+  pbr_lod::read_report r;
+  return detail::parse_las_header(path, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                  bytes.size(), r);
+}
+
+detail::laz_fetch fetch_from(const std::string& bytes) {
+  return [&bytes](std::uint64_t at, std::size_t n, unsigned char* out) {
+    std::memcpy(out, bytes.data() + at, n);
+  };
+}
+
+/// The layout of a LAZ file held in `bytes`.
+detail::laz_layout layout_of(const std::string& path, const std::string& bytes) {
+  return detail::read_laz_layout(path, header_of(path, bytes), bytes.size(), fetch_from(bytes));
+}
+
+/// Every record of the LAZ file at `path`, decoded.
+std::string laz_records(const std::string& path) {
+  const std::string bytes = slurp(path);
+  const detail::laz_layout L = layout_of(path, bytes);
+  const detail::las_header h = header_of(path, bytes);
+  std::string out(static_cast<std::size_t>(h.count * h.record_length), '\0');
+  detail::decode_laz_chunks(path, L, 0, L.chunks.size(), fetch_from(bytes),
+                            reinterpret_cast<unsigned char*>(out.data()));
+  return out;
+}
+
+/// The records of the LAS file at `path`, as stored.
+std::string las_records(const std::string& path) {
+  const std::string bytes = slurp(path);
+  const detail::las_header h = header_of(path, bytes);
+  return bytes.substr(h.data_offset, static_cast<std::size_t>(h.count * h.record_length));
+}
+
+/// The whole cloud from a point source, read in blocks of `block` points.
+pbr_lod::point_cloud stream(const std::string& path, std::size_t block) {
+  const auto src = pbr_lod::open_point_source(path);
+  pbr_lod::point_cloud c;
+  c.origin = src->origin();
+  pbr_lod::point_block b;
+  for (std::uint64_t first = 0; first < src->size(); first += block) {
+    src->read(first, static_cast<std::size_t>(std::min<std::uint64_t>(block, src->size() - first)),
+              b);
+    c.positions.insert(c.positions.end(), b.positions.begin(), b.positions.end());
+    c.colours.insert(c.colours.end(), b.colours.begin(), b.colours.end());
+  }
+  return c;
+}
+
+void expect_same_cloud(const pbr_lod::point_cloud& a, const pbr_lod::point_cloud& b,
+                       const std::string& what) {
+  EXPECT_EQ(a.origin, b.origin) << what;
+  EXPECT_EQ(a.positions, b.positions) << what;
+  EXPECT_EQ(a.colours, b.colours) << what;
+}
+
+/// Index of the first differing record (for a readable failure), or -1.
+long first_difference(const std::string& a, const std::string& b, std::size_t record_length) {
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    if (a[i] != b[i]) return static_cast<long>(i / record_length);
+  return a.size() == b.size() ? -1
+                              : static_cast<long>(std::min(a.size(), b.size()) / record_length);
+}
+
+struct twin_case {
+  const char* name;
+  unsigned format;
+  unsigned record_length;
+  std::uint64_t points;
+};
+// point10, point-time, point-color, extra-bytes: laz-rs's test set (LASzip 2.2); simple: PDAL's
+// (LASzip 3.4). Formats 0–3; extra-bytes has 27 extra bytes per record (a BYTE item).
+const twin_case twins[] = {{"point10", 0, 20, 1065},
+                           {"point-time", 1, 28, 1065},
+                           {"point-color", 2, 26, 1065},
+                           {"simple", 3, 34, 1065},
+                           {"extra-bytes", 3, 61, 1065}};
+
+// The heart of it: the decoder gives the LAS records, every byte of every field.
+TEST(LazTwins, RecordsEqualTheLasRecordsByteForByte) {
+  for (const twin_case& t : twins) {
+    const std::string laz = twin(std::string(t.name) + ".laz");
+    const std::string las = twin(std::string(t.name) + ".las");
+    const std::string bytes = slurp(laz);
+    const detail::las_header h = header_of(laz, bytes);
+    EXPECT_TRUE(h.compressed) << t.name;
+    EXPECT_EQ(h.format, t.format) << t.name;
+    EXPECT_EQ(h.record_length, t.record_length) << t.name;
+    EXPECT_EQ(h.count, t.points) << t.name;
+    const std::string got = laz_records(laz), want = las_records(las);
+    ASSERT_EQ(got.size(), want.size()) << t.name;
+    EXPECT_EQ(first_difference(got, want, t.record_length), -1) << t.name << ": first bad record";
+  }
+}
+
+TEST(LazTwins, ReadPointsGivesTheLasCloud) {
+  for (const twin_case& t : twins) {
+    pbr_lod::read_report rz, rs;
+    const auto z = read_points(twin(std::string(t.name) + ".laz"), &rz);
+    const auto s = read_points(twin(std::string(t.name) + ".las"), &rs);
+    ASSERT_EQ(z.size(), t.points) << t.name;
+    expect_same_cloud(z, s, t.name);
+    EXPECT_EQ(rz.points_read, rs.points_read) << t.name;
+    EXPECT_EQ(rz.warnings.size(), rs.warnings.size()) << t.name;
+  }
+}
+
+// Blocks of 7 start reads inside the chunk; blocks of 4096 cover it whole.
+TEST(LazTwins, PointSourceGivesWhatReadPointsGives) {
+  for (const twin_case& t : twins) {
+    const std::string laz = twin(std::string(t.name) + ".laz");
+    const auto whole = read_points(laz);
+    for (const std::size_t block : {std::size_t{7}, std::size_t{4096}})
+      expect_same_cloud(stream(laz, block), whole, cat(t.name, " in blocks of ", block));
+  }
+}
+
+// --- files of several chunks ------------------------------------------------------------------
+
+/// `copies` chunks, each the single chunk of the twin `name`, under a chunk table we encode:
+/// fixed chunks (the VLR's chunk size = the twin's point count) or variable ones (chunk size
+/// 0xFFFFFFFF, the table holds each chunk's count). Returns the LAZ and the LAS twin to match.
+std::pair<std::string, std::string> repeat_chunk(const std::string& name, std::uint32_t copies,
+                                                 bool variable) {
+  const std::string laz = slurp(twin(name + ".laz"));
+  const std::string las = slurp(twin(name + ".las"));
+  const detail::las_header h = header_of(name, laz);
+  const detail::laz_layout L = layout_of(name, laz);
+  const detail::laz_chunk c = L.chunks.at(0);
+  const std::string chunk =
+      laz.substr(static_cast<std::size_t>(c.offset), static_cast<std::size_t>(c.bytes));
+
+  std::string out = laz.substr(0, h.data_offset);
+  const auto points = static_cast<std::uint32_t>(h.count * copies);
+  poke_le<std::uint32_t>(out, 107, points);
+  // The chunk size field of the LASzip VLR (found as read_laz_layout finds it).
+  std::size_t at = h.header_size;
+  for (std::uint32_t i = 0; i < h.vlr_count; ++i) {
+    const auto length = peek_le<std::uint16_t>(out, at + 20);
+    if (out.compare(at + 2, 14, "laszip encoded") == 0)
+      poke_le<std::uint32_t>(out, at + 54 + 12,
+                             variable ? 0xFFFFFFFFu : static_cast<std::uint32_t>(h.count));
+    at += 54 + length;
+  }
+  const std::uint64_t table_at = h.data_offset + 8 + copies * chunk.size();
+  put_le<std::int64_t>(out, static_cast<std::int64_t>(table_at));
+  for (std::uint32_t i = 0; i < copies; ++i) out += chunk;
+  put_le<std::uint32_t>(out, 0);
+  put_le<std::uint32_t>(out, copies);
+  std::vector<unsigned char> coded;
+  detail::laz::range_encoder enc(coded);
+  detail::laz::integer_codec ic(32, 2);
+  std::int32_t prev_count = 0, prev_bytes = 0;
+  for (std::uint32_t i = 0; i < copies; ++i) {
+    if (variable) {
+      ic.encode(enc, prev_count, static_cast<std::int32_t>(c.count), 0);
+      prev_count = static_cast<std::int32_t>(c.count);
+    }
+    ic.encode(enc, prev_bytes, static_cast<std::int32_t>(chunk.size()), 1);
+    prev_bytes = static_cast<std::int32_t>(chunk.size());
+  }
+  enc.done();
+  out.append(coded.begin(), coded.end());
+
+  const detail::las_header hs = header_of(name, las);
+  std::string las_out = las.substr(0, hs.data_offset);
+  poke_le<std::uint32_t>(las_out, 107, points);
+  const std::string records = las_records(twin(name + ".las"));
+  for (std::uint32_t i = 0; i < copies; ++i) las_out += records;
+  return {out, las_out};
+}
+
+TEST_F(Laz, SeveralFixedChunks) {
+  const auto [laz, las] = repeat_chunk("simple", 3, false);
+  const std::string zp = write("three.laz", laz), sp = write("three.las", las);
+  EXPECT_EQ(layout_of(zp, laz).chunks.size(), 3u);
+  EXPECT_EQ(first_difference(laz_records(zp), las_records(sp), 34), -1);
+  const auto whole = read_points(zp);
+  ASSERT_EQ(whole.size(), 3u * 1065u);
+  expect_same_cloud(whole, read_points(sp), "read_points");
+  for (const std::size_t block : {std::size_t{7}, std::size_t{1000}, std::size_t{5000}})
+    expect_same_cloud(stream(zp, block), whole, cat("blocks of ", block));
+}
+
+TEST_F(Laz, SeveralVariableChunksWithExtraBytes) {
+  const auto [laz, las] = repeat_chunk("extra-bytes", 4, true);
+  const std::string zp = write("four.laz", laz), sp = write("four.las", las);
+  const detail::laz_layout L = layout_of(zp, laz);
+  ASSERT_EQ(L.chunks.size(), 4u);
+  EXPECT_EQ(L.chunks[3].first, 3u * 1065u);
+  EXPECT_EQ(L.chunks[3].count, 1065u);
+  EXPECT_EQ(first_difference(laz_records(zp), las_records(sp), 61), -1);
+  expect_same_cloud(read_points(zp), read_points(sp), "read_points");
+  expect_same_cloud(stream(zp, 333), read_points(sp), "blocks of 333");
+}
+
+// A LAZ file whose name says .las (or the reverse) reads by its format byte.
+TEST_F(Laz, TheFormatByteDecidesNotTheExtension) {
+  const std::string laz = slurp(twin("point-color.laz"));
+  const std::string las = slurp(twin("point-color.las"));
+  expect_same_cloud(read_points(write("z.las", laz)), read_points(twin("point-color.las")),
+                    "LAZ named .las");
+  expect_same_cloud(read_points(write("s.laz", las)), read_points(twin("point-color.las")),
+                    "LAS named .laz");
+}
+
+// --- damage: the intact file reads first (a reader refusing everything passes no test below)
+
+class LazDamage : public Laz {
+ protected:
+  void SetUp() override {
+    Laz::SetUp();
+    std::tie(good_, std::ignore) = repeat_chunk("simple", 3, false);
+    ASSERT_EQ(read_points(write("good.laz", good_)).size(), 3u * 1065u);
+    h_ = header_of("good", good_);
+    L_ = layout_of("good", good_);
+    table_at_ = static_cast<std::size_t>(peek_le<std::int64_t>(good_, h_.data_offset));
+  }
+  /// read_points and open_point_source of `bytes` both throw a FormatError containing `what`.
+  void expect_format_error(const std::string& bytes, const std::string& what) {
+    const std::string p = write("bad.laz", bytes);
+    PBR_LOD_EXPECT_THROW_MSG(read_points(p), FormatError, what);
+    PBR_LOD_EXPECT_THROW_MSG((void)stream(p, 100), FormatError, what);
+  }
+  std::string good_;
+  detail::las_header h_;
+  detail::laz_layout L_;
+  std::size_t table_at_ = 0;
+};
+
+// The middle chunk's bytes cut to half, the rest moved up and the table re-pointed: its stream
+// runs out long before its 1065 points.
+TEST_F(LazDamage, TruncatedChunk) {
+  const detail::laz_chunk& c = L_.chunks[1];
+  const std::size_t cut = static_cast<std::size_t>(c.bytes / 2);
+  std::string bad = good_;
+  bad.erase(static_cast<std::size_t>(c.offset) + cut, static_cast<std::size_t>(c.bytes) - cut);
+  // Re-encode the table with the shorter size, at its new place.
+  const std::size_t table_at = table_at_ - (static_cast<std::size_t>(c.bytes) - cut);
+  bad.resize(table_at);
+  poke_le<std::int64_t>(bad, h_.data_offset, static_cast<std::int64_t>(table_at));
+  put_le<std::uint32_t>(bad, 0);
+  put_le<std::uint32_t>(bad, 3);
+  std::vector<unsigned char> coded;
+  detail::laz::range_encoder enc(coded);
+  detail::laz::integer_codec ic(32, 2);
+  std::int32_t prev = 0;
+  for (int i = 0; i < 3; ++i) {
+    const auto bytes = static_cast<std::int32_t>(i == 1 ? cut : L_.chunks[0].bytes);
+    ic.encode(enc, prev, bytes, 1);
+    prev = bytes;
+  }
+  enc.done();
+  bad.append(coded.begin(), coded.end());
+  expect_format_error(bad, "chunk 1: damaged or truncated");
+}
+
+// Bytes of a chunk's stream overwritten: the decoder never reads outside the chunk; whatever it
+// decodes, read_points gives points or a FormatError, never a crash (run under ASan in CI).
+TEST_F(LazDamage, OverwrittenChunkBytesStayInBounds) {
+  std::mt19937 rng(7);
+  const detail::laz_chunk& c = L_.chunks[2];
+  std::uniform_int_distribution<std::size_t> where(
+      static_cast<std::size_t>(c.offset) + 34, static_cast<std::size_t>(c.offset + c.bytes) - 1);
+  for (int k = 0; k < 20; ++k) {
+    std::string bad = good_;
+    for (int i = 0; i < 8; ++i) bad[where(rng)] = static_cast<char>(rng());
+    try {
+      const auto cloud = read_points(write("flip.laz", bad));
+      EXPECT_EQ(cloud.size(), 3u * 1065u);
+    } catch (const FormatError&) {
+    }
+  }
+}
+
+TEST_F(LazDamage, ChunkTableVersion) {
+  std::string bad = good_;
+  poke_le<std::uint32_t>(bad, table_at_, 1);
+  expect_format_error(bad, "chunk table: version 1 (expected 0)");
+}
+
+TEST_F(LazDamage, ChunkTableOffsetOutsideTheFile) {
+  std::string bad = good_;
+  poke_le<std::int64_t>(bad, h_.data_offset, static_cast<std::int64_t>(bad.size() + 100));
+  expect_format_error(bad, "chunk table: offset");
+  poke_le<std::int64_t>(bad, h_.data_offset, 12);  // inside the header
+  expect_format_error(bad, "is not inside the file");
+}
+
+TEST_F(LazDamage, ChunkTableCountDisagreesWithThePoints) {
+  std::string bad = good_;
+  poke_le<std::uint32_t>(bad, table_at_ + 4, 2);
+  expect_format_error(bad, "2 chunks, but 3195 points in chunks of 1065 make 3");
+}
+
+// The coded sizes cut off: the table's stream ends before its third chunk.
+TEST_F(LazDamage, ChunkTableTruncated) {
+  expect_format_error(good_.substr(0, table_at_ + 9), "chunk table");
+}
+
+// The file cut inside the chunks: the table offset now points past the end.
+TEST_F(LazDamage, FileCutInsideTheChunks) {
+  expect_format_error(good_.substr(0, static_cast<std::size_t>(L_.chunks[2].offset) + 10),
+                      "is not inside the file");
+}
+
+TEST_F(LazDamage, NoLaszipVlr) {
+  std::string bad = good_;
+  const auto at = bad.find("laszip encoded");
+  ASSERT_NE(at, std::string::npos);
+  bad[at] = 'X';
+  expect_format_error(bad, "none of the 1 VLRs is LASzip's");
+}
+
+TEST_F(LazDamage, UnsupportedCompressorAndItems) {
+  const std::size_t vlr = good_.find("laszip encoded") - 2 + 54;  // the VLR's payload
+  std::string bad = good_;
+  poke_le<std::uint16_t>(bad, vlr, 1);
+  expect_format_error(bad, "point-wise compression without chunks (LASzip 1.x)");
+  bad = good_;
+  poke_le<std::uint16_t>(bad, vlr + 34 + 6 * 1 + 4, 1);  // GPSTIME11 version 1
+  expect_format_error(bad, "item GPSTIME11 has compressor version 1");
+  bad = good_;
+  poke_le<std::uint16_t>(bad, vlr + 34 + 6 * 2, 11);  // RGB14 in a format 3 file
+  expect_format_error(bad, "do not describe point format 3 with 34-byte records");
+}
+
+// Cuts at every length through the header, VLRs and first chunk, then spread over the file, and
+// random bytes anywhere: a FormatError or points, never anything else.
+TEST_F(LazDamage, CutsAndRandomBytes) {
+  const auto read_or_error = [&](const std::string& bytes, const std::string& label) {
+    const std::string p = write("m.laz", bytes);
+    try {
+      read_points(p).validate();
+      (void)stream(p, 500);
+    } catch (const pbr_lod::Error&) {
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << label << ": " << e.what();
+    }
+  };
+  const std::size_t n = good_.size();
+  for (std::size_t len = 0; len < n; len += (len < 600 ? 7 : n / 150))
+    read_or_error(good_.substr(0, len), cat("cut at ", len));
+  std::mt19937 rng(42);
+  std::uniform_int_distribution<std::size_t> where(0, n - 1);
+  for (int k = 0; k < 150; ++k) {
+    std::string bad = good_;
+    for (int c = 0; c <= k % 4; ++c) bad[where(rng)] = static_cast<char>(rng());
+    read_or_error(bad, cat("mutation ", k));
+  }
+}
+
+}  // namespace
