@@ -18,6 +18,11 @@
 
 namespace pbr_lod::detail::laz {
 
+// The coder's per-symbol steps are inlined into the item decoders (they are most of the
+// decoding time); model updates and renormalisation, rarer, stay out of line.
+#define PBR_LOD_LAZ_INLINE [[gnu::always_inline]] inline
+#define PBR_LOD_LAZ_COLD [[gnu::noinline]]
+
 constexpr std::uint32_t ac_min_length = 0x01000000u;  // renormalise below 2^24
 constexpr std::uint32_t ac_max_length = 0xFFFFFFFFu;
 constexpr std::uint32_t bm_length_shift = 13;  // bit models: 13-bit probability of a 0
@@ -50,7 +55,7 @@ struct bit_model {
   std::uint32_t update_cycle = 4, until_update = 4;
   std::uint32_t bit_0_prob = 1u << (bm_length_shift - 1), bit_0_count = 1, bit_count = 2;
 
-  void update() {
+  PBR_LOD_LAZ_COLD void update() {
     if ((bit_count += update_cycle) > bm_max_count) {  // halve the counts
       bit_count = (bit_count + 1) >> 1;
       bit_0_count = (bit_0_count + 1) >> 1;
@@ -91,7 +96,7 @@ class symbol_model {
   friend class range_decoder;
   friend class range_encoder;
 
-  void update() {
+  PBR_LOD_LAZ_COLD void update() {
     if ((total_count_ += update_cycle_) > dm_max_count) {  // halve the counts
       total_count_ = 0;
       for (std::uint32_t n = 0; n < symbols_; ++n)
@@ -138,7 +143,7 @@ class range_decoder {
     for (int i = 0; i < 4; ++i) value_ = (value_ << 8) | in_.get();
   }
 
-  std::uint32_t decode_bit(bit_model& m) {
+  PBR_LOD_LAZ_INLINE std::uint32_t decode_bit(bit_model& m) {
     const std::uint32_t x = m.bit_0_prob * (length_ >> bm_length_shift);
     std::uint32_t sym;
     if (value_ < x) {
@@ -155,7 +160,7 @@ class range_decoder {
     return sym;
   }
 
-  std::uint32_t decode_symbol(symbol_model& m) {
+  PBR_LOD_LAZ_INLINE std::uint32_t decode_symbol(symbol_model& m) {
     std::uint32_t sym, x, y = length_;
     length_ >>= dm_length_shift;
     if (m.table_) {
@@ -195,23 +200,28 @@ class range_decoder {
   }
 
   /// `bits` raw bits (1–32), equiprobable.
-  std::uint32_t read_bits(std::uint32_t bits) {
+  PBR_LOD_LAZ_INLINE std::uint32_t read_bits(std::uint32_t bits) {
     if (bits > 19) {
-      const std::uint32_t low = read_bits(16);
-      return (read_bits(bits - 16) << 16) | low;
+      const std::uint32_t low = read_bits_short(16);
+      return (read_bits_short(bits - 16) << 16) | low;
     }
+    return read_bits_short(bits);
+  }
+  std::uint32_t read_int() {
+    const std::uint32_t low = read_bits_short(16);
+    return (read_bits_short(16) << 16) | low;
+  }
+
+ private:
+  /// 1–19 raw bits.
+  PBR_LOD_LAZ_INLINE std::uint32_t read_bits_short(std::uint32_t bits) {
     const std::uint32_t sym = value_ / (length_ >>= bits);
     value_ -= length_ * sym;
     if (length_ < ac_min_length) renormalise();
     return sym;
   }
-  std::uint32_t read_int() {
-    const std::uint32_t low = read_bits(16);
-    return (read_bits(16) << 16) | low;
-  }
 
- private:
-  void renormalise() {
+  PBR_LOD_LAZ_INLINE void renormalise() {
     do {
       value_ = (value_ << 8) | in_.get();
     } while ((length_ <<= 8) < ac_min_length);
@@ -335,12 +345,11 @@ class integer_codec {
       corr_range_ = 0;
       corr_min_ = std::numeric_limits<std::int32_t>::min();
     }
-    k_models_.reserve(contexts);
-    for (std::uint32_t i = 0; i < contexts; ++i)
-      k_models_.push_back(std::make_unique<symbol_model>(corr_bits_ + 1));
-    corrector_.reserve(corr_bits_);
-    for (std::uint32_t i = 1; i <= corr_bits_; ++i)
-      corrector_.push_back(std::make_unique<symbol_model>(1u << std::min(i, bits_high_)));
+    // Models are made on first use: a model's first state is fixed, so making it later changes
+    // nothing, and most of LASzip's contexts and corrector lengths never occur in a chunk
+    // (each chunk starts afresh, so setup is paid per chunk).
+    k_models_.resize(contexts);
+    corrector_.resize(corr_bits_);
   }
 
   /// Codes `real` predicted as `pred` in `context` (the encoder's half).
@@ -363,7 +372,7 @@ class integer_codec {
       ++k;
     }
     k_ = k;
-    enc.encode_symbol(*k_models_[context], k);
+    enc.encode_symbol(k_model(context), k);
     if (k == 0) {
       enc.encode_bit(corrector0_, c);
       return;
@@ -371,10 +380,10 @@ class integer_codec {
     if (k == 32) return;
     c = cs < 0 ? c + ((1u << k) - 1) : c - 1;
     if (k <= bits_high_) {
-      enc.encode_symbol(*corrector_[k - 1], c);
+      enc.encode_symbol(corrector_model(k), c);
     } else {
       const std::uint32_t low_bits = k - bits_high_;
-      enc.encode_symbol(*corrector_[k - 1], c >> low_bits);
+      enc.encode_symbol(corrector_model(k), c >> low_bits);
       enc.write_bits(low_bits, c & ((1u << low_bits) - 1));
     }
   }
@@ -392,16 +401,16 @@ class integer_codec {
   [[nodiscard]] std::uint32_t k() const { return k_; }
 
  private:
-  std::uint32_t corrector(range_decoder& dec, std::uint32_t context) {
-    k_ = dec.decode_symbol(*k_models_[context]);
+  PBR_LOD_LAZ_INLINE std::uint32_t corrector(range_decoder& dec, std::uint32_t context) {
+    k_ = dec.decode_symbol(k_model(context));
     if (k_ == 0) return dec.decode_bit(corrector0_);  // 0 or 1
     if (k_ >= 32) return static_cast<std::uint32_t>(corr_min_);
     std::uint32_t c;
     if (k_ <= bits_high_) {
-      c = dec.decode_symbol(*corrector_[k_ - 1]);
+      c = dec.decode_symbol(corrector_model(k_));
     } else {
       const std::uint32_t low_bits = k_ - bits_high_;
-      c = dec.decode_symbol(*corrector_[k_ - 1]);
+      c = dec.decode_symbol(corrector_model(k_));
       c = (c << low_bits) | dec.read_bits(low_bits);
     }
     // [0, 2^(k-1)) holds -(2^k - 1) … -2^(k-1); [2^(k-1), 2^k) holds 2^(k-1) + 1 … 2^k.
@@ -410,6 +419,18 @@ class integer_codec {
     else
       c -= (1u << k_) - 1;
     return c;
+  }
+
+  symbol_model& k_model(std::uint32_t context) {
+    auto& m = k_models_[context];
+    if (!m) m = std::make_unique<symbol_model>(corr_bits_ + 1);
+    return *m;
+  }
+  /// The model of correctors of bit length k (1 ≤ k ≤ corr_bits): 2^min(k, bits_high) symbols.
+  symbol_model& corrector_model(std::uint32_t k) {
+    auto& m = corrector_[k - 1];
+    if (!m) m = std::make_unique<symbol_model>(1u << std::min(k, bits_high_));
+    return *m;
   }
 
   std::uint32_t bits_high_;

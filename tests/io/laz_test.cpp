@@ -13,6 +13,7 @@
 #include "io/laz_codec.hpp"
 #include "io/laz_decoder.hpp"
 #include "io_test_util.hpp"
+#include "laz_test_util.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 #include "pbr_lod/io/read.hpp"
 
@@ -159,57 +160,19 @@ TEST(LazTwins, PointSourceGivesWhatReadPointsGives) {
 
 // --- files of several chunks ------------------------------------------------------------------
 
-/// `copies` chunks, each the single chunk of the twin `name`, under a chunk table we encode:
-/// fixed chunks (the VLR's chunk size = the twin's point count) or variable ones (chunk size
-/// 0xFFFFFFFF, the table holds each chunk's count). Returns the LAZ and the LAS twin to match.
+/// The LAZ twin `name` with its chunk repeated `copies` times (laz_test_util.hpp), and the LAS
+/// twin with its records repeated to match.
 std::pair<std::string, std::string> repeat_chunk(const std::string& name, std::uint32_t copies,
                                                  bool variable) {
-  const std::string laz = slurp(twin(name + ".laz"));
+  const std::string laz =
+      pbr_lod::test::laz_repeat_chunk(slurp(twin(name + ".laz")), copies, variable);
   const std::string las = slurp(twin(name + ".las"));
-  const detail::las_header h = header_of(name, laz);
-  const detail::laz_layout L = layout_of(name, laz);
-  const detail::laz_chunk c = L.chunks.at(0);
-  const std::string chunk =
-      laz.substr(static_cast<std::size_t>(c.offset), static_cast<std::size_t>(c.bytes));
-
-  std::string out = laz.substr(0, h.data_offset);
-  const auto points = static_cast<std::uint32_t>(h.count * copies);
-  poke_le<std::uint32_t>(out, 107, points);
-  // The chunk size field of the LASzip VLR (found as read_laz_layout finds it).
-  std::size_t at = h.header_size;
-  for (std::uint32_t i = 0; i < h.vlr_count; ++i) {
-    const auto length = peek_le<std::uint16_t>(out, at + 20);
-    if (out.compare(at + 2, 14, "laszip encoded") == 0)
-      poke_le<std::uint32_t>(out, at + 54 + 12,
-                             variable ? 0xFFFFFFFFu : static_cast<std::uint32_t>(h.count));
-    at += 54 + length;
-  }
-  const std::uint64_t table_at = h.data_offset + 8 + copies * chunk.size();
-  put_le<std::int64_t>(out, static_cast<std::int64_t>(table_at));
-  for (std::uint32_t i = 0; i < copies; ++i) out += chunk;
-  put_le<std::uint32_t>(out, 0);
-  put_le<std::uint32_t>(out, copies);
-  std::vector<unsigned char> coded;
-  detail::laz::range_encoder enc(coded);
-  detail::laz::integer_codec ic(32, 2);
-  std::int32_t prev_count = 0, prev_bytes = 0;
-  for (std::uint32_t i = 0; i < copies; ++i) {
-    if (variable) {
-      ic.encode(enc, prev_count, static_cast<std::int32_t>(c.count), 0);
-      prev_count = static_cast<std::int32_t>(c.count);
-    }
-    ic.encode(enc, prev_bytes, static_cast<std::int32_t>(chunk.size()), 1);
-    prev_bytes = static_cast<std::int32_t>(chunk.size());
-  }
-  enc.done();
-  out.append(coded.begin(), coded.end());
-
   const detail::las_header hs = header_of(name, las);
   std::string las_out = las.substr(0, hs.data_offset);
-  poke_le<std::uint32_t>(las_out, 107, points);
+  poke_le<std::uint32_t>(las_out, 107, static_cast<std::uint32_t>(hs.count * copies));
   const std::string records = las_records(twin(name + ".las"));
   for (std::uint32_t i = 0; i < copies; ++i) las_out += records;
-  return {out, las_out};
+  return {laz, las_out};
 }
 
 TEST_F(Laz, SeveralFixedChunks) {
