@@ -10,11 +10,15 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cstdint>
 #include <cstring>
 #include <limits>
 #include <memory>
 #include <vector>
+
+#include "io_internal.hpp"  // byte_swapped
 
 namespace pbr_lod::detail::laz {
 
@@ -441,5 +445,87 @@ class integer_codec {
   bit_model corrector0_;
   std::vector<std::unique_ptr<symbol_model>> corrector_;
 };
+
+// --- shared by the item decoders --------------------------------------------------------------
+
+/// A symbol model made on first use (LASzip's per-value contexts: most of 256 are never used).
+class lazy_model {
+ public:
+  symbol_model& get(std::uint32_t symbols) {
+    if (!m_) m_ = std::make_unique<symbol_model>(symbols);
+    return *m_;
+  }
+
+ private:
+  std::unique_ptr<symbol_model> m_;
+};
+
+/// The median of the last five values, kept sorted with a flag that says which end the next
+/// insertion replaces (LASzip's StreamingMedian5).
+class median5 {
+ public:
+  void add(std::int32_t v) {
+    auto& a = v_;
+    if (high_) {
+      if (v < a[2]) {
+        a[4] = a[3];
+        a[3] = a[2];
+        if (v < a[0]) {
+          a[2] = a[1];
+          a[1] = a[0];
+          a[0] = v;
+        } else if (v < a[1]) {
+          a[2] = a[1];
+          a[1] = v;
+        } else {
+          a[2] = v;
+        }
+      } else {
+        if (v < a[3]) {
+          a[4] = a[3];
+          a[3] = v;
+        } else {
+          a[4] = v;
+        }
+        high_ = false;
+      }
+    } else {
+      if (a[2] < v) {
+        a[0] = a[1];
+        a[1] = a[2];
+        if (a[4] < v) {
+          a[2] = a[3];
+          a[3] = a[4];
+          a[4] = v;
+        } else if (a[3] < v) {
+          a[2] = a[3];
+          a[3] = v;
+        } else {
+          a[2] = v;
+        }
+      } else {
+        if (a[1] < v) {
+          a[0] = a[1];
+          a[1] = v;
+        } else {
+          a[0] = v;
+        }
+        high_ = true;
+      }
+    }
+  }
+  [[nodiscard]] std::int32_t get() const { return v_[2]; }
+
+ private:
+  std::array<std::int32_t, 5> v_{};
+  bool high_ = true;
+};
+
+/// Stores v little-endian at p.
+template <class T>
+inline void store_le(unsigned char* p, T v) {
+  if constexpr (std::endian::native == std::endian::big) v = byte_swapped(v);
+  std::memcpy(p, &v, sizeof(T));
+}
 
 }  // namespace pbr_lod::detail::laz

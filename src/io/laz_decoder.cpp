@@ -87,81 +87,6 @@ const char* item_name(std::uint16_t t) {
 
 constexpr std::uint32_t variable_chunks = 0xFFFFFFFFu;
 
-/// A symbol model made on first use (LASzip's per-value contexts: most of 256 are never used).
-class lazy_model {
- public:
-  symbol_model& get(std::uint32_t symbols) {
-    if (!m_) m_ = std::make_unique<symbol_model>(symbols);
-    return *m_;
-  }
-
- private:
-  std::unique_ptr<symbol_model> m_;
-};
-
-// --- the item decoders (version 2) ------------------------------------------------------------
-
-/// The median of the last five values, kept sorted with a flag that says which end the next
-/// insertion replaces (LASzip's StreamingMedian5).
-class median5 {
- public:
-  void add(std::int32_t v) {
-    auto& a = v_;
-    if (high_) {
-      if (v < a[2]) {
-        a[4] = a[3];
-        a[3] = a[2];
-        if (v < a[0]) {
-          a[2] = a[1];
-          a[1] = a[0];
-          a[0] = v;
-        } else if (v < a[1]) {
-          a[2] = a[1];
-          a[1] = v;
-        } else {
-          a[2] = v;
-        }
-      } else {
-        if (v < a[3]) {
-          a[4] = a[3];
-          a[3] = v;
-        } else {
-          a[4] = v;
-        }
-        high_ = false;
-      }
-    } else {
-      if (a[2] < v) {
-        a[0] = a[1];
-        a[1] = a[2];
-        if (a[4] < v) {
-          a[2] = a[3];
-          a[3] = a[4];
-          a[4] = v;
-        } else if (a[3] < v) {
-          a[2] = a[3];
-          a[3] = v;
-        } else {
-          a[2] = v;
-        }
-      } else {
-        if (a[1] < v) {
-          a[0] = a[1];
-          a[1] = v;
-        } else {
-          a[0] = v;
-        }
-        high_ = true;
-      }
-    }
-  }
-  [[nodiscard]] std::int32_t get() const { return v_[2]; }
-
- private:
-  std::array<std::int32_t, 5> v_{};
-  bool high_ = true;
-};
-
 // Return number r and number of returns n (3 bits each) → one of 16 contexts for x, y and
 // intensity, and the 8 "levels" (n − r, completed for files that number them oddly) for z.
 constexpr std::uint8_t return_map[8][8] = {
@@ -173,12 +98,6 @@ constexpr std::uint8_t return_level[8][8] = {{0, 1, 2, 3, 4, 5, 6, 7}, {1, 0, 1,
                                              {2, 1, 0, 1, 2, 3, 4, 5}, {3, 2, 1, 0, 1, 2, 3, 4},
                                              {4, 3, 2, 1, 0, 1, 2, 3}, {5, 4, 3, 2, 1, 0, 1, 2},
                                              {6, 5, 4, 3, 2, 1, 0, 1}, {7, 6, 5, 4, 3, 2, 1, 0}};
-
-template <class T>
-void store_le(unsigned char* p, T v) {
-  if constexpr (std::endian::native == std::endian::big) v = byte_swapped(v);
-  std::memcpy(p, &v, sizeof(T));
-}
 
 /// POINT10 v2: the 20 bytes of formats 0–5 (x y z, intensity, return bits, classification,
 /// scan angle, user data, point source). A 6-bit mask says which of the non-coordinate fields
@@ -560,10 +479,12 @@ std::string items_text(const std::vector<laz_item>& items) {
 }
 
 /// Checks the VLR's item list against the LAS header: the items of the point format, in
-/// order, each of its size, then at most one BYTE item holding the extra bytes; the sizes add
-/// up to the record length.
+/// order, each of its size, then at most one BYTE (BYTE14 for formats 6–10) item holding the extra
+/// bytes; the sizes add up to the record length; the versions are those we decode (2 for the
+/// point-wise items, 3 for the layered ones).
 void check_items(const std::string& path, const laz_layout& L) {
   const std::vector<std::uint16_t> want = expected_items(L.format);
+  const bool layered = L.format >= 6;
   const auto& items = L.items;
   bool ok = items.size() >= want.size() && items.size() <= want.size() + 1;
   std::uint32_t total = 0;
@@ -571,23 +492,25 @@ void check_items(const std::string& path, const laz_layout& L) {
     if (i < want.size())
       ok = items[i].type == want[i] && items[i].size == item_size(want[i]);
     else
-      ok = (items[i].type == item_byte || items[i].type == item_byte14) && items[i].size > 0;
+      ok = items[i].type == (layered ? item_byte14 : item_byte) && items[i].size > 0;
     total += items[i].size;
   }
   if (!ok || total != L.record_length)
     format_error(path, "LASzip VLR",
                  cat("items [", items_text(items), "] do not describe point format ", L.format,
                      " with ", L.record_length, "-byte records"));
-  if (L.format > 3)
+  if (L.format == 4 || L.format == 5 || L.format > 8)
     format_error(path, "LASzip VLR",
                  cat("point format ", L.format, " (items ", items_text(items),
-                     ") is not supported by our LAZ decoder, which reads formats 0 to 3: "
-                     "decompress it to LAS first (laszip, pdal translate)"));
+                     ") is not supported by our LAZ decoder, which reads formats 0 to 3 and 6 to "
+                     "8 (no waveforms): decompress it to LAS first (laszip, pdal translate)"));
+  const std::uint16_t version = layered ? 3 : 2;
   for (const laz_item& it : items)
-    if (it.version != 2)
+    if (it.version != version)
       format_error(path, "LASzip VLR",
                    cat("item ", item_name(it.type), " has compressor version ", it.version,
-                       "; our LAZ decoder reads version 2 (LASzip 2.0 and later)"));
+                       "; our LAZ decoder reads version ", version,
+                       layered ? "" : " (LASzip 2.0 and later)"));
 }
 
 /// The LASzip VLR's payload.
@@ -616,13 +539,11 @@ laz_layout parse_laszip_vlr(const std::string& path, const las_header& h,
     format_error(path, "LASzip VLR",
                  "point-wise compression without chunks (LASzip 1.x) is not supported by our LAZ "
                  "decoder: recompress it with a current laszip, or decompress it to LAS");
-  if (L.compressor == 3)
+  const std::uint16_t want = L.format >= 6 ? 3 : 2;
+  if (L.compressor != want)
     format_error(path, "LASzip VLR",
-                 cat("layered chunked compression (LAS 1.4 point format ", L.format,
-                     ") is not supported by our LAZ decoder yet: decompress it to LAS first"));
-  if (L.compressor != 2)
-    format_error(path, "LASzip VLR",
-                 cat("compressor ", L.compressor, " (expected 2, point-wise chunked)"));
+                 cat("compressor ", L.compressor, " for point format ", L.format, " (expected ",
+                     want, want == 3 ? ", layered chunked)" : ", point-wise chunked)"));
   if (L.chunk_size == 0)
     format_error(path, "LASzip VLR", "chunk size 0 (expected a positive count of points)");
   check_items(path, L);
@@ -693,8 +614,9 @@ void read_chunk_table(const std::string& path, const las_header& h, std::uint64_
       format_error(path, "chunk table",
                    cat("chunk ", i, " has ", c.bytes, " bytes, less than one raw ", L.record_length,
                        "-byte record"));
-    // Even a record predicted perfectly costs the four symbols of POINT10 (the change mask and
-    // the bit lengths of dx, dy and z), at least 0.0075 bits whatever the models learnt: more
+    // Even a record predicted perfectly costs its change mask and the bit lengths of dx and dy
+    // (and z, POINT10), symbols whose models never give the likeliest value more than
+    // 1 − (symbols − 1)/2^15: at least 0.0075 bits (POINT10) or 0.0084 bits (POINT14). More
     // than 1100 records per byte is damage (and may not size an allocation).
     if (c.count > 1 + 1100 * (c.bytes - std::min<std::uint64_t>(c.bytes, L.record_length)))
       format_error(path, "chunk table",
@@ -789,6 +711,11 @@ void decode_laz_chunk(const std::string& path, const laz_layout& L, std::size_t 
       break;
     case 3:
       overrun = decode_pointwise<true, true>(bytes, n, c.count, L.record_length, records);
+      break;
+    case 6:
+    case 7:
+    case 8:
+      overrun = decode_layered_chunk(path, L, k, bytes, n, c.count, records);
       break;
     default:
       format_error(path, cat("chunk ", k), cat("point format ", L.format, " is not supported"));

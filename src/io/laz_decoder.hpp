@@ -1,6 +1,8 @@
-// pbr_lod — our LAZ (LASzip-compressed LAS) decoder: the LASzip VLR, the chunk table and the
+// pbr_lod — our LAZ (LASzip-compressed LAS) decoder: the LASzip VLR, the chunk table, the
 // point-wise chunked compressor of point data record formats 0–3 (items POINT10, GPSTIME11,
-// RGB12 and BYTE, version 2). Not installed; see laz_decoder.cpp for the format and docs/io.md.
+// RGB12 and BYTE, version 2) and the layered chunked compressor of LAS 1.4 formats 6–8 (POINT14,
+// RGB14, RGBNIR14 and BYTE14, version 3). Not installed; see laz_decoder.cpp for the format and
+// docs/io.md.
 //
 // A LAZ file is a LAS file whose point records are replaced by chunks of compressed records.
 // Chunks are independent (every chunk restarts the models and stores its first record raw), so
@@ -34,7 +36,7 @@ struct laz_chunk {
 
 /// What the LASzip VLR and the chunk table say, checked against the LAS header and the file.
 struct laz_layout {
-  std::uint16_t compressor = 0;  ///< 2: point-wise chunked (LAS formats 0–5)
+  std::uint16_t compressor = 0;  ///< 2: point-wise chunked (formats 0–5); 3: layered (6–10)
   std::uint32_t chunk_size = 0;  ///< points per chunk; 0xFFFFFFFF: variable (the table says)
   unsigned format = 0;           ///< point data record format (the format byte without bits 7, 6)
   std::uint16_t record_length = 0;
@@ -61,6 +63,15 @@ using laz_fetch = std::function<void(std::uint64_t offset, std::size_t n, unsign
 /// the chunk is damaged in a way that shows (its stream runs past its end).
 void decode_laz_chunk(const std::string& path, const laz_layout& L, std::size_t k,
                       const unsigned char* bytes, unsigned char* records);
+
+/// Decodes chunk k of a layered (LAS 1.4, formats 6–8) file from its `n_bytes` bytes into its
+/// `count` records; returns how many bytes its layers' decoders read past their ends (0 for an
+/// intact chunk). Throws FormatError for a chunk whose header does not fit. (laz_layered.cpp;
+/// called by decode_laz_chunk.)
+[[nodiscard]] std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
+                                                 std::size_t k, const unsigned char* bytes,
+                                                 std::size_t n_bytes, std::uint64_t count,
+                                                 unsigned char* records);
 
 /// Decodes chunks [c0, c1) into consecutive records at `records` (the first record of chunk c0
 /// first), reading their bytes with `fetch`, on up to `threads` threads (0: every core).

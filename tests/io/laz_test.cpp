@@ -7,6 +7,8 @@
 // each is one chunk); damaged chunks and tables must give a FormatError naming what is wrong.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <random>
 #include <tuple>
 
@@ -169,7 +171,7 @@ std::pair<std::string, std::string> repeat_chunk(const std::string& name, std::u
   const std::string las = slurp(twin(name + ".las"));
   const detail::las_header hs = header_of(name, las);
   std::string las_out = las.substr(0, hs.data_offset);
-  poke_le<std::uint32_t>(las_out, 107, static_cast<std::uint32_t>(hs.count * copies));
+  pbr_lod::test::las_multiply_count(las_out, copies);
   const std::string records = las_records(twin(name + ".las"));
   for (std::uint32_t i = 0; i < copies; ++i) las_out += records;
   return {laz, las_out};
@@ -197,6 +199,75 @@ TEST_F(Laz, SeveralVariableChunksWithExtraBytes) {
   EXPECT_EQ(first_difference(laz_records(zp), las_records(sp), 61), -1);
   expect_same_cloud(read_points(zp), read_points(sp), "read_points");
   expect_same_cloud(stream(zp, 333), read_points(sp), "blocks of 333");
+}
+
+TEST_F(Laz, SeveralLayeredChunks) {
+  for (const bool variable : {false, true}) {
+    const auto [laz, las] = repeat_chunk("1_4_w_evlr", 3, variable);
+    const std::string zp = write("six.laz", laz), sp = write("six.las", las);
+    EXPECT_EQ(layout_of(zp, laz).chunks.size(), 3u);
+    EXPECT_EQ(first_difference(laz_records(zp), las_records(sp), 30), -1);
+    const auto whole = read_points(zp);
+    ASSERT_EQ(whole.size(), 3000u);
+    expect_same_cloud(whole, read_points(sp), "read_points");
+    expect_same_cloud(stream(zp, 7), whole, "blocks of 7");
+  }
+}
+
+/// A record's fields of LAS formats 3 and 7 that both have, with the position in world units
+/// (the two files differ in offset), for comparing the same points in another order.
+using las_fields = std::tuple<std::int64_t, std::int64_t, std::int64_t, int, int, int, int, int,
+                              int, std::uint64_t, int, int, int>;
+std::vector<las_fields> fields_of(const std::string& path) {
+  const std::string bytes = slurp(path);
+  const detail::las_header h = header_of(path, bytes);
+  const std::string recs = h.compressed ? laz_records(path) : las_records(path);
+  std::vector<las_fields> out;
+  for (std::size_t i = 0; i < h.count; ++i) {
+    const char* r = recs.data() + i * h.record_length;
+    const auto u8 = [&](int at) { return static_cast<int>(static_cast<unsigned char>(r[at])); };
+    const auto u16 = [&](int at) {
+      return static_cast<int>(peek_le<std::uint16_t>(recs, i * h.record_length + at));
+    };
+    const auto world = [&](int a) {  // in units of the 0.01 scale both files use
+      const double w =
+          peek_le<std::int32_t>(recs, i * h.record_length + 4 * a) * h.scale[a] + h.offset[a];
+      return static_cast<std::int64_t>(std::llround(w * 100.0));
+    };
+    const bool f14 = h.format >= 6;
+    const int returns = f14 ? u8(14) : (u8(14) & 7) | ((u8(14) >> 3) & 7) << 4;
+    const int cls = f14 ? u8(16) : u8(15) & 31;
+    const int user = f14 ? u8(17) : u8(17);
+    const int source = f14 ? u16(20) : u16(18);
+    const auto gps = peek_le<std::uint64_t>(recs, i * h.record_length + (f14 ? 22 : 20));
+    const int rgb = f14 ? 30 : 28;
+    out.emplace_back(world(0), world(1), world(2), u16(12), returns, cls, user, source, 0, gps,
+                     u16(rgb), u16(rgb + 2), u16(rgb + 4));
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// COPC (PDAL's simple.las as a COPC file, laspy's copy): LAS 1.4 format 7 in 65 variable chunks,
+// the points reordered by octree node. Every field both formats have equals the LAS twin's, as
+// a multiset; read_points gives the same cloud up to order.
+TEST(LazTwins, CopcFormat7HoldsTheLasPointsInAnotherOrder) {
+  const std::string copc = twin("simple.copc.laz");
+  EXPECT_EQ(layout_of(copc, slurp(copc)).chunks.size(), 65u);
+  EXPECT_EQ(layout_of(copc, slurp(copc)).chunk_size, 0xFFFFFFFFu);
+  EXPECT_TRUE(fields_of(copc) == fields_of(twin("simple.las")));
+  const auto sorted = [](const pbr_lod::point_cloud& c) {
+    std::vector<std::tuple<float, float, float, int, int, int>> v;
+    for (std::size_t i = 0; i < c.size(); ++i)
+      v.emplace_back(c.positions[i].x(), c.positions[i].y(), c.positions[i].z(), c.colours[i].r,
+                     c.colours[i].g, c.colours[i].b);
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  const auto z = read_points(copc), s = read_points(twin("simple.las"));
+  EXPECT_EQ(z.origin, s.origin);
+  EXPECT_TRUE(sorted(z) == sorted(s));
+  expect_same_cloud(stream(copc, 7), z, "blocks of 7");
 }
 
 // A LAZ file whose name says .las (or the reverse) reads by its format byte.
@@ -328,6 +399,29 @@ TEST_F(LazDamage, UnsupportedCompressorAndItems) {
   bad = good_;
   poke_le<std::uint16_t>(bad, vlr + 34 + 6 * 2, 11);  // RGB14 in a format 3 file
   expect_format_error(bad, "do not describe point format 3 with 34-byte records");
+}
+
+// The layered format's chunk header: its own point count and the sizes of its layers.
+TEST_F(Laz, DamagedLayeredChunkHeader) {
+  const std::string good = slurp(twin("1_4_w_evlr.laz"));
+  ASSERT_EQ(read_points(write("good.laz", good)).size(), 1000u);
+  const auto chunk = static_cast<std::size_t>(layout_of("good", good).chunks[0].offset);
+  std::string bad = good;
+  poke_le<std::uint32_t>(bad, chunk + 30, 999);  // after the raw 30-byte record
+  PBR_LOD_EXPECT_THROW_MSG(read_points(write("count.laz", bad)), FormatError,
+                           "chunk 0: holds 999 points, the chunk table says 1000");
+  bad = good;
+  poke_le<std::uint32_t>(bad, chunk + 34, 1u << 30);  // the xy layer's size
+  PBR_LOD_EXPECT_THROW_MSG(read_points(write("layer.laz", bad)), FormatError,
+                           "chunk 0: its layers need");
+  bad = good;
+  poke_le<std::uint32_t>(bad, chunk + 34, peek_le<std::uint32_t>(good, chunk + 34) / 2);
+  poke_le<std::uint32_t>(bad, chunk + 38,
+                         peek_le<std::uint32_t>(good, chunk + 38) +
+                             peek_le<std::uint32_t>(good, chunk + 34) -
+                             peek_le<std::uint32_t>(good, chunk + 34) / 2);
+  // The xy layer cut to half (the z layer takes the rest): its stream runs out.
+  PBR_LOD_EXPECT_THROW_MSG(read_points(write("xy.laz", bad)), FormatError, "chunk 0: damaged");
 }
 
 // Cuts at every length through the header, VLRs and first chunk, then spread over the file, and

@@ -14,10 +14,27 @@
 
 namespace pbr_lod::test {
 
+/// Multiplies the point counts of the LAS header at the start of `las` by `copies` (the legacy
+/// count, and for LAS 1.4 the 64-bit one) and drops its EVLRs (LAS 1.4).
+inline void las_multiply_count(std::string& las, std::uint32_t copies) {
+  std::uint32_t legacy = 0;
+  std::memcpy(&legacy, las.data() + 107, 4);
+  legacy *= copies;
+  std::memcpy(las.data() + 107, &legacy, 4);
+  if (las[25] >= 4) {
+    std::uint64_t count = 0;
+    std::memcpy(&count, las.data() + 247, 8);
+    count *= copies;
+    std::memcpy(las.data() + 247, &count, 8);
+    const std::uint64_t no_evlr[2] = {0, 0};  // start of the first EVLR (235), their count (243)
+    std::memcpy(las.data() + 235, no_evlr, 12);
+  }
+}
+
 /// `laz` (the bytes of a LAZ file whose points are one chunk) with that chunk repeated `copies`
 /// times: fixed chunks (the VLR's chunk size becomes the file's point count) or variable ones
-/// (chunk size 0xFFFFFFFF; the table then holds each chunk's count). The header's point count
-/// is multiplied (the legacy field; LAS ≤ 1.3 files).
+/// (chunk size 0xFFFFFFFF; the table then holds each chunk's count). The header's point counts
+/// are multiplied; what followed the chunk table (LAS 1.4 EVLRs) is left out.
 inline std::string laz_repeat_chunk(const std::string& laz, std::uint32_t copies, bool variable) {
   const auto* b = reinterpret_cast<const unsigned char*>(laz.data());
   pbr_lod::read_report r;
@@ -33,7 +50,7 @@ inline std::string laz_repeat_chunk(const std::string& laz, std::uint32_t copies
   };
 
   std::string out = laz.substr(0, h.data_offset);
-  poke32(out, 107, static_cast<std::uint32_t>(h.count * copies));
+  las_multiply_count(out, copies);
   // The chunk size field of the LASzip VLR (found as read_laz_layout finds it).
   std::size_t at = h.header_size;
   for (std::uint32_t i = 0; i < h.vlr_count; ++i) {
