@@ -130,6 +130,43 @@ enum point14_layer : std::size_t {
   point14_layers
 };
 
+/// The state of POINT14 for one scanner channel, the same on both sides of the coder: the last
+/// record, the predictions' state and the models.
+struct point14_channel {
+  point14 p;
+  bool gps_changed = false;
+  std::array<std::uint16_t, 8> last_intensity{};
+  std::array<std::int32_t, 8> last_z{};
+  std::array<median5, 12> x_median, y_median;
+  // GPS time: four sequences, as GPSTIME11 (laz_decoder.cpp), with v3's codes.
+  std::array<std::uint64_t, 4> time{};
+  std::array<std::int32_t, 4> diff{};
+  std::array<std::int32_t, 4> extreme{};
+  std::uint32_t last = 0, next = 0;
+
+  std::array<lazy_model, 8> changed;
+  symbol_model scanner{3};
+  symbol_model rn_gps_same{13};
+  std::array<lazy_model, 16> nr, rn;
+  std::array<lazy_model, 64> classification, flags, user_data;
+  symbol_model gps_multi{515};
+  symbol_model gps_zero_diff{5};
+  integer_codec dx{32, 2}, dy{32, 22}, dz{32, 20}, intensity{16, 4}, scan_angle{16, 2},
+      point_source{16, 1}, gps{32, 9};
+};
+
+/// A channel's first state, from the record `seed` (the chunk's first record, or the last
+/// record of the channel before).
+void start_channel(std::array<std::unique_ptr<point14_channel>, 4>& ch, unsigned sc,
+                   const point14& seed) {
+  ch[sc] = std::make_unique<point14_channel>();
+  point14_channel& c = *ch[sc];
+  c.p = seed;
+  c.last_z.fill(seed.z);
+  c.last_intensity.fill(seed.intensity);
+  c.time[0] = seed.gps;
+}
+
 /// POINT14 v3. Per scanner channel: the last record, the predictions' state and the models,
 /// made when the channel first occurs (from the record of the channel before it).
 class point14_decoder {
@@ -138,12 +175,12 @@ class point14_decoder {
     point14 p;
     p.load(rec);
     current_ = p.channel;
-    start_channel(current_, p);
+    start_channel(ch_, current_, p);
   }
 
   /// Decodes the next record into rec; returns its scanner channel (the other items' context).
   unsigned next(std::array<layer, point14_layers>& L, unsigned char* rec) {
-    channel& prev = *ch_[current_];
+    point14_channel& prev = *ch_[current_];
     range_decoder& xy = L[l_xy].dec();
     const unsigned lpr =
         (prev.p.r == 1 ? 1u : 0u) | (prev.p.r >= prev.p.n ? 2u : 0u) | (prev.gps_changed ? 4u : 0u);
@@ -151,10 +188,10 @@ class point14_decoder {
     unsigned sc = current_;
     if (changed & 64) {  // the scanner channel changed
       sc = (prev.p.channel + xy.decode_symbol(prev.scanner) + 1) % 4;
-      if (!ch_[sc]) start_channel(sc, prev.p);
+      if (!ch_[sc]) start_channel(ch_, sc, prev.p);
       current_ = sc;
     }
-    channel& c = *ch_[sc];
+    point14_channel& c = *ch_[sc];
     point14& p = c.p;
     p.channel = static_cast<std::uint8_t>(sc);
     const bool gps_changed = (changed & 16) != 0;
@@ -226,43 +263,9 @@ class point14_decoder {
   [[nodiscard]] unsigned current() const { return current_; }
 
  private:
-  struct channel {
-    point14 p;
-    bool gps_changed = false;
-    std::array<std::uint16_t, 8> last_intensity{};
-    std::array<std::int32_t, 8> last_z{};
-    std::array<median5, 12> x_median, y_median;
-    // GPS time: four sequences, as GPSTIME11 (laz_decoder.cpp), with v3's codes.
-    std::array<std::uint64_t, 4> time{};
-    std::array<std::int32_t, 4> diff{};
-    std::array<std::int32_t, 4> extreme{};
-    std::uint32_t last = 0, next = 0;
-
-    std::array<lazy_model, 8> changed;
-    symbol_model scanner{3};
-    symbol_model rn_gps_same{13};
-    std::array<lazy_model, 16> nr, rn;
-    std::array<lazy_model, 64> classification, flags, user_data;
-    symbol_model gps_multi{515};
-    symbol_model gps_zero_diff{5};
-    integer_codec dx{32, 2}, dy{32, 22}, dz{32, 20}, intensity{16, 4}, scan_angle{16, 2},
-        point_source{16, 1}, gps{32, 9};
-  };
-
-  /// A channel's first state, from the record `seed` (the chunk's first record, or the last
-  /// record of the channel before).
-  void start_channel(unsigned sc, const point14& seed) {
-    ch_[sc] = std::make_unique<channel>();
-    channel& c = *ch_[sc];
-    c.p = seed;
-    c.last_z.fill(seed.z);
-    c.last_intensity.fill(seed.intensity);
-    c.time[0] = seed.gps;
-  }
-
   static constexpr std::uint32_t multi_max = 500, code_full = 511;
 
-  void decode_gps(channel& c, range_decoder& dec) {
+  void decode_gps(point14_channel& c, range_decoder& dec) {
     const auto times = [&](std::int32_t f) {  // f · last difference, wrapping like LASzip
       return static_cast<std::int32_t>(static_cast<std::uint32_t>(f) *
                                        static_cast<std::uint32_t>(c.diff[c.last]));
@@ -337,7 +340,7 @@ class point14_decoder {
     c.p.gps = c.time[c.last];
   }
 
-  std::array<std::unique_ptr<channel>, 4> ch_;
+  std::array<std::unique_ptr<point14_channel>, 4> ch_;
   unsigned current_ = 0;
 };
 
@@ -511,6 +514,342 @@ class byte14_decoder {
   std::array<ctx, 4> slots_;
 };
 
+// --- encoding: the same models and predictions, run forwards -----------------------------------
+
+/// A layer being written: its bytes, an encoder on them, and whether any record changed the
+/// field (an unchanged layer is not written: the decoder keeps the first record's value).
+struct out_layer {
+  std::vector<unsigned char> bytes;
+  range_encoder enc{bytes};
+  bool changed = false;
+};
+
+class point14_encoder {
+ public:
+  void first(const unsigned char* rec) {
+    point14 p;
+    p.load(rec);
+    current_ = p.channel;
+    start_channel(ch_, current_, p);
+  }
+
+  /// Encodes rec; returns its scanner channel (the other items' context).
+  unsigned next(std::array<std::unique_ptr<out_layer>, point14_layers>& L,
+                const unsigned char* rec) {
+    point14 q;
+    q.load(rec);
+    const unsigned sc = q.channel;
+    point14_channel& prev = *ch_[current_];
+    // The changes are judged against this channel's last record, or for a channel new in the
+    // chunk against the record it will start from (the previous channel's).
+    const point14& old = ch_[sc] ? ch_[sc]->p : prev.p;
+    // Bits, not doubles: LAZ must give back every time exactly (−0.0, NaNs included).
+    const bool gps_change = q.gps != old.gps;
+    const bool source_change = q.point_source != old.point_source;
+    const bool angle_change = q.scan_angle != old.scan_angle;
+    const unsigned last_n = old.n, last_r = old.r, n = q.n, r = q.r;
+    const bool inc = r == (last_r + 1) % 16, dec = r == (last_r + 15) % 16;
+    const bool misc = r != last_r && !inc && !dec;
+    const std::uint32_t changed = ((inc || misc) ? 1u : 0u) | ((dec || misc) ? 2u : 0u) |
+                                  (n != last_n ? 4u : 0u) | (angle_change ? 8u : 0u) |
+                                  (gps_change ? 16u : 0u) | (source_change ? 32u : 0u) |
+                                  (sc != current_ ? 64u : 0u);
+    range_encoder& xy = L[l_xy]->enc;
+    const unsigned lpr =
+        (prev.p.r == 1 ? 1u : 0u) | (prev.p.r >= prev.p.n ? 2u : 0u) | (prev.gps_changed ? 4u : 0u);
+    xy.encode_symbol(prev.changed[lpr].get(128), changed);
+    if (sc != current_) {
+      xy.encode_symbol(prev.scanner, (sc + 4 - current_ - 1) % 4);
+      if (!ch_[sc]) start_channel(ch_, sc, prev.p);
+      current_ = sc;
+    }
+    point14_channel& c = *ch_[sc];
+    point14& p = c.p;
+    if (n != last_n) xy.encode_symbol(c.nr[last_n].get(16), n);
+    if (misc) {
+      if (gps_change)
+        xy.encode_symbol(c.rn[last_r].get(16), r);
+      else
+        xy.encode_symbol(c.rn_gps_same, (r + 32 - last_r - 2) % 16);
+    }
+    const unsigned ctx = (return_map_6[n][r] << 1u) | (gps_change ? 1u : 0u);
+    const std::uint32_t single = n == 1 ? 1u : 0u;
+    const auto minus = [](std::int32_t a, std::int32_t b) {
+      return static_cast<std::int32_t>(static_cast<std::uint32_t>(a) -
+                                       static_cast<std::uint32_t>(b));
+    };
+    std::int32_t diff = minus(q.x, p.x);
+    c.dx.encode(xy, c.x_median[ctx].get(), diff, single);
+    c.x_median[ctx].add(diff);
+    std::uint32_t k = std::min(c.dx.k(), 20u) & ~1u;
+    diff = minus(q.y, p.y);
+    c.dy.encode(xy, c.y_median[ctx].get(), diff, single | k);
+    c.y_median[ctx].add(diff);
+    {
+      k = std::min((c.dx.k() + c.dy.k()) / 2, 18u) & ~1u;
+      const unsigned level = return_level_8(n, r);
+      L[l_z]->changed = true;  // LASzip always writes the z layer
+      c.dz.encode(L[l_z]->enc, c.last_z[level], q.z, single | k);
+      c.last_z[level] = q.z;
+    }
+    {
+      const unsigned cc = ((r == 1 && r >= n) ? 1u : 0u) | ((p.classification & 0x1Fu) << 1);
+      L[l_class]->changed |= q.classification != p.classification;
+      L[l_class]->enc.encode_symbol(c.classification[cc].get(256), q.classification);
+    }
+    {
+      L[l_flags]->changed |= q.flags() != p.flags();
+      L[l_flags]->enc.encode_symbol(c.flags[p.flags()].get(64), q.flags());
+    }
+    {
+      const unsigned ic = (gps_change ? 1u : 0u) | (r >= n ? 2u : 0u) | (r == 1 ? 4u : 0u);
+      L[l_intensity]->changed |= q.intensity != p.intensity;
+      c.intensity.encode(L[l_intensity]->enc, c.last_intensity[ic], q.intensity, ic >> 1);
+      c.last_intensity[ic] = q.intensity;
+    }
+    if (angle_change) {
+      L[l_scan_angle]->changed = true;
+      c.scan_angle.encode(L[l_scan_angle]->enc, p.scan_angle, q.scan_angle, gps_change ? 1 : 0);
+    }
+    {
+      L[l_user_data]->changed |= q.user_data != p.user_data;
+      L[l_user_data]->enc.encode_symbol(c.user_data[p.user_data / 4].get(256), q.user_data);
+    }
+    if (source_change) {
+      L[l_point_source]->changed = true;
+      c.point_source.encode(L[l_point_source]->enc, p.point_source, q.point_source, 0);
+    }
+    if (gps_change) {
+      L[l_gps]->changed = true;
+      encode_gps(c, L[l_gps]->enc, q.gps);
+    }
+    c.gps_changed = gps_change;
+    p = q;
+    return sc;
+  }
+
+ private:
+  static constexpr std::int32_t multi_max = 500, multi_minus = -10, code_full = 511;
+
+  /// The first of sequences last + start … last + 3 from which t is a 32-bit difference (and
+  /// that difference), or −1.
+  static int find_sequence(const point14_channel& c, std::uint64_t t, int start, std::int32_t& d) {
+    for (int i = start; i < 4; ++i) {
+      const std::uint64_t delta = t - c.time[(c.last + static_cast<unsigned>(i)) & 3u];
+      const auto d64 = static_cast<std::int64_t>(delta);
+      if (d64 >= std::numeric_limits<std::int32_t>::min() &&
+          d64 <= std::numeric_limits<std::int32_t>::max()) {
+        d = static_cast<std::int32_t>(d64);
+        return i;
+      }
+    }
+    return -1;
+  }
+
+  void encode_gps(point14_channel& c, range_encoder& enc, std::uint64_t t) {
+    const auto times = [&](std::int32_t f) {
+      return static_cast<std::int32_t>(static_cast<std::uint32_t>(f) *
+                                       static_cast<std::uint32_t>(c.diff[c.last]));
+    };
+    const auto extreme = [&](std::int32_t d) {
+      if (++c.extreme[c.last] > 3) {
+        c.diff[c.last] = d;
+        c.extreme[c.last] = 0;
+      }
+    };
+    const auto full = [&] {
+      const auto high = [](std::uint64_t v) {
+        return static_cast<std::int32_t>(static_cast<std::uint32_t>(v >> 32));
+      };
+      c.gps.encode(enc, high(c.time[c.last]), high(t), 8);
+      enc.write_bits(32, static_cast<std::uint32_t>(t));
+      c.next = (c.next + 1) & 3u;
+      c.last = c.next;
+      c.diff[c.last] = 0;
+      c.extreme[c.last] = 0;
+    };
+    for (;;) {  // at most one switch of sequence, then a code in it
+      std::int32_t d = 0;
+      if (c.diff[c.last] == 0) {
+        const int i = find_sequence(c, t, 0, d);
+        if (i == 0) {
+          enc.encode_symbol(c.gps_zero_diff, 0);
+          c.gps.encode(enc, 0, d, 0);
+          c.diff[c.last] = d;
+          c.extreme[c.last] = 0;
+        } else if (i > 0) {
+          enc.encode_symbol(c.gps_zero_diff, static_cast<std::uint32_t>(i) + 1);
+          c.last = (c.last + static_cast<unsigned>(i)) & 3u;
+          continue;
+        } else {
+          enc.encode_symbol(c.gps_zero_diff, 1);
+          full();
+        }
+        c.time[c.last] = t;
+        return;
+      }
+      const auto d64 = static_cast<std::int64_t>(t - c.time[c.last]);
+      if (d64 >= std::numeric_limits<std::int32_t>::min() &&
+          d64 <= std::numeric_limits<std::int32_t>::max()) {
+        d = static_cast<std::int32_t>(d64);
+        // The multiple of the last difference, rounded as LASzip does (in float, half away
+        // from zero); any choice decodes, this one gives LASzip's bytes.
+        const float ratio = static_cast<float>(d) / static_cast<float>(c.diff[c.last]);
+        const auto multi = static_cast<std::int32_t>(ratio >= 0 ? ratio + 0.5f : ratio - 0.5f);
+        if (multi > 0 && multi < multi_max) {
+          enc.encode_symbol(c.gps_multi, static_cast<std::uint32_t>(multi));
+          c.gps.encode(enc, times(multi), d, multi == 1 ? 1 : multi < 10 ? 2 : 3);
+          if (multi == 1) c.extreme[c.last] = 0;
+        } else if (multi >= multi_max) {
+          enc.encode_symbol(c.gps_multi, multi_max);
+          c.gps.encode(enc, times(multi_max), d, 4);
+          extreme(d);
+        } else if (multi < 0 && multi > multi_minus) {
+          enc.encode_symbol(c.gps_multi, static_cast<std::uint32_t>(multi_max - multi));
+          c.gps.encode(enc, times(multi), d, 5);
+        } else if (multi <= multi_minus) {
+          enc.encode_symbol(c.gps_multi, static_cast<std::uint32_t>(multi_max - multi_minus));
+          c.gps.encode(enc, times(multi_minus), d, 6);
+          extreme(d);
+        } else {  // 0
+          enc.encode_symbol(c.gps_multi, 0);
+          c.gps.encode(enc, 0, d, 7);
+          extreme(d);
+        }
+      } else {
+        const int i = find_sequence(c, t, 1, d);
+        if (i > 0) {
+          enc.encode_symbol(c.gps_multi, static_cast<std::uint32_t>(code_full + i));
+          c.last = (c.last + static_cast<unsigned>(i)) & 3u;
+          continue;
+        }
+        enc.encode_symbol(c.gps_multi, code_full);
+        full();
+      }
+      c.time[c.last] = t;
+      return;
+    }
+  }
+
+  std::array<std::unique_ptr<point14_channel>, 4> ch_;
+  unsigned current_ = 0;
+};
+
+struct rgb14_models {
+  symbol_model used{128};
+  symbol_model diff[6] = {symbol_model(256), symbol_model(256), symbol_model(256),
+                          symbol_model(256), symbol_model(256), symbol_model(256)};
+};
+
+class rgb14_encoder : public channel_items<6> {
+ public:
+  void next(out_layer& L, unsigned sc, const unsigned char* rec) {
+    unsigned char* lastp = switch_to(sc);
+    if (!models_[sc]) models_[sc] = std::make_unique<rgb14_models>();
+    rgb14_models& m = *models_[sc];
+    std::array<std::uint32_t, 3> last{}, v{};
+    for (int c = 0; c < 3; ++c) {
+      last[c] = load_le<std::uint16_t>(lastp + 2 * c);
+      v[c] = load_le<std::uint16_t>(rec + 2 * c);
+    }
+    const auto lo = [](std::uint32_t c) { return static_cast<int>(c & 0xFFu); };
+    const auto hi = [](std::uint32_t c) { return static_cast<int>(c >> 8); };
+    const auto clamp8 = [](int x) { return std::clamp(x, 0, 255); };
+    const auto put = [&](int i, int x) {
+      L.enc.encode_symbol(m.diff[i], static_cast<std::uint8_t>(x));
+    };
+    const std::uint32_t sym =
+        (lo(v[0]) != lo(last[0]) ? 1u : 0u) | (hi(v[0]) != hi(last[0]) ? 2u : 0u) |
+        (lo(v[1]) != lo(last[1]) ? 4u : 0u) | (hi(v[1]) != hi(last[1]) ? 8u : 0u) |
+        (lo(v[2]) != lo(last[2]) ? 16u : 0u) | (hi(v[2]) != hi(last[2]) ? 32u : 0u) |
+        (v[0] != v[1] || v[0] != v[2] ? 64u : 0u);
+    L.changed |= v != last;
+    L.enc.encode_symbol(m.used, sym);
+    int diff_l = 0, diff_h = 0;
+    if (sym & 1) put(0, diff_l = lo(v[0]) - lo(last[0]));
+    if (sym & 2) put(1, diff_h = hi(v[0]) - hi(last[0]));
+    if (sym & 64) {
+      if (sym & 4) put(2, lo(v[1]) - clamp8(diff_l + lo(last[1])));
+      if (sym & 16) {
+        diff_l = (diff_l + lo(v[1]) - lo(last[1])) / 2;
+        put(4, lo(v[2]) - clamp8(diff_l + lo(last[2])));
+      }
+      if (sym & 8) put(3, hi(v[1]) - clamp8(diff_h + hi(last[1])));
+      if (sym & 32) {
+        diff_h = (diff_h + hi(v[1]) - hi(last[1])) / 2;
+        put(5, hi(v[2]) - clamp8(diff_h + hi(last[2])));
+      }
+    }
+    std::copy(rec, rec + 6, lastp);
+  }
+
+ private:
+  std::array<std::unique_ptr<rgb14_models>, 4> models_;
+};
+
+class nir14_encoder : public channel_items<2> {
+ public:
+  void next(out_layer& L, unsigned sc, const unsigned char* rec) {
+    unsigned char* lastp = switch_to(sc);
+    if (!models_[sc]) models_[sc] = std::make_unique<models>();
+    models& m = *models_[sc];
+    const std::uint32_t sym = (rec[0] != lastp[0] ? 1u : 0u) | (rec[1] != lastp[1] ? 2u : 0u);
+    L.changed |= sym != 0;
+    L.enc.encode_symbol(m.used, sym);
+    if (sym & 1) L.enc.encode_symbol(m.diff[0], static_cast<std::uint8_t>(rec[0] - lastp[0]));
+    if (sym & 2) L.enc.encode_symbol(m.diff[1], static_cast<std::uint8_t>(rec[1] - lastp[1]));
+    lastp[0] = rec[0];
+    lastp[1] = rec[1];
+  }
+
+ private:
+  struct models {
+    symbol_model used{4};
+    symbol_model diff[2] = {symbol_model(256), symbol_model(256)};
+  };
+  std::array<std::unique_ptr<models>, 4> models_;
+};
+
+class byte14_encoder {
+ public:
+  explicit byte14_encoder(std::size_t n) : n_(n) {}
+  void first(const unsigned char* rec, unsigned sc) {
+    last_ch_ = sc;
+    slots_[sc].used = true;
+    slots_[sc].last.assign(rec, rec + n_);
+  }
+  void next(std::vector<std::unique_ptr<out_layer>>& layers, unsigned sc,
+            const unsigned char* rec) {
+    std::vector<unsigned char>* last = &slots_[last_ch_].last;
+    if (sc != last_ch_) {
+      last_ch_ = sc;
+      if (!slots_[sc].used) {
+        slots_[sc].used = true;
+        slots_[sc].last = *last;
+        last = &slots_[sc].last;
+      }
+    }
+    auto& c = slots_[sc];
+    if (c.models.empty()) c.models.resize(n_);
+    for (std::size_t i = 0; i < n_; ++i) {
+      layers[i]->changed |= rec[i] != (*last)[i];
+      layers[i]->enc.encode_symbol(c.models[i].get(256),
+                                   static_cast<std::uint8_t>(rec[i] - (*last)[i]));
+      (*last)[i] = rec[i];
+    }
+  }
+
+ private:
+  struct ctx {
+    bool used = false;
+    std::vector<unsigned char> last;
+    std::vector<lazy_model> models;
+  };
+  std::size_t n_;
+  unsigned last_ch_ = 0;
+  std::array<ctx, 4> slots_;
+};
+
 }  // namespace
 
 std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L, std::size_t k,
@@ -588,6 +927,62 @@ std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
     if ((i & 1023) == 0 && overrun() > 64) break;  // damaged: stop decoding garbage
   }
   return overrun();
+}
+
+std::vector<unsigned char> encode_layered_chunk(unsigned format, std::uint16_t record_length,
+                                                const unsigned char* records, std::uint64_t count) {
+  std::vector<unsigned char> out;
+  if (count == 0) return out;
+  const std::size_t rl = record_length;
+  const bool rgb = format == 7 || format == 8, nir = format == 8;
+  const std::size_t at_extra = 30 + (rgb ? 6 : 0) + (nir ? 2 : 0);
+  const std::size_t extra = rl - at_extra;
+  out.assign(records, records + rl);  // the first record raw
+
+  std::array<std::unique_ptr<out_layer>, point14_layers> p_layers;
+  for (auto& l : p_layers) l = std::make_unique<out_layer>();
+  auto rgb_layer = std::make_unique<out_layer>(), nir_layer = std::make_unique<out_layer>();
+  std::vector<std::unique_ptr<out_layer>> byte_layers(extra);
+  for (auto& l : byte_layers) l = std::make_unique<out_layer>();
+  p_layers[l_xy]->changed = true;  // LASzip always writes the xy and z layers
+  p_layers[l_z]->changed = true;
+
+  auto point = std::make_unique<point14_encoder>();
+  std::optional<rgb14_encoder> rgb_enc;
+  std::optional<nir14_encoder> nir_enc;
+  std::optional<byte14_encoder> byte_enc;
+  point->first(records);
+  const unsigned sc0 = (records[15] >> 4) & 3u;
+  if (rgb) rgb_enc.emplace().first(records + 30, sc0);
+  if (nir) nir_enc.emplace().first(records + 36, sc0);
+  if (extra) byte_enc.emplace(extra).first(records + at_extra, sc0);
+  for (std::uint64_t i = 1; i < count; ++i) {
+    const unsigned char* rec = records + i * rl;
+    const unsigned sc = point->next(p_layers, rec);
+    if (rgb) rgb_enc->next(*rgb_layer, sc, rec + 30);
+    if (nir) nir_enc->next(*nir_layer, sc, rec + 36);
+    if (extra) byte_enc->next(byte_layers, sc, rec + at_extra);
+  }
+
+  // The point count, the layer sizes (0 for a layer no record changed), the layers.
+  std::vector<out_layer*> all;
+  for (auto& l : p_layers) all.push_back(l.get());
+  if (rgb) all.push_back(rgb_layer.get());
+  if (nir) all.push_back(nir_layer.get());
+  for (auto& l : byte_layers) all.push_back(l.get());
+  const auto put32 = [&](std::uint32_t v) {
+    unsigned char b[4];
+    store_le(b, v);
+    out.insert(out.end(), b, b + 4);
+  };
+  put32(static_cast<std::uint32_t>(count));
+  for (out_layer* l : all) {
+    l->enc.done();
+    put32(l->changed ? static_cast<std::uint32_t>(l->bytes.size()) : 0u);
+  }
+  for (out_layer* l : all)
+    if (l->changed) out.insert(out.end(), l->bytes.begin(), l->bytes.end());
+  return out;
 }
 
 }  // namespace pbr_lod::detail
