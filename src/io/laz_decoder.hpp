@@ -73,15 +73,6 @@ void decode_laz_chunk(const std::string& path, const laz_layout& L, std::size_t 
                                                  std::size_t n_bytes, std::uint64_t count,
                                                  unsigned char* records);
 
-/// The encoder's half (laz_layered.cpp): `count` records of LAS 1.4 format 6, 7 or 8 (extra
-/// bytes after the format's fields) compressed into one layered chunk as LASzip writes it — the
-/// first record raw, the point count, the layer sizes, the layers. The first step of a LAZ (and
-/// COPC) writer; the chunk table is encoded with laz_codec.hpp's integer_codec.
-[[nodiscard]] std::vector<unsigned char> encode_layered_chunk(unsigned format,
-                                                              std::uint16_t record_length,
-                                                              const unsigned char* records,
-                                                              std::uint64_t count);
-
 /// Decodes chunks [c0, c1) into consecutive records at `records` (the first record of chunk c0
 /// first), reading their bytes with `fetch`, on up to `threads` threads (0: every core).
 void decode_laz_chunks(const std::string& path, const laz_layout& L, std::size_t c0, std::size_t c1,

@@ -20,6 +20,7 @@
 
 #include "laz_codec.hpp"
 #include "laz_decoder.hpp"
+#include "laz_encoder.hpp"
 
 namespace pbr_lod::detail {
 namespace {

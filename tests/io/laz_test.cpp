@@ -14,6 +14,7 @@
 
 #include "io/laz_codec.hpp"
 #include "io/laz_decoder.hpp"
+#include "io/laz_encoder.hpp"
 #include "io_test_util.hpp"
 #include "laz_test_util.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
@@ -531,4 +532,39 @@ TEST(LazEncode, RoundTripAcrossScannerChannelsFormat8AndExtraBytes) {
     mixed[i * 30 + 15] =
         static_cast<unsigned char>((mixed[i * 30 + 15] & 0xCF) | (((i / 7) % 4) << 4));
   EXPECT_TRUE(round_trip(L6, mixed) == mixed);
+}
+
+// A whole LAS 1.4 file written as LAZ by us: it reads back to the LAS file's cloud and records;
+// its one chunk is LASzip's; its EVLR moves with it; in chunks of 300 points it reads the same,
+// also in blocks.
+TEST_F(Laz, EncodedFileReadsBackAsItsLas) {
+  const std::string las_path = twin("1_4_w_evlr.las");
+  const std::string las = slurp(las_path);
+  const std::string ours = detail::encode_laz_file(las_path, las);
+  const std::string zp = write("ours.laz", ours);
+  EXPECT_EQ(first_difference(laz_records(zp), las_records(las_path), 30), -1);
+  expect_same_cloud(read_points(zp), read_points(las_path), "read_points");
+  const detail::laz_layout L = layout_of(zp, ours);
+  const std::string theirs = slurp(twin("1_4_w_evlr.laz"));
+  const detail::laz_layout T = layout_of("theirs", theirs);
+  ASSERT_EQ(L.chunks.size(), 1u);
+  EXPECT_EQ(ours.substr(static_cast<std::size_t>(L.chunks[0].offset),
+                        static_cast<std::size_t>(L.chunks[0].bytes)),
+            theirs.substr(static_cast<std::size_t>(T.chunks[0].offset),
+                          static_cast<std::size_t>(T.chunks[0].bytes)));
+  // The EVLR (its 60-byte header and payload) at the offset the header now gives.
+  const auto las_evlr = static_cast<std::size_t>(peek_le<std::uint64_t>(las, 235));
+  const auto our_evlr = static_cast<std::size_t>(peek_le<std::uint64_t>(ours, 235));
+  EXPECT_EQ(ours.substr(our_evlr), las.substr(las_evlr));
+
+  const std::string small = detail::encode_laz_file(las_path, las, 300);
+  const std::string sp = write("small.laz", small);
+  EXPECT_EQ(layout_of(sp, small).chunks.size(), 4u);
+  expect_same_cloud(read_points(sp), read_points(las_path), "chunks of 300");
+  expect_same_cloud(stream(sp, 7), read_points(las_path), "chunks of 300, blocks of 7");
+  EXPECT_EQ(first_difference(laz_records(sp), las_records(las_path), 30), -1);
+
+  PBR_LOD_EXPECT_THROW_MSG((void)detail::encode_laz_file("f3", slurp(twin("simple.las"))),
+                           FormatError, "the LAZ writer encodes LAS 1.4 formats 6 to 8");
+  PBR_LOD_EXPECT_THROW_MSG((void)detail::encode_laz_file("z", ours), FormatError, "already LAZ");
 }

@@ -1,0 +1,31 @@
+// pbr_lod — LAZ encoding, LAS 1.4 point formats 6–8 (LASzip's layered chunked compressor): a
+// chunk (laz_layered.cpp, the decoder's models run forwards; it reproduces LASzip's chunks byte
+// for byte) and a whole file (laz_writer.cpp). The first steps of the COPC writer of issue 44.
+// Not installed.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace pbr_lod::detail {
+
+/// (laz_layered.cpp) `count` records of LAS 1.4 format 6, 7 or 8 (extra
+/// bytes after the format's fields) compressed into one layered chunk as LASzip writes it — the
+/// first record raw, the point count, the layer sizes, the layers. The first step of a LAZ (and
+/// COPC) writer; the chunk table is encoded with laz_codec.hpp's integer_codec.
+[[nodiscard]] std::vector<unsigned char> encode_layered_chunk(unsigned format,
+                                                              std::uint16_t record_length,
+                                                              const unsigned char* records,
+                                                              std::uint64_t count);
+
+/// The LAS 1.4 file `las` (its bytes; point format 6, 7 or 8, not compressed) as LAZ: its header
+/// and VLRs with bit 7 of the format byte set and LASzip's VLR appended (compressor 3, items
+/// POINT14 [RGB14 | RGBNIR14] [BYTE14] version 3, fixed chunks of `chunk_size` points), the
+/// offsets after it moved; the records in layered chunks, compressed in parallel; the chunk
+/// table; then the file's EVLRs. `path` names the input in messages. Throws FormatError for a
+/// file it cannot encode (parse_las_header's checks, another format, VLRs past the points).
+[[nodiscard]] std::string encode_laz_file(const std::string& path, const std::string& las,
+                                          std::uint32_t chunk_size = 50000);
+
+}  // namespace pbr_lod::detail
