@@ -1,8 +1,8 @@
 // LAZ throughput (src/io/laz_decoder.cpp, laz_layered.cpp): points per second decoded from the
 // file's bytes in memory into LAS records, every chunk in parallel on all cores (the figure of
 // issue 44: ≥ 5 M points/s on 2 cores), read_points end to end (file read, decode, LAS record
-// parsing, float conversion), and for LAS 1.4 files the layered encoder (issue 44: ≥ 2 M
-// points/s), its records compressed again into the file's chunks.
+// parsing, float conversion), and the encoder (issue 44: ≥ 2 M points/s), the file's records
+// compressed again into its chunks.
 //
 // Inputs: PBR_LOD_LAZ_BENCH, a colon-separated list of LAZ files (real data: PDAL's
 // test/data/laz/autzen_trim.laz, 110 000 points in 3 chunks; its ept/source/lone-star.laz,
@@ -58,8 +58,8 @@ void decode_chunks(benchmark::State& state, const std::string& path) {
   set_points(state, h.count);
 }
 
-/// The layered encoder (LAS 1.4 files only): the file's records, decoded once, compressed again
-/// chunk by chunk as the file has them, every chunk in parallel.
+/// The encoder: the file's records, decoded once, compressed again chunk by chunk as the file
+/// has them, every chunk in parallel.
 void encode_chunks(benchmark::State& state, const std::string& path) {
   const std::string bytes = slurp(path);
   const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
@@ -93,11 +93,6 @@ void read_points_laz(benchmark::State& state, const std::string& path) {
   set_points(state, report.points_read);
 }
 
-bool is_layered(const std::string& path) {
-  const std::string head = slurp(path).substr(0, 105);
-  return head.size() == 105 && (static_cast<unsigned char>(head[104]) & 0x3Fu) >= 6;
-}
-
 std::string synthetic() {
   const std::string p =
       (std::filesystem::temp_directory_path() / "pbr_lod_bench_simple_x400.laz").string();
@@ -123,10 +118,9 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("read_points_laz/" + name).c_str(), read_points_laz, path)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
-    if (is_layered(path))
-      benchmark::RegisterBenchmark(("encode_laz/" + name).c_str(), encode_chunks, path)
-          ->Unit(benchmark::kMillisecond)
-          ->UseRealTime();
+    benchmark::RegisterBenchmark(("encode_laz/" + name).c_str(), encode_chunks, path)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
   }
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

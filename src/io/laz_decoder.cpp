@@ -37,6 +37,7 @@
 #include <optional>
 
 #include "laz_codec.hpp"
+#include "laz_encoder.hpp"
 #include "pbr_lod/core/parallel.hpp"
 
 namespace pbr_lod::detail {
@@ -416,6 +417,287 @@ std::uint64_t decode_pointwise(const unsigned char* bytes, std::size_t n_bytes, 
   return in.overrun();
 }
 
+// --- encoding (formats 0–3): the same models and predictions, run forwards ---------------------
+
+class point10_encoder {
+ public:
+  point10_encoder() : changed_(64), scan_angle_models_{symbol_model(256), symbol_model(256)} {}
+
+  void first(const unsigned char* rec) { std::memcpy(last_, rec, 20); }
+
+  void next(range_encoder& enc, const unsigned char* rec) {
+    const std::uint8_t bits = rec[14];
+    const unsigned r = bits & 7u, n = (bits >> 3) & 7u;
+    const unsigned m = return_map[n][r], l = return_level[n][r];
+    const auto intensity = load_le<std::uint16_t>(rec + 12);
+    const auto source = load_le<std::uint16_t>(rec + 18);
+    const auto last_source = load_le<std::uint16_t>(last_ + 18);
+    const std::uint32_t changed =
+        (bits != last_[14] ? 32u : 0u) | (intensity != last_intensity_[m] ? 16u : 0u) |
+        (rec[15] != last_[15] ? 8u : 0u) | (rec[16] != last_[16] ? 4u : 0u) |
+        (rec[17] != last_[17] ? 2u : 0u) | (source != last_source ? 1u : 0u);
+    enc.encode_symbol(changed_, changed);
+    if (changed & 32) enc.encode_symbol(bit_byte_[last_[14]].get(256), bits);
+    if (changed & 16) {
+      ic_intensity_.encode(enc, last_intensity_[m], intensity, m < 3 ? m : 3);
+      last_intensity_[m] = intensity;
+    }
+    if (changed & 8) enc.encode_symbol(classification_m_[last_[15]].get(256), rec[15]);
+    if (changed & 4)
+      enc.encode_symbol(scan_angle_models_[(bits >> 6) & 1u],
+                        static_cast<std::uint8_t>(rec[16] - last_[16]));
+    if (changed & 2) enc.encode_symbol(user_data_m_[last_[17]].get(256), rec[17]);
+    if (changed & 1) ic_point_source_.encode(enc, last_source, source);
+    const std::uint32_t single = n == 1 ? 1u : 0u;
+    const auto minus = [&](int at) {
+      return static_cast<std::int32_t>(load_le<std::uint32_t>(rec + at) -
+                                       load_le<std::uint32_t>(last_ + at));
+    };
+    std::int32_t diff = minus(0);
+    ic_dx_.encode(enc, x_median_[m].get(), diff, single);
+    x_median_[m].add(diff);
+    std::uint32_t k = ic_dx_.k();
+    diff = minus(4);
+    ic_dy_.encode(enc, y_median_[m].get(), diff, single + (k < 20 ? (k & ~1u) : 20u));
+    y_median_[m].add(diff);
+    k = (ic_dx_.k() + ic_dy_.k()) / 2;
+    const auto z = load_le<std::int32_t>(rec + 8);
+    ic_z_.encode(enc, last_height_[l], z, single + (k < 18 ? (k & ~1u) : 18u));
+    last_height_[l] = z;
+    std::memcpy(last_, rec, 20);
+  }
+
+ private:
+  unsigned char last_[20] = {};
+  std::array<std::uint16_t, 16> last_intensity_{};
+  std::array<median5, 16> x_median_, y_median_;
+  std::array<std::int32_t, 8> last_height_{};
+  symbol_model changed_;
+  symbol_model scan_angle_models_[2];
+  std::array<lazy_model, 256> bit_byte_, classification_m_, user_data_m_;
+  integer_codec ic_intensity_{16, 4};
+  integer_codec ic_point_source_{16, 1};
+  integer_codec ic_dx_{32, 2};
+  integer_codec ic_dy_{32, 22};
+  integer_codec ic_z_{32, 20};
+};
+
+class gpstime11_encoder {
+ public:
+  static constexpr std::int32_t multi_max = 500, multi_minus = -10;
+  static constexpr std::uint32_t multi_unchanged = 511, multi_code_full = 512;
+
+  gpstime11_encoder() : multi_(516), zero_diff_(6) {}
+
+  void first(const unsigned char* rec) { time_[0] = load_le<std::uint64_t>(rec); }
+
+  void next(range_encoder& enc, const unsigned char* rec) {
+    const auto t = load_le<std::uint64_t>(rec);
+    const auto fits = [](std::uint64_t delta, std::int32_t& d) {
+      const auto d64 = static_cast<std::int64_t>(delta);
+      d = static_cast<std::int32_t>(d64);
+      return d64 >= std::numeric_limits<std::int32_t>::min() &&
+             d64 <= std::numeric_limits<std::int32_t>::max();
+    };
+    const auto times = [&](std::int32_t f) {
+      return static_cast<std::int32_t>(static_cast<std::uint32_t>(f) *
+                                       static_cast<std::uint32_t>(diff_[last_]));
+    };
+    const auto extreme = [&](std::int32_t d) {
+      if (++extreme_[last_] > 3) {
+        diff_[last_] = d;
+        extreme_[last_] = 0;
+      }
+    };
+    const auto full = [&](symbol_model& m, std::uint32_t code) {
+      enc.encode_symbol(m, code);
+      const auto high = [](std::uint64_t v) {
+        return static_cast<std::int32_t>(static_cast<std::uint32_t>(v >> 32));
+      };
+      ic_.encode(enc, high(time_[last_]), high(t), 8);
+      enc.write_bits(32, static_cast<std::uint32_t>(t));
+      next_ = (next_ + 1) & 3u;
+      last_ = next_;
+      diff_[last_] = 0;
+      extreme_[last_] = 0;
+    };
+    /// The other sequence t belongs to (1–3 ahead of last_), or 0.
+    const auto other = [&]() -> unsigned {
+      std::int32_t d;
+      for (unsigned i = 1; i < 4; ++i)
+        if (fits(t - time_[(last_ + i) & 3u], d)) return i;
+      return 0;
+    };
+    for (;;) {  // at most one switch of sequence, then a code in it
+      std::int32_t d = 0;
+      if (diff_[last_] == 0) {
+        if (t == time_[last_]) {
+          enc.encode_symbol(zero_diff_, 0);
+          return;
+        }
+        if (fits(t - time_[last_], d)) {
+          enc.encode_symbol(zero_diff_, 1);
+          ic_.encode(enc, 0, d, 0);
+          diff_[last_] = d;
+          extreme_[last_] = 0;
+        } else if (const unsigned i = other(); i > 0) {
+          enc.encode_symbol(zero_diff_, i + 2);
+          last_ = (last_ + i) & 3u;
+          continue;
+        } else {
+          full(zero_diff_, 2);
+        }
+        time_[last_] = t;
+        return;
+      }
+      if (t == time_[last_]) {
+        enc.encode_symbol(multi_, multi_unchanged);
+        return;
+      }
+      if (fits(t - time_[last_], d)) {
+        // LASzip's rounding (in float, half away from zero); any multiple decodes.
+        const float ratio = static_cast<float>(d) / static_cast<float>(diff_[last_]);
+        const auto multi = static_cast<std::int32_t>(ratio >= 0 ? ratio + 0.5f : ratio - 0.5f);
+        if (multi == 1) {
+          enc.encode_symbol(multi_, 1);
+          ic_.encode(enc, diff_[last_], d, 1);
+          extreme_[last_] = 0;
+        } else if (multi > 0 && multi < multi_max) {
+          enc.encode_symbol(multi_, static_cast<std::uint32_t>(multi));
+          ic_.encode(enc, times(multi), d, multi < 10 ? 2 : 3);
+        } else if (multi >= multi_max) {
+          enc.encode_symbol(multi_, multi_max);
+          ic_.encode(enc, times(multi_max), d, 4);
+          extreme(d);
+        } else if (multi < 0 && multi > multi_minus) {
+          enc.encode_symbol(multi_, static_cast<std::uint32_t>(multi_max - multi));
+          ic_.encode(enc, times(multi), d, 5);
+        } else if (multi <= multi_minus) {
+          enc.encode_symbol(multi_, static_cast<std::uint32_t>(multi_max - multi_minus));
+          ic_.encode(enc, times(multi_minus), d, 6);
+          extreme(d);
+        } else {
+          enc.encode_symbol(multi_, 0);
+          ic_.encode(enc, 0, d, 7);
+          extreme(d);
+        }
+      } else if (const unsigned i = other(); i > 0) {
+        enc.encode_symbol(multi_, multi_code_full + i);
+        last_ = (last_ + i) & 3u;
+        continue;
+      } else {
+        full(multi_, multi_code_full);
+      }
+      time_[last_] = t;
+      return;
+    }
+  }
+
+ private:
+  std::array<std::uint64_t, 4> time_{};
+  std::array<std::int32_t, 4> diff_{};
+  std::array<std::int32_t, 4> extreme_{};
+  std::uint32_t last_ = 0, next_ = 0;
+  symbol_model multi_, zero_diff_;
+  integer_codec ic_{32, 9};
+};
+
+class rgb12_encoder {
+ public:
+  rgb12_encoder()
+      : used_(128), diff_{symbol_model(256), symbol_model(256), symbol_model(256),
+                          symbol_model(256), symbol_model(256), symbol_model(256)} {}
+  void first(const unsigned char* rec) { std::memcpy(last_, rec, 6); }
+  void next(range_encoder& enc, const unsigned char* rec) {
+    std::array<std::uint32_t, 3> last{}, v{};
+    for (int c = 0; c < 3; ++c) {
+      last[c] = load_le<std::uint16_t>(last_ + 2 * c);
+      v[c] = load_le<std::uint16_t>(rec + 2 * c);
+    }
+    const auto lo = [](std::uint32_t c) { return static_cast<int>(c & 0xFFu); };
+    const auto hi = [](std::uint32_t c) { return static_cast<int>(c >> 8); };
+    const auto clamp8 = [](int x) { return std::clamp(x, 0, 255); };
+    const auto put = [&](int i, int x) {
+      enc.encode_symbol(diff_[i], static_cast<std::uint8_t>(x));
+    };
+    const std::uint32_t sym =
+        (lo(v[0]) != lo(last[0]) ? 1u : 0u) | (hi(v[0]) != hi(last[0]) ? 2u : 0u) |
+        (lo(v[1]) != lo(last[1]) ? 4u : 0u) | (hi(v[1]) != hi(last[1]) ? 8u : 0u) |
+        (lo(v[2]) != lo(last[2]) ? 16u : 0u) | (hi(v[2]) != hi(last[2]) ? 32u : 0u) |
+        (v[0] != v[1] || v[0] != v[2] ? 64u : 0u);
+    enc.encode_symbol(used_, sym);
+    int diff_l = 0, diff_h = 0;
+    if (sym & 1) put(0, diff_l = lo(v[0]) - lo(last[0]));
+    if (sym & 2) put(1, diff_h = hi(v[0]) - hi(last[0]));
+    if (sym & 64) {
+      if (sym & 4) put(2, lo(v[1]) - clamp8(diff_l + lo(last[1])));
+      if (sym & 16) {
+        diff_l = (diff_l + lo(v[1]) - lo(last[1])) / 2;
+        put(4, lo(v[2]) - clamp8(diff_l + lo(last[2])));
+      }
+      if (sym & 8) put(3, hi(v[1]) - clamp8(diff_h + hi(last[1])));
+      if (sym & 32) {
+        diff_h = (diff_h + hi(v[1]) - hi(last[1])) / 2;
+        put(5, hi(v[2]) - clamp8(diff_h + hi(last[2])));
+      }
+    }
+    std::memcpy(last_, rec, 6);
+  }
+
+ private:
+  unsigned char last_[6] = {};
+  symbol_model used_;
+  symbol_model diff_[6];
+};
+
+class bytes_encoder {
+ public:
+  explicit bytes_encoder(std::size_t n) : last_(n) {
+    for (std::size_t i = 0; i < n; ++i) models_.push_back(std::make_unique<symbol_model>(256));
+  }
+  void first(const unsigned char* rec) { std::copy(rec, rec + last_.size(), last_.begin()); }
+  void next(range_encoder& enc, const unsigned char* rec) {
+    for (std::size_t i = 0; i < last_.size(); ++i) {
+      enc.encode_symbol(*models_[i], static_cast<std::uint8_t>(rec[i] - last_[i]));
+      last_[i] = rec[i];
+    }
+  }
+
+ private:
+  std::vector<unsigned char> last_;
+  std::vector<std::unique_ptr<symbol_model>> models_;
+};
+
+template <bool Gps, bool Rgb>
+std::vector<unsigned char> encode_pointwise(const unsigned char* records, std::uint64_t count,
+                                            std::size_t record_length) {
+  constexpr std::size_t gps_at = 20;
+  constexpr std::size_t rgb_at = Gps ? 28 : 20;
+  constexpr std::size_t extra_at = rgb_at + (Rgb ? 6 : 0);
+  const std::size_t extra = record_length - extra_at;
+  std::vector<unsigned char> out;
+  if (count == 0) return out;
+  out.assign(records, records + record_length);  // the first record raw
+  auto point = std::make_unique<point10_encoder>();
+  std::optional<gpstime11_encoder> gps;
+  std::optional<rgb12_encoder> rgb;
+  std::optional<bytes_encoder> tail;
+  point->first(records);
+  if constexpr (Gps) gps.emplace().first(records + gps_at);
+  if constexpr (Rgb) rgb.emplace().first(records + rgb_at);
+  if (extra) tail.emplace(extra).first(records + extra_at);
+  range_encoder enc(out);
+  for (std::uint64_t i = 1; i < count; ++i) {
+    const unsigned char* rec = records + i * record_length;
+    point->next(enc, rec);
+    if constexpr (Gps) gps->next(enc, rec + gps_at);
+    if constexpr (Rgb) rgb->next(enc, rec + rgb_at);
+    if (extra) tail->next(enc, rec + extra_at);
+  }
+  enc.done();
+  return out;
+}
+
 // --- the layout: VLR and chunk table -----------------------------------------------------------
 
 /// The items LASzip writes for LAS point format f (before any BYTE item for extra bytes).
@@ -786,6 +1068,23 @@ void laz_record_reader::read(std::uint64_t first, std::uint64_t n, unsigned char
     const std::uint64_t lo = std::max(first, c.first), hi = std::min(end, c.first + c.count);
     std::memcpy(out + (lo - first) * rl, records->data() + (lo - c.first) * rl,
                 static_cast<std::size_t>((hi - lo) * rl));
+  }
+}
+
+std::vector<unsigned char> encode_pointwise_chunk(unsigned format, std::uint16_t record_length,
+                                                  const unsigned char* records,
+                                                  std::uint64_t count) {
+  switch (format) {
+    case 0:
+      return encode_pointwise<false, false>(records, count, record_length);
+    case 1:
+      return encode_pointwise<true, false>(records, count, record_length);
+    case 2:
+      return encode_pointwise<false, true>(records, count, record_length);
+    case 3:
+      return encode_pointwise<true, true>(records, count, record_length);
+    default:
+      throw InvalidArgument(cat("encode_pointwise_chunk: point format ", format));
   }
 }
 

@@ -1,7 +1,7 @@
-// pbr_lod — LAZ encoding, LAS 1.4 point formats 6–8 (LASzip's layered chunked compressor): a
-// chunk (laz_layered.cpp, the decoder's models run forwards; it reproduces LASzip's chunks byte
-// for byte) and a whole file (laz_writer.cpp). The first steps of the COPC writer of issue 44.
-// Not installed.
+// pbr_lod — LAZ encoding: a chunk of point formats 0–3 (point-wise, laz_decoder.cpp) or of LAS 1.4
+// formats 6–8 (layered, laz_layered.cpp) — the decoders' models run forwards; both reproduce
+// LASzip's chunks byte for byte — and a whole LAS file (laz_writer.cpp). The first steps of the
+// COPC writer of issue 44. Not installed.
 #pragma once
 
 #include <cstdint>
@@ -19,12 +19,22 @@ namespace pbr_lod::detail {
                                                               const unsigned char* records,
                                                               std::uint64_t count);
 
-/// The LAS 1.4 file `las` (its bytes; point format 6, 7 or 8, not compressed) as LAZ: its header
-/// and VLRs with bit 7 of the format byte set and LASzip's VLR appended (compressor 3, items
-/// POINT14 [RGB14 | RGBNIR14] [BYTE14] version 3, fixed chunks of `chunk_size` points), the
-/// offsets after it moved; the records in layered chunks, compressed in parallel; the chunk
-/// table; then the file's EVLRs. `path` names the input in messages. Throws FormatError for a
-/// file it cannot encode (parse_las_header's checks, another format, VLRs past the points).
+/// (laz_decoder.cpp) `count` records of LAS format 0–3 (extra bytes after the format's fields)
+/// compressed into one point-wise chunk as LASzip writes it: the first record raw, then one
+/// arithmetic-coded stream of POINT10, GPSTIME11, RGB12 and BYTE version 2.
+[[nodiscard]] std::vector<unsigned char> encode_pointwise_chunk(unsigned format,
+                                                                std::uint16_t record_length,
+                                                                const unsigned char* records,
+                                                                std::uint64_t count);
+
+/// The LAS file `las` (its bytes; point format 0–3 or 6–8, not compressed) as LAZ: its header
+/// and VLRs with bit 7 of the format byte set and LASzip's VLR appended (compressor 2, items
+/// POINT10 [GPSTIME11] [RGB12] [BYTE] version 2 for formats 0–3; compressor 3, items POINT14
+/// [RGB14 | RGBNIR14] [BYTE14] version 3 for 6–8; fixed chunks of `chunk_size` points), the
+/// offsets after it moved; the records in chunks, compressed in parallel; the chunk table; then
+/// a LAS 1.4 file's EVLRs (bytes after the records of older versions are dropped). `path` names the
+/// input in messages. Throws FormatError for a file it cannot encode (parse_las_header's checks,
+/// another format, VLRs past the points).
 [[nodiscard]] std::string encode_laz_file(const std::string& path, const std::string& las,
                                           std::uint32_t chunk_size = 50000);
 

@@ -1,4 +1,4 @@
-// pbr_lod — a LAS 1.4 file (formats 6–8) written as LAZ: the file layout around the layered
+// pbr_lod — a LAS file (formats 0–3 and 6–8) written as LAZ: the file layout around the layered
 // chunks of laz_layered.cpp (see laz_decoder.cpp for the layout this writes and the decoder
 // reads: the LASzip VLR, the chunk table offset before the chunks, the chunk table after them).
 #include <algorithm>
@@ -22,11 +22,12 @@ void poke(std::string& s, std::size_t at, T v) {
   laz::store_le(reinterpret_cast<unsigned char*>(s.data() + at), v);
 }
 
-/// LASzip's VLR (header and payload) for a layered file of `format` with `extra` extra bytes.
+/// LASzip's VLR (header and payload) for a file of `format` with `extra` extra bytes.
 std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_size) {
+  const bool layered = format >= 6;
   std::string payload;
-  put<std::uint16_t>(payload, 3);  // compressor: layered chunked
-  put<std::uint16_t>(payload, 0);  // coder: arithmetic
+  put<std::uint16_t>(payload, layered ? 3 : 2);  // compressor: layered / point-wise chunked
+  put<std::uint16_t>(payload, 0);                // coder: arithmetic
   // The LASzip revision whose output encode_layered_chunk reproduces.
   payload += '\x03';
   payload += '\x04';
@@ -38,15 +39,24 @@ std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_s
   struct item {
     std::uint16_t type, size;
   };
-  std::vector<item> items = {{10, 30}};                                 // POINT14
-  if (format == 7) items.push_back({11, 6});                            // RGB14
-  if (format == 8) items.push_back({12, 8});                            // RGBNIR14
-  if (extra) items.push_back({14, static_cast<std::uint16_t>(extra)});  // BYTE14
+  std::vector<item> items;
+  if (layered) {
+    items.push_back({10, 30});                  // POINT14
+    if (format == 7) items.push_back({11, 6});  // RGB14
+    if (format == 8) items.push_back({12, 8});  // RGBNIR14
+  } else {
+    items.push_back({6, 20});                                 // POINT10
+    if (format == 1 || format == 3) items.push_back({7, 8});  // GPSTIME11
+    if (format == 2 || format == 3) items.push_back({8, 6});  // RGB12
+  }
+  if (extra)  // BYTE14 / BYTE
+    items.push_back(
+        {static_cast<std::uint16_t>(layered ? 14 : 0), static_cast<std::uint16_t>(extra)});
   put<std::uint16_t>(payload, static_cast<std::uint16_t>(items.size()));
   for (const item& it : items) {
     put<std::uint16_t>(payload, it.type);
     put<std::uint16_t>(payload, it.size);
-    put<std::uint16_t>(payload, 3);
+    put<std::uint16_t>(payload, layered ? 3 : 2);  // the item versions we code
   }
   std::string v;
   put<std::uint16_t>(v, 0);  // reserved
@@ -68,11 +78,13 @@ std::string encode_laz_file(const std::string& path, const std::string& las,
   read_report report;
   const las_header h = parse_las_header(path, b, las.size(), report);
   if (h.compressed) format_error(path, "header", "already LAZ (bit 7 of the format byte set)");
-  if (h.format < 6 || h.format > 8)
+  if (h.format == 4 || h.format == 5 || h.format > 8)
     format_error(path, "header",
-                 cat("point format ", h.format, ": the LAZ writer encodes LAS 1.4 formats 6 to 8"));
+                 cat("point format ", h.format,
+                     ": the LAZ writer encodes formats 0 to 3 and 6 to 8 (no waveforms)"));
   if (chunk_size == 0) throw InvalidArgument("encode_laz_file: chunk size 0");
-  const std::size_t min_length = h.format == 6 ? 30 : h.format == 7 ? 36 : 38;
+  constexpr std::size_t min_length_of[9] = {20, 28, 26, 34, 0, 0, 30, 36, 38};
+  const std::size_t min_length = min_length_of[h.format];
   // The VLRs must end before the points (the LASzip VLR goes after them).
   std::uint64_t vlr_end = h.header_size;
   for (std::uint32_t i = 0; i < h.vlr_count; ++i) {
@@ -100,8 +112,9 @@ std::string encode_laz_file(const std::string& path, const std::string& las,
   parallel_tasks(chunks.size(), resolve_threads(0), [&](std::size_t k, unsigned) {
     const std::uint64_t first = k * std::uint64_t{chunk_size};
     const std::uint64_t count = std::min<std::uint64_t>(chunk_size, h.count - first);
-    chunks[k] = encode_layered_chunk(h.format, h.record_length,
-                                     b + h.data_offset + first * h.record_length, count);
+    const unsigned char* records = b + h.data_offset + first * h.record_length;
+    chunks[k] = h.format >= 6 ? encode_layered_chunk(h.format, h.record_length, records, count)
+                              : encode_pointwise_chunk(h.format, h.record_length, records, count);
   });
   std::uint64_t table_at = data_offset + 8;
   for (const auto& c : chunks) table_at += c.size();
@@ -124,8 +137,8 @@ std::string encode_laz_file(const std::string& path, const std::string& las,
     out.append(coded.begin(), coded.end());
   }
 
-  // The EVLRs after the records move with them.
-  if (records_end < las.size()) {
+  // The EVLRs after the records (LAS 1.4) move with them.
+  if (records_end < las.size() && las[25] >= 4) {
     const std::uint64_t evlr_start = load_le<std::uint64_t>(b + 235);
     if (evlr_start >= records_end && evlr_start <= las.size())
       poke<std::uint64_t>(out, 235, evlr_start - records_end + out.size());

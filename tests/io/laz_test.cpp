@@ -564,7 +564,42 @@ TEST_F(Laz, EncodedFileReadsBackAsItsLas) {
   expect_same_cloud(stream(sp, 7), read_points(las_path), "chunks of 300, blocks of 7");
   EXPECT_EQ(first_difference(laz_records(sp), las_records(las_path), 30), -1);
 
-  PBR_LOD_EXPECT_THROW_MSG((void)detail::encode_laz_file("f3", slurp(twin("simple.las"))),
-                           FormatError, "the LAZ writer encodes LAS 1.4 formats 6 to 8");
+  pbr_lod::test::las_spec f4;  // format 4: waveforms
+  f4.format = 4;
+  f4.record_length = 57;
+  f4.xyz = {{1, 2, 3}};
+  f4.rgb.clear();
+  PBR_LOD_EXPECT_THROW_MSG((void)detail::encode_laz_file("f4", pbr_lod::test::make_las(f4)),
+                           FormatError, "the LAZ writer encodes formats 0 to 3 and 6 to 8");
   PBR_LOD_EXPECT_THROW_MSG((void)detail::encode_laz_file("z", ours), FormatError, "already LAZ");
+}
+
+// The point-wise encoder (formats 0–3) on the records of every LAS twin: as a whole file it gives
+// LASzip's chunk byte for byte, and reads back to the LAS file's records and cloud.
+TEST_F(Laz, PointwiseFilesAreLaszipsChunksAndReadBack) {
+  for (const char* name : {"point10", "point-time", "point-color", "simple", "extra-bytes"}) {
+    const std::string las_path = twin(std::string(name) + ".las");
+    const std::string ours = detail::encode_laz_file(las_path, slurp(las_path));
+    const std::string zp = write("ours.laz", ours);
+    const detail::laz_layout L = layout_of(zp, ours);
+    const std::string theirs = slurp(twin(std::string(name) + ".laz"));
+    const detail::laz_layout T = layout_of("theirs", theirs);
+    ASSERT_EQ(L.chunks.size(), 1u) << name;
+    EXPECT_EQ(ours.substr(static_cast<std::size_t>(L.chunks[0].offset),
+                          static_cast<std::size_t>(L.chunks[0].bytes)),
+              theirs.substr(static_cast<std::size_t>(T.chunks[0].offset),
+                            static_cast<std::size_t>(T.chunks[0].bytes)))
+        << name;
+    const detail::las_header h = header_of(zp, ours);
+    EXPECT_EQ(first_difference(laz_records(zp), las_records(las_path), h.record_length), -1)
+        << name;
+    expect_same_cloud(read_points(zp), read_points(las_path), name);
+  }
+  // Several chunks: 1065 points in chunks of 100.
+  const std::string las_path = twin("extra-bytes.las");
+  const std::string small = detail::encode_laz_file(las_path, slurp(las_path), 100);
+  const std::string sp = write("small.laz", small);
+  EXPECT_EQ(layout_of(sp, small).chunks.size(), 11u);
+  EXPECT_EQ(first_difference(laz_records(sp), las_records(las_path), 61), -1);
+  expect_same_cloud(stream(sp, 7), read_points(las_path), "chunks of 100, blocks of 7");
 }
