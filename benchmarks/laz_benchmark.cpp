@@ -76,8 +76,10 @@ void encode_chunks(benchmark::State& state, const std::string& path) {
     pbr_lod::detail::parallel_tasks(
         L.chunks.size(), pbr_lod::resolve_threads(0), [&](std::size_t k, unsigned) {
           const detail::laz_chunk& c = L.chunks[k];
-          out[k] = detail::encode_layered_chunk(
-              L.format, L.record_length, records.data() + c.first * L.record_length, c.count);
+          const unsigned char* rec = records.data() + c.first * L.record_length;
+          out[k] = L.format >= 6
+                       ? detail::encode_layered_chunk(L.format, L.record_length, rec, c.count)
+                       : detail::encode_pointwise_chunk(L.format, L.record_length, rec, c.count);
         });
     benchmark::DoNotOptimize(out.data());
   }
