@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 
 #include "laz_decoder.hpp"
 #include "point_formats.hpp"
@@ -130,19 +131,21 @@ void las_outside_warning(const std::string& path, std::uint64_t outside, read_re
 namespace {
 
 /// The records of a LAZ file held in memory, decoded chunk by chunk in parallel.
-std::vector<unsigned char> decode_laz_file(const std::string& path, const las_header& h,
-                                           const std::string& bytes) {
+std::unique_ptr<unsigned char[]> decode_laz_file(const std::string& path, const las_header& h,
+                                                 const std::string& bytes) {
   const laz_layout L = read_laz_layout(path, h, bytes.size(),
                                        [&](std::uint64_t at, std::size_t n, unsigned char* out) {
                                          std::memcpy(out, bytes.data() + at, n);
                                        });
-  std::vector<unsigned char> records(static_cast<std::size_t>(h.count * h.record_length));
+  // Not zero-filled: the decoders write every byte of every record (or throw).
+  auto records = std::make_unique_for_overwrite<unsigned char[]>(
+      static_cast<std::size_t>(h.count * h.record_length));
   decode_laz_chunks(
       path, L, 0, L.chunks.size(),
       [&](std::uint64_t at, std::size_t n, unsigned char* out) {
         std::memcpy(out, bytes.data() + at, n);
       },
-      records.data());
+      records.get());
   return records;
 }
 
@@ -154,9 +157,9 @@ raw_geometry read_las_file(const std::string& path, read_report& report) {
   const las_header h = parse_las_header(path, b, bytes.size(), report);
   const std::uint64_t count = h.count;
   // LAZ: the chunks decoded to the LAS records they replace, then read as LAS.
-  std::vector<unsigned char> decoded;
+  std::unique_ptr<unsigned char[]> decoded;
   if (h.compressed) decoded = decode_laz_file(path, h, bytes);
-  const unsigned char* records = h.compressed ? decoded.data() : b + h.data_offset;
+  const unsigned char* records = h.compressed ? decoded.get() : b + h.data_offset;
 
   raw_geometry g;
   g.positions.resize(count);
