@@ -271,6 +271,18 @@ TEST(LazTwins, CopcFormat7HoldsTheLasPointsInAnotherOrder) {
   expect_same_cloud(stream(copc, 7), z, "blocks of 7");
 }
 
+// A streaming writer that could not seek back leaves −1 where the chunk table's offset belongs
+// and appends the offset as the file's last 8 bytes.
+TEST_F(Laz, ChunkTableOffsetAtTheEnd) {
+  std::string laz = slurp(twin("point-time.laz"));
+  const detail::las_header h = header_of("t", laz);
+  const auto table_at = peek_le<std::int64_t>(laz, h.data_offset);
+  poke_le<std::int64_t>(laz, h.data_offset, -1);
+  put_le<std::int64_t>(laz, table_at);
+  expect_same_cloud(read_points(write("end.laz", laz)), read_points(twin("point-time.las")),
+                    "offset at the end");
+}
+
 // A LAZ file whose name says .las (or the reverse) reads by its format byte.
 TEST_F(Laz, TheFormatByteDecidesNotTheExtension) {
   const std::string laz = slurp(twin("point-color.laz"));
