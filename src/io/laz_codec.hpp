@@ -528,4 +528,88 @@ inline void store_le(unsigned char* p, T v) {
   std::memcpy(p, &v, sizeof(T));
 }
 
+/// WAVEPACKET13 v1 / WAVEPACKET14 v3 (formats 4, 5, 9, 10): the 29 bytes that point into the
+/// waveform data — descriptor index (a symbol), offset (unchanged, the last packet's end, a
+/// 32-bit difference or raw), packet size, return point and dx dy dz (floats coded by their
+/// bits as integers), each against the last packet. One state per scanner channel in v3.
+class wavepacket_state {
+ public:
+  wavepacket_state()
+      : index_(256),
+        offset_sym_{symbol_model(4), symbol_model(4), symbol_model(4), symbol_model(4)} {}
+
+  /// Decodes the packet after `last` (29 bytes) into out (29 bytes; may alias last).
+  void decode(range_decoder& dec, const unsigned char* last, unsigned char* out) {
+    const auto last_offset = load_le<std::uint64_t>(last + 1);
+    const auto last_size = load_le<std::uint32_t>(last + 9);
+    std::uint32_t v[4];
+    for (int i = 0; i < 4; ++i) v[i] = load_le<std::uint32_t>(last + 13 + 4 * i);
+    const auto descriptor = static_cast<unsigned char>(dec.decode_symbol(index_));
+    last_sym_ = dec.decode_symbol(offset_sym_[last_sym_]);
+    std::uint64_t offset;
+    if (last_sym_ == 0) {
+      offset = last_offset;
+    } else if (last_sym_ == 1) {
+      offset = last_offset + last_size;
+    } else if (last_sym_ == 2) {
+      last_offset_diff_ = ic_offset_diff_.decode(dec, last_offset_diff_, 0);
+      offset =
+          last_offset + static_cast<std::uint64_t>(static_cast<std::int64_t>(last_offset_diff_));
+    } else {
+      offset = dec.read_int();
+      offset |= std::uint64_t{dec.read_int()} << 32;
+    }
+    const auto size =
+        static_cast<std::uint32_t>(ic_size_.decode(dec, static_cast<std::int32_t>(last_size), 0));
+    v[0] = static_cast<std::uint32_t>(
+        ic_return_point_.decode(dec, static_cast<std::int32_t>(v[0]), 0));
+    for (std::uint32_t a = 0; a < 3; ++a)
+      v[1 + a] =
+          static_cast<std::uint32_t>(ic_xyz_.decode(dec, static_cast<std::int32_t>(v[1 + a]), a));
+    out[0] = descriptor;
+    store_le(out + 1, offset);
+    store_le(out + 9, size);
+    for (int i = 0; i < 4; ++i) store_le(out + 13 + 4 * i, v[i]);
+  }
+
+  /// Encodes the packet `cur` after `last` (29 bytes each).
+  void encode(range_encoder& enc, const unsigned char* last, const unsigned char* cur) {
+    const auto last_offset = load_le<std::uint64_t>(last + 1);
+    const auto last_size = load_le<std::uint32_t>(last + 9);
+    const auto offset = load_le<std::uint64_t>(cur + 1);
+    enc.encode_symbol(index_, cur[0]);
+    const auto d64 = static_cast<std::int64_t>(offset - last_offset);
+    std::uint32_t sym = 3;
+    if (d64 == 0)
+      sym = 0;
+    else if (offset == last_offset + last_size)
+      sym = 1;
+    else if (d64 >= std::numeric_limits<std::int32_t>::min() &&
+             d64 <= std::numeric_limits<std::int32_t>::max())
+      sym = 2;
+    enc.encode_symbol(offset_sym_[last_sym_], sym);
+    last_sym_ = sym;
+    if (sym == 2) {
+      ic_offset_diff_.encode(enc, last_offset_diff_, static_cast<std::int32_t>(d64), 0);
+      last_offset_diff_ = static_cast<std::int32_t>(d64);
+    } else if (sym == 3) {
+      enc.write_bits(32, static_cast<std::uint32_t>(offset));
+      enc.write_bits(32, static_cast<std::uint32_t>(offset >> 32));
+    }
+    ic_size_.encode(enc, load_le<std::int32_t>(last + 9), load_le<std::int32_t>(cur + 9), 0);
+    ic_return_point_.encode(enc, load_le<std::int32_t>(last + 13), load_le<std::int32_t>(cur + 13),
+                            0);
+    for (std::uint32_t a = 0; a < 3; ++a)
+      ic_xyz_.encode(enc, load_le<std::int32_t>(last + 17 + 4 * a),
+                     load_le<std::int32_t>(cur + 17 + 4 * a), a);
+  }
+
+ private:
+  symbol_model index_;
+  symbol_model offset_sym_[4];
+  std::uint32_t last_sym_ = 0;
+  std::int32_t last_offset_diff_ = 0;
+  integer_codec ic_offset_diff_{32, 1}, ic_size_{32, 1}, ic_return_point_{32, 1}, ic_xyz_{32, 3};
+};
+
 }  // namespace pbr_lod::detail::laz

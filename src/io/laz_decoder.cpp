@@ -1,4 +1,5 @@
-// pbr_lod — LAZ decoding: LASzip's point-wise chunked compressor (point data record formats 0–3).
+// pbr_lod — LAZ decoding and encoding: LASzip's point-wise chunked compressor (point data record
+// formats 0–5; the layered one of LAS 1.4 is laz_layered.cpp), the LASzip VLR and chunk table.
 //
 // This work is based on:
 //  * M. Isenburg, "LASzip: lossless compression of LiDAR data", Photogrammetric Engineering and
@@ -380,14 +381,16 @@ class bytes_decoder {
   std::vector<std::unique_ptr<symbol_model>> models_;
 };
 
-/// One chunk of formats 0–3: POINT10, then GPSTIME11 when Gps, RGB12 when Rgb, then BYTE when
-/// the record has extra bytes. Returns the stream's overrun (bytes read past its end).
-template <bool Gps, bool Rgb>
+/// One chunk of formats 0–5: POINT10, then GPSTIME11 when Gps, RGB12 when Rgb, WAVEPACKET13 when
+/// Wave, then BYTE when the record has extra bytes. Returns the stream's overrun (bytes read past
+/// its end).
+template <bool Gps, bool Rgb, bool Wave = false>
 std::uint64_t decode_pointwise(const unsigned char* bytes, std::size_t n_bytes, std::uint64_t count,
                                std::size_t record_length, unsigned char* out) {
   constexpr std::size_t gps_at = 20;
   constexpr std::size_t rgb_at = Gps ? 28 : 20;
-  constexpr std::size_t extra_at = rgb_at + (Rgb ? 6 : 0);
+  constexpr std::size_t wave_at = rgb_at + (Rgb ? 6 : 0);
+  constexpr std::size_t extra_at = wave_at + (Wave ? 29 : 0);
   const std::size_t extra = record_length - extra_at;
   if (count == 0) return 0;
   // The first record is stored raw (read_laz_layout checked n_bytes ≥ record_length).
@@ -398,10 +401,12 @@ std::uint64_t decode_pointwise(const unsigned char* bytes, std::size_t n_bytes, 
   auto point = std::make_unique<point10_decoder>();
   std::optional<gpstime11_decoder> gps;
   std::optional<rgb12_decoder> rgb;
+  std::optional<wavepacket_state> wave;
   std::optional<bytes_decoder> tail;
   point->first(out);
   if constexpr (Gps) gps.emplace().first(out + gps_at);
   if constexpr (Rgb) rgb.emplace().first(out + rgb_at);
+  if constexpr (Wave) wave.emplace();
   if (extra) tail.emplace(extra).first(out + extra_at);
   unsigned char* rec = out;
   for (std::uint64_t i = 1; i < count; ++i) {
@@ -409,6 +414,7 @@ std::uint64_t decode_pointwise(const unsigned char* bytes, std::size_t n_bytes, 
     point->next(dec, rec);
     if constexpr (Gps) gps->next(dec, rec + gps_at);
     if constexpr (Rgb) rgb->next(dec, rec + rgb_at);
+    if constexpr (Wave) wave->decode(dec, rec - record_length + wave_at, rec + wave_at);
     if (extra) tail->next(dec, rec + extra_at);
     // A damaged chunk reads zeros past its end; stop once that is certain rather than decode
     // (up to) millions of records of garbage.
@@ -417,7 +423,7 @@ std::uint64_t decode_pointwise(const unsigned char* bytes, std::size_t n_bytes, 
   return in.overrun();
 }
 
-// --- encoding (formats 0–3): the same models and predictions, run forwards ---------------------
+// --- encoding (formats 0–5): the same models and predictions, run forwards ---------------------
 
 class point10_encoder {
  public:
@@ -668,12 +674,13 @@ class bytes_encoder {
   std::vector<std::unique_ptr<symbol_model>> models_;
 };
 
-template <bool Gps, bool Rgb>
+template <bool Gps, bool Rgb, bool Wave = false>
 std::vector<unsigned char> encode_pointwise(const unsigned char* records, std::uint64_t count,
                                             std::size_t record_length) {
   constexpr std::size_t gps_at = 20;
   constexpr std::size_t rgb_at = Gps ? 28 : 20;
-  constexpr std::size_t extra_at = rgb_at + (Rgb ? 6 : 0);
+  constexpr std::size_t wave_at = rgb_at + (Rgb ? 6 : 0);
+  constexpr std::size_t extra_at = wave_at + (Wave ? 29 : 0);
   const std::size_t extra = record_length - extra_at;
   std::vector<unsigned char> out;
   if (count == 0) return out;
@@ -681,10 +688,12 @@ std::vector<unsigned char> encode_pointwise(const unsigned char* records, std::u
   auto point = std::make_unique<point10_encoder>();
   std::optional<gpstime11_encoder> gps;
   std::optional<rgb12_encoder> rgb;
+  std::optional<wavepacket_state> wave;
   std::optional<bytes_encoder> tail;
   point->first(records);
   if constexpr (Gps) gps.emplace().first(records + gps_at);
   if constexpr (Rgb) rgb.emplace().first(records + rgb_at);
+  if constexpr (Wave) wave.emplace();
   if (extra) tail.emplace(extra).first(records + extra_at);
   range_encoder enc(out);
   for (std::uint64_t i = 1; i < count; ++i) {
@@ -692,6 +701,7 @@ std::vector<unsigned char> encode_pointwise(const unsigned char* records, std::u
     point->next(enc, rec);
     if constexpr (Gps) gps->next(enc, rec + gps_at);
     if constexpr (Rgb) rgb->next(enc, rec + rgb_at);
+    if constexpr (Wave) wave->encode(enc, rec - record_length + wave_at, rec + wave_at);
     if (extra) tail->next(enc, rec + extra_at);
   }
   enc.done();
@@ -781,18 +791,16 @@ void check_items(const std::string& path, const laz_layout& L) {
     format_error(path, "LASzip VLR",
                  cat("items [", items_text(items), "] do not describe point format ", L.format,
                      " with ", L.record_length, "-byte records"));
-  if (L.format == 4 || L.format == 5 || L.format > 8)
-    format_error(path, "LASzip VLR",
-                 cat("point format ", L.format, " (items ", items_text(items),
-                     ") is not supported by our LAZ decoder, which reads formats 0 to 3 and 6 to "
-                     "8 (no waveforms): decompress it to LAS first (laszip, pdal translate)"));
-  const std::uint16_t version = layered ? 3 : 2;
-  for (const laz_item& it : items)
+  // LASzip's item versions: 2 for the point-wise items but 1 for WAVEPACKET13, 3 for the
+  // layered ones.
+  for (const laz_item& it : items) {
+    const std::uint16_t version = layered ? 3 : it.type == item_wavepacket13 ? 1 : 2;
     if (it.version != version)
       format_error(path, "LASzip VLR",
                    cat("item ", item_name(it.type), " has compressor version ", it.version,
                        "; our LAZ decoder reads version ", version,
                        layered ? "" : " (LASzip 2.0 and later)"));
+  }
 }
 
 /// The LASzip VLR's payload.
@@ -994,9 +1002,17 @@ void decode_laz_chunk(const std::string& path, const laz_layout& L, std::size_t 
     case 3:
       overrun = decode_pointwise<true, true>(bytes, n, c.count, L.record_length, records);
       break;
+    case 4:
+      overrun = decode_pointwise<true, false, true>(bytes, n, c.count, L.record_length, records);
+      break;
+    case 5:
+      overrun = decode_pointwise<true, true, true>(bytes, n, c.count, L.record_length, records);
+      break;
     case 6:
     case 7:
     case 8:
+    case 9:
+    case 10:
       overrun = decode_layered_chunk(path, L, k, bytes, n, c.count, records);
       break;
     default:
@@ -1083,6 +1099,10 @@ std::vector<unsigned char> encode_pointwise_chunk(unsigned format, std::uint16_t
       return encode_pointwise<false, true>(records, count, record_length);
     case 3:
       return encode_pointwise<true, true>(records, count, record_length);
+    case 4:
+      return encode_pointwise<true, false, true>(records, count, record_length);
+    case 5:
+      return encode_pointwise<true, true, true>(records, count, record_length);
     default:
       throw InvalidArgument(cat("encode_pointwise_chunk: point format ", format));
   }

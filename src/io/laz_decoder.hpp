@@ -1,8 +1,8 @@
 // pbr_lod — our LAZ (LASzip-compressed LAS) decoder: the LASzip VLR, the chunk table, the
-// point-wise chunked compressor of point data record formats 0–3 (items POINT10, GPSTIME11,
-// RGB12 and BYTE, version 2) and the layered chunked compressor of LAS 1.4 formats 6–8 (POINT14,
-// RGB14, RGBNIR14 and BYTE14, version 3). Not installed; see laz_decoder.cpp for the format and
-// docs/io.md.
+// point-wise chunked compressor of point data record formats 0–5 (items POINT10, GPSTIME11,
+// RGB12 and BYTE version 2, WAVEPACKET13 version 1) and the layered chunked compressor of LAS 1.4
+// formats 6–10 (POINT14, RGB14, RGBNIR14, WAVEPACKET14 and BYTE14, version 3). Not installed; see
+// laz_decoder.cpp for the format and docs/io.md.
 //
 // A LAZ file is a LAS file whose point records are replaced by chunks of compressed records.
 // Chunks are independent (every chunk restarts the models and stores its first record raw), so
@@ -64,7 +64,7 @@ using laz_fetch = std::function<void(std::uint64_t offset, std::size_t n, unsign
 void decode_laz_chunk(const std::string& path, const laz_layout& L, std::size_t k,
                       const unsigned char* bytes, unsigned char* records);
 
-/// Decodes chunk k of a layered (LAS 1.4, formats 6–8) file from its `n_bytes` bytes into its
+/// Decodes chunk k of a layered (LAS 1.4, formats 6–10) file from its `n_bytes` bytes into its
 /// `count` records; returns how many bytes its layers' decoders read past their ends (0 for an
 /// intact chunk). Throws FormatError for a chunk whose header does not fit. (laz_layered.cpp;
 /// called by decode_laz_chunk.)

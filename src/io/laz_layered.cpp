@@ -1,5 +1,5 @@
-// pbr_lod — LAZ decoding of LAS 1.4 point formats 6–8: LASzip's layered chunked compressor
-// (compressor 3) with the items POINT14, RGB14, RGBNIR14 and BYTE14, version 3.
+// pbr_lod — LAZ decoding and encoding of LAS 1.4 point formats 6–10: LASzip's layered chunked
+// compressor (compressor 3) with the items POINT14, RGB14, RGBNIR14, WAVEPACKET14 and BYTE14, v3.
 //
 // Based on the LASzip paper (M. Isenburg, PE&RS 79(2), 2013) for the predictions, which are
 // those of the point-wise items (laz_decoder.cpp), and on LASzip's LAS 1.4 compressor as read in
@@ -10,7 +10,8 @@
 //
 // A chunk: the first record raw; u32 point count; the byte size (u32) of every layer — POINT14:
 // xy (with the change mask and the returns), z, classification, flags, intensity, scan angle,
-// user data, point source, GPS time; RGB14: rgb; RGBNIR14: rgb, nir; BYTE14: one per extra byte
+// user data, point source, GPS time; RGB14: rgb; RGBNIR14: rgb, nir; WAVEPACKET14: one; BYTE14:
+// one per extra byte
 // — then the layers, each an arithmetic-coded stream. An empty layer means the field never
 // changes in the chunk: it keeps the first record's value.
 #include <algorithm>
@@ -851,6 +852,37 @@ class byte14_encoder {
   std::array<ctx, 4> slots_;
 };
 
+/// WAVEPACKET14 v3: WAVEPACKET13's coding (laz_codec.hpp's wavepacket_state), one state per
+/// channel, the last packet switched between channels as RGB14's colour is.
+class wave14_decoder : public channel_items<29> {
+ public:
+  void next(layer& L, unsigned sc, unsigned char* rec) {
+    unsigned char* lastp = switch_to(sc);
+    if (L.present()) {
+      if (!states_[sc]) states_[sc] = std::make_unique<wavepacket_state>();
+      states_[sc]->decode(L.dec(), lastp, lastp);
+    }
+    std::copy(lastp, lastp + 29, rec);
+  }
+
+ private:
+  std::array<std::unique_ptr<wavepacket_state>, 4> states_;
+};
+
+class wave14_encoder : public channel_items<29> {
+ public:
+  void next(out_layer& L, unsigned sc, const unsigned char* rec) {
+    unsigned char* lastp = switch_to(sc);
+    if (!states_[sc]) states_[sc] = std::make_unique<wavepacket_state>();
+    L.changed |= !std::equal(rec, rec + 29, lastp);
+    states_[sc]->encode(L.enc, lastp, rec);
+    std::copy(rec, rec + 29, lastp);
+  }
+
+ private:
+  std::array<std::unique_ptr<wavepacket_state>, 4> states_;
+};
+
 }  // namespace
 
 std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L, std::size_t k,
@@ -860,12 +892,15 @@ std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
   if (count == 0) return 0;
   std::memcpy(out, bytes, rl);  // read_laz_layout checked n_bytes ≥ rl
   if (count == 1) return 0;
-  const bool rgb = L.format == 7 || L.format == 8, nir = L.format == 8;
-  const std::size_t at_extra = 30 + (rgb ? 6 : 0) + (nir ? 2 : 0);
+  const bool rgb = L.format == 7 || L.format == 8 || L.format == 10;
+  const bool nir = L.format == 8 || L.format == 10, wave = L.format >= 9;
+  const std::size_t at_wave = 30 + (rgb ? 6 : 0) + (nir ? 2 : 0);
+  const std::size_t at_extra = at_wave + (wave ? 29 : 0);
   const std::size_t extra = rl - at_extra;
 
   // The point count and the layer sizes, checked against the chunk.
-  const std::size_t n_layers = point14_layers + (rgb ? 1 : 0) + (nir ? 1 : 0) + extra;
+  const std::size_t n_layers =
+      point14_layers + (rgb ? 1 : 0) + (nir ? 1 : 0) + (wave ? 1 : 0) + extra;
   std::size_t at = rl;
   if (n_bytes - at < 4 + 4 * n_layers)
     format_error(path, cat("chunk ", k),
@@ -889,7 +924,7 @@ std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
                  cat("its layers need ", total, " bytes, ", n_bytes - at, " remain"));
 
   std::array<layer, point14_layers> p_layers;
-  layer rgb_layer, nir_layer;
+  layer rgb_layer, nir_layer, wave_layer;
   std::vector<layer> byte_layers(extra);
   std::size_t li = 0;
   const auto open = [&](layer& l) {
@@ -899,6 +934,7 @@ std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
   for (layer& l : p_layers) open(l);
   if (rgb) open(rgb_layer);
   if (nir) open(nir_layer);
+  if (wave) open(wave_layer);
   for (layer& l : byte_layers) open(l);
   if (!p_layers[l_xy].present())
     format_error(path, cat("chunk ", k), "its xy layer is empty (every record has one)");
@@ -906,14 +942,16 @@ std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
   auto point = std::make_unique<point14_decoder>();
   std::optional<rgb14_decoder> rgb_dec;
   std::optional<nir14_decoder> nir_dec;
+  std::optional<wave14_decoder> wave_dec;
   std::optional<byte14_decoder> byte_dec;
   point->first(out);
   const unsigned sc0 = point->current();
   if (rgb) rgb_dec.emplace().first(out + 30, sc0);
   if (nir) nir_dec.emplace().first(out + 36, sc0);
+  if (wave) wave_dec.emplace().first(out + at_wave, sc0);
   if (extra) byte_dec.emplace(extra).first(out + at_extra, sc0);
   const auto overrun = [&] {
-    std::uint64_t o = rgb_layer.overrun() + nir_layer.overrun();
+    std::uint64_t o = rgb_layer.overrun() + nir_layer.overrun() + wave_layer.overrun();
     for (const layer& l : p_layers) o += l.overrun();
     for (const layer& l : byte_layers) o += l.overrun();
     return o;
@@ -924,6 +962,7 @@ std::uint64_t decode_layered_chunk(const std::string& path, const laz_layout& L,
     const unsigned sc = point->next(p_layers, rec);
     if (rgb) rgb_dec->next(rgb_layer, sc, rec + 30);
     if (nir) nir_dec->next(nir_layer, sc, rec + 36);
+    if (wave) wave_dec->next(wave_layer, sc, rec + at_wave);
     if (extra) byte_dec->next(byte_layers, sc, rec + at_extra);
     if ((i & 1023) == 0 && overrun() > 64) break;  // damaged: stop decoding garbage
   }
@@ -935,14 +974,17 @@ std::vector<unsigned char> encode_layered_chunk(unsigned format, std::uint16_t r
   std::vector<unsigned char> out;
   if (count == 0) return out;
   const std::size_t rl = record_length;
-  const bool rgb = format == 7 || format == 8, nir = format == 8;
-  const std::size_t at_extra = 30 + (rgb ? 6 : 0) + (nir ? 2 : 0);
+  const bool rgb = format == 7 || format == 8 || format == 10;
+  const bool nir = format == 8 || format == 10, wave = format >= 9;
+  const std::size_t at_wave = 30 + (rgb ? 6 : 0) + (nir ? 2 : 0);
+  const std::size_t at_extra = at_wave + (wave ? 29 : 0);
   const std::size_t extra = rl - at_extra;
   out.assign(records, records + rl);  // the first record raw
 
   std::array<std::unique_ptr<out_layer>, point14_layers> p_layers;
   for (auto& l : p_layers) l = std::make_unique<out_layer>();
   auto rgb_layer = std::make_unique<out_layer>(), nir_layer = std::make_unique<out_layer>();
+  auto wave_layer = std::make_unique<out_layer>();
   std::vector<std::unique_ptr<out_layer>> byte_layers(extra);
   for (auto& l : byte_layers) l = std::make_unique<out_layer>();
   p_layers[l_xy]->changed = true;  // LASzip always writes the xy and z layers
@@ -956,12 +998,15 @@ std::vector<unsigned char> encode_layered_chunk(unsigned format, std::uint16_t r
   const unsigned sc0 = (records[15] >> 4) & 3u;
   if (rgb) rgb_enc.emplace().first(records + 30, sc0);
   if (nir) nir_enc.emplace().first(records + 36, sc0);
+  std::optional<wave14_encoder> wave_enc;
+  if (wave) wave_enc.emplace().first(records + at_wave, sc0);
   if (extra) byte_enc.emplace(extra).first(records + at_extra, sc0);
   for (std::uint64_t i = 1; i < count; ++i) {
     const unsigned char* rec = records + i * rl;
     const unsigned sc = point->next(p_layers, rec);
     if (rgb) rgb_enc->next(*rgb_layer, sc, rec + 30);
     if (nir) nir_enc->next(*nir_layer, sc, rec + 36);
+    if (wave) wave_enc->next(*wave_layer, sc, rec + at_wave);
     if (extra) byte_enc->next(byte_layers, sc, rec + at_extra);
   }
 
@@ -970,6 +1015,7 @@ std::vector<unsigned char> encode_layered_chunk(unsigned format, std::uint16_t r
   for (auto& l : p_layers) all.push_back(l.get());
   if (rgb) all.push_back(rgb_layer.get());
   if (nir) all.push_back(nir_layer.get());
+  if (wave) all.push_back(wave_layer.get());
   for (auto& l : byte_layers) all.push_back(l.get());
   const auto put32 = [&](std::uint32_t v) {
     unsigned char b[4];

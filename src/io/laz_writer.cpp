@@ -1,4 +1,4 @@
-// pbr_lod — a LAS file (formats 0–3 and 6–8) written as LAZ: the file layout around the layered
+// pbr_lod — a LAS file (formats 0–10) written as LAZ: the file layout around the layered
 // chunks of laz_layered.cpp (see laz_decoder.cpp for the layout this writes and the decoder
 // reads: the LASzip VLR, the chunk table offset before the chunks, the chunk table after them).
 #include <algorithm>
@@ -37,26 +37,29 @@ std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_s
   put<std::int64_t>(payload, -1);  // special EVLRs: none (as LASzip writes it)
   put<std::int64_t>(payload, -1);
   struct item {
-    std::uint16_t type, size;
+    std::uint16_t type, size, version;
   };
   std::vector<item> items;
   if (layered) {
-    items.push_back({10, 30});                  // POINT14
-    if (format == 7) items.push_back({11, 6});  // RGB14
-    if (format == 8) items.push_back({12, 8});  // RGBNIR14
+    items.push_back({10, 30, 3});                                  // POINT14
+    if (format == 7) items.push_back({11, 6, 3});                  // RGB14
+    if (format == 8 || format == 10) items.push_back({12, 8, 3});  // RGBNIR14
+    if (format >= 9) items.push_back({13, 29, 3});                 // WAVEPACKET14
   } else {
-    items.push_back({6, 20});                                 // POINT10
-    if (format == 1 || format == 3) items.push_back({7, 8});  // GPSTIME11
-    if (format == 2 || format == 3) items.push_back({8, 6});  // RGB12
+    items.push_back({6, 20, 2});                                                // POINT10
+    if (format != 0 && format != 2) items.push_back({7, 8, 2});                 // GPSTIME11
+    if (format == 2 || format == 3 || format == 5) items.push_back({8, 6, 2});  // RGB12
+    if (format == 4 || format == 5) items.push_back({9, 29, 1});                // WAVEPACKET13
   }
   if (extra)  // BYTE14 / BYTE
-    items.push_back(
-        {static_cast<std::uint16_t>(layered ? 14 : 0), static_cast<std::uint16_t>(extra)});
+    items.push_back({static_cast<std::uint16_t>(layered ? 14 : 0),
+                     static_cast<std::uint16_t>(extra),
+                     static_cast<std::uint16_t>(layered ? 3 : 2)});
   put<std::uint16_t>(payload, static_cast<std::uint16_t>(items.size()));
   for (const item& it : items) {
     put<std::uint16_t>(payload, it.type);
     put<std::uint16_t>(payload, it.size);
-    put<std::uint16_t>(payload, layered ? 3 : 2);  // the item versions we code
+    put<std::uint16_t>(payload, it.version);
   }
   std::string v;
   put<std::uint16_t>(v, 0);  // reserved
@@ -78,12 +81,10 @@ std::string encode_laz_file(const std::string& path, const std::string& las,
   read_report report;
   const las_header h = parse_las_header(path, b, las.size(), report);
   if (h.compressed) format_error(path, "header", "already LAZ (bit 7 of the format byte set)");
-  if (h.format == 4 || h.format == 5 || h.format > 8)
-    format_error(path, "header",
-                 cat("point format ", h.format,
-                     ": the LAZ writer encodes formats 0 to 3 and 6 to 8 (no waveforms)"));
+  if (h.format > 10)
+    format_error(path, "header", cat("point format ", h.format, " (expected 0 to 10)"));
   if (chunk_size == 0) throw InvalidArgument("encode_laz_file: chunk size 0");
-  constexpr std::size_t min_length_of[9] = {20, 28, 26, 34, 0, 0, 30, 36, 38};
+  constexpr std::size_t min_length_of[11] = {20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67};
   const std::size_t min_length = min_length_of[h.format];
   // The VLRs must end before the points (the LASzip VLR goes after them).
   std::uint64_t vlr_end = h.header_size;

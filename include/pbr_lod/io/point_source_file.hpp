@@ -18,7 +18,7 @@
 // Formats:
 //  * PLY ascii, binary little and big endian. Binary vertex rows must have a fixed size (no list
 //    property in the vertex element), and elements before the vertex element must have no lists.
-//  * LAS 1.0–1.4, point formats 0–10; LAZ (LASzip) formats 0–3 and 6–8, decoded chunk by chunk (the
+//  * LAS 1.0–1.4, point formats 0–10; LAZ (LASzip) formats 0–10, decoded chunk by chunk (the
 //    chunks a read covers decode in parallel; a few recent chunks are cached for small reads).
 //  * PCD ascii and binary. `binary_compressed` is one LZF block for the whole file, which
 //    cannot be read in parts: such a file is read whole into memory, as read_points does.

@@ -6,7 +6,7 @@
 //   .off  via OpenMesh (ASCII; binary "OFF BINARY" without colours/normals)
 //   .pcd  PCL point cloud: ascii, binary, binary_compressed (LZF)   — read_points only
 //   .las  LAS 1.0–1.4, point formats 0–10                          — read_points only
-//   .laz  LAZ (LASzip), point formats 0–3 and 6–8, our own decoder   — read_points only
+//   .laz  LAZ (LASzip), point formats 0–10, our own decoder          — read_points only
 //         (the format byte decides: a .las holding LAZ, or a .laz holding LAS, read as well)
 // (.ply, .pcd, .las and .laz can also be read in blocks, for inputs larger than memory:
 // io/point_source_file.hpp.)
