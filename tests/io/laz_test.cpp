@@ -715,3 +715,53 @@ TEST_F(Laz, WaveformPacketsRoundTrip) {
   const std::string zp = write("f5.laz", detail::encode_laz_file("f5", las));
   expect_same_cloud(read_points(zp), read_points(write("f5.las", las)), "format 5 file");
 }
+
+// The integer compressor at its edges: correctors of every bit length k (0, 1, the k ≤ 8 symbol
+// path, the k > 8 high-symbol + raw-bits path up to 31, and k = 32, which only INT_MIN reaches),
+// 16-bit values wrapping around their range, several contexts; and raw bits of every width
+// (read_bits splits widths above 19). What is encoded decodes to itself.
+TEST(LazCoder, IntegerCompressorEdges) {
+  std::vector<std::int32_t> values = {0,
+                                      1,
+                                      -1,
+                                      2,
+                                      -2,
+                                      255,
+                                      256,
+                                      -256,
+                                      65535,
+                                      65536,
+                                      -65536,
+                                      std::numeric_limits<std::int32_t>::max(),
+                                      std::numeric_limits<std::int32_t>::min()};
+  for (int k = 1; k < 31; ++k) values.push_back((1 << k) + 1), values.push_back(-(1 << k) - 1);
+  std::vector<unsigned char> bytes;
+  detail::laz::range_encoder enc(bytes);
+  detail::laz::integer_codec ic32(32, 3), ic16(16, 2);
+  std::int32_t prev = 0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    ic32.encode(enc, prev, values[i], static_cast<std::uint32_t>(i % 3));
+    ic16.encode(enc, prev & 0xFFFF, values[i] & 0xFFFF, static_cast<std::uint32_t>(i % 2));
+    enc.write_bits(
+        static_cast<std::uint32_t>(1 + i % 32),
+        static_cast<std::uint32_t>(values[i]) & (i % 32 == 31 ? ~0u : (1u << (1 + i % 32)) - 1));
+    prev = values[i];
+  }
+  enc.done();
+  detail::laz::byte_source in(bytes.data(), bytes.size());
+  detail::laz::range_decoder dec(in);
+  detail::laz::integer_codec dc32(32, 3), dc16(16, 2);
+  prev = 0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    EXPECT_EQ(dc32.decode(dec, prev, static_cast<std::uint32_t>(i % 3)), values[i]) << i;
+    EXPECT_EQ(dc16.decode(dec, prev & 0xFFFF, static_cast<std::uint32_t>(i % 2)),
+              values[i] & 0xFFFF)
+        << i;
+    const std::uint32_t bits = static_cast<std::uint32_t>(1 + i % 32);
+    EXPECT_EQ(dec.read_bits(bits),
+              static_cast<std::uint32_t>(values[i]) & (bits == 32 ? ~0u : (1u << bits) - 1))
+        << i;
+    prev = values[i];
+  }
+  EXPECT_EQ(in.overrun(), 0u);  // done() pads the stream for the decoder's reads
+}
