@@ -16,6 +16,13 @@ for t in ply obj off pcd las gaussian_ply splat spz $builders; do mkdir -p "$out
 # --- meshes and point clouds ---------------------------------------------------------------------
 cp --no-preserve=mode "$data/bun_zipper_res4.ply" "$out/fuzz_ply/bunny_res4.ply"
 cp --no-preserve=mode "$data/1.2-with-color.las" "$out/fuzz_las/with_color_1.2.las"
+# LAZ: the LAS reader decodes by the format byte, whatever the extension, so fuzz_las covers our
+# LAZ decoder too. The committed twins (tests/data/laz, 9–29 kB): formats 0 and 3, 3 with 27 extra
+# bytes (a BYTE item), LAS 1.4 format 6 (layered) and a COPC file (format 7, 65 chunks).
+laz_twins="$(dirname "$0")/../tests/data/laz"
+for f in point10 simple extra-bytes 1_4_w_evlr simple.copc; do
+  cp --no-preserve=mode "$laz_twins/$f.laz" "$out/fuzz_las/laz_$f.las"
+done
 
 # An octahedron with vertex colours and normals: the coloured mesh the POP seed is built from.
 octahedron="$out/fuzz_ply/octahedron_colour.ply"

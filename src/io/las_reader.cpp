@@ -6,15 +6,22 @@
 // kept, otherwise every value is shifted right by 8.
 //
 // Checked before any point is read: signature "LASF", version 1.0–1.4, header size at least the
-// version's minimum (227 / 235 / 375 bytes for 1.0–1.2 / 1.3 / 1.4), the compression bits of the
-// point format (LAZ → FormatError), format ≤ 10, record length ≥ the format's minimum, scale
+// version's minimum (227 / 235 / 375 bytes for 1.0–1.2 / 1.3 / 1.4), format ≤ 10 (bits 7 and 6 of
+// the format byte, LAZ compression, masked off), record length ≥ the format's minimum, scale
 // factors finite and non-zero, offsets finite, point data offset ≥ header size, and
 // offset + count × record length ≤ file size (overflow-checked). Record lengths longer than the
 // minimum ("extra bytes") are fine: we step by the declared length.
+//
+// LAZ (bit 7 or 6 of the format byte set, whatever the extension): the point data is LASzip
+// chunks. laz_decoder.hpp checks the LASzip VLR and the chunk table against the file in place of
+// the size check above, decodes the chunks (in parallel) to the records they replace, and those
+// go through exactly the record parsing below, so a LAZ reads to the point_cloud of its LAS twin.
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <memory>
 
+#include "laz_decoder.hpp"
 #include "point_formats.hpp"
 
 namespace pbr_lod::detail {
@@ -54,11 +61,7 @@ las_header parse_las_header(const std::string& path, const unsigned char* b,
         path, "header",
         cat("truncated: header size ", header_size, " but the file has ", file_size, " bytes"));
   // Bits 7 and 6 of the format byte mark LAZ (LASzip) compressed points.
-  if (format_byte & 0xC0)
-    format_error(path, "header",
-                 cat("point data is compressed (LAZ; format byte ", unsigned{format_byte},
-                     "), which is not supported: decompress it to LAS first (laszip, pdal)"));
-  const unsigned format = format_byte;
+  const unsigned format = format_byte & 0x3Fu;
   if (format > 10)
     format_error(path, "header",
                  cat("unknown point data record format ", format, " (expected 0 to 10)"));
@@ -72,6 +75,10 @@ las_header parse_las_header(const std::string& path, const unsigned char* b,
   h.data_offset = data_offset;
   h.rgb_offset = rgb_offset[format];
   h.count = legacy_count;
+  h.header_size = header_size;
+  h.vlr_count = load_le<std::uint32_t>(b + 100);
+  h.format = format;
+  h.compressed = (format_byte & 0xC0) != 0;
   if (minor >= 4) {
     const std::uint64_t count64 = load_le<std::uint64_t>(b + 247);
     if (count64 != 0) {
@@ -104,6 +111,7 @@ las_header parse_las_header(const std::string& path, const unsigned char* b,
     format_error(path, "header",
                  cat("offset to point data ", data_offset, " is beyond the end of the file (",
                      file_size, " bytes)"));
+  if (h.compressed) return h;  // read_laz_layout checks the chunks against the file
   const auto point_bytes = mul_checked(h.count, record_length);
   const auto end = point_bytes ? add_checked(data_offset, *point_bytes) : std::nullopt;
   if (!end || *end > file_size)
@@ -120,15 +128,42 @@ void las_outside_warning(const std::string& path, std::uint64_t outside, read_re
                                   " points lie outside the bounding box the header states"));
 }
 
+namespace {
+
+/// The records of a LAZ file held in memory, decoded chunk by chunk in parallel.
+std::unique_ptr<unsigned char[]> decode_laz_file(const std::string& path, const las_header& h,
+                                                 const std::string& bytes) {
+  const laz_layout L = read_laz_layout(path, h, bytes.size(),
+                                       [&](std::uint64_t at, std::size_t n, unsigned char* out) {
+                                         std::memcpy(out, bytes.data() + at, n);
+                                       });
+  // Not zero-filled: the decoders write every byte of every record (or throw).
+  auto records = std::make_unique_for_overwrite<unsigned char[]>(
+      static_cast<std::size_t>(h.count * h.record_length));
+  decode_laz_chunks(
+      path, L, 0, L.chunks.size(),
+      [&](std::uint64_t at, std::size_t n, unsigned char* out) {
+        std::memcpy(out, bytes.data() + at, n);
+      },
+      records.get());
+  return records;
+}
+
+}  // namespace
+
 raw_geometry read_las_file(const std::string& path, read_report& report) {
   const std::string bytes = read_file_bytes(path);
   const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
   const las_header h = parse_las_header(path, b, bytes.size(), report);
   const std::uint64_t count = h.count;
+  // LAZ: the chunks decoded to the LAS records they replace, then read as LAS.
+  std::unique_ptr<unsigned char[]> decoded;
+  if (h.compressed) decoded = decode_laz_file(path, h, bytes);
+  const unsigned char* records = h.compressed ? decoded.get() : b + h.data_offset;
 
   raw_geometry g;
   g.positions.resize(count);
-  const unsigned char* rec = b + h.data_offset;
+  const unsigned char* rec = records;
   std::uint64_t outside = 0;
   for (std::uint64_t i = 0; i < count; ++i, rec += h.record_length) {
     g.positions[i] = h.position(rec);
@@ -138,7 +173,7 @@ raw_geometry read_las_file(const std::string& path, read_report& report) {
   if (h.rgb_offset != 0) {
     std::vector<std::array<std::uint16_t, 3>> rgb(count);
     std::uint16_t top = 0;
-    rec = b + h.data_offset;
+    rec = records;
     for (std::uint64_t i = 0; i < count; ++i, rec += h.record_length) {
       rgb[i] = h.rgb16(rec);
       top = std::max({top, rgb[i][0], rgb[i][1], rgb[i][2]});

@@ -19,6 +19,12 @@ struct las_header {
   std::uint16_t record_length = 0;  ///< bytes per record (≥ the format's minimum)
   std::uint16_t rgb_offset = 0;     ///< byte offset of R G B in a record; 0 = the format has none
   std::uint64_t count = 0;          ///< point records
+  std::uint16_t header_size = 0;    ///< bytes of the header (the VLRs follow it)
+  std::uint32_t vlr_count = 0;      ///< variable length records between header and points
+  unsigned format = 0;              ///< point data record format, 0–10
+  /// Bit 7 or 6 of the format byte: the records are LAZ (LASzip) chunks, not stored as they are
+  /// (laz_decoder.hpp); the size check of the records is then the chunk table's.
+  bool compressed = false;
   double scale[3] = {}, offset[3] = {}, bmin[3] = {}, bmax[3] = {};
 
   /// World position of the record at rec: X·scale + offset in double.

@@ -14,6 +14,7 @@
 #include <filesystem>
 
 #include "io_internal.hpp"
+#include "laz_decoder.hpp"
 #include "ply_format.hpp"
 #include "point_formats.hpp"
 
@@ -101,7 +102,9 @@ class line_cursor {
 
 // --- codecs -----------------------------------------------------------------------------------
 // Fixed:  static constexpr bool line_based = false; data_begin, record_size, records;
-//         raw_point decode(const unsigned char* rec, std::uint64_t i, scratch&) const.
+//         raw_point decode(const unsigned char* rec, std::uint64_t i, scratch&) const;
+//         optionally read_records(file, first, n, out) when records are not stored as they are
+//         (LAZ), else they are read at data_begin + first · record_size.
 // Lines:  static constexpr bool line_based = true; records;
 //         record_at start(const posix_file&) (the first record's line; FormatError when the file
 //         ends first), raw_point decode(std::string_view line, i, line_no, scratch&) const,
@@ -199,12 +202,21 @@ struct las_codec {
   using scratch = no_scratch;
   std::string path;
   las_header h;
+  std::shared_ptr<const laz_record_reader> laz;  ///< LAZ: decodes the records by chunk
   std::uint64_t data_begin = 0, record_size = 0, records = 0;
   int shift = 0;  ///< set once the pass at open has seen every colour
   std::uint16_t top = 0;
   std::uint64_t outside = 0;
 
   [[nodiscard]] scratch make_scratch() const { return {}; }
+  void read_records(const posix_file& f, std::uint64_t first, std::uint64_t n,
+                    unsigned char* out) const {
+    if (laz)
+      laz->read(first, n, out);
+    else
+      f.read_exact(data_begin + first * record_size, static_cast<std::size_t>(n * record_size),
+                   out);
+  }
   raw_point decode(const unsigned char* rec, std::uint64_t, scratch&) const {
     raw_point q{h.position(rec)};
     if (h.rgb_offset != 0) {
@@ -346,7 +358,10 @@ class file_point_source final : public point_source {
             std::min({per_block, codec_.records - r, std::max<std::uint64_t>(want, 1024)});
         want = want > n ? want - n : 0;
         buf.resize(static_cast<std::size_t>(n * size));
-        file_->read_exact(codec_.data_begin + r * size, buf.size(), buf.data());
+        if constexpr (requires { codec_.read_records(*file_, r, n, buf.data()); })
+          codec_.read_records(*file_, r, n, buf.data());
+        else
+          file_->read_exact(codec_.data_begin + r * size, buf.size(), buf.data());
         for (std::uint64_t k = 0; k < n; ++k, ++r)
           if (!visit(codec_.decode(buf.data() + k * size, r, scratch), record_at{r})) return true;
       }
@@ -488,7 +503,17 @@ std::unique_ptr<point_source> open_las(std::unique_ptr<posix_file> f, read_repor
   std::vector<unsigned char> head(
       static_cast<std::size_t>(std::min<std::uint64_t>(f->size(), 375)));
   f->read_exact(0, head.size(), head.data());
-  las_codec c{.path = f->path(), .h = parse_las_header(f->path(), head.data(), f->size(), r)};
+  las_codec c{.path = f->path(),
+              .h = parse_las_header(f->path(), head.data(), f->size(), r),
+              .laz = nullptr};
+  if (c.h.compressed) {
+    const posix_file& file = *f;
+    c.laz = std::make_shared<const laz_record_reader>(
+        file, read_laz_layout(file.path(), c.h, file.size(),
+                              [&](std::uint64_t at, std::size_t n, unsigned char* out) {
+                                file.read_exact(at, n, out);
+                              }));
+  }
   c.data_begin = c.h.data_offset;
   c.record_size = c.h.record_length;
   c.records = c.h.count;
@@ -536,15 +561,15 @@ std::unique_ptr<point_source> open_point_source(const std::string& path, read_re
   read_report& r = report ? *report : local;
   r = read_report{};
   const std::string ext = detail::lower_extension(path);
-  if (ext != ".ply" && ext != ".las" && ext != ".pcd")
+  if (ext != ".ply" && ext != ".las" && ext != ".laz" && ext != ".pcd")
     detail::format_error(path, "",
                          detail::cat(ext.empty() ? std::string("no file extension")
                                                  : detail::cat("extension '", ext, "'"),
-                                     ": open_point_source streams .ply, .las and .pcd files "
+                                     ": open_point_source streams .ply, .las, .laz and .pcd files "
                                      "(read_points also reads .obj and .off)"));
   auto f = std::make_unique<detail::posix_file>(path);
   if (ext == ".ply") return detail::open_ply(std::move(f), r);
-  if (ext == ".las") return detail::open_las(std::move(f), r);
+  if (ext == ".las" || ext == ".laz") return detail::open_las(std::move(f), r);
   return detail::open_pcd(std::move(f), r);
 }
 

@@ -66,14 +66,10 @@ point_cloud read_points(const std::string& path, read_report* report) {
   detail::raw_geometry g;
   if (ext == ".pcd")
     g = detail::read_pcd_file(path, r);
-  else if (ext == ".las")
+  else if (ext == ".las" || ext == ".laz")  // the format byte says whether it is compressed
     g = detail::read_las_file(path, r);
-  else if (ext == ".laz")
-    detail::format_error(path, "",
-                         "LAZ is compressed LAS, which is not supported; convert it to LAS first "
-                         "(laszip -i in.laz -o out.las, or pdal translate in.laz out.las)");
   else
-    unsupported(path, ext, "read_points reads .ply, .obj, .off, .pcd and .las");
+    unsupported(path, ext, "read_points reads .ply, .obj, .off, .pcd, .las and .laz");
   return std::move(detail::finish_mesh(std::move(g), path, r).vertices);
 }
 

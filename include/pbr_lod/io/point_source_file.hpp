@@ -18,10 +18,11 @@
 // Formats:
 //  * PLY ascii, binary little and big endian. Binary vertex rows must have a fixed size (no list
 //    property in the vertex element), and elements before the vertex element must have no lists.
-//  * LAS 1.0–1.4, point formats 0–10.
+//  * LAS 1.0–1.4, point formats 0–10; LAZ (LASzip) formats 0–10, decoded chunk by chunk (the
+//    chunks a read covers decode in parallel; a few recent chunks are cached for small reads).
 //  * PCD ascii and binary. `binary_compressed` is one LZF block for the whole file, which
 //    cannot be read in parts: such a file is read whole into memory, as read_points does.
-// Other extensions (.obj, .off, .laz) are refused with a FormatError (read_points loads OBJ/OFF).
+// Other extensions (.obj, .off) are refused with a FormatError (read_points loads OBJ/OFF).
 //
 // Thread safety: read() may be called from several threads at once (positioned reads, no
 // shared cursor). The file must not change while the source is open; if it is cut short, read()
@@ -36,7 +37,7 @@
 
 namespace pbr_lod {
 
-/// Opens a point file (.ply, .las, .pcd) as a point_source read in blocks. Throws IoError /
+/// Opens a point file (.ply, .las, .laz, .pcd) as a point_source read in blocks. Throws IoError /
 /// FormatError as read_points does; `report` is filled as read_points fills it (see above).
 [[nodiscard]] std::unique_ptr<point_source> open_point_source(const std::string& path,
                                                               read_report* report = nullptr);

@@ -6,9 +6,10 @@
 //   .off  via OpenMesh (ASCII; binary "OFF BINARY" without colours/normals)
 //   .pcd  PCL point cloud: ascii, binary, binary_compressed (LZF)   — read_points only
 //   .las  LAS 1.0–1.4, point formats 0–10                          — read_points only
-// (.ply, .pcd and .las can also be read in blocks, for inputs larger than memory:
+//   .laz  LAZ (LASzip), point formats 0–10, our own decoder          — read_points only
+//         (the format byte decides: a .las holding LAZ, or a .laz holding LAS, read as well)
+// (.ply, .pcd, .las and .laz can also be read in blocks, for inputs larger than memory:
 // io/point_source_file.hpp.)
-//   .laz  rejected with a FormatError (compressed; convert to LAS first)
 // 3-D Gaussian Splatting scenes (3DGS .ply, .splat, .spz) are read by read_gaussians
 // (io/gaussians.hpp); read_points on a 3DGS .ply gives its positions only.
 //
