@@ -4,5 +4,3 @@ pbr_lod_add_benchmark(bench_io io_benchmark.cpp)
 # and real files named in PBR_LOD_LAZ_BENCH.
 pbr_lod_add_benchmark(bench_laz laz_benchmark.cpp)
 target_include_directories(bench_laz PRIVATE ${PROJECT_SOURCE_DIR}/src)
-target_compile_definitions(bench_laz PRIVATE
-                           PBR_LOD_LAZ_TEST_DIR="${PROJECT_SOURCE_DIR}/tests/data/laz")

@@ -22,6 +22,7 @@
 #include "io/laz_test_util.hpp"
 #include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/io/read.hpp"
+#include "support/data.hpp"
 
 namespace {
 
@@ -98,8 +99,8 @@ void read_points_laz(benchmark::State& state, const std::string& path) {
 std::string synthetic() {
   const std::string p =
       (std::filesystem::temp_directory_path() / "pbr_lod_bench_simple_x400.laz").string();
-  const std::string laz =
-      pbr_lod::test::laz_repeat_chunk(slurp(PBR_LOD_LAZ_TEST_DIR "/simple.laz"), 400, false);
+  const std::string laz = pbr_lod::test::laz_repeat_chunk(
+      slurp(pbr_lod::test::repository_file("laz/simple.laz")), 400, false);
   std::ofstream(p, std::ios::binary).write(laz.data(), static_cast<std::streamsize>(laz.size()));
   return p;
 }

@@ -19,6 +19,7 @@
 #include "laz_test_util.hpp"
 #include "pbr_lod/io/point_source_file.hpp"
 #include "pbr_lod/io/read.hpp"
+#include "support/data.hpp"
 
 namespace {
 
@@ -33,7 +34,7 @@ namespace detail = pbr_lod::detail;
 using Laz = pbr_lod::test::scratch_dir;
 
 std::string twin(const std::string& name) {
-  return std::string(PBR_LOD_LAZ_TEST_DIR "/") + name;
+  return pbr_lod::test::repository_file("laz/" + name);
 }
 
 template <class T>
