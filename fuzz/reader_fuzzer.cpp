@@ -60,15 +60,56 @@ void check_point_source(const std::string& path, const pbr_lod::point_cloud* who
 }
 #endif
 
+#if PBR_LOD_FUZZ_GAUSSIANS
+/// The same file as a gaussian_source (the out-of-core build's input), read in blocks of 7: a
+/// file both read must give read_gaussians' Gaussians, each block valid; a file the reader
+/// refuses must not open as a source that reads.
+void check_gaussian_source(const std::string& path, const pbr_lod::gaussian_cloud* whole) {
+  std::optional<pbr_lod::gaussian_cloud> got;
+  try {
+    const auto src = pbr_lod::open_gaussian_source(path);
+    got = pbr_lod::gaussian_cloud{};
+    got->origin = src->origin();
+    got->sh_degree = src->sh_degree();
+    pbr_lod::gaussian_cloud b;
+    for (std::uint64_t first = 0; first < src->size(); first += 7) {
+      src->read(first, static_cast<std::size_t>(std::min<std::uint64_t>(7, src->size() - first)),
+                b);
+      b.validate();
+      got->positions.insert(got->positions.end(), b.positions.begin(), b.positions.end());
+      got->scales.insert(got->scales.end(), b.scales.begin(), b.scales.end());
+      got->rotations.insert(got->rotations.end(), b.rotations.begin(), b.rotations.end());
+      got->opacities.insert(got->opacities.end(), b.opacities.begin(), b.opacities.end());
+      got->sh.insert(got->sh.end(), b.sh.begin(), b.sh.end());
+    }
+  } catch (const pbr_lod::FormatError&) {
+    got.reset();
+  } catch (const pbr_lod::IoError&) {
+    got.reset();
+  }
+  if (!got && !whole) return;
+  if (!got || !whole || got->origin != whole->origin || got->sh_degree != whole->sh_degree ||
+      got->positions != whole->positions || got->scales != whole->scales ||
+      got->rotations != whole->rotations || got->opacities != whole->opacities ||
+      got->sh != whole->sh)
+    __builtin_trap();  // the source and read_gaussians disagree
+}
+#endif
+
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string& path = input_path();
   pbr_lod::fuzz::write_bytes(path, data, size);
 #if PBR_LOD_FUZZ_GAUSSIANS
+  std::optional<pbr_lod::gaussian_cloud> whole;
   try {
-    pbr_lod::read_gaussians(path).validate();
+    whole = pbr_lod::read_gaussians(path);
+    whole->validate();
   } catch (const pbr_lod::FormatError&) {
+    whole.reset();
   } catch (const pbr_lod::IoError&) {
+    whole.reset();
   }
+  check_gaussian_source(path, whole ? &*whole : nullptr);
 #else
   std::optional<pbr_lod::point_cloud> whole;
   try {
