@@ -534,7 +534,7 @@ std::unique_ptr<gaussian_source> open_gaussian_source(const std::string& path,
   if (ext == ".ply" || ext == ".splat")
     if (auto rows = detail::gaussian_rows::open(path))
       return std::make_unique<file_gaussian_source>(std::move(rows), path, r);
-  return std::make_unique<owned_gaussian_source>(read_gaussians(path, &r), path);
+  return std::make_unique<cloud_gaussian_source>(read_gaussians(path, &r), path);
 }
 
 }  // namespace pbr_lod

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <utility>
 
@@ -54,11 +55,16 @@ inline void copy_gaussians(const gaussian_cloud& g, std::size_t first, std::size
 }
 }  // namespace detail
 
-/// A Gaussian cloud in memory as a source (it must outlive the source, and be valid).
+/// A Gaussian cloud in memory as a source (valid): one it refers to, which must outlive the
+/// source, or one moved into it (a file read whole: .spz, an ASCII PLY).
 class cloud_gaussian_source final : public gaussian_source {
  public:
   explicit cloud_gaussian_source(const gaussian_cloud& c, std::string name = "Gaussian cloud")
       : cloud_(c), name_(std::move(name)) {}
+  cloud_gaussian_source(gaussian_cloud&& c, std::string name)
+      : owned_(std::make_unique<const gaussian_cloud>(std::move(c))),
+        cloud_(*owned_),
+        name_(std::move(name)) {}
   [[nodiscard]] int sh_degree() const override { return cloud_.sh_degree; }
   [[nodiscard]] vec3d origin() const override { return cloud_.origin; }
   [[nodiscard]] std::uint64_t size() const override { return cloud_.size(); }
@@ -68,25 +74,8 @@ class cloud_gaussian_source final : public gaussian_source {
   [[nodiscard]] std::string name() const override { return name_; }
 
  private:
+  std::unique_ptr<const gaussian_cloud> owned_;  // set when the cloud was moved in
   const gaussian_cloud& cloud_;
-  std::string name_;
-};
-
-/// A Gaussian cloud moved into the source (a file that is read whole: .spz, an ASCII PLY).
-class owned_gaussian_source final : public gaussian_source {
- public:
-  owned_gaussian_source(gaussian_cloud c, std::string name)
-      : cloud_(std::move(c)), name_(std::move(name)) {}
-  [[nodiscard]] int sh_degree() const override { return cloud_.sh_degree; }
-  [[nodiscard]] vec3d origin() const override { return cloud_.origin; }
-  [[nodiscard]] std::uint64_t size() const override { return cloud_.size(); }
-  void read(std::uint64_t first, std::size_t count, gaussian_cloud& out) const override {
-    detail::copy_gaussians(cloud_, first, count, out);
-  }
-  [[nodiscard]] std::string name() const override { return name_; }
-
- private:
-  gaussian_cloud cloud_;
   std::string name_;
 };
 
