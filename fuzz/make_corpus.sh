@@ -24,6 +24,12 @@ for f in point10 simple extra-bytes 1_4_w_evlr simple.copc; do
   cp --no-preserve=mode "$laz_twins/$f.laz" "$out/fuzz_las/laz_$f.las"
 done
 
+# Inputs that once failed a target (fuzz/regressions/<target>/, README.md there): every run
+# starts from them, so a fix that comes undone fails the next run.
+for d in "$(dirname "$0")"/regressions/fuzz_*/; do
+  cp --no-preserve=mode "$d"* "$out/$(basename "$d")/"
+done
+
 # An octahedron with vertex colours and normals: the coloured mesh the POP seed is built from.
 octahedron="$out/fuzz_ply/octahedron_colour.ply"
 cat > "$octahedron" <<'PLY'

@@ -1046,8 +1046,7 @@ laz_fetch laz_record_reader::fetch() const {
 laz_record_reader::chunk_records laz_record_reader::cached(std::size_t k) const {
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    for (const auto& [key, records] : cache_)
-      if (key == k) return records;
+    if (const auto hit = cache_.find(k); hit != cache_.end()) return hit->second;
   }
   // Decoded outside the lock: two threads may decode the same chunk, which costs time only.
   const laz_chunk& c = layout_.chunks[k];
@@ -1055,9 +1054,17 @@ laz_record_reader::chunk_records laz_record_reader::cached(std::size_t k) const 
       static_cast<std::size_t>(c.count * layout_.record_length));
   decode_laz_chunks(file_.path(), layout_, k, k + 1, fetch(), records->data(), 1);
   const std::lock_guard<std::mutex> lock(mutex_);
-  constexpr std::size_t cache_chunks = 4;
-  if (cache_.size() >= cache_chunks) cache_.erase(cache_.begin());
-  cache_.emplace_back(k, records);
+  if (cache_.contains(k)) return records;
+  // At least a few chunks, and as many small ones as hold a small read's neighbourhood: a file
+  // of chunks of a few records each (COPC's nodes) would otherwise decode a chunk per record.
+  while (order_.size() >= cache_min_chunks && cached_records_ + c.count > cache_records) {
+    cached_records_ -= layout_.chunks[order_.front()].count;
+    cache_.erase(order_.front());
+    order_.pop_front();
+  }
+  cache_.emplace(k, records);
+  order_.push_back(k);
+  cached_records_ += c.count;
   return records;
 }
 
@@ -1066,18 +1073,19 @@ void laz_record_reader::read(std::uint64_t first, std::uint64_t n, unsigned char
   const std::uint64_t end = first + n;
   const std::size_t k0 = layout_.chunk_of(first), k1 = layout_.chunk_of(end - 1) + 1;
   const std::size_t rl = layout_.record_length;
-  // Chunks wholly inside [first, end): straight into out, in parallel.
-  std::size_t full0 = k0, full1 = k1;
-  if (layout_.chunks[k0].first < first) ++full0;
-  const laz_chunk& last = layout_.chunks[k1 - 1];
-  if (last.first + last.count > end) --full1;
-  if (full0 < full1)
-    decode_laz_chunks(file_.path(), layout_, full0, full1, fetch(),
-                      out + (layout_.chunks[full0].first - first) * rl);
-  // The chunks at the ends that the range only touches: through the cache.
-  const std::size_t edges[2] = {k0, k1 - 1};
-  for (std::size_t e = 0; e < (k0 + 1 == k1 ? 1u : 2u); ++e) {
-    const std::size_t k = edges[e];
+  // A large read: the chunks wholly inside [first, end) straight into out, in parallel. A small
+  // one (reads of a few points, which come in runs over the same chunks) all through the cache.
+  std::size_t full0 = k0, full1 = k0;
+  if (n >= cache_records) {
+    full1 = k1;
+    if (layout_.chunks[k0].first < first) ++full0;
+    const laz_chunk& last = layout_.chunks[k1 - 1];
+    if (last.first + last.count > end) --full1;
+    if (full0 < full1)
+      decode_laz_chunks(file_.path(), layout_, full0, full1, fetch(),
+                        out + (layout_.chunks[full0].first - first) * rl);
+  }
+  for (std::size_t k = k0; k < k1; ++k) {
     if (k >= full0 && k < full1) continue;
     const laz_chunk& c = layout_.chunks[k];
     const chunk_records records = cached(k);

@@ -11,10 +11,12 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "point_formats.hpp"
@@ -78,11 +80,11 @@ void decode_laz_chunk(const std::string& path, const laz_layout& L, std::size_t 
 void decode_laz_chunks(const std::string& path, const laz_layout& L, std::size_t c0, std::size_t c1,
                        const laz_fetch& fetch, unsigned char* records, unsigned threads = 0);
 
-/// Records of a LAZ file read by range from an open file, for the streaming point source:
-/// chunks wholly inside a range decode straight into it (in parallel); a chunk a range only
-/// touches is decoded once into a small cache of recent chunks, so that reads of a few points
-/// at a time do not decode a chunk per read. Memory: a few chunks. read() is safe to call from
-/// several threads at once.
+/// Records of a LAZ file read by range from an open file, for the streaming point source: the
+/// chunks wholly inside a large range decode straight into it (in parallel); the chunks a large
+/// range only touches, and every chunk of a small one, are decoded once into a cache of recent
+/// chunks, so that reads of a few points at a time do not decode a chunk per read. Memory: a few
+/// chunks, or 2^16 records of small ones. read() is safe to call from several threads at once.
 class laz_record_reader {
  public:
   laz_record_reader(const posix_file& file, laz_layout layout)
@@ -96,10 +98,17 @@ class laz_record_reader {
   [[nodiscard]] chunk_records cached(std::size_t k) const;
   [[nodiscard]] laz_fetch fetch() const;
 
+  /// The cache keeps at least cache_min_chunks chunks, more while they hold no more than
+  /// cache_records records; reads of fewer records than that go through it.
+  static constexpr std::size_t cache_min_chunks = 4;
+  static constexpr std::uint64_t cache_records = std::uint64_t{1} << 16;
+
   const posix_file& file_;
   laz_layout layout_;
   mutable std::mutex mutex_;
-  mutable std::vector<std::pair<std::size_t, chunk_records>> cache_;  ///< most recent last
+  mutable std::unordered_map<std::size_t, chunk_records> cache_;
+  mutable std::deque<std::size_t> order_;  ///< the cached chunks, oldest first
+  mutable std::uint64_t cached_records_ = 0;
 };
 
 }  // namespace pbr_lod::detail

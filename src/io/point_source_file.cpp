@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <mutex>
 
 #include "io_internal.hpp"
 #include "laz_decoder.hpp"
@@ -314,32 +315,28 @@ class file_point_source final : public point_source {
     out.normals.resize(attrs_.normal ? count : 0);
     out.colours.resize(attrs_.colour ? count : 0);
     if (count == 0) return;
-    // Start at the run holding `first` and skip the kept points before it; with nothing
-    // dropped a fixed-size record is found by arithmetic alone.
-    record_at at = index_[first >> run_bits];
-    std::uint64_t skip = first & ((std::uint64_t{1} << run_bits) - 1);
-    if constexpr (!Codec::line_based) {
-      if (size_ == codec_.records) {
-        at.record = first;
-        skip = 0;
-      }
-    }
+    auto [at, skip] = start_of(first);
     std::size_t k = 0;
+    record_at last_at;
     normal_rule normal;  // the counts were reported at open
-    const bool complete = for_records(at, skip + count, [&](const raw_point& q, const record_at&) {
-      if (!all_finite(q.position)) return true;
-      if (skip > 0) {
-        --skip;
-        return true;
-      }
-      out.positions[k] = (q.position - origin_).cast<float>();
-      if (attrs_.normal) out.normals[k] = normal(q.normal);
-      if (attrs_.colour) out.colours[k] = q.colour;
-      return ++k < count;
-    });
+    const bool complete =
+        for_records(at, skip + count, [&](const raw_point& q, const record_at& w) {
+          if (!all_finite(q.position)) return true;
+          if (skip > 0) {
+            --skip;
+            return true;
+          }
+          out.positions[k] = (q.position - origin_).cast<float>();
+          if (attrs_.normal) out.normals[k] = normal(q.normal);
+          if (attrs_.colour) out.colours[k] = q.colour;
+          last_at = w;
+          return ++k < count;
+        });
     if (!complete || k < count)
       throw IoError(cat(name(), ": the file ends before point ", first + k,
                         " (it changed since it was opened)"));
+    const std::lock_guard<std::mutex> lock(resume_mutex_);
+    resume_ = {first + count - 1, last_at};
   }
 
  private:
@@ -379,6 +376,29 @@ class file_point_source final : public point_source {
     }
   }
 
+  /// Where a read of kept point `first` starts: a record and how many kept points to skip from
+  /// it. The run holding `first` gives one; inside a run that dropped nothing a fixed-size
+  /// record is found by arithmetic alone; and a read that continues the last one starts where
+  /// that ended. Without the last two, reading a file with dropped points (or any line-based
+  /// file) a few points at a time would parse up to a run (2^run_bits records) per read — for a
+  /// LAZ file, decode them.
+  [[nodiscard]] std::pair<record_at, std::uint64_t> start_of(std::uint64_t first) const {
+    const std::uint64_t run = first >> run_bits, run_first = run << run_bits;
+    record_at at = index_[run];
+    std::uint64_t skip = first - run_first;
+    if constexpr (!Codec::line_based) {
+      const std::uint64_t run_records =
+          (run + 1 < index_.size() ? index_[run + 1].record : codec_.records) - at.record;
+      const std::uint64_t run_kept = std::min(std::uint64_t{1} << run_bits, size_ - run_first);
+      if (run_records == run_kept) return {record_at{at.record + skip}, 0};
+    }
+    const std::lock_guard<std::mutex> lock(resume_mutex_);
+    // resume_.at holds kept point resume_.kept: from there, skip it and those up to `first`.
+    if (resume_.kept != no_resume && resume_.kept < first && resume_.kept >= run_first)
+      return {resume_.at, first - resume_.kept};
+    return {at, skip};
+  }
+
   // The pass at open: finish_mesh's bookkeeping (box, normals, report) and the index.
   void scan(const std::optional<vec3d>& origin_hint, read_report& report) {
     finite_box box;
@@ -413,6 +433,13 @@ class file_point_source final : public point_source {
   vec3d origin_ = vec3d::Zero();
   std::uint64_t size_ = 0;
   std::vector<record_at> index_;  ///< index_[k]: where kept point k·2^run_bits is
+  static constexpr std::uint64_t no_resume = ~std::uint64_t{0};
+  struct resume_point {
+    std::uint64_t kept = no_resume;  ///< the last point the last read gave
+    record_at at;                    ///< where it is
+  };
+  mutable std::mutex resume_mutex_;
+  mutable resume_point resume_;
 };
 
 /// A file that cannot be read in parts (PCD binary_compressed), held in memory.

@@ -10,6 +10,7 @@
 #include <random>
 #include <thread>
 
+#include "io/io_internal.hpp"
 #include "io_test_util.hpp"
 #include "pbr_lod/core/point_source.hpp"
 #include "pbr_lod/core/synthetic.hpp"
@@ -31,6 +32,7 @@ using pbr_lod::read_points;
 using pbr_lod::read_report;
 using pbr_lod::vec3d;
 using pbr_lod::vec3f;
+using pbr_lod::detail::cat;
 using pbr_lod::test::put_be;
 using pbr_lod::test::put_le;
 
@@ -207,6 +209,61 @@ TEST_F(Source, PlyWithNonFinitePoints) {
   src->read(2, 2, b);
   EXPECT_EQ(b.positions[0], (vec3d(4, 4, 4) - c.origin).cast<float>());
   EXPECT_EQ(b.positions[1], (vec3d(0, 1, 2) - c.origin).cast<float>());
+}
+
+// Points dropped in the second of three index runs only (binary and ASCII): reads of 7 in order
+// (each starts where the last ended), backwards, across the runs' ends, and from two threads at
+// once (each may start where the other's last read ended) give read_points' points.
+TEST_F(Source, ReadsInOrderAndBackAcrossDroppedPoints) {
+  const int n = 140000;
+  const auto dropped = [](int i) { return i >= 70000 && i < 100000 && i % 997 == 3; };
+  for (const bool binary : {true, false}) {
+    std::string s =
+        cat("ply\nformat ", binary ? "binary_little_endian" : "ascii", " 1.0\nelement vertex ", n,
+            "\nproperty float x\nproperty float y\nproperty float z\nend_header\n");
+    for (int i = 0; i < n; ++i) {
+      const float x = dropped(i) ? std::numeric_limits<float>::quiet_NaN() : float(i % 1000);
+      const float y = float(i / 1000), z = float(i % 7);
+      if (binary) {
+        for (const float v : {x, y, z}) put_le(s, v);
+      } else {
+        s += cat(dropped(i) ? std::string("nan") : std::to_string(i % 1000), " ", i / 1000, " ",
+                 i % 7, "\n");
+      }
+    }
+    const std::string p = write(binary ? "drops.ply" : "drops_ascii.ply", s);
+    const point_cloud want = read_points(p);
+    ASSERT_EQ(want.size(), std::size_t(n - 30));  // 30 values ≡ 3 (mod 997) in [70000, 100000)
+    const auto src = open_point_source(p);
+    point_block b;
+    for (std::uint64_t first = 0; first < src->size(); first += 7) {
+      const auto count = static_cast<std::size_t>(std::min<std::uint64_t>(7, src->size() - first));
+      src->read(first, count, b);
+      expect_points(b, want, static_cast<std::size_t>(first), cat(p, " in order at ", first));
+    }
+    for (std::uint64_t first = src->size(); first >= 1000; first -= 1000) {
+      src->read(first - 1000, 1000, b);
+      expect_points(b, want, static_cast<std::size_t>(first - 1000), cat(p, " backwards"));
+    }
+    for (const std::uint64_t first : {65530ull, 65536ull, 131060ull, 131066ull, 65530ull}) {
+      src->read(first, 12, b);
+      expect_points(b, want, static_cast<std::size_t>(first), cat(p, " across runs ", first));
+    }
+    std::vector<std::string> failures(2);
+    const auto work = [&](int t) {
+      point_block tb;
+      for (std::uint64_t first = std::uint64_t(t) * 3; first + 5 < src->size(); first += 5)
+        if (src->read(first, 5, tb); !(same_bits(tb.positions[4], want.positions[first + 4]))) {
+          failures[std::size_t(t)] = cat("thread ", t, " at ", first);
+          return;
+        }
+    };
+    std::thread t0(work, 0), t1(work, 1);
+    t0.join();
+    t1.join();
+    EXPECT_EQ(failures[0], "") << p;
+    EXPECT_EQ(failures[1], "") << p;
+  }
 }
 
 // A cloud far from the world origin, written with its origin in a comment: the source honours
