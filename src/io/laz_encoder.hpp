@@ -1,7 +1,7 @@
 // pbr_lod — LAZ encoding: a chunk of point formats 0–5 (point-wise, laz_decoder.cpp) or of LAS 1.4
 // formats 6–10 (layered, laz_layered.cpp) — the decoders' models run forwards; both reproduce
-// LASzip's chunks byte for byte — and a whole LAS file (laz_writer.cpp). The first steps of the
-// COPC writer of issue 44. Not installed.
+// LASzip's chunks byte for byte — and a whole LAS file (laz_writer.cpp); the COPC writer
+// (copc_writer.cpp) builds on them. Not installed.
 #pragma once
 
 #include <cstdint>
@@ -26,6 +26,18 @@ namespace pbr_lod::detail {
                                                                 std::uint16_t record_length,
                                                                 const unsigned char* records,
                                                                 std::uint64_t count);
+
+/// LASzip's VLR (its 54-byte header and payload) for records of point format `format` (0–10)
+/// with `extra` extra bytes: compressor 2 (point-wise) for 0–5, 3 (layered) for 6–10, the items
+/// encode_pointwise_chunk / encode_layered_chunk write, chunks of `chunk_size` points
+/// (0xFFFFFFFF: variable, the chunk table gives each chunk's count).
+[[nodiscard]] std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_size);
+
+/// Appends a LAZ chunk table to `out`: version 0, the chunk count, then each chunk's point count
+/// (when `counts` is given: variable chunks) and byte count, arithmetic-coded as LASzip codes
+/// them (read_laz_layout reads it back).
+void append_chunk_table(std::string& out, const std::vector<std::uint64_t>& bytes,
+                        const std::vector<std::uint64_t>* counts);
 
 /// The LAS file `las` (its bytes; any point format 0–10, not compressed) as LAZ: its header
 /// and VLRs with bit 7 of the format byte set and LASzip's VLR appended (compressor 2, items

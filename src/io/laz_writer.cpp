@@ -22,7 +22,8 @@ void poke(std::string& s, std::size_t at, T v) {
   laz::store_le(reinterpret_cast<unsigned char*>(s.data() + at), v);
 }
 
-/// LASzip's VLR (header and payload) for a file of `format` with `extra` extra bytes.
+}  // namespace
+
 std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_size) {
   const bool layered = format >= 6;
   std::string payload;
@@ -73,7 +74,28 @@ std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_s
   return v + payload;
 }
 
-}  // namespace
+void append_chunk_table(std::string& out, const std::vector<std::uint64_t>& bytes,
+                        const std::vector<std::uint64_t>* counts) {
+  put<std::uint32_t>(out, 0);  // version
+  put<std::uint32_t>(out, static_cast<std::uint32_t>(bytes.size()));
+  if (bytes.empty()) return;
+  // Each chunk's point count (variable chunks only, context 0) and byte count (context 1),
+  // coded against the previous chunk's.
+  std::vector<unsigned char> coded;
+  laz::range_encoder enc(coded);
+  laz::integer_codec ic(32, 2);
+  std::int32_t prev_count = 0, prev_bytes = 0;
+  for (std::size_t i = 0; i < bytes.size(); ++i) {
+    if (counts) {
+      ic.encode(enc, prev_count, static_cast<std::int32_t>((*counts)[i]), 0);
+      prev_count = static_cast<std::int32_t>((*counts)[i]);
+    }
+    ic.encode(enc, prev_bytes, static_cast<std::int32_t>(bytes[i]), 1);
+    prev_bytes = static_cast<std::int32_t>(bytes[i]);
+  }
+  enc.done();
+  out.append(coded.begin(), coded.end());
+}
 
 std::string encode_laz_file(const std::string& path, const std::string& las,
                             std::uint32_t chunk_size) {
@@ -122,21 +144,9 @@ std::string encode_laz_file(const std::string& path, const std::string& las,
   put<std::int64_t>(out, static_cast<std::int64_t>(table_at));
   for (const auto& c : chunks) out.append(c.begin(), c.end());
 
-  // The chunk table: version 0, the count, the sizes coded against the previous one.
-  put<std::uint32_t>(out, 0);
-  put<std::uint32_t>(out, static_cast<std::uint32_t>(chunks.size()));
-  if (!chunks.empty()) {
-    std::vector<unsigned char> coded;
-    laz::range_encoder enc(coded);
-    laz::integer_codec ic(32, 2);
-    std::int32_t prev = 0;
-    for (const auto& c : chunks) {
-      ic.encode(enc, prev, static_cast<std::int32_t>(c.size()), 1);
-      prev = static_cast<std::int32_t>(c.size());
-    }
-    enc.done();
-    out.append(coded.begin(), coded.end());
-  }
+  std::vector<std::uint64_t> sizes;
+  for (const auto& c : chunks) sizes.push_back(c.size());
+  append_chunk_table(out, sizes, nullptr);
 
   // The EVLRs after the records (LAS 1.4) move with them.
   if (records_end < las.size() && las[25] >= 4) {

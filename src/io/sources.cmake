@@ -17,6 +17,7 @@ target_sources(pbr_lod PRIVATE
   ${CMAKE_CURRENT_LIST_DIR}/laz_decoder.cpp
   ${CMAKE_CURRENT_LIST_DIR}/laz_layered.cpp
   ${CMAKE_CURRENT_LIST_DIR}/laz_writer.cpp
+  ${CMAKE_CURRENT_LIST_DIR}/copc_writer.cpp
   ${CMAKE_CURRENT_LIST_DIR}/point_source_file.cpp
   ${CMAKE_CURRENT_LIST_DIR}/png_read.cpp)
 

@@ -26,6 +26,10 @@ namespace {
 using pbr_lod::FormatError;
 using pbr_lod::read_points;
 using pbr_lod::detail::cat;
+using pbr_lod::test::fetch_from;
+using pbr_lod::test::header_of;
+using pbr_lod::test::layout_of;
+using pbr_lod::test::laz_records;
 using pbr_lod::test::poke_le;
 using pbr_lod::test::put_le;
 using pbr_lod::test::slurp;
@@ -42,34 +46,6 @@ T peek_le(const std::string& b, std::size_t at) {
   T v;
   std::memcpy(&v, b.data() + at, sizeof(T));
   return v;
-}
-
-detail::las_header header_of(const std::string& path, const std::string& bytes) {
-  pbr_lod::read_report r;
-  return detail::parse_las_header(path, reinterpret_cast<const unsigned char*>(bytes.data()),
-                                  bytes.size(), r);
-}
-
-detail::laz_fetch fetch_from(const std::string& bytes) {
-  return [&bytes](std::uint64_t at, std::size_t n, unsigned char* out) {
-    std::memcpy(out, bytes.data() + at, n);
-  };
-}
-
-/// The layout of a LAZ file held in `bytes`.
-detail::laz_layout layout_of(const std::string& path, const std::string& bytes) {
-  return detail::read_laz_layout(path, header_of(path, bytes), bytes.size(), fetch_from(bytes));
-}
-
-/// Every record of the LAZ file at `path`, decoded.
-std::string laz_records(const std::string& path) {
-  const std::string bytes = slurp(path);
-  const detail::laz_layout L = layout_of(path, bytes);
-  const detail::las_header h = header_of(path, bytes);
-  std::string out(static_cast<std::size_t>(h.count * h.record_length), '\0');
-  detail::decode_laz_chunks(path, L, 0, L.chunks.size(), fetch_from(bytes),
-                            reinterpret_cast<unsigned char*>(out.data()));
-  return out;
 }
 
 /// The records of the LAS file at `path`, as stored.

@@ -11,6 +11,7 @@
 
 #include "io/laz_codec.hpp"
 #include "io/laz_decoder.hpp"
+#include "io_test_util.hpp"
 
 namespace pbr_lod::test {
 
@@ -80,6 +81,34 @@ inline std::string laz_repeat_chunk(const std::string& laz, std::uint32_t copies
   }
   enc.done();
   out.append(coded.begin(), coded.end());
+  return out;
+}
+
+inline detail::las_header header_of(const std::string& path, const std::string& bytes) {
+  pbr_lod::read_report r;
+  return detail::parse_las_header(path, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                  bytes.size(), r);
+}
+
+inline detail::laz_fetch fetch_from(const std::string& bytes) {
+  return [&bytes](std::uint64_t at, std::size_t n, unsigned char* out) {
+    std::memcpy(out, bytes.data() + at, n);
+  };
+}
+
+/// The layout of a LAZ file held in `bytes`.
+inline detail::laz_layout layout_of(const std::string& path, const std::string& bytes) {
+  return detail::read_laz_layout(path, header_of(path, bytes), bytes.size(), fetch_from(bytes));
+}
+
+/// Every record of the LAZ file at `path`, decoded.
+inline std::string laz_records(const std::string& path) {
+  const std::string bytes = slurp(path);
+  const detail::laz_layout L = layout_of(path, bytes);
+  const detail::las_header h = header_of(path, bytes);
+  std::string out(static_cast<std::size_t>(h.count * h.record_length), '\0');
+  detail::decode_laz_chunks(path, L, 0, L.chunks.size(), fetch_from(bytes),
+                            reinterpret_cast<unsigned char*>(out.data()));
   return out;
 }
 
