@@ -10,6 +10,8 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config git
   # examples/strict_json.py holds every `pbrlod --json` output of the tests to strict JSON.
   python3
+  # tools/copc-check: our COPC files read by the copc npm package (a reader we did not write).
+  nodejs
   libeigen3-dev libcgal-dev libflann-dev libnanoflann-dev liblz4-dev libopenmesh-dev liblzf-dev
   # .spz Gaussian files: gzip (versions 1–3) and zstd (version 4) streams.
   zlib1g-dev libzstd-dev
@@ -29,12 +31,23 @@ missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "install-deps: all ${#packages[@]} packages present"
-  exit 0
-fi
+# Debian's nodejs comes without npm (Debian's npm package); NodeSource's includes it.
+command -v npm > /dev/null || missing+=(npm)
 SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-echo "install-deps: installing ${missing[*]}"
-$SUDO apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+else
+  echo "install-deps: installing ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+# npm packages, pinned by their lock files: installed when missing or older than the lock.
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+for dir in "$root/tools/copc-check"; do
+  if [ ! -d "$dir/node_modules" ] || [ "$dir/package-lock.json" -nt "$dir/node_modules" ]; then
+    echo "install-deps: npm ci in ${dir#"$root"/}"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error && touch node_modules)
+  fi
+done

@@ -214,6 +214,55 @@ frame draw_frame(const H& h, const view& v, const render_options& o, const trave
   return f;
 }
 
+/// Every point a hierarchy's nodes hold, each with its node's depth (an inner node's
+/// representative at its depth, a leaf's samples at the leaf's): `export --format copc`.
+struct levelled_points {
+  point_cloud cloud;                 ///< world = origin + position; normals, colours if it has them
+  std::vector<std::uint8_t> levels;  ///< per point (depths beyond 255 are 255)
+  std::size_t nodes = 0;
+};
+
+/// Collects what each node of h emits (point and splat centres, with the normal and colour its
+/// attributes carry) by a walk over every node. `framing` gives the view emit() is called with
+/// (a view matters only to screen-space emitters, which send a point_prim to this sink). Throws
+/// InvalidArgument when a node emits triangles: their vertices are no point set of a level.
+template <class H>
+levelled_points collect_levelled_points(const H& h, std::pair<vec3d, double> framing,
+                                        const std::string& name) {
+  levelled_points out;
+  out.cloud.origin = h.origin();
+  if (h.empty()) return out;
+  const view v(make_camera(framing.first, framing.second, view_args{}), h.origin());
+  static constexpr attributes A = H::attrs;
+  std::uint8_t depth = 0;
+  std::size_t triangles = 0;
+  const auto add = [&](const vec3f& p, const auto& prim) {
+    out.cloud.positions.push_back(p);
+    if constexpr (A.normal) out.cloud.normals.push_back(prim.normal);
+    if constexpr (A.colour) out.cloud.colours.push_back(prim.colour);
+    out.levels.push_back(depth);
+  };
+  struct collect {
+    decltype(add)& put;
+    std::size_t& triangles;
+    void point(const point_prim<A>& p) { put(p.position, p); }
+    void splat(const splat_prim<A>& q) { put(q.centre, q); }
+    void triangle(const triangle_prim<A>&) { ++triangles; }
+  } sink{add, triangles};
+  std::vector<std::pair<typename H::node_id, unsigned>> stack{{h.root(), 0u}};
+  while (!stack.empty()) {
+    const auto [n, d] = stack.back();
+    stack.pop_back();
+    depth = static_cast<std::uint8_t>(std::min(d, 255u));
+    h.emit(n, v, sink);
+    ++out.nodes;
+    if (triangles > 0)
+      throw InvalidArgument(name + ": its nodes hold triangles; COPC holds points");
+    for (const auto c : h.children(n)) stack.emplace_back(c, d + 1);
+  }
+  return out;
+}
+
 /// A built or loaded hierarchy as the tool sees it.
 class lod {
  public:
@@ -229,6 +278,8 @@ class lod {
   [[nodiscard]] virtual std::size_t file_bytes() const = 0;
   /// Samples at full detail (input points, mesh vertices, ρ-grid cells): bytes per sample.
   [[nodiscard]] virtual std::size_t samples() const = 0;
+  /// Its nodes' points by level (collect_levelled_points); `name` for messages.
+  [[nodiscard]] virtual levelled_points points_by_level(const std::string& name) const = 0;
 };
 
 /// lod over a hierarchy H and a method M that knows how to frame, draw and describe it (and to
@@ -256,6 +307,14 @@ class lod_of final : public lod {
       return h_.file_bytes();
   }
   [[nodiscard]] std::size_t samples() const override { return m_.samples(h_); }
+  [[nodiscard]] levelled_points points_by_level(const std::string& name) const override {
+    if constexpr (requires { m_.points_by_level(h_, name); })
+      return m_.points_by_level(h_, name);
+    else if constexpr (Hierarchy<H>)
+      return collect_levelled_points(h_, m_.input_bounds(h_), name);
+    else
+      throw InvalidArgument(name + ": this method's hierarchy has no points by level to export");
+  }
 
  private:
   M m_;

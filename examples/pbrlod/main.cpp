@@ -28,6 +28,7 @@
 #include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/error.hpp"
 #include "pbr_lod/core/synthetic.hpp"
+#include "pbr_lod/io/copc.hpp"
 #include "pbr_lod/io/gaussians.hpp"
 #include "pbr_lod/io/texture.hpp"
 #include "pbr_lod/raster/gaussians.hpp"
@@ -199,6 +200,59 @@ int cmd_export(const std::string& input, const view_args& va, float tolerance,
     std::cout << "wrote " << output << ": " << cut.size() << " of " << input_gaussians
               << " Gaussians (" << (level ? "level " + std::to_string(*level) : "the view's cut")
               << ")\n";
+  }
+  return 0;
+}
+
+bool is_copc_export(const std::string& format, const std::string& output) {
+  if (format != "auto") return format == "copc";
+  return output.size() >= 4 && output.compare(output.size() - 4, 4, ".laz") == 0;
+}
+
+/// `export OUT.lod --format copc -o out.copc.laz`: every point the hierarchy's nodes hold, by
+/// level, as COPC (io/copc.hpp, docs/io.md).
+int cmd_export_copc(const std::string& input, const std::string& output, const std::string& crs,
+                    std::uint32_t node_points, bool as_json) {
+  const method_entry& m = lod_method(input);
+  if (m.name == "gaussian-hierarchy")
+    throw InvalidArgument(input +
+                          ": a Gaussian hierarchy exports its cuts as 3DGS PLY (--format ply)");
+  const auto t0 = clock_type::now();
+  const levelled_points pts = m.load(input)->points_by_level(input);
+  pbr_lod::copc_options o{.node_points = node_points};
+  if (!crs.empty()) {
+    o.wkt = pbr_lod::las_wkt(crs);
+    if (o.wkt.empty())
+      throw InvalidArgument(crs + ": --crs-from: the file has no spatial reference in WKT");
+  }
+  const pbr_lod::copc_summary s = pbr_lod::write_copc(output, pts.cloud, pts.levels, o);
+  const double seconds = seconds_since(t0);
+  const int deepest =
+      pts.levels.empty() ? 0 : *std::max_element(pts.levels.begin(), pts.levels.end());
+  if (as_json) {
+    json j;
+    j.str("input", input).str("output", output).str("format", "copc");
+    j.integer("points", static_cast<long long>(s.points));
+    j.integer("hierarchy_nodes", static_cast<long long>(pts.nodes));
+    j.integer("hierarchy_levels", deepest + 1);
+    j.integer("copc_nodes", static_cast<long long>(s.nodes));
+    j.integer("copc_empty_nodes", static_cast<long long>(s.empty_nodes));
+    j.integer("copc_levels", s.max_level + 1);
+    j.integer("level_shift", s.shift);
+    j.str("attributes", pts.cloud.present().to_string());
+    j.num("scale", s.scale).num("halfsize", s.halfsize).num("spacing", s.spacing);
+    json c;
+    c.num("x", s.centre.x()).num("y", s.centre.y()).num("z", s.centre.z());
+    j.object("centre", c);
+    j.boolean("spatial_reference", !o.wkt.empty());
+    j.integer("bytes", static_cast<long long>(s.bytes));
+    j.num("seconds", seconds);
+    std::cout << j.text() << "\n";
+  } else {
+    std::cout << "wrote " << output << ": " << s.points << " points of " << pts.nodes
+              << " hierarchy nodes in " << s.nodes
+              << " COPC nodes (hierarchy level l at COPC level "
+              << "max(0, l - " << s.shift << ")), " << s.bytes << " bytes\n";
   }
   return 0;
 }
@@ -577,13 +631,29 @@ int main(int argc, char** argv) {
   stats->add_option("input", stats_input, "OUT.lod or a mesh/point cloud file")->required();
   stats->add_flag("--json", as_json, "print one JSON object");
 
-  std::string export_input, export_output;
+  std::string export_input, export_output, export_format = "auto", export_crs;
   int export_level = -1;
+  std::uint32_t export_node_points = pbr_lod::copc_options{}.node_points;
   auto* exporter = app.add_subcommand(
       "export",
-      "write a Gaussian hierarchy's cut (a view and tolerance, or a level) as a 3DGS PLY");
-  exporter->add_option("input", export_input, "a Gaussian hierarchy (.lod)")->required();
-  exporter->add_option("-o,--output", export_output, "the .ply to write")->required();
+      "write a Gaussian hierarchy's cut (a view and tolerance, or a level) as a 3DGS PLY, or a "
+      "point hierarchy's levels as COPC (a LAZ 1.4 octree other tools open)");
+  exporter->add_option("input", export_input, "a hierarchy (.lod or chunked folder)")->required();
+  exporter->add_option("-o,--output", export_output, "the .ply or .copc.laz to write")->required();
+  exporter
+      ->add_option("--format", export_format,
+                   "ply (a Gaussian hierarchy's cut) or copc (a point hierarchy's levels); auto: "
+                   "copc when the output ends in .laz")
+      ->check(CLI::IsMember({"auto", "ply", "copc"}))
+      ->capture_default_str();
+  exporter->add_option("--crs-from", export_crs,
+                       "copc: a LAS/LAZ file whose spatial reference (WKT) the output carries");
+  exporter
+      ->add_option("--node-points", export_node_points,
+                   "copc: the mean points per octree node that chooses how hierarchy levels map "
+                   "onto COPC levels")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   exporter->add_option("--tolerance", tolerance, "pixels (as render --tolerance)")
       ->capture_default_str();
   exporter
@@ -657,6 +727,8 @@ int main(int argc, char** argv) {
     if (*build) return cmd_build(method, build_input, build_output, params, as_json);
     if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json, seed);
     if (*stats) return cmd_stats(stats_input, as_json);
+    if (*exporter && is_copc_export(export_format, export_output))
+      return cmd_export_copc(export_input, export_output, export_crs, export_node_points, as_json);
     if (*exporter)
       return cmd_export(export_input, va, tolerance,
                         export_level >= 0 ? std::optional<int>(export_level) : std::nullopt,

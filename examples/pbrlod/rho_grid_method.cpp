@@ -54,6 +54,12 @@ struct rho_method {
   std::pair<vec3d, double> input_bounds(const rho_grid<R>& g) const {
     return {g.input_centre(), g.input_radius()};  // recorded at build: frames like the input
   }
+  /// The cells of every level (their points; the grid's Hierarchy view by attributes).
+  template <int R>
+  levelled_points points_by_level(const rho_grid<R>& g, const std::string& name) const {
+    return with_rho_grid_hierarchy(
+        g, [&](const auto& h) { return collect_levelled_points(h, input_bounds(g), name); });
+  }
   template <int R>
   frame draw(const rho_grid<R>& g, const frame_request& r) const {
     const view v(r.cam, g.origin());
