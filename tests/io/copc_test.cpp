@@ -155,10 +155,6 @@ void check_copc(const std::string& path, const point_cloud& c,
       EXPECT_EQ(e.level, std::max(0, int(level) - s.shift));
       EXPECT_EQ(r[14], 0x11);
       // Which input point: the nearest of that level (positions are distinct in these clouds).
-      float nx, ny, nz;
-      std::memcpy(&nx, r + at_normal, 4);
-      std::memcpy(&ny, r + at_normal + 4, 4);
-      std::memcpy(&nz, r + at_normal + 8, 4);
       std::size_t best = c.size();
       double best_d = 1e300;
       for (std::size_t i = 0; i < c.size(); ++i)
@@ -171,6 +167,10 @@ void check_copc(const std::string& path, const point_cloud& c,
       // Half a quantum per axis, and the rounding of X·scale + offset in double.
       EXPECT_LE(best_d, std::sqrt(3.0) * 0.5 * h.scale[0] + 1e-15 * p.norm());
       if (!c.normals.empty()) {  // "no normal" (zero or not finite) is written as zero
+        float nx, ny, nz;
+        std::memcpy(&nx, r + at_normal, 4);
+        std::memcpy(&ny, r + at_normal + 4, 4);
+        std::memcpy(&nz, r + at_normal + 8, 4);
         const vec3f n = c.normals[best];
         EXPECT_EQ(vec3f(nx, ny, nz), pbr_lod::all_finite(n) ? n : vec3f::Zero());
       }
