@@ -15,6 +15,7 @@
 
 #include "pbr_lod/core/bounds.hpp"
 #include "pbr_lod/core/knn.hpp"
+#include "pbr_lod/core/parallel.hpp"
 #include "pbr_lod/raster/metrics.hpp"
 #include "pbr_lod/raster/rasterizer.hpp"
 #include "pbr_lod/traverse/sink.hpp"
@@ -220,27 +221,34 @@ struct levelled_points {
   point_cloud cloud;                 ///< world = origin + position; normals, colours if it has them
   std::vector<std::uint8_t> levels;  ///< per point (depths beyond 255 are 255)
   std::size_t nodes = 0;
+  std::size_t leaf_samples = 0;  ///< points the leaves emit (the rest are inner nodes')
+  bool snapped = false;          ///< inner nodes' points replaced by samples of their subtree
 };
 
 /// Collects what each node of h emits (point and splat centres, with the normal and colour its
 /// attributes carry) by a walk over every node. `framing` gives the view emit() is called with
-/// (a view matters only to screen-space emitters, which send a point_prim to this sink). Throws
+/// (a view matters only to screen-space emitters, which send a point_prim to this sink). With
+/// `snap`, each point of an inner node is replaced by the leaf sample of its subtree nearest to
+/// it: a node's representative sits at its samples' mean, which on a curved part (an ear) lies
+/// off the surface, and a COPC reader draws coarse levels together with the fine ones. Throws
 /// InvalidArgument when a node emits triangles: their vertices are no point set of a level.
 template <class H>
 levelled_points collect_levelled_points(const H& h, std::pair<vec3d, double> framing,
-                                        const std::string& name) {
-  levelled_points out;
-  out.cloud.origin = h.origin();
-  if (h.empty()) return out;
-  const view v(make_camera(framing.first, framing.second, view_args{}), h.origin());
+                                        const std::string& name, bool snap) {
   static constexpr attributes A = H::attrs;
+  levelled_points inner, leaf;  // apart: in preorder, a subtree's samples are one run of `leaf`
+  inner.cloud.origin = leaf.cloud.origin = h.origin();
+  inner.snapped = snap;
+  if (h.empty()) return inner;
+  const view v(make_camera(framing.first, framing.second, view_args{}), h.origin());
+  levelled_points* to = &leaf;
   std::uint8_t depth = 0;
   std::size_t triangles = 0;
   const auto add = [&](const vec3f& p, const auto& prim) {
-    out.cloud.positions.push_back(p);
-    if constexpr (A.normal) out.cloud.normals.push_back(prim.normal);
-    if constexpr (A.colour) out.cloud.colours.push_back(prim.colour);
-    out.levels.push_back(depth);
+    to->cloud.positions.push_back(p);
+    if constexpr (A.normal) to->cloud.normals.push_back(prim.normal);
+    if constexpr (A.colour) to->cloud.colours.push_back(prim.colour);
+    to->levels.push_back(depth);
   };
   struct collect {
     decltype(add)& put;
@@ -249,18 +257,60 @@ levelled_points collect_levelled_points(const H& h, std::pair<vec3d, double> fra
     void splat(const splat_prim<A>& q) { put(q.centre, q); }
     void triangle(const triangle_prim<A>&) { ++triangles; }
   } sink{add, triangles};
-  std::vector<std::pair<typename H::node_id, unsigned>> stack{{h.root(), 0u}};
+  struct item {
+    typename H::node_id n;
+    unsigned depth;
+    bool exit = false;
+    std::size_t inner0 = 0, inner1 = 0, leaf0 = 0;
+  };
+  std::vector<std::pair<std::size_t, std::size_t>> runs;  // per inner point: its subtree's samples
+  std::vector<item> stack{{h.root(), 0u}};
   while (!stack.empty()) {
-    const auto [n, d] = stack.back();
+    const item it = stack.back();
     stack.pop_back();
-    depth = static_cast<std::uint8_t>(std::min(d, 255u));
-    h.emit(n, v, sink);
-    ++out.nodes;
+    if (it.exit) {
+      for (std::size_t i = it.inner0; i < it.inner1; ++i) runs[i] = {it.leaf0, leaf.levels.size()};
+      continue;
+    }
+    depth = static_cast<std::uint8_t>(std::min(it.depth, 255u));
+    to = h.is_leaf(it.n) ? &leaf : &inner;
+    const std::size_t first = inner.levels.size();
+    h.emit(it.n, v, sink);
+    ++inner.nodes;
     if (triangles > 0)
       throw InvalidArgument(name + ": its nodes hold triangles; COPC holds points");
-    for (const auto c : h.children(n)) stack.emplace_back(c, d + 1);
+    if (h.is_leaf(it.n)) continue;
+    runs.resize(inner.levels.size());
+    stack.push_back({it.n, it.depth, true, first, inner.levels.size(), leaf.levels.size()});
+    for (const auto c : h.children(it.n)) stack.push_back({c, it.depth + 1});
   }
-  return out;
+  if (snap)  // each inner point against its subtree's samples: N × depth distances in all
+    pbr_lod::detail::parallel_chunks(
+        runs.size(), pbr_lod::resolve_threads(0), 256, [&](std::size_t lo, std::size_t hi) {
+          for (std::size_t i = lo; i < hi; ++i) {
+            const auto [b, e] = runs[i];
+            std::size_t best = e;
+            float best_d = std::numeric_limits<float>::infinity();
+            for (std::size_t j = b; j < e; ++j)
+              if (const float d =
+                      (leaf.cloud.positions[j] - inner.cloud.positions[i]).squaredNorm();
+                  d < best_d) {
+                best_d = d;
+                best = j;
+              }
+            if (best == e) continue;  // a subtree without samples keeps its own point
+            inner.cloud.positions[i] = leaf.cloud.positions[best];
+            if constexpr (A.normal) inner.cloud.normals[i] = leaf.cloud.normals[best];
+            if constexpr (A.colour) inner.cloud.colours[i] = leaf.cloud.colours[best];
+          }
+        });
+  inner.leaf_samples = leaf.levels.size();
+  const auto append = [](auto& a, const auto& b) { a.insert(a.end(), b.begin(), b.end()); };
+  append(inner.cloud.positions, leaf.cloud.positions);
+  append(inner.cloud.normals, leaf.cloud.normals);
+  append(inner.cloud.colours, leaf.cloud.colours);
+  append(inner.levels, leaf.levels);
+  return inner;
 }
 
 /// A built or loaded hierarchy as the tool sees it.
@@ -279,7 +329,8 @@ class lod {
   /// Samples at full detail (input points, mesh vertices, ρ-grid cells): bytes per sample.
   [[nodiscard]] virtual std::size_t samples() const = 0;
   /// Its nodes' points by level (collect_levelled_points); `name` for messages.
-  [[nodiscard]] virtual levelled_points points_by_level(const std::string& name) const = 0;
+  [[nodiscard]] virtual levelled_points points_by_level(const std::string& name,
+                                                        bool snap) const = 0;
 };
 
 /// lod over a hierarchy H and a method M that knows how to frame, draw and describe it (and to
@@ -307,11 +358,11 @@ class lod_of final : public lod {
       return h_.file_bytes();
   }
   [[nodiscard]] std::size_t samples() const override { return m_.samples(h_); }
-  [[nodiscard]] levelled_points points_by_level(const std::string& name) const override {
-    if constexpr (requires { m_.points_by_level(h_, name); })
-      return m_.points_by_level(h_, name);
+  [[nodiscard]] levelled_points points_by_level(const std::string& name, bool snap) const override {
+    if constexpr (requires { m_.points_by_level(h_, name, snap); })
+      return m_.points_by_level(h_, name, snap);
     else if constexpr (Hierarchy<H>)
-      return collect_levelled_points(h_, m_.input_bounds(h_), name);
+      return collect_levelled_points(h_, m_.input_bounds(h_), name, snap);
     else
       throw InvalidArgument(name + ": this method's hierarchy has no points by level to export");
   }

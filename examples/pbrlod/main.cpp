@@ -212,13 +212,13 @@ bool is_copc_export(const std::string& format, const std::string& output) {
 /// `export OUT.lod --format copc -o out.copc.laz`: every point the hierarchy's nodes hold, by
 /// level, as COPC (io/copc.hpp, docs/io.md).
 int cmd_export_copc(const std::string& input, const std::string& output, const std::string& crs,
-                    std::uint32_t node_points, bool as_json) {
+                    std::uint32_t node_points, bool snap, bool as_json) {
   const method_entry& m = lod_method(input);
   if (m.name == "gaussian-hierarchy")
     throw InvalidArgument(input +
                           ": a Gaussian hierarchy exports its cuts as 3DGS PLY (--format ply)");
   const auto t0 = clock_type::now();
-  const levelled_points pts = m.load(input)->points_by_level(input);
+  const levelled_points pts = m.load(input)->points_by_level(input, snap);
   pbr_lod::copc_options o{.node_points = node_points};
   if (!crs.empty()) {
     o.wkt = pbr_lod::las_wkt(crs);
@@ -235,6 +235,8 @@ int cmd_export_copc(const std::string& input, const std::string& output, const s
     j.integer("points", static_cast<long long>(s.points));
     j.integer("hierarchy_nodes", static_cast<long long>(pts.nodes));
     j.integer("hierarchy_levels", deepest + 1);
+    j.integer("leaf_samples", static_cast<long long>(pts.leaf_samples));
+    j.str("coarse_points", snap ? "samples" : "representatives");
     j.integer("copc_nodes", static_cast<long long>(s.nodes));
     j.integer("copc_empty_nodes", static_cast<long long>(s.empty_nodes));
     j.integer("copc_levels", s.max_level + 1);
@@ -631,7 +633,8 @@ int main(int argc, char** argv) {
   stats->add_option("input", stats_input, "OUT.lod or a mesh/point cloud file")->required();
   stats->add_flag("--json", as_json, "print one JSON object");
 
-  std::string export_input, export_output, export_format = "auto", export_crs;
+  std::string export_input, export_output, export_format = "auto", export_crs,
+                                           export_coarse = "samples";
   int export_level = -1;
   std::uint32_t export_node_points = pbr_lod::copc_options{}.node_points;
   auto* exporter = app.add_subcommand(
@@ -645,6 +648,13 @@ int main(int argc, char** argv) {
                    "ply (a Gaussian hierarchy's cut) or copc (a point hierarchy's levels); auto: "
                    "copc when the output ends in .laz")
       ->check(CLI::IsMember({"auto", "ply", "copc"}))
+      ->capture_default_str();
+  exporter
+      ->add_option("--coarse-points", export_coarse,
+                   "copc: what an inner node stores: its subtree's sample nearest its "
+                   "representative (samples: every point lies on the input), or the "
+                   "representative itself (representatives: the hierarchy's own nodes)")
+      ->check(CLI::IsMember({"samples", "representatives"}))
       ->capture_default_str();
   exporter->add_option("--crs-from", export_crs,
                        "copc: a LAS/LAZ file whose spatial reference (WKT) the output carries");
@@ -728,7 +738,8 @@ int main(int argc, char** argv) {
     if (*render) return cmd_render(render_input_path, va, tolerance, render_output, as_json, seed);
     if (*stats) return cmd_stats(stats_input, as_json);
     if (*exporter && is_copc_export(export_format, export_output))
-      return cmd_export_copc(export_input, export_output, export_crs, export_node_points, as_json);
+      return cmd_export_copc(export_input, export_output, export_crs, export_node_points,
+                             export_coarse == "samples", as_json);
     if (*exporter)
       return cmd_export(export_input, va, tolerance,
                         export_level >= 0 ? std::optional<int>(export_level) : std::nullopt,

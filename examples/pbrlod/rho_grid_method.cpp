@@ -56,9 +56,9 @@ struct rho_method {
   }
   /// The cells of every level (their points; the grid's Hierarchy view by attributes).
   template <int R>
-  levelled_points points_by_level(const rho_grid<R>& g, const std::string& name) const {
+  levelled_points points_by_level(const rho_grid<R>& g, const std::string& name, bool snap) const {
     return with_rho_grid_hierarchy(
-        g, [&](const auto& h) { return collect_levelled_points(h, input_bounds(g), name); });
+        g, [&](const auto& h) { return collect_levelled_points(h, input_bounds(g), name, snap); });
   }
   template <int R>
   frame draw(const rho_grid<R>& g, const frame_request& r) const {

@@ -8,9 +8,9 @@
 // Writes OUTDIR/points.bin and OUTDIR/points.json (the layout, the COPC cube centre the positions
 // are relative to, the spacing) and prints one JSON object. points.bin, for n points:
 //   Float32 x,y,z × n   position minus the COPC cube centre (subtracted in double)
-//   Float32 r × n       disc radius (world units): half the distance to the 8th nearest decoded
-//                       point, which closes a square grid of samples (its 8th neighbour lies at
-//                       √2·spacing, the disc that covers a grid cell has radius spacing/√2)
+//   Float32 d × n       spacing (world units): the distance to the 8th nearest other decoded
+//                       point, the k-NN spacing pbrlod sizes an unstructured cloud's splats by
+//                       (raster/reference.cpp: radius 0.8 × the distance to the 8th neighbour)
 //   Int16 nx,ny,nz × n  normal × 32767 (NormalX/Y/Z extra bytes), when the file has them
 //   Uint8 r,g,b × n     colour (the 16-bit LAS colour / 257), for point formats 7 and 8
 import { Copc } from 'copc';
@@ -90,9 +90,9 @@ for (const key of keys) {
 if (at !== n) throw new Error(`decoded ${at} points, the hierarchy says ${n}`);
 const tDecode = performance.now();
 
-// Disc radii: half the distance to the K-th nearest other point, by a uniform grid searched in
-// growing shells of cells (exact: a shell is searched until it lies beyond the K-th distance).
-const radius = new Float32Array(n);
+// Spacing: the distance to the K-th nearest other point, by a uniform grid searched in growing
+// shells of cells (exact: a shell is searched until it lies beyond the K-th distance).
+const spacing = new Float32Array(n);
 if (n > 1) {
   const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
   for (let i = 0; i < n; ++i)
@@ -147,13 +147,13 @@ if (n > 1) {
       // Every point not yet seen lies at least s·h away.
       if (best[k - 1] <= (s * h) ** 2) break;
     }
-    radius[i] = 0.5 * Math.sqrt(best[k - 1]);
+    spacing[i] = Math.sqrt(best[k - 1]);
   }
 }
-const tRadius = performance.now();
+const tSpacing = performance.now();
 
 fs.mkdirSync(out, { recursive: true });
-const parts = [['position', pos], ['radius', radius]];
+const parts = [['position', pos], ['spacing', spacing]];
 if (nrm) parts.push(['normal', nrm]);
 if (rgb) parts.push(['rgb', rgb]);
 const layout = {};
@@ -168,7 +168,7 @@ for (const [name, arr] of parts) {
   offset += arr.byteLength;
 }
 fs.writeFileSync(path.join(out, 'points.bin'), Buffer.concat(buffers));
-const sortedR = Array.from(radius).sort((a, b) => a - b);
+const sorted = Array.from(spacing).sort((a, b) => a - b);
 const meta = {
   file: path.resolve(file),
   points: n,
@@ -183,8 +183,8 @@ const meta = {
   has_rgb: hasRgb,
   has_normals: hasNormals,
   points_per_hierarchy_level: perHierarchyLevel,
-  radius_median: n ? sortedR[Math.floor(n / 2)] : 0,
-  radius_max: n ? sortedR[n - 1] : 0,
+  knn_spacing_median: n ? sorted[Math.floor(n / 2)] : 0,
+  knn_spacing_max: n ? sorted[n - 1] : 0,
   knn: K,
   layout,
   bytes: offset,
@@ -194,5 +194,5 @@ console.log(JSON.stringify({
   ...meta,
   layout: undefined,
   decode_seconds: (tDecode - t0) / 1000,
-  radius_seconds: (tRadius - tDecode) / 1000,
+  knn_seconds: (tSpacing - tDecode) / 1000,
 }));

@@ -72,6 +72,7 @@ for (const key of keys) {
   points += view.pointCount;
 }
 const centre = [0, 1, 2].map((a) => 0.5 * (lo[a] + hi[a]));
+const distinct = new Set(xyz.map((p) => p.join(','))).size;
 let radius = 0;
 for (const p of xyz) radius = Math.max(radius, Math.hypot(p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]));
 console.log(JSON.stringify({
@@ -88,6 +89,7 @@ console.log(JSON.stringify({
   empty_nodes: emptyNodes,
   levels: maxLevel + 1,
   points,
+  distinct_positions: distinct,
   points_outside_their_voxel: outside,
   normals_not_unit: badNormals,
   points_per_hierarchy_level: perLevel,

@@ -60,6 +60,11 @@ def main():
     levels = {int(k): v for k, v in seen["points_per_hierarchy_level"].items()}
     same("points over hierarchy levels", sum(levels.values()), n)
     same("hierarchy levels", max(levels) + 1 if levels else 0, exported["hierarchy_levels"])
+    # With the default --coarse-points samples every coarse point is one of the leaves' samples:
+    # the file holds no position the leaves do not.
+    if exported["coarse_points"] == "samples" and seen["distinct_positions"] > exported["leaf_samples"]:
+        problems.append(f"{seen['distinct_positions']} distinct positions, more than the "
+                        f"{exported['leaf_samples']} leaf samples")
     # The bounding sphere pbrlod stats gives (about the box centre, in float) and copc.js's.
     a, b = stats["bounding_sphere"], seen["bounding_sphere"]
     r = max(b["radius"], 1e-300)
