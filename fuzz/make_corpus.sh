@@ -231,3 +231,7 @@ done
 build rho_grid bunny_rho4_no_attributes "$bunny" rho-grid --param rho=4 --param level=1 \
   --param normal_bits=0 --param material_bits=0
 build rho_grid bunny_rho5 "$bunny" rho-grid --param rho=5 --param level=1
+# A COPC file as `pbrlod export` writes it (io/copc.hpp: LAS 1.4 format 7, normals as extra bytes,
+# variable chunks, the hierarchy EVLR), for fuzz_las: the LAS reader reads it as the LAZ it is.
+"$pbrlod" export "$out/fuzz_point_octree/las_colour.lod" --format copc --node-points 64 \
+  -o "$out/fuzz_las/copc_export.las" > /dev/null
