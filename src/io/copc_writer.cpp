@@ -270,6 +270,7 @@ copc_summary write_copc(const std::string& path, const point_cloud& c,
   if (levels.size() != c.size())
     throw InvalidArgument(cat("write_copc: ", levels.size(), " levels for ", c.size(), " points"));
   if (o.node_points == 0) throw InvalidArgument("write_copc: node_points must be positive");
+  if (o.wkt.size() + 1 > 0xFFFF) throw InvalidArgument("write_copc: WKT longer than 65534 bytes");
   const layout L = make_layout(c);
   copc_summary s;
   s.points = c.size();
@@ -313,7 +314,6 @@ copc_summary write_copc(const std::string& path, const point_cloud& c,
     ++vlr_count;
   }
   if (!o.wkt.empty()) {
-    if (o.wkt.size() + 1 > 0xFFFF) throw InvalidArgument("write_copc: WKT longer than 65534 bytes");
     vlrs += vlr("LASF_Projection", 2112, "OGC WKT", o.wkt + '\0');
     ++vlr_count;
   }
