@@ -16,11 +16,10 @@
 #include <fstream>
 #include <map>
 #include <numeric>
-#include <unordered_map>
+#include <unordered_set>
 
 #include "io_internal.hpp"
 #include "laz_codec.hpp"
-#include "laz_decoder.hpp"
 #include "laz_encoder.hpp"
 #include "pbr_lod/core/atomic_file.hpp"
 #include "pbr_lod/core/parallel.hpp"
@@ -32,12 +31,7 @@ namespace {
 
 using detail::cat;
 
-template <class T>
-void put(std::string& s, T v) {
-  unsigned char b[sizeof(T)];
-  detail::laz::store_le(b, v);
-  s.append(reinterpret_cast<const char*>(b), sizeof(T));
-}
+using detail::laz::append_le;
 template <class T>
 void poke(unsigned char* p, T v) {
   detail::laz::store_le(p, v);
@@ -52,13 +46,13 @@ void put_text(std::string& s, std::string_view text, std::size_t width) {
 std::string vlr(std::string_view user, std::uint16_t record, std::string_view description,
                 const std::string& payload, bool extended = false) {
   std::string v;
-  put<std::uint16_t>(v, 0);  // reserved
+  append_le<std::uint16_t>(v, 0);  // reserved
   put_text(v, user, 16);
-  put<std::uint16_t>(v, record);
+  append_le<std::uint16_t>(v, record);
   if (extended)
-    put<std::uint64_t>(v, payload.size());
+    append_le<std::uint64_t>(v, payload.size());
   else
-    put<std::uint16_t>(v, static_cast<std::uint16_t>(payload.size()));
+    append_le<std::uint16_t>(v, static_cast<std::uint16_t>(payload.size()));
   put_text(v, description, 32);
   return v + payload;
 }
@@ -86,6 +80,7 @@ struct layout {
   double scale = 1e-3;
   vec3d offset = vec3d::Zero();
   std::vector<std::array<std::int32_t, 3>> xyz;
+  std::array<std::int32_t, 3> xyz_lo{}, xyz_hi{};  ///< the quantised bounds (the header's)
 
   [[nodiscard]] vec3d world(std::size_t i) const {
     return {xyz[i][0] * scale + offset.x(), xyz[i][1] * scale + offset.y(),
@@ -125,23 +120,41 @@ layout make_layout(const point_cloud& c) {
   L.xyz.resize(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) {
     const vec3d p = c.world(i);
-    for (int a = 0; a < 3; ++a)
-      L.xyz[i][static_cast<std::size_t>(a)] =
-          static_cast<std::int32_t>(std::llround((p[a] - L.offset[a]) / L.scale));
+    for (std::size_t a = 0; a < 3; ++a) {
+      const auto q = static_cast<std::int32_t>(std::llround((p[a] - L.offset[a]) / L.scale));
+      L.xyz[i][a] = q;
+      L.xyz_lo[a] = i == 0 ? q : std::min(L.xyz_lo[a], q);
+      L.xyz_hi[a] = i == 0 ? q : std::max(L.xyz_hi[a], q);
+    }
   }
   return L;
 }
 
-/// The smallest shift that gives at least `target` points per non-empty node on average.
-int choose_shift(const layout& L, std::span<const std::uint8_t> levels, std::uint32_t target) {
+/// Each point's voxel when hierarchy level l is stored at COPC level max(0, l − shift), into key
+/// (one buffer for every shift tried).
+void voxels_at(const layout& L, std::span<const std::uint8_t> levels, int shift, unsigned threads,
+               std::vector<voxel>& key) {
+  key.resize(levels.size());
+  detail::parallel_chunks(
+      key.size(), resolve_threads(threads), 1 << 16, [&](std::size_t lo, std::size_t hi) {
+        for (std::size_t i = lo; i < hi; ++i)
+          key[i] = L.voxel_of(i, std::min(max_copc_level, std::max(0, levels[i] - shift)));
+      });
+}
+
+/// The smallest shift that gives at least `target` points per non-empty node on average (the
+/// deepest level when none does), and the points' voxels at that shift.
+std::pair<int, std::vector<voxel>> choose_shift(const layout& L,
+                                                std::span<const std::uint8_t> levels,
+                                                std::uint32_t target, unsigned threads) {
   const int deepest = levels.empty() ? 0 : *std::max_element(levels.begin(), levels.end());
-  for (int shift = 0; shift < deepest; ++shift) {
-    std::unordered_map<voxel, std::uint64_t, voxel_hash> nodes;
-    for (std::size_t i = 0; i < levels.size(); ++i)
-      ++nodes[L.voxel_of(i, std::min(max_copc_level, std::max(0, levels[i] - shift)))];
-    if (levels.size() >= std::uint64_t{target} * nodes.size()) return shift;
+  std::vector<voxel> key;
+  for (int shift = 0;; ++shift) {
+    voxels_at(L, levels, shift, threads, key);
+    if (shift == deepest) return {shift, std::move(key)};
+    const std::unordered_set<voxel, voxel_hash> nodes(key.begin(), key.end());
+    if (levels.size() >= std::uint64_t{target} * nodes.size()) return {shift, std::move(key)};
   }
-  return deepest;
 }
 
 /// The LAS 1.4 record of point i: format 6 (30 bytes) or 7 (+ RGB), then the normal's floats.
@@ -171,9 +184,9 @@ std::string normal_descriptors() {
   std::string s;
   for (const char axis : {'X', 'Y', 'Z'}) {
     std::string d;
-    put<std::uint16_t>(d, 0);  // reserved
-    d += '\x09';               // data type 9: float
-    d += '\0';                 // options: no no_data, min, max, scale or offset
+    append_le<std::uint16_t>(d, 0);  // reserved
+    d += '\x09';                     // data type 9: float
+    d += '\0';                       // options: no no_data, min, max, scale or offset
     put_text(d, std::string("Normal") + axis, 32);
     d.resize(160, '\0');
     put_text(d, std::string("unit normal, ") + axis, 32);
@@ -190,15 +203,9 @@ struct octree {
   std::vector<std::size_t> order;         ///< point indices, node by node
 };
 
-octree make_octree(const layout& L, std::span<const std::uint8_t> levels, int shift,
-                   unsigned threads) {
-  const std::size_t n = levels.size();
-  std::vector<voxel> key(n);
-  detail::parallel_chunks(
-      n, resolve_threads(threads), 1 << 16, [&](std::size_t lo, std::size_t hi) {
-        for (std::size_t i = lo; i < hi; ++i)
-          key[i] = L.voxel_of(i, std::min(max_copc_level, std::max(0, levels[i] - shift)));
-      });
+/// The octree of the points whose voxels are `key`.
+octree make_octree(const std::vector<voxel>& key) {
+  const std::size_t n = key.size();
   octree t;
   t.order.resize(n);
   std::iota(t.order.begin(), t.order.end(), std::size_t{0});
@@ -211,6 +218,8 @@ octree make_octree(const layout& L, std::span<const std::uint8_t> levels, int sh
     nodes.emplace(key[t.order[k]], std::pair{k, e - k});
     k = e;
   }
+  // Every ancestor of a node with points. In key order (level first) a parent met on the way up
+  // already has its own ancestors, so the walk stops there.
   std::vector<voxel> data;
   for (const auto& [k, run] : nodes) data.push_back(k);
   for (voxel v : data)
@@ -243,17 +252,14 @@ std::string las14_header(const point_cloud& c, const layout& L, unsigned format,
   poke<std::uint32_t>(b + 100, vlrs);
   b[104] = static_cast<unsigned char>(format | 0x80);  // LAZ
   poke<std::uint16_t>(b + 105, record_length);
-  vec3d lo = vec3d::Zero(), hi = vec3d::Zero();
-  for (std::size_t i = 0; i < c.size(); ++i) {
-    const vec3d p = L.world(i);
-    lo = i == 0 ? p : vec3d(lo.cwiseMin(p));
-    hi = i == 0 ? p : vec3d(hi.cwiseMax(p));
-  }
   for (int a = 0; a < 3; ++a) {
+    const auto bound = [&](std::int32_t q) {
+      return c.size() == 0 ? 0.0 : q * L.scale + L.offset[a];
+    };
     poke<double>(b + 131 + 8 * a, L.scale);
     poke<double>(b + 155 + 8 * a, L.offset[a]);
-    poke<double>(b + 179 + 16 * a, hi[a]);
-    poke<double>(b + 187 + 16 * a, lo[a]);
+    poke<double>(b + 179 + 16 * a, bound(L.xyz_hi[static_cast<std::size_t>(a)]));
+    poke<double>(b + 187 + 16 * a, bound(L.xyz_lo[static_cast<std::size_t>(a)]));
   }
   poke<std::uint64_t>(b + 235, evlr_at);
   poke<std::uint32_t>(b + 243, 1);
@@ -274,8 +280,10 @@ copc_summary write_copc(const std::string& path, const point_cloud& c,
   const layout L = make_layout(c);
   copc_summary s;
   s.points = c.size();
-  s.shift = choose_shift(L, levels, o.node_points);
-  const octree t = make_octree(L, levels, s.shift, o.threads);
+  auto [shift, keys] = choose_shift(L, levels, o.node_points, o.threads);
+  s.shift = shift;
+  const octree t = make_octree(keys);
+  keys = {};
 
   const unsigned format = c.colours.empty() ? 6 : 7;
   const std::size_t extra = c.normals.empty() ? 0 : 12;
@@ -294,17 +302,17 @@ copc_summary write_copc(const std::string& path, const point_cloud& c,
   // The VLRs; the info VLR's hierarchy offset is filled in once the chunks' sizes are known.
   std::string info;
   const vec3d centre = L.lo + vec3d::Constant(0.5 * L.size);
-  for (int a = 0; a < 3; ++a) put<double>(info, centre[a]);
-  put<double>(info, 0.5 * L.size);
+  for (int a = 0; a < 3; ++a) append_le<double>(info, centre[a]);
+  append_le<double>(info, 0.5 * L.size);
   std::size_t root_points = 0;
   for (std::size_t k = 0; k < t.keys.size() && t.keys[k].level == 0; ++k) root_points += t.count[k];
   s.spacing = L.size / std::sqrt(double(std::max<std::size_t>(1, root_points)));
-  put<double>(info, s.spacing);
+  append_le<double>(info, s.spacing);
   const std::size_t hier_at_in_info = info.size();
-  put<std::uint64_t>(info, 0);  // root_hier_offset
-  put<std::uint64_t>(info, 0);  // root_hier_size
-  put<double>(info, 0);         // gpstime min and max: the records hold none
-  put<double>(info, 0);
+  append_le<std::uint64_t>(info, 0);  // root_hier_offset
+  append_le<std::uint64_t>(info, 0);  // root_hier_size
+  append_le<double>(info, 0);         // gpstime min and max: the records hold none
+  append_le<double>(info, 0);
   info.append(11 * 8, '\0');
   std::string vlrs = vlr("copc", 1, "COPC info", info);
   vlrs += detail::laszip_vlr(format, extra, 0xFFFFFFFFu);
@@ -325,20 +333,20 @@ copc_summary write_copc(const std::string& path, const point_cloud& c,
   std::string page;
   for (std::size_t k = 0; k < t.keys.size(); ++k) {
     const voxel& v = t.keys[k];
-    for (const std::int32_t x : {v.level, v.x, v.y, v.z}) put<std::int32_t>(page, x);
+    for (const std::int32_t x : {v.level, v.x, v.y, v.z}) append_le<std::int32_t>(page, x);
     if (t.count[k] == 0) {
-      put<std::uint64_t>(page, 0);
-      put<std::int32_t>(page, 0);
-      put<std::int32_t>(page, 0);
+      append_le<std::uint64_t>(page, 0);
+      append_le<std::int32_t>(page, 0);
+      append_le<std::int32_t>(page, 0);
       ++s.empty_nodes;
       continue;
     }
     if (t.count[k] > 0x7FFFFFFFu || chunks[k].size() > 0x7FFFFFFFu)
       throw InvalidArgument(cat("write_copc: node ", v.level, "-", v.x, "-", v.y, "-", v.z,
                                 " holds ", t.count[k], " points (COPC allows 2^31 - 1)"));
-    put<std::uint64_t>(page, at);
-    put<std::int32_t>(page, static_cast<std::int32_t>(chunks[k].size()));
-    put<std::int32_t>(page, static_cast<std::int32_t>(t.count[k]));
+    append_le<std::uint64_t>(page, at);
+    append_le<std::int32_t>(page, static_cast<std::int32_t>(chunks[k].size()));
+    append_le<std::int32_t>(page, static_cast<std::int32_t>(t.count[k]));
     at += chunks[k].size();
     bytes.push_back(chunks[k].size());
     counts.push_back(t.count[k]);
@@ -367,7 +375,7 @@ copc_summary write_copc(const std::string& path, const point_cloud& c,
   write(header.data(), header.size());
   write(vlrs.data(), vlrs.size());
   std::string table_offset;
-  put<std::int64_t>(table_offset, static_cast<std::int64_t>(table_at));
+  append_le<std::int64_t>(table_offset, static_cast<std::int64_t>(table_at));
   write(table_offset.data(), table_offset.size());
   for (const auto& ch : chunks) write(ch.data(), ch.size());
   write(table.data(), table.size());
@@ -391,44 +399,36 @@ std::string las_wkt(const std::string& path) {
   f.read_exact(0, head.size(), head.data());
   read_report report;
   const detail::las_header h = detail::parse_las_header(path, head.data(), f.size(), report);
-  // The VLRs between the header and the points.
-  std::uint64_t at = h.header_size;
-  for (std::uint32_t i = 0; i < h.vlr_count; ++i) {
-    unsigned char v[54];
-    if (at + 54 > f.size()) detail::format_error(path, cat("VLR ", i), "runs past the file's end");
-    f.read_exact(at, 54, v);
-    const std::uint16_t record = detail::load_le<std::uint16_t>(v + 18);
-    const std::uint16_t length = detail::load_le<std::uint16_t>(v + 20);
-    if (at + 54 + length > f.size())
-      detail::format_error(path, cat("VLR ", i), "runs past the file's end");
-    if (std::memcmp(v + 2, "LASF_Projection", 15) == 0 && record == 2112) {
-      std::string wkt(length, '\0');
-      f.read_exact(at + 54, length, wkt.data());
-      return wkt.substr(0, wkt.find('\0'));
-    }
-    at += 54 + length;
-  }
-  // LAS 1.4: the EVLRs after the points.
-  if (head.size() >= 247 && head[25] >= 4) {
-    std::uint64_t e = detail::load_le<std::uint64_t>(head.data() + 235);
-    const std::uint32_t n = detail::load_le<std::uint32_t>(head.data() + 243);
-    for (std::uint32_t i = 0; i < n && e != 0; ++i) {
+  // One walk for the VLRs (54-byte headers, 16-bit lengths) between the header and the points
+  // and for a LAS 1.4 file's EVLRs after them (60-byte headers, 64-bit lengths).
+  std::string wkt;
+  const auto find = [&](const char* what, std::uint64_t at, std::uint32_t count, bool extended) {
+    const std::size_t head_bytes = extended ? 60 : 54;
+    for (std::uint32_t i = 0; i < count && at != 0; ++i) {
       unsigned char v[60];
-      if (e > f.size() || f.size() - e < 60)
-        detail::format_error(path, cat("EVLR ", i), "runs past the file's end");
-      f.read_exact(e, 60, v);
+      if (at > f.size() || f.size() - at < head_bytes)
+        detail::format_error(path, cat(what, " ", i), "runs past the file's end");
+      f.read_exact(at, head_bytes, v);
       const std::uint16_t record = detail::load_le<std::uint16_t>(v + 18);
-      const std::uint64_t length = detail::load_le<std::uint64_t>(v + 20);
-      if (length > f.size() - e - 60)
-        detail::format_error(path, cat("EVLR ", i), "runs past the file's end");
+      const std::uint64_t length = extended ? detail::load_le<std::uint64_t>(v + 20)
+                                            : detail::load_le<std::uint16_t>(v + 20);
+      if (length > f.size() - at - head_bytes)
+        detail::format_error(path, cat(what, " ", i), "runs past the file's end");
       if (std::memcmp(v + 2, "LASF_Projection", 15) == 0 && record == 2112) {
-        std::string wkt(static_cast<std::size_t>(length), '\0');
-        f.read_exact(e + 60, wkt.size(), wkt.data());
-        return wkt.substr(0, wkt.find('\0'));
+        wkt.assign(static_cast<std::size_t>(length), '\0');
+        f.read_exact(at + head_bytes, wkt.size(), wkt.data());
+        wkt.resize(std::min(wkt.find('\0'), wkt.size()));
+        return true;
       }
-      e += 60 + length;
+      at += head_bytes + length;
     }
-  }
+    return false;
+  };
+  if (find("VLR", h.header_size, h.vlr_count, false)) return wkt;
+  if (head.size() >= 247 && head[25] >= 4 &&
+      find("EVLR", detail::load_le<std::uint64_t>(head.data() + 235),
+           detail::load_le<std::uint32_t>(head.data() + 243), true))
+    return wkt;
   return {};
 }
 

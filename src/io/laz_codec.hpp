@@ -16,6 +16,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "io_internal.hpp"  // byte_swapped
@@ -526,6 +527,14 @@ template <class T>
 inline void store_le(unsigned char* p, T v) {
   if constexpr (std::endian::native == std::endian::big) v = byte_swapped(v);
   std::memcpy(p, &v, sizeof(T));
+}
+
+/// Appends v little-endian to s (the writers' file assembly).
+template <class T>
+inline void append_le(std::string& s, T v) {
+  unsigned char b[sizeof(T)];
+  store_le(b, v);
+  s.append(reinterpret_cast<const char*>(b), sizeof(T));
 }
 
 /// WAVEPACKET13 v1 / WAVEPACKET14 v3 (formats 4, 5, 9, 10): the 29 bytes that point into the

@@ -11,12 +11,7 @@
 namespace pbr_lod::detail {
 namespace {
 
-template <class T>
-void put(std::string& s, T v) {
-  unsigned char b[sizeof(T)];
-  laz::store_le(b, v);
-  s.append(reinterpret_cast<const char*>(b), sizeof(T));
-}
+using laz::append_le;
 template <class T>
 void poke(std::string& s, std::size_t at, T v) {
   laz::store_le(reinterpret_cast<unsigned char*>(s.data() + at), v);
@@ -27,16 +22,16 @@ void poke(std::string& s, std::size_t at, T v) {
 std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_size) {
   const bool layered = format >= 6;
   std::string payload;
-  put<std::uint16_t>(payload, layered ? 3 : 2);  // compressor: layered / point-wise chunked
-  put<std::uint16_t>(payload, 0);                // coder: arithmetic
+  append_le<std::uint16_t>(payload, layered ? 3 : 2);  // compressor: layered / point-wise chunked
+  append_le<std::uint16_t>(payload, 0);                // coder: arithmetic
   // The LASzip revision whose output encode_layered_chunk reproduces.
   payload += '\x03';
   payload += '\x04';
-  put<std::uint16_t>(payload, 3);
-  put<std::uint32_t>(payload, 0);  // options
-  put<std::uint32_t>(payload, chunk_size);
-  put<std::int64_t>(payload, -1);  // special EVLRs: none (as LASzip writes it)
-  put<std::int64_t>(payload, -1);
+  append_le<std::uint16_t>(payload, 3);
+  append_le<std::uint32_t>(payload, 0);  // options
+  append_le<std::uint32_t>(payload, chunk_size);
+  append_le<std::int64_t>(payload, -1);  // special EVLRs: none (as LASzip writes it)
+  append_le<std::int64_t>(payload, -1);
   struct item {
     std::uint16_t type, size, version;
   };
@@ -56,28 +51,28 @@ std::string laszip_vlr(unsigned format, std::size_t extra, std::uint32_t chunk_s
     items.push_back({static_cast<std::uint16_t>(layered ? 14 : 0),
                      static_cast<std::uint16_t>(extra),
                      static_cast<std::uint16_t>(layered ? 3 : 2)});
-  put<std::uint16_t>(payload, static_cast<std::uint16_t>(items.size()));
+  append_le<std::uint16_t>(payload, static_cast<std::uint16_t>(items.size()));
   for (const item& it : items) {
-    put<std::uint16_t>(payload, it.type);
-    put<std::uint16_t>(payload, it.size);
-    put<std::uint16_t>(payload, it.version);
+    append_le<std::uint16_t>(payload, it.type);
+    append_le<std::uint16_t>(payload, it.size);
+    append_le<std::uint16_t>(payload, it.version);
   }
   std::string v;
-  put<std::uint16_t>(v, 0);  // reserved
+  append_le<std::uint16_t>(v, 0);  // reserved
   std::string id(16, '\0'), description(32, '\0');
   std::copy_n("laszip encoded", 14, id.begin());
   std::copy_n("pbr_lod LAZ writer", 18, description.begin());
   v += id;
-  put<std::uint16_t>(v, 22204);
-  put<std::uint16_t>(v, static_cast<std::uint16_t>(payload.size()));
+  append_le<std::uint16_t>(v, 22204);
+  append_le<std::uint16_t>(v, static_cast<std::uint16_t>(payload.size()));
   v += description;
   return v + payload;
 }
 
 void append_chunk_table(std::string& out, const std::vector<std::uint64_t>& bytes,
                         const std::vector<std::uint64_t>* counts) {
-  put<std::uint32_t>(out, 0);  // version
-  put<std::uint32_t>(out, static_cast<std::uint32_t>(bytes.size()));
+  append_le<std::uint32_t>(out, 0);  // version
+  append_le<std::uint32_t>(out, static_cast<std::uint32_t>(bytes.size()));
   if (bytes.empty()) return;
   // Each chunk's point count (variable chunks only, context 0) and byte count (context 1),
   // coded against the previous chunk's.
@@ -141,7 +136,7 @@ std::string encode_laz_file(const std::string& path, const std::string& las,
   });
   std::uint64_t table_at = data_offset + 8;
   for (const auto& c : chunks) table_at += c.size();
-  put<std::int64_t>(out, static_cast<std::int64_t>(table_at));
+  append_le<std::int64_t>(out, static_cast<std::int64_t>(table_at));
   for (const auto& c : chunks) out.append(c.begin(), c.end());
 
   std::vector<std::uint64_t> sizes;

@@ -394,7 +394,7 @@ class file_point_source final : public point_source {
     }
     const std::lock_guard<std::mutex> lock(resume_mutex_);
     // resume_.at holds kept point resume_.kept: from there, skip it and those up to `first`.
-    if (resume_.kept != no_resume && resume_.kept < first && resume_.kept >= run_first)
+    if (resume_.kept < first && resume_.kept >= run_first)
       return {resume_.at, first - resume_.kept};
     return {at, skip};
   }
@@ -433,10 +433,10 @@ class file_point_source final : public point_source {
   vec3d origin_ = vec3d::Zero();
   std::uint64_t size_ = 0;
   std::vector<record_at> index_;  ///< index_[k]: where kept point k·2^run_bits is
-  static constexpr std::uint64_t no_resume = ~std::uint64_t{0};
   struct resume_point {
-    std::uint64_t kept = no_resume;  ///< the last point the last read gave
-    record_at at;                    ///< where it is
+    /// The last point the last read gave; before any read, a value no point is above.
+    std::uint64_t kept = ~std::uint64_t{0};
+    record_at at;  ///< where it is
   };
   mutable std::mutex resume_mutex_;
   mutable resume_point resume_;
