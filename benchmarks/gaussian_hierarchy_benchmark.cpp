@@ -28,17 +28,21 @@ const gaussian_cloud& scene(std::size_t n) {
 void BM_Build(benchmark::State& state) {
   const gaussian_cloud& g = scene(static_cast<std::size_t>(state.range(0)));
   const auto threads = static_cast<unsigned>(state.range(1));
+  const auto leaf = static_cast<int>(state.range(2));
   for (auto _ : state) {
-    auto h = build_gaussian_hierarchy(g, {.threads = threads});
+    auto h = build_gaussian_hierarchy(g, {.leaf_size = leaf, .threads = threads});
     benchmark::DoNotOptimize(h);
   }
   state.counters["gaussians_per_s"] = benchmark::Counter(
       static_cast<double>(g.size()), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_Build)
-    ->Args({1'000'000, 1})
-    ->Args({1'000'000, 2})
-    ->Args({10'000'000, 2})
+    ->Args({1'000'000, 1, 1})
+    ->Args({1'000'000, 2, 1})
+    ->Args({1'000'000, 2, 2})
+    ->Args({10'000'000, 2, 1})
+    ->Args({10'000'000, 2, 2})
+    ->ArgNames({"n", "threads", "leaf"})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1)

@@ -1,7 +1,7 @@
 // pbrlod build --distributed: a chunked build (point-octree, PMR) shared among MPI ranks (Open MPI
 // from Debian). The library knows no MPI: it takes a rank, a rank count and a barrier
-// (chunked_options::distributed, builders/chunked.hpp); this file gives it MPI's. Every rank runs the same
-// command line over a folder on a shared file system; rank 0 prints the report.
+// (chunked_options::distributed, builders/chunked.hpp); this file gives it MPI's. Every rank runs
+// the same command line over a folder on a shared file system; rank 0 prints the report.
 #include "distributed.hpp"
 
 #include <iostream>

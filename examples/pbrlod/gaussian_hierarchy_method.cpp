@@ -34,7 +34,7 @@ json gaussian_stats_json(const gaussian_hierarchy& h, const std::string& path) {
 /// the host's.
 template <class H>
 frame host_gaussians(const H& h, const view& v, const render_options& o, const traverse_options& t,
-                     host_sink& host) {
+                     float lowpass, host_sink& host) {
   static_assert(gaussian_hierarchy::attrs == host_attributes);
   struct to_host {
     host_sink& out;
@@ -49,7 +49,7 @@ frame host_gaussians(const H& h, const view& v, const render_options& o, const t
   f.fx = ho.fx;
   const auto t0 = clock_type::now();
   host.begin(v, ho, gaussian_hierarchy::attrs);
-  f.st = traverse(h, v, t, sink, gaussian_policy{});
+  f.st = traverse(h, v, t, sink, gaussian_policy{.merged_lowpass_px2 = lowpass});
   f.seconds = seconds_since(t0);
   f.extra.integer("gaussians", static_cast<long long>(f.st.gaussians));
   return f;
@@ -70,18 +70,19 @@ struct gaussian_method_traits {
     const view v(r.cam, h.origin());
     const render_options o = lod_render_options(r.view, true);
     const traverse_options t{.tolerance_px = r.tolerance};
-    if (r.host) return host_gaussians(h, v, o, t, *r.host);
+    if (r.host) return host_gaussians(h, v, o, t, r.view.merged_lowpass, *r.host);
     frame f;
     f.fx = effects{.colour = true};
     const auto t0 = clock_type::now();
     gaussian_render_options go;
     go.background = o.background;
     gaussian_rasterizer raster(v, go);
-    f.st = traverse(h, v, t, raster, gaussian_policy{});
+    const gaussian_policy policy{.merged_lowpass_px2 = r.view.merged_lowpass};
+    f.st = traverse(h, v, t, raster, policy);
     f.img = raster.finish();
     f.seconds = seconds_since(t0);
-    if (r.time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, gaussian_policy{});
-    collect_samples(f, h, v, t, gaussian_policy{}, r, h.origin());
+    if (r.time_traversal) f.traverse_seconds = traversal_seconds(h, v, t, policy);
+    collect_samples(f, h, v, t, policy, r, h.origin());
     f.extra.integer("gaussians", static_cast<long long>(f.st.gaussians));
     return f;
   }
@@ -131,7 +132,7 @@ struct chunked_gaussian_traits : chunked_folder, gaussian_method_traits {
 /// The in-memory build's parameters (a chunked build's too).
 gaussian_hierarchy_options gaussian_options(params& m) {
   gaussian_hierarchy_options o;
-  o.leaf_size = static_cast<int>(m.integer("leaf_size", 1, 1, 64));
+  o.leaf_size = static_cast<int>(m.integer("leaf_size", o.leaf_size, 1, 64));
   o.threads = static_cast<unsigned>(m.integer("threads", 0, 0, 256));
   o.opacity = m.choice("merge", "grow", {"grow", "conserve"}) == "conserve"
                   ? merged_opacity::conserve

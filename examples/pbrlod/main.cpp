@@ -172,7 +172,8 @@ int cmd_export(const std::string& input, const view_args& va, float tolerance,
     input_gaussians = h.input_gaussians();
     if (level) return h.level(static_cast<std::size_t>(*level));
     const view v(make_camera(bounds.first, bounds.second, va), h.origin());
-    return h.cut(v, {.tolerance_px = tolerance});
+    return h.cut(v, {.tolerance_px = tolerance},
+                 gaussian_policy{.merged_lowpass_px2 = va.merged_lowpass});
   };
   gaussian_cloud cut;
   if (is_chunked_gaussian_hierarchy(input)) {
@@ -626,6 +627,12 @@ int main(int argc, char** argv) {
   render->add_option("--seed", seed, "random stream of methods that generate points (pca-octree)")
       ->capture_default_str();
   add_view_options(render, va);
+  const std::string lowpass_help =
+      "gaussian-hierarchy: square pixels added to the large axes of each merged Gaussian the cut "
+      "draws (0: as stored, the paper's; docs/gaussian-hierarchy.md)";
+  render->add_option("--merged-lowpass", va.merged_lowpass, lowpass_help)
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   render->add_flag("--json", as_json, "print one JSON object");
 
   std::string stats_input;
@@ -672,6 +679,9 @@ int main(int argc, char** argv) {
                    "above it) instead of the view's cut")
       ->check(CLI::NonNegativeNumber);
   add_view_options(exporter, va);
+  exporter->add_option("--merged-lowpass", va.merged_lowpass, lowpass_help)
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   exporter->add_flag("--json", as_json, "print one JSON object");
 
   std::string cmp_a, cmp_b;

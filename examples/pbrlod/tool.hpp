@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "pbr_lod/builders/chunked.hpp"
+#include "pbr_lod/builders/gaussian_hierarchy.hpp"
 #include "pbr_lod/core/attributes.hpp"
 #include "pbr_lod/core/camera.hpp"
 #include "pbr_lod/core/gaussians.hpp"
@@ -201,6 +202,8 @@ struct view_args {
   std::string up = "y";
   std::string effects_list = "default";
   int supersample = 1;  ///< render_options::supersample
+  /// Gaussian hierarchies: gaussian_policy::merged_lowpass_px2 (render, export).
+  float merged_lowpass = pbr_lod::gaussian_policy{}.merged_lowpass_px2;
 };
 std::vector<double> parse_numbers(const std::string& s, char sep, std::size_t n, const char* what);
 /// The orbit camera of --view/--size/--up around the bounding sphere of c.

@@ -65,7 +65,8 @@ gaussian_cloud random_cloud(std::size_t n, int degree, unsigned seed) {
   return g;
 }
 
-chunked_gaussian_hierarchy_options options(std::uint64_t chunk_points, int leaf_size = 1,
+chunked_gaussian_hierarchy_options options(std::uint64_t chunk_points,
+                                           int leaf_size = gaussian_hierarchy_options{}.leaf_size,
                                            unsigned threads = 0) {
   chunked_gaussian_hierarchy_options o;
   o.chunk_points = chunk_points;
@@ -284,7 +285,7 @@ TEST(ChunkedGaussianHierarchy, EveryDamagedTopFileIsAFormatError) {
 
 // save() writes its file in pieces of about 1 MiB, hashing as it goes: the bytes serialize() gives.
 TEST(GaussianHierarchyFile, SaveWritesTheSerializedBytesInPieces) {
-  const gaussian_hierarchy h = build_gaussian_hierarchy(make_gaussian_scene(12000, 3, 2));
+  const gaussian_hierarchy h = build_gaussian_hierarchy(make_gaussian_scene(16000, 3, 2));
   ASSERT_GT(h.file_bytes(), std::size_t{5} << 20);
   const std::string path = temp("pieces.lod");
   h.save(path);

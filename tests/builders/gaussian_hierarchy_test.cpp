@@ -62,6 +62,9 @@ gaussian_cloud two_gaussians(vec3f a, vec3f b, float sa, float sb, float oa, flo
   return g;
 }
 
+/// Leaves of one Gaussian (the paper's), so that the root of two merges them.
+const gaussian_hierarchy_options pair{.leaf_size = 1};
+
 std::array<float, 6> root_covariance(const gaussian_hierarchy& h) {
   const auto& s = h.store();
   const std::size_t r = h.nodes()[0].gaussian;
@@ -73,7 +76,7 @@ std::array<float, 6> root_covariance(const gaussian_hierarchy& h) {
 // o = 3 / (1 + 2√2) = 0.78361; SH the plain mean.
 TEST(GaussianMerge, TwoEqualGaussiansByHand) {
   const auto h = build_gaussian_hierarchy(two_gaussians({-1, 0, 0}, {1, 0, 0}, 1, 1, 0.5f, 0.5f),
-                                          {.threads = 1});
+                                          {.leaf_size = 1, .threads = 1});
   ASSERT_EQ(h.nodes().size(), 3u);
   ASSERT_FALSE(h.is_leaf(0));
   const std::size_t r = h.nodes()[0].gaussian;
@@ -98,13 +101,13 @@ TEST(GaussianMerge, TwoEqualGaussiansByHand) {
 // equal weights again, mean x = 1.5; Σxx = ½(1 + 2.25) + ½(4 + 2.25) = 4.75, Σyy = ½(1 + 4).
 // Then opacity 0.25 → 0.125 on the big one: W = 1.5, weights 2/3 and 1/3, mean x = 1.
 TEST(GaussianMerge, WeightsAreOpacityTimesSurface) {
-  auto h = build_gaussian_hierarchy(two_gaussians({0, 0, 0}, {3, 0, 0}, 1, 2, 1, 0.25f));
+  auto h = build_gaussian_hierarchy(two_gaussians({0, 0, 0}, {3, 0, 0}, 1, 2, 1, 0.25f), pair);
   std::size_t r = h.nodes()[0].gaussian;
   EXPECT_NEAR(h.store().positions[r].x(), 1.5, 1e-5);
   auto c = root_covariance(h);
   EXPECT_NEAR(c[0], 4.75, 1e-4);
   EXPECT_NEAR(c[3], 2.5, 1e-4);
-  h = build_gaussian_hierarchy(two_gaussians({0, 0, 0}, {3, 0, 0}, 1, 2, 1, 0.125f));
+  h = build_gaussian_hierarchy(two_gaussians({0, 0, 0}, {3, 0, 0}, 1, 2, 1, 0.125f), pair);
   r = h.nodes()[0].gaussian;
   EXPECT_NEAR(h.store().positions[r].x(), 1.0, 1e-5);
   c = root_covariance(h);
@@ -120,12 +123,12 @@ TEST(GaussianMerge, WeightsAreOpacityTimesSurface) {
 TEST(GaussianMerge, CoincidentCopiesAddOpacity) {
   for (const merged_opacity rule : {merged_opacity::grow, merged_opacity::conserve}) {
     auto h = build_gaussian_hierarchy(two_gaussians({1, 2, 3}, {1, 2, 3}, 0.5f, 0.5f, 0.3f, 0.3f),
-                                      {.opacity = rule});
+                                      {.leaf_size = 1, .opacity = rule});
     std::size_t r = h.nodes()[0].gaussian;
     EXPECT_NEAR(h.store().opacities[r], 0.6, 1e-6);
     EXPECT_NEAR(h.store().scales[r].maxCoeff(), 0.5, 1e-6);
     h = build_gaussian_hierarchy(two_gaussians({1, 2, 3}, {1, 2, 3}, 0.5f, 0.5f, 0.7f, 0.7f),
-                                 {.opacity = rule});
+                                 {.leaf_size = 1, .opacity = rule});
     r = h.nodes()[0].gaussian;
     const bool grow = rule == merged_opacity::grow;
     EXPECT_NEAR(h.store().opacities[r], grow ? 1.0 : 1.4, 1e-6);
@@ -140,7 +143,8 @@ TEST(GaussianMerge, CoincidentCopiesAddOpacity) {
 TEST(GaussianMerge, DegenerateInputStaysFinite) {
   for (const auto& [sa, oa, ob] :
        {std::tuple{0.0f, 0.5f, 0.8f}, std::tuple{1.0f, 0.0f, 0.0f}, std::tuple{0.0f, 0.0f, 0.0f}}) {
-    const auto h = build_gaussian_hierarchy(two_gaussians({0, 0, 0}, {0, 0, 0}, sa, sa, oa, ob));
+    const auto h =
+        build_gaussian_hierarchy(two_gaussians({0, 0, 0}, {0, 0, 0}, sa, sa, oa, ob), pair);
     const std::size_t r = h.nodes()[0].gaussian;
     EXPECT_NO_THROW(h.store().validate("store", kAnyOpacity));
     EXPECT_EQ(h.store().opacities[r], std::max(oa, ob)) << sa << " " << oa;
@@ -346,6 +350,57 @@ TEST(GaussianHierarchy, CutsAgainstTheFullRenderAndTheirExport) {
       EXPECT_GE(exported, r.min_export_psnr);
     }
   }
+  std::filesystem::remove(path);
+}
+
+// widened_scale by hand: scales (0.1, 2, 3) at depth 10 with focal 100 px: a pixel is 0.1 units
+// there, so 1 px² adds 0.01 to the two large axes' variances; the smallest axis is kept.
+TEST(GaussianPolicy, WidenedScaleByHand) {
+  const vec3f s(0.1f, 2, 3);
+  const vec3f w = detail::widened_scale(s, 10, 100, 1);
+  EXPECT_EQ(w[0], 0.1f);
+  EXPECT_FLOAT_EQ(w[1], std::sqrt(4.01f));
+  EXPECT_FLOAT_EQ(w[2], std::sqrt(9.01f));
+  EXPECT_EQ(detail::widened_scale(vec3f(2, 0.5f, 3), 20, 100, 0.25f)[1], 0.5f);  // axis 1 kept
+  EXPECT_FLOAT_EQ(detail::widened_scale(vec3f(2, 0.5f, 3), 20, 100, 0.25f)[0], std::sqrt(4.01f));
+  EXPECT_EQ(detail::widened_scale(s, 10, 100, 0), s);  // no low-pass
+  EXPECT_EQ(detail::widened_scale(s, 0, 100, 1), s);   // at the eye
+  EXPECT_EQ(detail::widened_scale(s, -5, 100, 1), s);  // behind it
+}
+
+// The low-pass reaches exactly the merged Gaussians a cut draws: the cut with it is the cut
+// without it (same Gaussians, same order) with every merged one widened by hand and every
+// leaf's as stored; the frame drawn with it is the export drawn in full (the file carries it).
+TEST(GaussianPolicy, MergedLowpassWidensTheCutsMergedGaussiansOnly) {
+  const gaussian_cloud scene = make_gaussian_scene(30000, 1, 5);
+  camera cam;
+  cam.eye = vec3d(0.3, 0.4, 1).normalized() * 10;
+  cam.vp = {256, 256};
+  cam.z_far = 20;
+  const auto h = build_gaussian_hierarchy(scene);
+  const view v(cam, h.origin());
+  const traverse_options t{.tolerance_px = 2};
+  const gaussian_policy widen{.merged_lowpass_px2 = 1};
+  const gaussian_cloud plain = h.cut(v, t), wide = h.cut(v, t, widen);
+  ASSERT_EQ(plain.positions, wide.positions);
+  gaussian_rasterizer raster(v);
+  const auto st = traverse(h, v, t, raster, widen);
+  ASSERT_EQ(st.gaussians, wide.size());
+  std::size_t widened = 0;
+  for (std::size_t i = 0; i < plain.size(); ++i) {
+    if (plain.scales[i] == wide.scales[i]) continue;
+    ++widened;
+    const float z = v.to_eye(plain.positions[i]).z();
+    EXPECT_EQ(wide.scales[i], detail::widened_scale(plain.scales[i], z, v.focal_px, 1)) << i;
+  }
+  // One Gaussian per merged (inner) node drawn; a leaf's drawn as stored.
+  EXPECT_EQ(widened, st.emitted_nodes);
+  EXPECT_GT(widened, plain.size() / 2);  // a coarse cut: mostly merged nodes
+  const std::string path = temp_path("wide_cut.ply");
+  write_gaussians_ply(wide, path);
+  const double exported =
+      compare_images(raster.finish(), render_gaussians(read_gaussians(path), cam)).psnr;
+  EXPECT_GE(exported, 80);
   std::filesystem::remove(path);
 }
 

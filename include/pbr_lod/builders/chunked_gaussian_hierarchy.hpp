@@ -139,7 +139,9 @@ class chunked_gaussian_hierarchy : public chunked_reader<gaussian_hierarchy> {
     const top_node& t = top_nodes_[i];
     return {&top_g_, t.gaussian, t.count == 0 ? 1 : t.count};
   }
-  /// The Gaussians a traversal of v with `o` draws (gaussian_policy), as gaussian_hierarchy::cut.
+  /// The Gaussians a traversal of v with `o` and `p` draws, as gaussian_hierarchy::cut.
+  [[nodiscard]] gaussian_cloud cut(const view& v, const traverse_options& o,
+                                   const gaussian_policy& p) const;
   [[nodiscard]] gaussian_cloud cut(const view& v, const traverse_options& o) const;
   /// The view-independent cut at tree depth `level`, as gaussian_hierarchy::level (reads the
   /// chunks it reaches).

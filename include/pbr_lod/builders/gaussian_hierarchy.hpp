@@ -5,7 +5,8 @@
 // Paper → code (docs/gaussian-hierarchy.md has the full table):
 //   §4.1 hierarchy generation   a binary tree by recursive median splits of the Gaussians' means
 //                               along the longest axis of their 3σ boxes (the authors' k-d tree
-//                               generator); leaves hold `leaf_size` Gaussians (theirs: one).
+//                               generator); leaves hold `leaf_size` Gaussians (theirs: one; ours:
+//                               two).
 //   §4.1 merging (eqs. 2–4)     an inner node is one Gaussian moment-matched from its children's:
 //                               weights w_i ∝ o_i · S(s_i), S the surface proxy s₀s₁ + s₀s₂ + s₁s₂;
 //                               μ = Σ w_i μ_i, Σ = Σ w_i (Σ_i + (μ_i − μ)(μ_i − μ)ᵀ), the SH
@@ -34,6 +35,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -62,9 +64,11 @@ enum class merged_opacity {
 };
 
 struct gaussian_hierarchy_options {
-  /// Gaussians per leaf, 1–64. 1 is the paper's; 2 stores about 0.5 inner Gaussians per input
-  /// Gaussian instead of 1 (docs/gaussian-hierarchy.md measures both).
-  int leaf_size = 1;
+  /// Gaussians per leaf, 1–64. 1 is the paper's: one merged Gaussian per input Gaussian, a
+  /// hierarchy 2.3 × its input. 2 (the default) drops only the merges of single pairs: about 0.5
+  /// merged Gaussians per input one (1.6 × the input), the same Gaussians in every cut that draws
+  /// an inner node above the pairs, a quarter less to build (docs/gaussian-hierarchy.md).
+  int leaf_size = 2;
   merged_opacity opacity = merged_opacity::grow;
   unsigned threads = 0;  ///< 0 = every core (core/parallel.hpp)
 };
@@ -79,10 +83,32 @@ struct gaussian_hierarchy_stats {
 
 namespace detail {
 
-/// Gaussian i of `g` as a primitive (its covariance from scale and rotation).
+/// Gaussian i of `g` as a primitive (its covariance from `scale` and its rotation).
+[[nodiscard]] inline gaussian_prim gaussian_at(const gaussian_cloud& g, std::size_t i,
+                                               const vec3f& scale) {
+  return {g.positions[i], gaussian_covariance(scale, g.rotations[i]), g.opacities[i], g.sh_degree,
+          g.sh.data() + i * g.sh_stride()};
+}
+/// Gaussian i of `g` as a primitive (its covariance from its scale and rotation).
 [[nodiscard]] inline gaussian_prim gaussian_at(const gaussian_cloud& g, std::size_t i) {
-  return {g.positions[i], gaussian_covariance(g.scales[i], g.rotations[i]), g.opacities[i],
-          g.sh_degree, g.sh.data() + i * g.sh_stride()};
+  return gaussian_at(g, i, g.scales[i]);
+}
+
+/// `scale` with its two largest axes widened by `lowpass_px2` square pixels at depth `z` of a
+/// view with focal length `focal_px`: s → √(s² + lowpass · (z / focal)²), the smallest axis (the
+/// normal of a flat Gaussian) kept (gaussian_policy::merged_lowpass_px2 says why). Unchanged for
+/// lowpass ≤ 0 or a Gaussian at or behind the eye.
+[[nodiscard]] inline vec3f widened_scale(const vec3f& scale, float z, float focal_px,
+                                         float lowpass_px2) {
+  if (!(lowpass_px2 > 0) || !(z > 0) || !(focal_px > 0)) return scale;
+  const float w = z / focal_px, add = lowpass_px2 * w * w;
+  int small = 0;
+  for (int k = 1; k < 3; ++k)
+    if (scale[k] < scale[small]) small = k;
+  vec3f out = scale;
+  for (int k = 0; k < 3; ++k)
+    if (k != small) out[k] = std::sqrt(scale[k] * scale[k] + add);
+  return out;
 }
 
 /// Gaussian i of `g` as an ellipse splat: its two largest axes at 2σ (as_splat_prim), its normal
@@ -90,37 +116,44 @@ namespace detail {
 /// Gaussians the surface normal; merged ones keep their children's side), its colour the
 /// view-independent one.
 [[nodiscard]] inline splat_prim<attributes{.normal = true, .colour = true}> gaussian_splat(
-    const gaussian_cloud& g, std::size_t i) {
+    const gaussian_cloud& g, std::size_t i, const vec3f& sc) {
   constexpr attributes a{.normal = true, .colour = true};
   const vec4f& q = g.rotations[i];
   const Eigen::Matrix3f r = Eigen::Quaternionf(q[0], q[1], q[2], q[3]).toRotationMatrix();
-  const vec3f& sc = g.scales[i];
   int small = 0;
   for (int k = 1; k < 3; ++k)
     if (sc[k] < sc[small]) small = k;
   const int a1 = (small + 1) % 3, a2 = (small + 2) % 3;
   const int big = sc[a1] >= sc[a2] ? a1 : a2, mid = big == a1 ? a2 : a1;
-  splat_prim<a> out = as_splat_prim<a>(gaussian_at(g, i));  // the colour
+  splat_prim<a> out = as_splat_prim<a>(gaussian_at(g, i, sc));  // the colour
   out.u = r.col(big) * (2 * sc[big]);
   out.v = r.col(mid) * (2 * sc[mid]);
   out.normal = r.col(small);
   return out;
+}
+[[nodiscard]] inline splat_prim<attributes{.normal = true, .colour = true}> gaussian_splat(
+    const gaussian_cloud& g, std::size_t i) {
+  return gaussian_splat(g, i, g.scales[i]);
 }
 
 /// Gaussians [first, first + count) of `g` to `sink`: gaussian_prim to a GaussianSink
 /// (raster/gaussians.hpp; the z-buffer rasteriser, which draws it as below), gaussian_splat() of
 /// each to any other sink — or, where that ellipse covers less than a pixel on the screen, a
 /// one-pixel point (a Gaussian rasteriser's low-pass still draws such a Gaussian as a dot; an
-/// ellipse that small, or seen edge on, would cover no pixel centre).
+/// ellipse that small, or seen edge on, would cover no pixel centre). `lowpass_px2` > 0 widens
+/// each one's large axes first (widened_scale; the cut's merged Gaussians, gaussian_policy).
 template <class S>
 void emit_gaussians(const gaussian_cloud& g, std::uint32_t first, std::uint32_t count,
-                    const view& v, S& sink) {
+                    const view& v, S& sink, float lowpass_px2 = 0) {
   constexpr attributes a{.normal = true, .colour = true};
   for (std::uint32_t i = first; i < first + count; ++i) {
+    const vec3f sc = lowpass_px2 > 0 ? widened_scale(g.scales[i], v.to_eye(g.positions[i]).z(),
+                                                     v.focal_px, lowpass_px2)
+                                     : g.scales[i];
     if constexpr (GaussianSink<S>) {
-      sink.gaussian(gaussian_at(g, i));
+      sink.gaussian(gaussian_at(g, i, sc));
     } else {
-      const splat_prim<a> s = gaussian_splat(g, i);
+      const splat_prim<a> s = gaussian_splat(g, i, sc);
       const float z = v.to_eye(s.centre).z();
       const float k = z > 0 ? v.focal_px / z : 0.0f;
       const vec3f ray = (s.centre - v.eye).normalized();
@@ -140,6 +173,8 @@ struct gaussian_range {
 };
 
 }  // namespace detail
+
+struct gaussian_policy;
 
 class gaussian_hierarchy {
  public:
@@ -206,8 +241,11 @@ class gaussian_hierarchy {
   /// Edges on the longest root-to-leaf path.
   [[nodiscard]] std::size_t depth() const;
 
-  /// The Gaussians a traversal of v with `o` draws (gaussian_policy), as a cloud in the
-  /// hierarchy's frame: what `pbrlod export` writes as a standard 3DGS file.
+  /// The Gaussians a traversal of v with `o` and `p` draws, as a cloud in the hierarchy's frame,
+  /// merged ones widened as `p` draws them for v: what `pbrlod export` writes as a standard 3DGS
+  /// file, which any 3DGS renderer then draws as the cut's frame.
+  [[nodiscard]] gaussian_cloud cut(const view& v, const traverse_options& o,
+                                   const gaussian_policy& p) const;
   [[nodiscard]] gaussian_cloud cut(const view& v, const traverse_options& o) const;
   /// The view-independent cut at tree depth `level`: every node at that depth, and every leaf
   /// above it (level 0: the root's Gaussian; a level at or beyond depth(): the input).
@@ -250,6 +288,17 @@ class gaussian_hierarchy {
 /// sphere of its `size` about its Gaussian's mean; refine while that exceeds the tolerance. For
 /// gaussian_hierarchy and chunked_gaussian_hierarchy (builders/chunked_gaussian_hierarchy.hpp).
 struct gaussian_policy {
+  /// Square pixels added to the variance of a merged Gaussian's two large axes (in its own
+  /// plane, at its depth) when the cut draws it; 0 (the default, the paper's) draws it as
+  /// stored. For Gaussians made from a mesh or a scan (flat discs that tile a surface): the
+  /// full render draws the leaves beneath, each widened by the rasteriser's low-pass (0.3 px²,
+  /// Kerbl et al. 2023), and their union covers its region to the edges, while one moment-
+  /// matched Gaussian of a few pixels fades out before its neighbours begin and the background
+  /// shows through a lattice of gaps; 1 closes them (+8 dB on the bunny's Gaussians from 10
+  /// radii). Trained scenes, whose Gaussians overlap many times over, lose by it (−6 dB on the
+  /// donut): docs/gaussian-hierarchy.md has the table. A leaf's Gaussians are drawn as stored.
+  float merged_lowpass_px2 = 0.0f;
+
   template <class H>
   [[nodiscard]] float screen_size(const H& h, typename H::node_id n, const sphere&, const view& v,
                                   const traverse_options& o) const {
@@ -263,7 +312,9 @@ struct gaussian_policy {
   template <class H, class S>
   void emit(const H& h, typename H::node_id n, const view& v, float, const traverse_options&,
             S& sink) const {
-    h.emit(n, v, sink);
+    const detail::gaussian_range r = h.gaussians(n);
+    detail::emit_gaussians(*r.cloud, r.first, r.count, v, sink,
+                           h.is_leaf(n) ? 0.0f : merged_lowpass_px2);
   }
 };
 

@@ -272,7 +272,8 @@ gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud& in,
     detail::resize_fresh(h.g_.opacities, total, threads);
     detail::resize_fresh(h.g_.sh, total * in.sh_stride(), threads);
     detail::resize_fresh(h.nodes_, 2 * std::size_t{leaves} - 1, threads);
-    std::vector<split_key> keys(n);
+    std::vector<split_key> keys;  // 16 B per Gaussian: on huge pages too
+    detail::resize_fresh(keys, n, threads);
     detail::parallel_chunks(n, threads, 1 << 16, [&](std::size_t lo, std::size_t hi) {
       for (std::size_t i = lo; i < hi; ++i)
         keys[i] = {in.positions[i], 3 * in.scales[i].maxCoeff(), static_cast<std::uint32_t>(i)};

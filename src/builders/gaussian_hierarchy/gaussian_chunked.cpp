@@ -131,7 +131,8 @@ struct gaussian_chunked_build : detail::chunked_folder_build {
 
   gaussian_chunked_build(const gaussian_source& s, const std::string& target,
                          const chunked_gaussian_hierarchy_options& opt)
-      : chunked_folder_build(target, opt.block_points, opt.distributed, "chunked Gaussian hierarchy"),
+      : chunked_folder_build(target, opt.block_points, opt.distributed,
+                             "chunked Gaussian hierarchy"),
         src(s),
         o(opt) {}
 
@@ -533,8 +534,12 @@ const gaussian_hierarchy& chunked_gaussian_hierarchy::chunk(std::uint32_t c) con
   });
 }
 
+gaussian_cloud chunked_gaussian_hierarchy::cut(const view& v, const traverse_options& o,
+                                               const gaussian_policy& p) const {
+  return detail::gaussian_cut(*this, v, o, p);
+}
 gaussian_cloud chunked_gaussian_hierarchy::cut(const view& v, const traverse_options& o) const {
-  return detail::gaussian_cut(*this, v, o);
+  return cut(v, o, gaussian_policy{});
 }
 
 gaussian_cloud chunked_gaussian_hierarchy::level(std::size_t level) const {

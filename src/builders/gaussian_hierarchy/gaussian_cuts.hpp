@@ -11,9 +11,11 @@
 
 namespace pbr_lod::detail {
 
-/// The Gaussians of the given nodes (their leaves' or their merged ones), in that order.
+/// The Gaussians of the given nodes (their leaves' or their merged ones), in that order; with a
+/// view, merged ones widened by `lowpass_px2` as gaussian_policy draws them there.
 template <class H>
-gaussian_cloud gather_gaussians(const H& h, const std::vector<typename H::node_id>& ids) {
+gaussian_cloud gather_gaussians(const H& h, const std::vector<typename H::node_id>& ids,
+                                const view* v = nullptr, float lowpass_px2 = 0) {
   gaussian_cloud out;
   out.origin = h.origin();
   out.sh_degree = h.sh_degree();
@@ -21,9 +23,12 @@ gaussian_cloud gather_gaussians(const H& h, const std::vector<typename H::node_i
   for (const auto n : ids) {
     const gaussian_range r = h.gaussians(n);
     const gaussian_cloud& s = *r.cloud;
+    const bool widen = v != nullptr && !h.is_leaf(n);
     for (std::uint32_t i = r.first; i < r.first + r.count; ++i) {
       out.positions.push_back(s.positions[i]);
-      out.scales.push_back(s.scales[i]);
+      out.scales.push_back(widen ? widened_scale(s.scales[i], v->to_eye(s.positions[i]).z(),
+                                                 v->focal_px, lowpass_px2)
+                                 : s.scales[i]);
       out.rotations.push_back(s.rotations[i]);
       out.opacities.push_back(s.opacities[i]);
       out.sh.insert(out.sh.end(), s.sh.begin() + static_cast<std::ptrdiff_t>(i * stride),
@@ -43,15 +48,17 @@ struct recording_gaussian_policy : gaussian_policy {
   }
 };
 
-/// The Gaussians a traversal of v with `o` draws.
+/// The Gaussians a traversal of v with `o` and `policy` draws, as it draws them.
 template <class H>
-gaussian_cloud gaussian_cut(const H& h, const view& v, const traverse_options& o) {
+gaussian_cloud gaussian_cut(const H& h, const view& v, const traverse_options& o,
+                            const gaussian_policy& policy) {
   std::vector<typename H::node_id> ids;
   counting_sink<H::attrs> none;
   recording_gaussian_policy<typename H::node_id> p;
+  static_cast<gaussian_policy&>(p) = policy;
   p.ids = &ids;
   (void)traverse(h, v, o, none, p);
-  return gather_gaussians(h, ids);
+  return gather_gaussians(h, ids, &v, policy.merged_lowpass_px2);
 }
 
 /// Every node at depth `level` and every leaf above it, in preorder.

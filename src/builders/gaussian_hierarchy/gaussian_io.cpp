@@ -190,8 +190,12 @@ gaussian_hierarchy gaussian_hierarchy::load(const std::string& path) {
   return parse(detail::load_file_bytes(path), path);
 }
 
+gaussian_cloud gaussian_hierarchy::cut(const view& v, const traverse_options& o,
+                                       const gaussian_policy& p) const {
+  return detail::gaussian_cut(*this, v, o, p);
+}
 gaussian_cloud gaussian_hierarchy::cut(const view& v, const traverse_options& o) const {
-  return detail::gaussian_cut(*this, v, o);
+  return cut(v, o, gaussian_policy{});
 }
 
 gaussian_cloud gaussian_hierarchy::level(std::size_t level) const {
