@@ -266,12 +266,27 @@ gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud& in,
     const unsigned threads = resolve_threads(o.threads);
     // The store is ~2.4 × the input: on huge pages, faulted in by every thread (core/memory.hpp:
     // 4 kB first touches and the zeroing were half of a one-thread build).
-    detail::resize_fresh(h.g_.positions, total, threads);
-    detail::resize_fresh(h.g_.scales, total, threads);
-    detail::resize_fresh(h.g_.rotations, total, threads);
-    detail::resize_fresh(h.g_.opacities, total, threads);
-    detail::resize_fresh(h.g_.sh, total * in.sh_stride(), threads);
-    detail::resize_fresh(h.nodes_, 2 * std::size_t{leaves} - 1, threads);
+    // The pages are faulted in by every thread; the vectors' own value-initialisation (a memset
+    // per vector, which a std::vector<float> cannot skip) runs as two tasks: the SH, ~80 % of the
+    // bytes at degree 3, beside everything else.
+    const std::size_t sh_size = total * in.sh_stride(), node_count = 2 * std::size_t{leaves} - 1;
+    detail::populate_fresh(h.g_.positions, total, threads);
+    detail::populate_fresh(h.g_.scales, total, threads);
+    detail::populate_fresh(h.g_.rotations, total, threads);
+    detail::populate_fresh(h.g_.opacities, total, threads);
+    detail::populate_fresh(h.g_.sh, sh_size, threads);
+    detail::populate_fresh(h.nodes_, node_count, threads);
+    detail::parallel_tasks(2, threads, [&](std::size_t task, unsigned) {
+      if (task == 0) {
+        h.g_.sh.resize(sh_size);
+        return;
+      }
+      h.g_.positions.resize(total);
+      h.g_.scales.resize(total);
+      h.g_.rotations.resize(total);
+      h.g_.opacities.resize(total);
+      h.nodes_.resize(node_count);
+    });
     std::vector<split_key> keys;  // 16 B per Gaussian: on huge pages too
     detail::resize_fresh(keys, n, threads);
     detail::parallel_chunks(n, threads, 1 << 16, [&](std::size_t lo, std::size_t hi) {
@@ -342,14 +357,16 @@ void merge_gaussians(gaussian_cloud& g, std::span<const std::uint32_t> parts, st
   }
   if (!(total > 0) || !std::isfinite(total)) std::fill(w.begin(), w.end(), 1.0);
   const double sum = std::accumulate(w.begin(), w.end(), 0.0);
+  std::array<double, 128> shares;  // w[k] / sum, once per part
+  for (std::size_t k = 0; k < parts.size(); ++k) shares[k] = w[k] / sum;
   // Mean, then the covariance about it (both in double, origin-relative).
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (std::size_t k = 0; k < parts.size(); ++k)
-    mean += (w[k] / sum) * g.positions[parts[k]].cast<double>();
+    mean += shares[k] * g.positions[parts[k]].cast<double>();
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
   for (std::size_t k = 0; k < parts.size(); ++k) {
     const Eigen::Vector3d d = g.positions[parts[k]].cast<double>() - mean;
-    cov += (w[k] / sum) * (covariance_of(g, parts[k]) + d * d.transpose());
+    cov += shares[k] * (covariance_of(g, parts[k]) + d * d.transpose());
   }
   Eigen::Vector3d side = Eigen::Vector3d::Zero();
   for (std::size_t k = 0; k < parts.size(); ++k) side += w[k] * normal_of(g, parts[k]);
@@ -374,7 +391,7 @@ void merge_gaussians(gaussian_cloud& g, std::span<const std::uint32_t> parts, st
   float* sh = g.sh.data() + slot * stride;
   for (std::size_t j = 0; j < stride; ++j) {
     double v = 0;
-    for (std::size_t k = 0; k < parts.size(); ++k) v += (w[k] / sum) * g.sh[parts[k] * stride + j];
+    for (std::size_t k = 0; k < parts.size(); ++k) v += shares[k] * g.sh[parts[k] * stride + j];
     sh[j] = static_cast<float>(v);
   }
 }
