@@ -65,9 +65,10 @@ enum class merged_opacity {
 
 struct gaussian_hierarchy_options {
   /// Gaussians per leaf, 1–64. 1 is the paper's: one merged Gaussian per input Gaussian, a
-  /// hierarchy 2.3 × its input. 2 (the default) drops only the merges of single pairs: about 0.5
-  /// merged Gaussians per input one (1.6 × the input), the same Gaussians in every cut that draws
-  /// an inner node above the pairs, a quarter less to build (docs/gaussian-hierarchy.md).
+  /// hierarchy 2.27 × its input (SH degree 3, nodes included). 2 (the default) drops only the
+  /// merges of single pairs: about 0.6 merged Gaussians per input one (1.74 ×), the same
+  /// Gaussians in every cut that draws a node above the pairs, a quarter less to build
+  /// (docs/gaussian-hierarchy.md).
   int leaf_size = 2;
   merged_opacity opacity = merged_opacity::grow;
   unsigned threads = 0;  ///< 0 = every core (core/parallel.hpp)

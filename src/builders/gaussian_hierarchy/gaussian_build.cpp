@@ -264,11 +264,11 @@ gaussian_hierarchy build_gaussian_hierarchy(const gaussian_cloud& in,
     const std::uint32_t leaves = shape.leaves(n);
     const std::size_t total = std::size_t{n} + (leaves - 1);
     const unsigned threads = resolve_threads(o.threads);
-    // The store is ~2.4 × the input: on huge pages, faulted in by every thread (core/memory.hpp:
-    // 4 kB first touches and the zeroing were half of a one-thread build).
-    // The pages are faulted in by every thread; the vectors' own value-initialisation (a memset
-    // per vector, which a std::vector<float> cannot skip) runs as two tasks: the SH, ~80 % of the
-    // bytes at degree 3, beside everything else.
+    // The store is 1.6–2.3 × the input (leaves of two or one): on huge pages, faulted in by every
+    // thread (core/memory.hpp: 4 kB first touches and the zeroing were half of a one-thread
+    // build). The vectors' own value-initialisation (a memset per vector, which a
+    // std::vector<float> cannot skip) then runs as two tasks: the SH, ~80 % of the bytes at
+    // degree 3, beside everything else.
     const std::size_t sh_size = total * in.sh_stride(), node_count = 2 * std::size_t{leaves} - 1;
     detail::populate_fresh(h.g_.positions, total, threads);
     detail::populate_fresh(h.g_.scales, total, threads);
