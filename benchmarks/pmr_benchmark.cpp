@@ -3,13 +3,18 @@
 // points: 3 h 53 min and 97 MB on the paper's 1.7 GHz Pentium 4), with peak memory; and the
 // Table 2 / Figure 6 analogue: points and triangles drawn and time per frame against the factor
 // (1, 3, 5) and the viewing distance, with the image error against the full-detail cut (level 0,
-// every sample as its umbrella). docs/pmr.md quotes these numbers.
+// every sample as its umbrella). docs/pmr.md quotes these numbers. bm_build on "generated_500k"
+// (`pbrlod build generated-points:500000:normals`) has its peer in pmr_cgal_benchmark.cpp, CGAL's
+// triangulation of the same points, run in the same process (issue 43: PMR against one parallel
+// triangulation of its input):
+//   bench_pmr --benchmark_filter='generated_500k|cgal' --benchmark_repetitions=5
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
 #include <map>
 
 #include "pbr_lod/builders/pmr.hpp"
+#include "pbr_lod/core/point_source.hpp"
 #include "pbr_lod/core/synthetic.hpp"
 #include "pbr_lod/io/read.hpp"
 #include "pbr_lod/raster/metrics.hpp"
@@ -27,6 +32,8 @@ const char* input_name(int which) {
       return "buddha_res3";
     case 2:
       return "milk_carton_pcd";
+    case 4:
+      return "generated_500k";
     default:
       return "wavy_437645";
   }
@@ -39,6 +46,7 @@ const point_cloud& input(int which) {
     point_cloud c = which == 0   ? read_mesh(test::data_file("bun_zipper.ply")).vertices
                     : which == 1 ? read_mesh(test::data_file("happy_vrip_res3.ply")).vertices
                     : which == 2 ? read_points(test::data_file("milk_cartoon_all_small_clorox.pcd"))
+                    : which == 4 ? read_all(generated_point_source(500000, 1, true, true))
                                  : make_wavy_surface(437645, 1);
     it = cache.emplace(which, std::move(c)).first;
   }
@@ -88,6 +96,7 @@ BENCHMARK(bm_build)
     ->ArgsProduct({{0, 1, 2}, {10000}, {10}})
     ->Args({3, 10000, 10})
     ->Args({3, 10000, 25})
+    ->Args({4, 10000, 10})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
