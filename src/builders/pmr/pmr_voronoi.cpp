@@ -12,7 +12,7 @@
 // always close into one polygon. Coordinates arrive relative to the leaf's centre (subtracted
 // in double by the caller), so scans far from the origin lose nothing here.
 #include <CGAL/Delaunay_triangulation_3.h>
-#include <CGAL/Delaunay_triangulation_cell_base_with_circumcenter_3.h>
+#include <CGAL/Delaunay_triangulation_cell_base_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
@@ -35,7 +35,56 @@ namespace {
 
 using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Vb = CGAL::Triangulation_vertex_base_with_info_3<std::uint32_t, K>;
-using Cb = CGAL::Delaunay_triangulation_cell_base_with_circumcenter_3<K>;
+/// A Delaunay cell that caches its circumcentre in place: CGAL's
+/// Delaunay_triangulation_cell_base_with_circumcenter_3 computes the same value (the base's
+/// circumcenter(), from the vertices in order) but allocates it on the heap, one allocation per
+/// cell and a pointer to follow on every visit of a Voronoi cell (malloc and free were 40 % of a
+/// build). The cache is mutable: a triangulation belongs to one thread.
+template <class GT, class Base = CGAL::Delaunay_triangulation_cell_base_3<GT>>
+class cell_with_circumcentre : public Base {
+ public:
+  using Vertex_handle = typename Base::Vertex_handle;
+  using Cell_handle = typename Base::Cell_handle;
+  using Geom_traits = GT;
+  template <class Tds2>
+  struct Rebind_TDS {
+    using Other = cell_with_circumcentre<GT, typename Base::template Rebind_TDS<Tds2>::Other>;
+  };
+
+  cell_with_circumcentre() = default;
+  cell_with_circumcentre(Vertex_handle v0, Vertex_handle v1, Vertex_handle v2, Vertex_handle v3)
+      : Base(v0, v1, v2, v3) {}
+  cell_with_circumcentre(Vertex_handle v0, Vertex_handle v1, Vertex_handle v2, Vertex_handle v3,
+                         Cell_handle n0, Cell_handle n1, Cell_handle n2, Cell_handle n3)
+      : Base(v0, v1, v2, v3, n0, n1, n2, n3) {}
+
+  // Whatever changes a vertex forgets the circumcentre.
+  void set_vertex(int i, Vertex_handle v) {
+    known_ = false;
+    Base::set_vertex(i, v);
+  }
+  void set_vertices() {
+    known_ = false;
+    Base::set_vertices();
+  }
+  void set_vertices(Vertex_handle v0, Vertex_handle v1, Vertex_handle v2, Vertex_handle v3) {
+    known_ = false;
+    Base::set_vertices(v0, v1, v2, v3);
+  }
+  const typename GT::Point_3& circumcenter(const GT& gt = GT()) const {
+    if (!known_) {
+      centre_ = Base::circumcenter(gt);
+      known_ = true;
+    }
+    return centre_;
+  }
+
+ private:
+  mutable typename GT::Point_3 centre_;
+  mutable bool known_ = false;
+};
+
+using Cb = cell_with_circumcentre<K>;
 using Tds = CGAL::Triangulation_data_structure_3<Vb, Cb>;
 using Dt = CGAL::Delaunay_triangulation_3<K, Tds>;
 using Point = K::Point_3;
