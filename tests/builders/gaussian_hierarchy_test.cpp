@@ -305,6 +305,15 @@ TEST(GaussianHierarchy, CutsAndLevels) {
   EXPECT_LT(sizes[1], sizes[0] / 4);
 }
 
+/// 256² from 10 radii of a generated scene (unit radius), off every axis.
+camera ten_radii_camera() {
+  camera cam;
+  cam.eye = vec3d(0.3, 0.4, 1).normalized() * 10;
+  cam.vp = {256, 256};
+  cam.z_far = 20;
+  return cam;
+}
+
 // What the user sees: a 30,000-Gaussian surface from 10 radii. The finest cut is the input
 // (the same image up to rounding); coarser cuts draw fewer Gaussians at a PSNR against the full
 // render that falls as the tolerance grows; a cut exported as a 3DGS file and drawn in full is the
@@ -312,10 +321,7 @@ TEST(GaussianHierarchy, CutsAndLevels) {
 // 3DGS Gaussian), within the lower floors with conserve (merged opacities above 1 written as 1).
 TEST(GaussianHierarchy, CutsAgainstTheFullRenderAndTheirExport) {
   const gaussian_cloud scene = make_gaussian_scene(30000, 3, 4);
-  camera cam;
-  cam.eye = vec3d(0.3, 0.4, 1).normalized() * 10;
-  cam.vp = {256, 256};
-  cam.z_far = 20;
+  const camera cam = ten_radii_camera();
   const image full = render_gaussians(scene, cam);
   const std::string path = temp_path("cut.ply");
   struct row {
@@ -373,10 +379,7 @@ TEST(GaussianPolicy, WidenedScaleByHand) {
 // leaf's as stored; the frame drawn with it is the export drawn in full (the file carries it).
 TEST(GaussianPolicy, MergedLowpassWidensTheCutsMergedGaussiansOnly) {
   const gaussian_cloud scene = make_gaussian_scene(30000, 1, 5);
-  camera cam;
-  cam.eye = vec3d(0.3, 0.4, 1).normalized() * 10;
-  cam.vp = {256, 256};
-  cam.z_far = 20;
+  const camera cam = ten_radii_camera();
   const auto h = build_gaussian_hierarchy(scene);
   const view v(cam, h.origin());
   const traverse_options t{.tolerance_px = 2};

@@ -121,10 +121,12 @@ class chunked_gaussian_hierarchy : public chunked_reader<gaussian_hierarchy> {
     const std::uint32_t i = in_top(n);
     return i != top ? top_nodes_[i].bounds : chunk(n.chunk).bounding_sphere(n.index);
   }
+  /// As gaussian_hierarchy::emit.
   template <class S>
-  void emit(node_id n, const view& v, S& sink) const {
+  void emit(node_id n, const view& v, S& sink, float merged_lowpass_px2 = 0) const {
     const detail::gaussian_range r = gaussians(n);
-    detail::emit_gaussians(*r.cloud, r.first, r.count, v, sink);
+    detail::emit_gaussians(*r.cloud, r.first, r.count, v, sink,
+                           is_leaf(n) ? 0.0f : merged_lowpass_px2);
   }
 
   // ---- what gaussian_policy, the cuts and inspection need

@@ -111,6 +111,14 @@ namespace detail {
     if (k != small) out[k] = std::sqrt(scale[k] * scale[k] + add);
   return out;
 }
+/// The scale Gaussian i of `g` is drawn with in v: widened by `lowpass_px2` (widened_scale, at
+/// its depth in v), or as stored.
+[[nodiscard]] inline vec3f drawn_scale(const gaussian_cloud& g, std::size_t i, const view& v,
+                                       float lowpass_px2) {
+  return lowpass_px2 > 0
+             ? widened_scale(g.scales[i], v.to_eye(g.positions[i]).z(), v.focal_px, lowpass_px2)
+             : g.scales[i];
+}
 
 /// Gaussian i of `g` as an ellipse splat: its two largest axes at 2σ (as_splat_prim), its normal
 /// the axis of its smallest scale with the sign its rotation gives it (for a mesh's or a scan's
@@ -148,9 +156,7 @@ void emit_gaussians(const gaussian_cloud& g, std::uint32_t first, std::uint32_t 
                     const view& v, S& sink, float lowpass_px2 = 0) {
   constexpr attributes a{.normal = true, .colour = true};
   for (std::uint32_t i = first; i < first + count; ++i) {
-    const vec3f sc = lowpass_px2 > 0 ? widened_scale(g.scales[i], v.to_eye(g.positions[i]).z(),
-                                                     v.focal_px, lowpass_px2)
-                                     : g.scales[i];
+    const vec3f sc = drawn_scale(g, i, v, lowpass_px2);
     if constexpr (GaussianSink<S>) {
       sink.gaussian(gaussian_at(g, i, sc));
     } else {
@@ -210,11 +216,13 @@ class gaussian_hierarchy {
   }
   [[nodiscard]] sphere bounding_sphere(node_id n) const { return nodes_[n].bounds; }
 
-  /// An inner node sends its merged Gaussian, a leaf its own (detail::emit_gaussians).
+  /// An inner node sends its merged Gaussian, its large axes widened by `merged_lowpass_px2`
+  /// (gaussian_policy), a leaf its own as stored (detail::emit_gaussians).
   template <class S>
-  void emit(node_id n, const view& v, S& sink) const {
+  void emit(node_id n, const view& v, S& sink, float merged_lowpass_px2 = 0) const {
     const node& d = nodes_[n];
-    detail::emit_gaussians(g_, d.gaussian, d.count == 0 ? 1 : d.count, v, sink);
+    detail::emit_gaussians(g_, d.gaussian, d.count == 0 ? 1 : d.count, v, sink,
+                           d.count == 0 ? merged_lowpass_px2 : 0.0f);
   }
 
   /// Gaussian i as an ellipse splat (detail::gaussian_splat).
@@ -313,9 +321,7 @@ struct gaussian_policy {
   template <class H, class S>
   void emit(const H& h, typename H::node_id n, const view& v, float, const traverse_options&,
             S& sink) const {
-    const detail::gaussian_range r = h.gaussians(n);
-    detail::emit_gaussians(*r.cloud, r.first, r.count, v, sink,
-                           h.is_leaf(n) ? 0.0f : merged_lowpass_px2);
+    h.emit(n, v, sink, merged_lowpass_px2);
   }
 };
 

@@ -26,9 +26,7 @@ gaussian_cloud gather_gaussians(const H& h, const std::vector<typename H::node_i
     const bool widen = v != nullptr && !h.is_leaf(n);
     for (std::uint32_t i = r.first; i < r.first + r.count; ++i) {
       out.positions.push_back(s.positions[i]);
-      out.scales.push_back(widen ? widened_scale(s.scales[i], v->to_eye(s.positions[i]).z(),
-                                                 v->focal_px, lowpass_px2)
-                                 : s.scales[i]);
+      out.scales.push_back(widen ? drawn_scale(s, i, *v, lowpass_px2) : s.scales[i]);
       out.rotations.push_back(s.rotations[i]);
       out.opacities.push_back(s.opacities[i]);
       out.sh.insert(out.sh.end(), s.sh.begin() + static_cast<std::ptrdiff_t>(i * stride),
