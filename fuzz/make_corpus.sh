@@ -1,17 +1,18 @@
 #!/usr/bin/env bash
 # Writes the fuzz targets' seed corpora: small valid files of every format, one folder per target.
-#   fuzz/make_corpus.sh PBRLOD DATA OUT
+#   fuzz/make_corpus.sh PBRLOD DATA OUT [MAKE_LAZ_SEEDS]
 # PBRLOD: the pbrlod tool (builds the hierarchy files); DATA: the shared/data folder (the bunny
 # res4 PLY and the LAS file are copied from it; the hierarchies are built from them); OUT: the
-# corpus root, e.g. build/fuzz/corpus, which gets OUT/fuzz_<target>/.
+# corpus root, e.g. build/fuzz/corpus, which gets OUT/fuzz_<target>/; MAKE_LAZ_SEEDS: the fuzz
+# tree's make_laz_seeds (fuzz/make_laz_seeds.cpp), which writes fuzz_laz's small LAZ seeds.
 # Seeds are small on purpose: libFuzzer runs each input whole, so a 2 MB seed (the real PCD scan)
 # would cost milliseconds per execution. The PCD seeds are written here, byte by byte, in the
 # three encodings (ascii, binary, binary_compressed) instead.
 set -euo pipefail
-pbrlod="$1" data="$2" out="$3"
+pbrlod="$1" data="$2" out="$3" make_laz_seeds="${4:-}"
 # The builders (one fuzz target each) are those of cmake/builders.cmake.
 builders=$(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/\1/p' "$(dirname "$0")/../cmake/builders.cmake")
-for t in ply obj off pcd las gaussian_ply splat spz $builders; do mkdir -p "$out/fuzz_$t"; done
+for t in ply obj off pcd las laz gaussian_ply splat spz $builders; do mkdir -p "$out/fuzz_$t"; done
 
 # --- meshes and point clouds ---------------------------------------------------------------------
 cp --no-preserve=mode "$data/bun_zipper_res4.ply" "$out/fuzz_ply/bunny_res4.ply"
@@ -23,6 +24,9 @@ laz_twins="$(dirname "$0")/../tests/data/laz"
 for f in point10 simple extra-bytes 1_4_w_evlr simple.copc; do
   cp --no-preserve=mode "$laz_twins/$f.laz" "$out/fuzz_las/laz_$f.las"
 done
+# fuzz_laz: the same reader from LAZ seeds only, each under 4 kB (formats 0–10 in chunks of 8
+# points, written by our encoder from the twins' first records; a COPC file below).
+[ -n "$make_laz_seeds" ] && "$make_laz_seeds" "$laz_twins" "$out/fuzz_laz"
 
 # Inputs that once failed a target (fuzz/regressions/<target>/, README.md there): every run
 # starts from them, so a fix that comes undone fails the next run.
@@ -235,3 +239,5 @@ build rho_grid bunny_rho5 "$bunny" rho-grid --param rho=5 --param level=1
 # variable chunks, the hierarchy EVLR), for fuzz_las: the LAS reader reads it as the LAZ it is.
 "$pbrlod" export "$out/fuzz_point_octree/las_colour.lod" --format copc --node-points 64 \
   -o "$out/fuzz_las/copc_export.las" > /dev/null
+"$pbrlod" export "$out/fuzz_point_octree/octahedron_colour.lod" --format copc --node-points 2 \
+  -o "$out/fuzz_laz/copc_octahedron.las" > /dev/null

@@ -24,7 +24,7 @@ seconds="${1:-10}"
 shift $(($# > 0 ? 1 : 0))
 # The readers' targets (meshes and points, then 3-D Gaussians), then one per builder of cmake/builders.cmake.
 mapfile -t builders < <(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/fuzz_\1/p' cmake/builders.cmake)
-all=(fuzz_ply fuzz_obj fuzz_off fuzz_pcd fuzz_las fuzz_gaussian_ply fuzz_splat fuzz_spz
+all=(fuzz_ply fuzz_obj fuzz_off fuzz_pcd fuzz_las fuzz_laz fuzz_gaussian_ply fuzz_splat fuzz_spz
      "${builders[@]}")
 targets=("${@:-${all[@]}}")
 jobs="${JOBS:-$(nproc)}"
@@ -37,14 +37,14 @@ if [ "${PBR_LOD_CCACHE:-1}" != 0 ] && command -v ccache > /dev/null; then
   export CCACHE_BASEDIR="$root" CCACHE_NOHASHDIR=1
 fi
 cmake --preset fuzz "${launcher[@]}" > /dev/null
-cmake --build "$build" -j "$jobs" --target "${targets[@]}"
+cmake --build "$build" -j "$jobs" --target "${targets[@]}" make_laz_seeds
 
 pbrlod="${PBRLOD:-$root/build/release/examples/pbrlod}"
 if [ ! -x "$pbrlod" ]; then
   cmake -S . -B build/release -G Ninja -DCMAKE_BUILD_TYPE=Release "${launcher[@]}" > /dev/null
   cmake --build build/release -j "$jobs" --target pbrlod
 fi
-bash fuzz/make_corpus.sh "$pbrlod" "$data" "$build/corpus"
+bash fuzz/make_corpus.sh "$pbrlod" "$data" "$build/corpus" "$build/fuzz/make_laz_seeds"
 
 # -max_len: by default the largest seed (the PMR file, ~140 kB) fits; larger inputs only slow the
 # run.
