@@ -21,6 +21,7 @@
 #include <string>
 
 #include "io/laz_encoder.hpp"
+#include "pbr_lod/io/read.hpp"
 
 namespace {
 
@@ -107,6 +108,12 @@ std::string small_las(const std::string& las, std::size_t n, unsigned target, st
   return out;
 }
 
+void write(const std::string& path, const std::string& bytes) {
+  std::ofstream f(path, std::ios::binary);
+  if (!f.write(bytes.data(), static_cast<std::streamsize>(bytes.size())) || !f.flush())
+    throw std::runtime_error(path + ": cannot write");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -130,9 +137,15 @@ int main(int argc, char** argv) {
       const std::string las =
           small_las(slurp(twins + "/" + s.twin + ".las"), 24, s.format, s.record_length);
       const std::string laz = pbr_lod::detail::encode_laz_file(name, las, 8);
-      std::ofstream f(out + "/laz_" + name + ".las", std::ios::binary);
-      if (!f.write(laz.data(), static_cast<std::streamsize>(laz.size())))
-        throw std::runtime_error(out + ": cannot write " + name);
+      const std::string path = out + "/laz_" + name + ".las";
+      write(path, laz);
+      // A seed the reader refuses would fuzz only the refusal: each must read as its LAS does.
+      const std::string plain = out + "/.plain_" + name + ".las";
+      write(plain, las);
+      const pbr_lod::point_cloud a = pbr_lod::read_points(path), b = pbr_lod::read_points(plain);
+      std::remove(plain.c_str());
+      if (a.positions.size() != 24 || a.positions != b.positions || a.colours != b.colours)
+        throw std::runtime_error(path + ": does not read as the LAS it encodes");
     }
   } catch (const std::exception& e) {
     std::cerr << "make_laz_seeds: " << e.what() << "\n";
