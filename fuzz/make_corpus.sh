@@ -26,7 +26,7 @@ for f in point10 simple extra-bytes 1_4_w_evlr simple.copc; do
 done
 # fuzz_laz: the same reader from LAZ seeds only, each under 4 kB (formats 0–10 in chunks of 8
 # points, written by our encoder from the twins' first records; a COPC file below).
-[ -n "$make_laz_seeds" ] && "$make_laz_seeds" "$laz_twins" "$out/fuzz_laz"
+if [ -n "$make_laz_seeds" ]; then "$make_laz_seeds" "$laz_twins" "$out/fuzz_laz"; fi
 
 # Inputs that once failed a target (fuzz/regressions/<target>/, README.md there): every run
 # starts from them, so a fix that comes undone fails the next run.

@@ -14,23 +14,21 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "io/laz_encoder.hpp"
+#include "pbr_lod/core/atomic_file.hpp"
+#include "pbr_lod/core/binary.hpp"
 #include "pbr_lod/io/read.hpp"
 
 namespace {
 
 std::string slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error(path + ": cannot open");
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
+  const std::vector<unsigned char> b = pbr_lod::detail::load_file_bytes(path);
+  return {b.begin(), b.end()};
 }
 
 template <class T>
@@ -109,9 +107,7 @@ std::string small_las(const std::string& las, std::size_t n, unsigned target, st
 }
 
 void write(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  if (!f.write(bytes.data(), static_cast<std::streamsize>(bytes.size())) || !f.flush())
-    throw std::runtime_error(path + ": cannot write");
+  pbr_lod::write_file_atomically(path, bytes.data(), bytes.size());
 }
 
 }  // namespace

@@ -22,11 +22,8 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 seconds="${1:-10}"
 shift $(($# > 0 ? 1 : 0))
-# The readers' targets (meshes and points, then 3-D Gaussians), then one per builder of cmake/builders.cmake.
-mapfile -t builders < <(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/fuzz_\1/p' cmake/builders.cmake)
-all=(fuzz_ply fuzz_obj fuzz_off fuzz_pcd fuzz_las fuzz_laz fuzz_gaussian_ply fuzz_splat fuzz_spz
-     "${builders[@]}")
-targets=("${@:-${all[@]}}")
+source scripts/fuzz_targets.sh
+targets=("${@:-${fuzz_targets[@]}}")
 jobs="${JOBS:-$(nproc)}"
 data="${PBR_LOD_DATA:-$root/../shared/data}"
 build=build/fuzz

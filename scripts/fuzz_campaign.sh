@@ -18,10 +18,8 @@ if [ "${1:-}" = "--report" ]; then
   report_only=1
   shift
 fi
-mapfile -t builders < <(sed -n 's/^pbr_lod_builder(\([a-z0-9_]*\).*/fuzz_\1/p' cmake/builders.cmake)
-all=(fuzz_ply fuzz_obj fuzz_off fuzz_pcd fuzz_las fuzz_laz fuzz_gaussian_ply fuzz_splat fuzz_spz
-     "${builders[@]}")
-targets=("${@:-${all[@]}}")
+source scripts/fuzz_targets.sh
+targets=("${@:-${fuzz_targets[@]}}")
 artifacts=build/fuzz/artifacts
 
 failed=()
